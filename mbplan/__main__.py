@@ -1,0 +1,5 @@
+import sys
+
+from mbplan.cli import main
+
+sys.exit(main())

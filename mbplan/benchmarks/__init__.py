@@ -1,0 +1,1 @@
+"""Benchmarks run through ``mbplan bench …``; each writes JSON, markdown and a plot."""
