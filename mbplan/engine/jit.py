@@ -60,3 +60,8 @@ def compile_function(fn: cs.Function, flags: tuple[str, ...] = DEFAULT_FLAGS) ->
             shutil.copyfile(obj, partial)
             os.replace(partial, target)
     return cs.external(name, str(target))
+
+
+def jit_available() -> bool:
+    """True if a C compiler is on the PATH (``$CC`` or gcc)."""
+    return shutil.which(os.environ.get("CC", "gcc")) is not None

@@ -132,7 +132,10 @@ def _coefficients(xi: Array) -> tuple[Array, Array, Array]:
 
 
 def _inverse_coefficient(xi: Array) -> Array:
-    """``d = 1/θ² - (1+cosθ)/(2θ sinθ)`` with its Taylor series near 0."""
+    """``d = 1/θ² - (1+cosθ)/(2θ sinθ) = 1/θ² - cot(θ/2)/(2θ)`` with its Taylor series near 0.
+
+    The cotangent form avoids the cancellation in ``1 + cosθ`` near θ = π.
+    """
     if is_symbolic(xi):
         t2 = cs.dot(xi, xi)
         small = t2 < _SMALL
@@ -140,13 +143,13 @@ def _inverse_coefficient(xi: Array) -> Array:
         return cs.if_else(
             small,
             1 / 12 + t2 / 720 + t2**2 / 30240,
-            1 / t**2 - (1 + cs.cos(t)) / (2 * t * cs.sin(t)),
+            1 / t**2 - 1 / (2 * t * cs.tan(t / 2)),
         )
     t2 = np.sum(xi * xi, axis=-1)
     small = t2 < _SMALL
     t = np.sqrt(np.where(small, 1.0, t2))
     with np.errstate(divide="ignore", invalid="ignore"):
-        general = 1 / t**2 - (1 + np.cos(t)) / (2 * t * np.sin(t))
+        general = 1 / t**2 - 1 / (2 * t * np.tan(t / 2))
     return np.where(small, 1 / 12 + t2 / 720 + t2**2 / 30240, general)
 
 
@@ -180,23 +183,28 @@ def _log_near_pi(R: np.ndarray, w: np.ndarray, c: np.ndarray, theta: np.ndarray)
 
 
 def _log_symbolic(R: Array) -> Array:
+    """Branches as in :func:`_log_numeric`. Every branch is evaluated at a safe argument when it is
+    not selected, so automatic derivatives never form ``0 · inf`` (NaN) at θ = 0 or θ = π."""
     w = 0.5 * cs.vertcat(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
     c = 0.5 * (cs.trace(R) - 1.0)
     s2 = cs.dot(w, w)
     small = s2 < _SMALL
     s = cs.sqrt(cs.if_else(small, 1.0, s2))
-    theta = cs.atan2(cs.sqrt(s2 + 1e-300), c)
-    generic = cs.if_else(small, 1 + s2 / 6 + 3 * s2**2 / 40, theta / s) * w
+    generic = cs.if_else(small, 1 + s2 / 6 + 3 * s2**2 / 40, cs.atan2(s, c) / s) * w
+    near_pi = cs.logic_and(c < 0, s2 < _NEAR_PI)
+    # Symmetric part (R+Rᵀ)/2 - cosθ I = (1-cosθ) a aᵀ; use the column of the largest diagonal.
     B = 0.5 * (R + R.T) - c * cs.DM.eye(3)
-    one_minus_c = 1.0 - c
-    axes = [B[:, i] / cs.sqrt(cs.fmax(B[i, i] * one_minus_c, 1e-300)) for i in range(3)]
+    q = [B[i, i] * (1.0 - c) for i in range(3)]
+    axes = [B[:, i] / cs.sqrt(cs.if_else(q[i] > _SMALL, q[i], 1.0)) for i in range(3)]
     axis = cs.if_else(
         B[0, 0] >= cs.fmax(B[1, 1], B[2, 2]),
         axes[0],
         cs.if_else(B[1, 1] >= B[2, 2], axes[1], axes[2]),
     )
     axis = cs.if_else(cs.dot(axis, w) < 0, -axis, axis)
-    return cs.if_else(cs.logic_and(c < 0, s2 < _NEAR_PI), theta * axis, generic)
+    s_pi = cs.sqrt(cs.if_else(near_pi, s2, 0.0))
+    c_pi = cs.if_else(near_pi, c, -1.0)
+    return cs.if_else(near_pi, cs.atan2(s_pi, c_pi) * axis, generic)
 
 
 SO3 = SO3Group()

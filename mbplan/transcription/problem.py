@@ -1,0 +1,179 @@
+"""The trajectory NLP on a product manifold: Problem 2 (RIPM paper eq. 46) from terms.
+
+``min Σ costs  s.t.  eq = 0,  ineq ≤ 0`` over the free knots of :class:`TrajectoryVariables`.
+Jacobians are Riemannian (along ``X exp(ξ)``) and the Lagrangian Hessian
+``Hess(σ f + yᵀh + zᵀg)`` is exact (eq. 54), both assembled with fixed sparsity patterns, so the
+cost of one evaluation is linear in the horizon and in the number of bodies.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from mbplan.errors import InputError
+from mbplan.transcription.sparse import SparsePattern
+from mbplan.transcription.terms import Term
+from mbplan.transcription.variables import Point, TrajectoryVariables
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Everything a Newton step needs at one point (Hessian is the lower triangle)."""
+
+    objective: float
+    gradient: np.ndarray
+    eq: np.ndarray
+    eq_jacobian: sp.csr_matrix
+    ineq: np.ndarray
+    ineq_jacobian: sp.csr_matrix
+    hessian_lower: sp.csr_matrix | None
+
+
+class _TermLayout:
+    """Where one term's residual rows and tangent columns land in the global NLP."""
+
+    def __init__(self, term: Term, row_offset: int, index: dict[str, np.ndarray]) -> None:
+        f = term.function
+        K = len(term.knots)
+        self.term = term
+        self.row_offset = row_offset
+        self.rows = slice(row_offset, row_offset + term.rows)
+        cols = term.tangent_columns(index)  # (K, n_f)
+        self.jac_rows = row_offset + np.arange(K)[:, None] * f.m + f.jac_rows[None, :]
+        self.jac_cols = cols[:, f.jac_cols]
+        hr, hc = cols[:, f.hess_rows], cols[:, f.hess_cols]
+        self.hess_rows, self.hess_cols = np.maximum(hr, hc), np.minimum(hr, hc)
+
+
+class TrajectoryProblem:
+    """Costs, equalities and inequalities over trajectory variables, evaluated sparsely."""
+
+    def __init__(self, variables: TrajectoryVariables, terms: Sequence[Term]) -> None:
+        self.variables = variables
+        self.terms = list(terms)
+        names = [t.name for t in self.terms]
+        if len(set(names)) != len(names):
+            raise InputError(f"duplicate term names: {names}")
+        index = {name: variables.tangent_index(name) for name in variables.blocks}
+        for t in self.terms:
+            for arg, (block, off) in t.bind.items():
+                if block not in variables.blocks:
+                    raise InputError(
+                        f"term {t.name!r}: argument {arg!r} bound to unknown block {block!r}"
+                    )
+                knots = t.knots + off
+                if (
+                    knots.min(initial=0) < 0
+                    or knots.max(initial=0) >= variables.blocks[block].knots
+                ):
+                    raise InputError(
+                        f"term {t.name!r}: knots of {arg!r} fall outside block {block!r}"
+                    )
+        self.n = variables.n
+        self._layouts: dict[str, list[_TermLayout]] = {"cost": [], "eq": [], "ineq": []}
+        sizes = {"cost": 0, "eq": 0, "ineq": 0}
+        for t in self.terms:
+            self._layouts[t.kind].append(_TermLayout(t, sizes[t.kind], index))
+            sizes[t.kind] += t.rows
+        self.n_eq, self.n_ineq = sizes["eq"], sizes["ineq"]
+        self._jac_patterns = {
+            kind: self._jacobian_pattern(kind, sizes[kind]) for kind in ("eq", "ineq")
+        }
+        self._grad_cols, self._grad_mask = self._gradient_columns()
+        self._hess_pattern, self._hess_mask = self._hessian_pattern()
+
+    # ------------------------------------------------------------------ patterns
+    def _jacobian_pattern(self, kind: str, m: int) -> tuple[SparsePattern, np.ndarray]:
+        rows = [lay.jac_rows.ravel() for lay in self._layouts[kind]]
+        cols = [lay.jac_cols.ravel() for lay in self._layouts[kind]]
+        rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+        cols = np.concatenate(cols) if cols else np.zeros(0, np.int64)
+        mask = cols >= 0
+        return SparsePattern(rows[mask], cols[mask], (m, self.n)), mask
+
+    def _gradient_columns(self) -> tuple[np.ndarray, np.ndarray]:
+        cols = [lay.jac_cols.ravel() for lay in self._layouts["cost"]]
+        cols = np.concatenate(cols) if cols else np.zeros(0, np.int64)
+        mask = cols >= 0
+        return cols[mask], mask
+
+    def _hessian_pattern(self) -> tuple[SparsePattern, np.ndarray]:
+        lays = [lay for kind in ("cost", "eq", "ineq") for lay in self._layouts[kind]]
+        rows = np.concatenate([lay.hess_rows.ravel() for lay in lays] or [np.zeros(0, np.int64)])
+        cols = np.concatenate([lay.hess_cols.ravel() for lay in lays] or [np.zeros(0, np.int64)])
+        mask = cols >= 0
+        return SparsePattern(rows[mask], cols[mask], (self.n, self.n)), mask
+
+    # ------------------------------------------------------------------ manifold
+    def check_point(self, point: Point, what: str = "initial guess") -> Point:
+        return self.variables.check_point(point, what)
+
+    def retract(self, point: Point, dx: np.ndarray) -> Point:
+        return self.variables.retract(point, dx)
+
+    # ------------------------------------------------------------------ evaluation
+    def values(self, point: Point) -> tuple[float, np.ndarray, np.ndarray]:
+        """Objective, equality and inequality residuals (for line-search trials)."""
+        out = {"cost": [], "eq": [], "ineq": []}
+        for kind, lays in self._layouts.items():
+            for lay in lays:
+                t = lay.term
+                out[kind].append(t.function.value(t.gather(point), t.parameters).ravel())
+        f = float(sum(v.sum() for v in out["cost"]))
+        return f, _cat(out["eq"]), _cat(out["ineq"])
+
+    def evaluate(
+        self,
+        point: Point,
+        obj_factor: float = 1.0,
+        y: np.ndarray | None = None,
+        z: np.ndarray | None = None,
+        hessian: bool = True,
+    ) -> Evaluation:
+        """Values, Riemannian gradient and Jacobians and (optionally) the Lagrangian Hessian."""
+        y = np.zeros(self.n_eq) if y is None else np.asarray(y, dtype=float)
+        z = np.zeros(self.n_ineq) if z is None else np.asarray(z, dtype=float)
+        if y.shape != (self.n_eq,) or z.shape != (self.n_ineq,):
+            raise InputError(f"multipliers must have shapes ({self.n_eq},), ({self.n_ineq},)")
+        vals = {"cost": [], "eq": [], "ineq": []}
+        jacs = {"cost": [], "eq": [], "ineq": []}
+        hess = []
+        for kind, lays in self._layouts.items():
+            for lay in lays:
+                t, f = lay.term, lay.term.function
+                args = t.gather(point)
+                if hessian:
+                    if kind == "cost":
+                        lam = np.full((len(t.knots), 1), obj_factor)
+                    else:
+                        lam = (y if kind == "eq" else z)[lay.rows].reshape(len(t.knots), f.m)
+                    r, j, h = f.hessian(args, t.parameters, lam)
+                    hess.append(h.ravel())
+                else:
+                    r, j = f.jacobian(args, t.parameters)
+                vals[kind].append(r.ravel())
+                jacs[kind].append(j.ravel())
+        grad = np.bincount(
+            self._grad_cols, weights=_cat(jacs["cost"])[self._grad_mask], minlength=self.n
+        )
+        eq_pat, eq_mask = self._jac_patterns["eq"]
+        in_pat, in_mask = self._jac_patterns["ineq"]
+        return Evaluation(
+            objective=float(_cat(vals["cost"]).sum()),
+            gradient=grad,
+            eq=_cat(vals["eq"]),
+            eq_jacobian=eq_pat.assemble(_cat(jacs["eq"])[eq_mask]),
+            ineq=_cat(vals["ineq"]),
+            ineq_jacobian=in_pat.assemble(_cat(jacs["ineq"])[in_mask]),
+            hessian_lower=self._hess_pattern.assemble(_cat(hess)[self._hess_mask])
+            if hessian
+            else None,
+        )
+
+
+def _cat(parts: list[np.ndarray]) -> np.ndarray:
+    return np.concatenate(parts) if parts else np.zeros(0)

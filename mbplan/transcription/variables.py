@@ -1,0 +1,93 @@
+"""Trajectory variables: named blocks of per-knot group elements, some knots held fixed.
+
+A point is a ``dict`` mapping block names to arrays ``(knots, *element_shape)``. Its tangent
+space is R^n, the free knots' tangent coordinates stacked block by block, knot by knot.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from mbplan.errors import InputError
+
+Point = dict[str, np.ndarray]
+
+
+@dataclass(frozen=True)
+class Block:
+    """``knots`` elements of ``group``; the knots in ``fixed`` are data, not variables."""
+
+    name: str
+    group: Any
+    knots: int
+    fixed: tuple[int, ...] = field(default=())
+
+
+class TrajectoryVariables:
+    """Layout of the tangent space of a product of per-knot group elements."""
+
+    def __init__(self, blocks: Iterable[Block]) -> None:
+        self.blocks = {b.name: b for b in blocks}
+        offset = 0
+        self._index: dict[str, np.ndarray] = {}
+        for b in self.blocks.values():
+            if any(not 0 <= k < b.knots for k in b.fixed):
+                raise InputError(
+                    f"block {b.name!r}: fixed knots {b.fixed} outside 0..{b.knots - 1}"
+                )
+            free = np.ones(b.knots, dtype=bool)
+            free[list(b.fixed)] = False
+            idx = -np.ones((b.knots, b.group.dim), dtype=np.int64)
+            nfree = int(free.sum())
+            idx[free] = offset + np.arange(nfree * b.group.dim).reshape(nfree, b.group.dim)
+            offset += nfree * b.group.dim
+            self._index[b.name] = idx
+        self.n = offset
+
+    def tangent_index(self, name: str) -> np.ndarray:
+        """``(knots, dim)`` tangent coordinates of each knot of a block; ``-1`` for fixed knots."""
+        return self._index[name]
+
+    def check_point(self, point: Mapping[str, np.ndarray], what: str = "point") -> Point:
+        """Validate shapes, finiteness and group membership; return float copies."""
+        out: Point = {}
+        for b in self.blocks.values():
+            if b.name not in point:
+                raise InputError(f"{what}: missing block {b.name!r}")
+            a = np.array(point[b.name], dtype=float)
+            shape = (b.knots, *b.group.element_shape)
+            if a.shape != shape:
+                raise InputError(f"{what}: block {b.name!r} must have shape {shape}, got {a.shape}")
+            b.group.check(a)  # raises InputError naming the problem (NaN, not in group, ...)
+            out[b.name] = a
+        extra = sorted(set(point) - set(self.blocks))
+        if extra:
+            raise InputError(f"{what}: unknown blocks {extra}")
+        return out
+
+    def retract(self, point: Point, dx: np.ndarray) -> Point:
+        """``X exp(ξ)`` on every free knot (``y + ξ`` for vector blocks)."""
+        out = dict(point)
+        for b in self.blocks.values():
+            idx = self._index[b.name]
+            free = idx[:, 0] >= 0
+            if not free.any():
+                continue
+            new = point[b.name].copy()
+            new[free] = b.group.retract(point[b.name][free], dx[idx[free]])
+            out[b.name] = new
+        return out
+
+    def local(self, point: Point, other: Point) -> np.ndarray:
+        """Inverse of :meth:`retract`: the tangent vector from ``point`` to ``other``."""
+        dx = np.zeros(self.n)
+        for b in self.blocks.values():
+            idx = self._index[b.name]
+            free = idx[:, 0] >= 0
+            if free.any():
+                dx[idx[free]] = b.group.local(point[b.name][free], other[b.name][free])
+        return dx
