@@ -1,0 +1,251 @@
+"""Maximal-coordinate model of a fixed-base robot: one rigid body on SO(3) x R^3 per joint.
+
+Each Pinocchio joint ``j`` (revolute, continuous or prismatic) moves one rigid body: the links
+rigidly attached to its child link are already merged into ``model.inertias[j]`` by Pinocchio.
+The body frame has its origin at the body's centre of mass and the orientation of the joint frame,
+so a body pose ``(R, p)`` is the world orientation of joint frame ``j`` and the world position of
+the body COM.  Joints become holonomic constraints between a parent body (or the fixed world,
+pose ``R = I, p = 0``) and the child body (paper §VI.B):
+
+* pivot: ``R_p r_parent + p_p = R_c r_child + p_c``;
+* axis:  ``(R_p perp_parent[i])^T (R_c axis_child) = 0`` for ``i = 0, 1``.
+
+A prismatic joint keeps ``R_p^T R_c = R_rel0`` and lets the pivot points separate along the axis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from mbplan.errors import RobotModelError
+from mbplan.robots import RobotSpec, load
+
+# Pinocchio joint model -> (maximal-coordinate joint type, fixed axis in the joint frame or None
+# when the joint carries its own axis, continuous i.e. configuration (cos, sin)).
+_E = np.eye(3)
+_SUPPORTED: dict[str, tuple[str, np.ndarray | None, bool]] = {
+    "JointModelRX": ("revolute", _E[0], False),
+    "JointModelRY": ("revolute", _E[1], False),
+    "JointModelRZ": ("revolute", _E[2], False),
+    "JointModelRevoluteUnaligned": ("revolute", None, False),
+    "JointModelRUBX": ("revolute", _E[0], True),
+    "JointModelRUBY": ("revolute", _E[1], True),
+    "JointModelRUBZ": ("revolute", _E[2], True),
+    "JointModelRevoluteUnboundedUnaligned": ("revolute", None, True),
+    "JointModelPX": ("prismatic", _E[0], False),
+    "JointModelPY": ("prismatic", _E[1], False),
+    "JointModelPZ": ("prismatic", _E[2], False),
+    "JointModelPrismaticUnaligned": ("prismatic", None, False),
+}
+
+
+@dataclass(frozen=True, eq=False)
+class MaximalModel:
+    """Bodies and joints of a robot in maximal coordinates (read-only NumPy arrays).
+
+    Index ``i`` runs over the ``nb`` bodies; body ``i`` is moved by joint ``i`` (Pinocchio joint
+    ``pin_joint[i]``) that connects it to body ``parent[i]`` (``-1``: the fixed world).  Vectors
+    ``*_parent`` are expressed in the parent body frame (world frame for a world parent) and
+    ``*_child`` in the child body frame.
+    """
+
+    name: str
+    model: pin.Model  # the source model (not copied)
+    gravity: np.ndarray  # (3,) world gravity acceleration
+    # bodies
+    body_names: tuple[str, ...]
+    mass: np.ndarray  # (nb,)
+    inertia: np.ndarray  # (nb, 3, 3) standard inertia I_b about the COM, body frame
+    inertia_nonstandard: np.ndarray  # (nb, 3, 3) J = tr(I_b)/2 I - I_b (eq. 33)
+    com_in_joint: np.ndarray  # (nb, 3) COM in the joint frame
+    parent: np.ndarray  # (nb,) int, -1 = world
+    # joints
+    joint_names: tuple[str, ...]
+    joint_types: tuple[str, ...]  # "revolute" or "prismatic"
+    continuous: np.ndarray  # (nb,) bool: revolute without limits, q = (cos, sin)
+    pin_joint: np.ndarray  # (nb,) int, Pinocchio joint index
+    idx_q: np.ndarray  # (nb,) int, first index in Pinocchio's q
+    idx_v: np.ndarray  # (nb,) int, index in Pinocchio's v
+    r_parent: np.ndarray  # (nb, 3) pivot from parent COM (world: anchor point)
+    r_child: np.ndarray  # (nb, 3) pivot from child COM
+    axis_parent: np.ndarray  # (nb, 3) unit joint axis
+    axis_child: np.ndarray  # (nb, 3) unit joint axis
+    perp_parent: np.ndarray  # (nb, 2, 3) orthonormal, orthogonal to axis_parent
+    R_rel0: np.ndarray  # (nb, 3, 3) R_parent^T R_child at zero joint position
+    lower_position_limit: np.ndarray  # (nb,) rad or m; -inf for continuous joints
+    upper_position_limit: np.ndarray  # (nb,)
+    velocity_limit: np.ndarray  # (nb,)
+    effort_limit: np.ndarray  # (nb,)
+    damping: np.ndarray  # (nb,)
+
+    @property
+    def nb(self) -> int:
+        """Number of rigid bodies (= number of joints)."""
+        return len(self.body_names)
+
+    @property
+    def nq(self) -> int:
+        """Size of Pinocchio's configuration vector."""
+        return self.model.nq
+
+    @property
+    def nv(self) -> int:
+        """Size of Pinocchio's velocity vector."""
+        return self.model.nv
+
+    @property
+    def revolute(self) -> np.ndarray:
+        """(nb,) bool mask of revolute (incl. continuous) joints."""
+        return np.array([t == "revolute" for t in self.joint_types], dtype=bool)
+
+
+def nonstandard_inertia(inertia: np.ndarray) -> np.ndarray:
+    """Paper's non-standard inertia ``J = tr(I_b)/2 I3 - I_b``, inverse of ``I_b = tr(J) I3 - J``
+    (eq. 33); works on stacks ``(..., 3, 3)``."""
+    trace = np.trace(inertia, axis1=-2, axis2=-1)[..., None, None]
+    return 0.5 * trace * np.eye(3) - inertia
+
+
+# dtype of each per-joint MaximalModel array collected by maximal_model
+_ARRAY_FIELDS: dict[str, type] = {
+    "mass": float,
+    "inertia": float,
+    "com_in_joint": float,
+    "parent": int,
+    "continuous": bool,
+    "pin_joint": int,
+    "idx_q": int,
+    "idx_v": int,
+    "r_parent": float,
+    "r_child": float,
+    "axis_parent": float,
+    "axis_child": float,
+    "perp_parent": float,
+    "R_rel0": float,
+    "lower_position_limit": float,
+    "upper_position_limit": float,
+    "velocity_limit": float,
+    "effort_limit": float,
+    "damping": float,
+}
+
+
+def maximal_model(robot: RobotSpec) -> MaximalModel:
+    """Maximal-coordinate model of ``robot`` (anything :func:`mbplan.robots.load` accepts).
+
+    Raises :class:`RobotModelError` for a joint that is not revolute, continuous or prismatic
+    (spherical, planar, free-flyer, mimic, helical, universal, composite, ...) and for a body whose
+    mass or inertia (after merging fixed links) is not positive.
+    """
+    model = load(robot, geometry=False).model
+    if model.njoints == 1:
+        raise RobotModelError(f"robot {model.name!r} has no moving joint")
+    body_names = _body_names(model)
+
+    cols: dict[str, list] = {k: [] for k in _ARRAY_FIELDS}
+    joint_types: list[str] = []
+    for j in range(1, model.njoints):
+        jtype, axis, continuous = _joint_kind(model, j)
+        inertia = model.inertias[j]
+        _check_body(body_names[j - 1], model.names[j], inertia)
+        parent = model.parents[j]
+        placement = model.jointPlacements[j]
+        com_parent = model.inertias[parent].lever if parent > 0 else np.zeros(3)
+        axis_parent = placement.rotation @ axis
+        lo, hi = (
+            (-np.inf, np.inf)
+            if continuous
+            else (
+                model.lowerPositionLimit[model.idx_qs[j]],
+                model.upperPositionLimit[model.idx_qs[j]],
+            )
+        )
+        iv = model.idx_vs[j]
+        joint_types.append(jtype)
+        for key, value in (
+            ("mass", inertia.mass),
+            ("inertia", inertia.inertia),
+            ("com_in_joint", inertia.lever),
+            ("parent", parent - 1),
+            ("continuous", continuous),
+            ("pin_joint", j),
+            ("idx_q", model.idx_qs[j]),
+            ("idx_v", iv),
+            ("r_parent", placement.translation - com_parent),
+            ("r_child", -inertia.lever),
+            ("axis_parent", axis_parent),
+            ("axis_child", axis),
+            ("perp_parent", _orthonormal_complement(axis_parent)),
+            ("R_rel0", placement.rotation),
+            ("lower_position_limit", lo),
+            ("upper_position_limit", hi),
+            ("velocity_limit", model.upperVelocityLimit[iv]),
+            ("effort_limit", model.upperEffortLimit[iv]),
+            ("damping", model.damping[iv]),
+        ):
+            cols[key].append(value)
+
+    arrays = {k: _readonly(np.array(v, dtype=_ARRAY_FIELDS[k])) for k, v in cols.items()}
+    return MaximalModel(
+        name=model.name,
+        model=model,
+        gravity=_readonly(np.array(model.gravity.linear, dtype=float)),
+        body_names=tuple(body_names),
+        inertia_nonstandard=_readonly(nonstandard_inertia(arrays["inertia"])),
+        joint_names=tuple(model.names[1:]),
+        joint_types=tuple(joint_types),
+        **arrays,
+    )
+
+
+def _joint_kind(model: pin.Model, j: int) -> tuple[str, np.ndarray, bool]:
+    """(type, unit axis in the joint frame, continuous) of Pinocchio joint ``j``."""
+    shortname = model.joints[j].shortname()
+    if shortname not in _SUPPORTED:
+        raise RobotModelError(
+            f"joint {model.names[j]!r} is a {shortname}, which the maximal-coordinate model does "
+            "not support (only revolute, continuous and prismatic joints)"
+        )
+    jtype, axis, continuous = _SUPPORTED[shortname]
+    if axis is None:
+        axis = np.array(model.joints[j].extract().axis, dtype=float)
+        axis = axis / np.linalg.norm(axis)
+    return jtype, axis, continuous
+
+
+def _check_body(body: str, joint: str, inertia: pin.Inertia) -> None:
+    moments = np.linalg.eigvalsh(inertia.inertia)
+    if not inertia.mass > 0.0 or not moments[0] > 0.0:
+        raise RobotModelError(
+            f"body {body!r} (moved by joint {joint!r}) has mass {inertia.mass} and principal "
+            f"moments of inertia {moments}: a rigid body needs a positive mass and a "
+            "positive-definite inertia"
+        )
+
+
+def _body_names(model: pin.Model) -> list[str]:
+    """Name of the child link of each joint (first body frame on it), else the joint name."""
+    names = list(model.names[1:])
+    named = set()
+    for frame in model.frames:
+        j = frame.parentJoint
+        if frame.type == pin.FrameType.BODY and j > 0 and j not in named:
+            names[j - 1] = frame.name
+            named.add(j)
+    return names
+
+
+def _orthonormal_complement(axis: np.ndarray) -> np.ndarray:
+    """(2, 3) orthonormal vectors orthogonal to the unit vector ``axis``."""
+    helper = _E[np.argmin(np.abs(axis))]
+    u = np.cross(axis, helper)
+    u /= np.linalg.norm(u)
+    return np.stack([u, np.cross(axis, u)])
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a

@@ -1,0 +1,159 @@
+"""Maps between Pinocchio's joint coordinates ``(q, v)`` and maximal coordinates.
+
+Maximal coordinates of body ``i``: orientation ``R[i]`` (body frame -> world), COM position
+``p[i]``, body angular velocity ``omega_body[i]`` (body frame, ``R^T dR/dt = omega^``) and COM
+velocity ``v_com[i]`` (world frame).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+import pinocchio as pin
+
+from mbplan.errors import InputError
+from mbplan.multibody.model import MaximalModel
+
+
+def body_poses(mm: MaximalModel, q: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """World poses of the bodies at configuration ``q``: ``R`` (nb, 3, 3) and ``p`` (nb, 3)."""
+    q = _array(q, (mm.nq,), "q")
+    data = mm.model.createData()
+    pin.forwardKinematics(mm.model, data, q)
+    R = np.array([data.oMi[j].rotation for j in mm.pin_joint.tolist()])
+    t = np.array([data.oMi[j].translation for j in mm.pin_joint.tolist()])
+    return R, t + np.einsum("bij,bj->bi", R, mm.com_in_joint)
+
+
+def body_velocities(
+    mm: MaximalModel, q: npt.ArrayLike, v: npt.ArrayLike
+) -> tuple[np.ndarray, np.ndarray]:
+    """Body angular velocities (nb, 3, body frame) and COM velocities (nb, 3, world frame)."""
+    q = _array(q, (mm.nq,), "q")
+    v = _array(v, (mm.nv,), "v")
+    data = mm.model.createData()
+    pin.forwardKinematics(mm.model, data, q, v)
+    R = np.array([data.oMi[j].rotation for j in mm.pin_joint.tolist()])
+    omega = np.array([data.v[j].angular for j in mm.pin_joint.tolist()])
+    v_origin = np.array([data.v[j].linear for j in mm.pin_joint.tolist()])
+    v_com = np.einsum("bij,bj->bi", R, v_origin + np.cross(omega, mm.com_in_joint))
+    return omega, v_com
+
+
+def joint_positions(
+    mm: MaximalModel,
+    R: npt.ArrayLike,
+    p: npt.ArrayLike | None = None,
+    *,
+    q_ref: npt.ArrayLike | None = None,
+) -> np.ndarray:
+    """Pinocchio configuration ``q`` (nq,) of body poses ``(R, p)``; ``p`` needed for prismatic joints.
+
+    A revolute angle is read from ``R_rel0^T R_p^T R_c = exp(theta [axis_child]^)``; it is taken
+    in the 2*pi-window centred on ``q_ref`` (default: the middle of the joint's limits, or 0).
+    A continuous joint gives ``(cos theta, sin theta)``.  A prismatic displacement is the distance
+    between the two pivot points along the joint axis.
+    """
+    R = _array(R, (mm.nb, 3, 3), "R")
+    Rp = _from_parent(mm, R, np.eye(3))
+    M = np.einsum("bji,bjk->bik", mm.R_rel0, np.einsum("bji,bjk->bik", Rp, R))
+    skew = M - M.transpose(0, 2, 1)
+    sin = 0.5 * np.einsum(
+        "bi,bi->b", mm.axis_child, np.stack([skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0]], 1)
+    )
+    cos = 0.5 * (np.trace(M, axis1=1, axis2=2) - 1.0)
+    theta = np.arctan2(sin, cos)
+
+    if q_ref is None:
+        bounded = np.isfinite(mm.lower_position_limit) & np.isfinite(mm.upper_position_limit)
+        lo = np.where(bounded, mm.lower_position_limit, 0.0)
+        hi = np.where(bounded, mm.upper_position_limit, 0.0)
+        center = 0.5 * (lo + hi)
+    else:
+        center = _array(q_ref, (mm.nq,), "q_ref")[mm.idx_q]
+    theta += 2.0 * np.pi * np.round((center - theta) / (2.0 * np.pi))
+
+    q = np.zeros(mm.nq)
+    revolute = mm.revolute
+    angle = revolute & ~mm.continuous
+    q[mm.idx_q[angle]] = theta[angle]
+    q[mm.idx_q[mm.continuous]] = np.cos(theta[mm.continuous])
+    q[mm.idx_q[mm.continuous] + 1] = np.sin(theta[mm.continuous])
+    if not revolute.all():
+        prismatic = ~revolute
+        p = _require(p, (mm.nb, 3), "p")
+        delta = _pivot_separation(mm, R, p, Rp)
+        axis_world = np.einsum("bij,bj->bi", Rp, mm.axis_parent)
+        q[mm.idx_q[prismatic]] = np.einsum("bi,bi->b", axis_world, delta)[prismatic]
+    return q
+
+
+def joint_velocities(
+    mm: MaximalModel,
+    R: npt.ArrayLike,
+    omega_body: npt.ArrayLike,
+    p: npt.ArrayLike | None = None,
+    v_com: npt.ArrayLike | None = None,
+) -> np.ndarray:
+    """Pinocchio velocity ``v`` (nv,) of body velocities; ``p``, ``v_com`` needed for prismatic joints.
+
+    Revolute: ``axis_child . (omega_c - R_rel^T omega_p)`` with ``R_rel = R_p^T R_c``.  Prismatic:
+    time derivative of ``(R_p axis_parent) . (pivot_c - pivot_p)``.
+    """
+    R = _array(R, (mm.nb, 3, 3), "R")
+    omega = _array(omega_body, (mm.nb, 3), "omega_body")
+    Rp = _from_parent(mm, R, np.eye(3))
+    omega_p = _from_parent(mm, omega, np.zeros(3))
+    rel = np.einsum("bji,bjk->bik", Rp, R)
+    omega_rel = omega - np.einsum("bji,bj->bi", rel, omega_p)
+
+    v = np.zeros(mm.nv)
+    revolute = mm.revolute
+    v[mm.idx_v[revolute]] = np.einsum("bi,bi->b", mm.axis_child, omega_rel)[revolute]
+    if not revolute.all():
+        prismatic = ~revolute
+        p = _require(p, (mm.nb, 3), "p")
+        v_com = _require(v_com, (mm.nb, 3), "v_com")
+        v_p = _from_parent(mm, v_com, np.zeros(3))
+        delta = _pivot_separation(mm, R, p, Rp)
+        delta_dot = (
+            np.einsum("bij,bj->bi", R, np.cross(omega, mm.r_child))
+            + v_com
+            - np.einsum("bij,bj->bi", Rp, np.cross(omega_p, mm.r_parent))
+            - v_p
+        )
+        axis_world = np.einsum("bij,bj->bi", Rp, mm.axis_parent)
+        axis_world_dot = np.einsum("bij,bj->bi", Rp, np.cross(omega_p, mm.axis_parent))
+        d_dot = np.einsum("bi,bi->b", axis_world_dot, delta) + np.einsum(
+            "bi,bi->b", axis_world, delta_dot
+        )
+        v[mm.idx_v[prismatic]] = d_dot[prismatic]
+    return v
+
+
+def _pivot_separation(mm: MaximalModel, R: np.ndarray, p: np.ndarray, Rp: np.ndarray) -> np.ndarray:
+    """(nb, 3) world vector from the parent's pivot point to the child's (pivot constraint)."""
+    pp = _from_parent(mm, p, np.zeros(3))
+    child = np.einsum("bij,bj->bi", R, mm.r_child) + p
+    return child - np.einsum("bij,bj->bi", Rp, mm.r_parent) - pp
+
+
+def _from_parent(mm: MaximalModel, x: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """Per body, the parent's entry of ``x`` (``world`` for the fixed world)."""
+    has_parent = (mm.parent >= 0).reshape((-1,) + (1,) * (x.ndim - 1))
+    return np.where(has_parent, x[np.maximum(mm.parent, 0)], world)
+
+
+def _require(x: npt.ArrayLike | None, shape: tuple[int, ...], name: str) -> np.ndarray:
+    if x is None:
+        raise InputError(f"{name} is required for a robot with prismatic joints")
+    return _array(x, shape, name)
+
+
+def _array(x: npt.ArrayLike, shape: tuple[int, ...], name: str) -> np.ndarray:
+    a = np.asarray(x, dtype=float)
+    if a.shape != shape:
+        raise InputError(f"{name} must have shape {shape}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise InputError(f"{name} has non-finite entries")
+    return a

@@ -1,0 +1,306 @@
+"""Load a robot description (Pinocchio model + geometry) by name, URDF path or model.
+
+Every URDF is checked with :mod:`xml.etree` before Pinocchio sees it, so that a
+broken file fails with a :class:`~mbplan.errors.RobotModelError` naming the
+offending link or joint rather than with a parser crash.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from mbplan.errors import InputError, RobotModelError
+
+IIWA_URDF = Path(__file__).resolve().parent / "data" / "iiwa14.urdf"
+
+# Fixed-base arms of example-robot-data: name -> (description folder, URDF path in it, SRDF).
+# The table mirrors the upstream `example_robot_data` loaders, which are no longer part of the
+# `example-robot-data` wheel (>= 4.4 ships only the model files).
+_ERD_ARMS: dict[str, tuple[str, str, str | None]] = {
+    "panda": ("panda_description", "urdf/panda.urdf", "srdf/panda.srdf"),
+    "ur3": ("ur_description", "urdf/ur3_robot.urdf", None),
+    "ur3_limited": ("ur_description", "urdf/ur3_joint_limited_robot.urdf", None),
+    "ur3_gripper": ("ur_description", "urdf/ur3_gripper.urdf", "srdf/ur3_gripper.srdf"),
+    "ur5": ("ur_description", "urdf/ur5_robot.urdf", "srdf/ur5.srdf"),
+    "ur5_limited": (
+        "ur_description",
+        "urdf/ur5_joint_limited_robot.urdf",
+        "srdf/ur5_joint_limited_robot.srdf",
+    ),
+    "ur5_gripper": ("ur_description", "urdf/ur5_gripper.urdf", "srdf/ur5_gripper.srdf"),
+    "ur10": ("ur_description", "urdf/ur10_robot.urdf", None),
+    "ur10_limited": ("ur_description", "urdf/ur10_joint_limited_robot.urdf", None),
+    "kinova": ("kinova_description", "robots/kinova.urdf", "srdf/kinova.srdf"),
+    "z1": ("z1_description", "urdf/z1.urdf", "srdf/z1.srdf"),
+    "xarm7": ("xarm_description", "urdf/xarm7.urdf", "srdf/xarm7.srdf"),
+    "so100": ("so_arm_description", "urdf/so100.urdf", None),
+    "so101": ("so_arm_description", "urdf/so101.urdf", None),
+    "talos_arm": ("talos_data", "robots/talos_left_arm.urdf", None),
+    "finger_edu": ("finger_edu_description", "robots/finger_edu.urdf", "srdf/finger_edu.srdf"),
+    "asr_twodof": ("asr_twodof_description", "urdf/TwoDofs.urdf", None),
+    "double_pendulum": ("double_pendulum_description", "urdf/double_pendulum.urdf", None),
+    "double_pendulum_continuous": (
+        "double_pendulum_description",
+        "urdf/double_pendulum_continuous.urdf",
+        None,
+    ),
+    "double_pendulum_simple": (
+        "double_pendulum_description",
+        "urdf/double_pendulum_simple.urdf",
+        None,
+    ),
+}
+
+_URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+
+
+@dataclass(frozen=True, eq=False)
+class RobotDescription:
+    """A loaded robot: kinematic/inertial model plus optional geometry."""
+
+    name: str
+    model: pin.Model
+    collision_model: pin.GeometryModel | None
+    visual_model: pin.GeometryModel | None
+    urdf_path: Path | None
+
+
+RobotSpec = str | os.PathLike[str] | pin.Model | RobotDescription
+
+
+def available_robots() -> list[str]:
+    """Names accepted by :func:`load`: ``"iiwa"`` and the example-robot-data fixed-base arms."""
+    return ["iiwa", *_ERD_ARMS]
+
+
+def load(
+    robot: RobotSpec,
+    *,
+    collision_model: pin.GeometryModel | None = None,
+    visual_model: pin.GeometryModel | None = None,
+    geometry: bool = True,
+) -> RobotDescription:
+    """Load ``robot``: a name from :func:`available_robots`, a URDF path, or a ``pinocchio.Model``.
+
+    ``collision_model``/``visual_model`` accompany a ``pinocchio.Model``; ``geometry=False``
+    skips loading geometry (and meshes) from a URDF.  A :class:`RobotDescription` is returned
+    unchanged.  URDF ``<mimic>`` tags are ignored, as by Pinocchio's default: the mimicking joint
+    becomes an independent joint.  SRDF reference configurations of example-robot-data arms are
+    stored in ``model.referenceConfigurations``.
+    """
+    if isinstance(robot, pin.Model):
+        return RobotDescription(robot.name, robot, collision_model, visual_model, None)
+    if collision_model is not None or visual_model is not None:
+        raise InputError("collision_model and visual_model can only accompany a pinocchio.Model")
+    if isinstance(robot, RobotDescription):
+        return robot
+    if not isinstance(robot, str | os.PathLike):
+        raise InputError(
+            f"cannot load a robot from a {type(robot).__name__}: expected a robot name, "
+            "a URDF path or a pinocchio.Model"
+        )
+    if isinstance(robot, str):
+        if robot == "iiwa":
+            return _load_urdf(IIWA_URDF, "iiwa", [], geometry)
+        if robot in _ERD_ARMS:
+            return _load_erd(robot, geometry)
+        if Path(robot).suffix.lower() != ".urdf" and not Path(robot).exists():
+            raise InputError(
+                f"unknown robot {robot!r}: not a URDF path and not one of "
+                f"{', '.join(available_robots())}"
+            )
+    path = Path(robot)
+    return _load_urdf(path, None, [path.resolve().parent], geometry)
+
+
+def _erd_model_dir() -> Path:
+    """The ``share/example-robot-data/robots`` folder installed beside the Python packages."""
+    for entry in sys.path:
+        candidate = Path(entry or ".", "..", "..", "..", "share", "example-robot-data", "robots")
+        if candidate.is_dir():
+            return candidate.resolve()
+    raise RobotModelError("example-robot-data models not found: install `example-robot-data`")
+
+
+def _load_erd(name: str, geometry: bool) -> RobotDescription:
+    folder, urdf, srdf = _ERD_ARMS[name]
+    models = _erd_model_dir()
+    desc = _load_urdf(models / folder / urdf, name, [models.parent.parent], geometry)
+    if srdf is not None:
+        pin.loadReferenceConfigurations(desc.model, str(models / folder / srdf), False)
+    return desc
+
+
+def _load_urdf(
+    path: Path, name: str | None, package_dirs: list[Path], geometry: bool
+) -> RobotDescription:
+    validate_urdf(path)
+    types = [pin.GeometryType.COLLISION, pin.GeometryType.VISUAL] if geometry else []
+    try:
+        model, *geoms = pin.buildModelsFromUrdf(
+            str(path), package_dirs=[str(d) for d in package_dirs], geometry_types=types
+        )
+    except (RuntimeError, ValueError) as err:
+        raise RobotModelError(f"Pinocchio cannot build a model from {path}: {err}") from err
+    collision, visual = geoms if geometry else (None, None)
+    return RobotDescription(name or model.name, model, collision, visual, path)
+
+
+def validate_urdf(path: str | os.PathLike[str]) -> None:
+    """Check a URDF file's XML, link tree and inertias; raise naming the culprit.
+
+    Rules: well-formed XML with a ``<robot>`` root; unique link and joint names; known joint
+    types; a ``<limit>`` with effort and velocity on revolute and prismatic joints; a non-zero
+    axis; every joint's parent and child links defined; one root link, every other link the
+    child of exactly one joint, no loop; masses finite and non-negative; inertia matrices
+    positive semi-definite; the child link of a non-fixed joint has an ``<inertial>`` with
+    positive mass.  (Positive definiteness of each moving body's inertia, after Pinocchio merges
+    the links fixed to it, is checked by :func:`mbplan.multibody.maximal_model`.)
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"URDF file not found: {path}")
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as err:
+        raise RobotModelError(f"malformed XML in URDF {path}: {err}") from err
+    if root.tag != "robot":
+        raise RobotModelError(f"URDF {path}: root element is <{root.tag}>, expected <robot>")
+
+    links: dict[str, ET.Element] = {}
+    for link in root.findall("link"):
+        name = _required_attr(link, "name", f"URDF {path}: a <link>")
+        if name in links:
+            raise RobotModelError(f"URDF {path}: link {name!r} is defined twice")
+        links[name] = link
+
+    parent_joint: dict[str, str] = {}  # child link -> joint
+    children: dict[str, list[str]] = {}  # parent link -> child links
+    joint_names: set[str] = set()
+    for joint in root.findall("joint"):
+        jname = _required_attr(joint, "name", f"URDF {path}: a <joint>")
+        where = f"URDF {path}: joint {jname!r}"
+        if jname in joint_names:
+            raise RobotModelError(f"URDF {path}: joint {jname!r} is defined twice")
+        joint_names.add(jname)
+        jtype = joint.get("type")
+        if jtype not in _URDF_JOINT_TYPES:
+            raise RobotModelError(
+                f"{where} has unknown type {jtype!r}; URDF joint types are "
+                f"{', '.join(_URDF_JOINT_TYPES)}"
+            )
+        parent, child = (
+            _required_attr(_required_child(joint, tag, where), "link", f"{where} <{tag}>")
+            for tag in ("parent", "child")
+        )
+        for role, link_name in (("parent", parent), ("child", child)):
+            if link_name not in links:
+                raise RobotModelError(
+                    f"{where} has {role} link {link_name!r}, which is not defined"
+                )
+        if child in parent_joint:
+            raise RobotModelError(
+                f"URDF {path}: link {child!r} is the child of both joint "
+                f"{parent_joint[child]!r} and joint {jname!r}"
+            )
+        parent_joint[child] = jname
+        children.setdefault(parent, []).append(child)
+        if jtype in ("revolute", "prismatic"):
+            limit = _required_child(joint, "limit", where)
+            for attr in ("effort", "velocity"):
+                _number(limit, attr, where)
+        axis = joint.find("axis")
+        if jtype != "fixed" and axis is not None:
+            _check_axis(axis.get("xyz", "1 0 0"), where)
+        if jtype != "fixed":
+            _check_moving_link(links[child], f"{where}: its child link {child!r}")
+
+    roots = [name for name in links if name not in parent_joint]
+    if len(roots) != 1:
+        detail = f"several root links: {', '.join(roots)}" if roots else "no root link"
+        raise RobotModelError(
+            f"URDF {path}: {detail} (the links must form one tree, every link but the root being "
+            "the child of a joint)"
+        )
+    reached, stack = set(roots), list(roots)
+    while stack:
+        for child in children.get(stack.pop(), []):
+            reached.add(child)
+            stack.append(child)
+    if len(reached) != len(links):
+        loop = sorted(set(links) - reached)
+        raise RobotModelError(f"URDF {path}: links {', '.join(loop)} form a kinematic loop")
+
+    for name, link in links.items():
+        inertial = link.find("inertial")
+        if inertial is not None:
+            _mass_and_inertia(inertial, f"URDF {path}: link {name!r}")
+
+
+def _check_axis(text: str, where: str) -> None:
+    try:
+        axis = np.array([float(x) for x in text.split()])
+    except ValueError:
+        axis = np.array([])
+    if axis.shape != (3,) or not np.all(np.isfinite(axis)) or not np.any(axis):
+        raise RobotModelError(f"{where} has axis {text!r}: expected three numbers, not all zero")
+
+
+def _check_moving_link(link: ET.Element, where: str) -> None:
+    inertial = link.find("inertial")
+    if inertial is None:
+        raise RobotModelError(f"{where} has no <inertial>: a moving link needs a mass and inertia")
+    mass, _ = _mass_and_inertia(inertial, where)
+    if mass == 0.0:
+        raise RobotModelError(f"{where} has zero mass: a moving link needs a positive mass")
+
+
+def _mass_and_inertia(inertial: ET.Element, where: str) -> tuple[float, np.ndarray]:
+    """Mass and 3x3 inertia of an ``<inertial>``, checked finite, m >= 0 and inertia PSD."""
+    mass = _number(_required_child(inertial, "mass", where), "value", where)
+    if mass < 0.0:
+        raise RobotModelError(f"{where} has negative mass {mass}")
+    el = _required_child(inertial, "inertia", where)
+    xx, xy, xz, yy, yz, zz = (
+        _number(el, k, where) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+    )
+    inertia = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+    moments = np.linalg.eigvalsh(inertia)
+    if moments[0] < -1e-12 * max(1.0, abs(moments[-1])):
+        raise RobotModelError(
+            f"{where} has a non-positive-definite inertia (principal moments {moments})"
+        )
+    return mass, inertia
+
+
+def _required_child(el: ET.Element, tag: str, where: str) -> ET.Element:
+    child = el.find(tag)
+    if child is None:
+        raise RobotModelError(f"{where} has no <{tag}>")
+    return child
+
+
+def _required_attr(el: ET.Element, attr: str, where: str) -> str:
+    value = el.get(attr)
+    if not value:
+        raise RobotModelError(f"{where} has no {attr!r} attribute")
+    return value
+
+
+def _number(el: ET.Element, attr: str, where: str) -> float:
+    text = _required_attr(el, attr, f"{where} <{el.tag}>")
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise RobotModelError(f"{where}: <{el.tag} {attr}={text!r}> is not a finite number")
+    return value
