@@ -12,9 +12,10 @@ import numpy as np
 from tqdm import tqdm
 
 from mbplan.benchmarks.common import machine_info, median_time, write_atomic, write_json
-from mbplan.dynamics import nonstandard_inertia, quadrotor_step
+from mbplan.dynamics import quadrotor_step
 from mbplan.engine import RiemannianFunction
 from mbplan.lie import SO3, R
+from mbplan.multibody import nonstandard_inertia
 
 KNOTS = (1, 10, 100, 1000, 10000)
 

@@ -1,8 +1,10 @@
 """Discrete dynamics on SO(3)×R³: the Lie group variational integrator and joint constraints."""
 
 from mbplan.dynamics.constraints import axis_constraint, kinematic_chain, pivot_constraint
+from mbplan.dynamics.joints import constraint_forces, revolute_constraint, revolute_forces
 from mbplan.dynamics.rigid_body import (
-    nonstandard_inertia,
+    body_dynamics,
+    body_kinematics,
     quadrotor_step,
     rotational_dynamics,
     rotational_kinematics,
@@ -12,10 +14,14 @@ from mbplan.dynamics.rigid_body import (
 
 __all__ = [
     "axis_constraint",
+    "body_dynamics",
+    "body_kinematics",
+    "constraint_forces",
     "kinematic_chain",
-    "nonstandard_inertia",
     "pivot_constraint",
     "quadrotor_step",
+    "revolute_constraint",
+    "revolute_forces",
     "rotational_dynamics",
     "rotational_kinematics",
     "translational_dynamics",

@@ -9,15 +9,8 @@ as the ``residual`` of a :class:`mbplan.engine.RiemannianFunction`.
 from __future__ import annotations
 
 import casadi as cs
-import numpy as np
 
 from mbplan.lie import SO3
-
-
-def nonstandard_inertia(inertia: np.ndarray) -> np.ndarray:
-    """``J = tr(I_b)/2 · I₃ - I_b``, the inverse of ``I_b = tr(J) I₃ - J`` (eq. 33)."""
-    inertia = np.asarray(inertia, dtype=float)
-    return 0.5 * np.trace(inertia) * np.eye(3) - inertia
 
 
 def rotational_kinematics(R0: cs.SX, R1: cs.SX, F0: cs.SX) -> cs.SX:
@@ -47,6 +40,32 @@ def translational_dynamics(
     return out if force is None else out - force * dt
 
 
+def body_kinematics(
+    R0: cs.SX, R1: cs.SX, F0: cs.SX, p0: cs.SX, p1: cs.SX, v0: cs.SX, dt: cs.SX
+) -> cs.SX:
+    """``R₁ = R₀F₀``, ``p₁ = p₀ + v₀Δt`` (eq. 30): Table I rows 1–2, 6 residuals."""
+    return cs.vertcat(rotational_kinematics(R0, R1, F0), translational_kinematics(p0, p1, v0, dt))
+
+
+def body_dynamics(
+    F0: cs.SX,
+    F1: cs.SX,
+    v0: cs.SX,
+    v1: cs.SX,
+    J: cs.SX,
+    mass: cs.SX,
+    gravity: cs.SX,
+    dt: cs.SX,
+    torque: cs.SX | None = None,
+    force: cs.SX | None = None,
+) -> cs.SX:
+    """Forced LGVI (eq. 34–35, 60): Table I rows 3–4, 6 residuals; forces act at the new knot."""
+    return cs.vertcat(
+        rotational_dynamics(F0, F1, J, dt, torque),
+        translational_dynamics(v0, v1, mass, gravity, dt, force),
+    )
+
+
 def quadrotor_step(
     R0: cs.SX,
     R1: cs.SX,
@@ -68,8 +87,6 @@ def quadrotor_step(
     """
     thrust = cs.mtimes(R1, cs.DM([0.0, 0.0, 1.0])) * u[0]
     return cs.vertcat(
-        rotational_kinematics(R0, R1, F0),
-        translational_kinematics(p0, p1, v0, dt),
-        rotational_dynamics(F0, F1, J, dt, u[1:4]),
-        translational_dynamics(v0, v1, mass, gravity, dt, thrust),
+        body_kinematics(R0, R1, F0, p0, p1, v0, dt),
+        body_dynamics(F0, F1, v0, v1, J, mass, gravity, dt, u[1:4], thrust),
     )

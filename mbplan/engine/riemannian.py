@@ -184,6 +184,8 @@ class RiemannianFunction:
             a = np.asarray(values[s.name], dtype=float)
             if a.shape == s.shape or (s.shape == (1,) and a.ndim == 0):
                 a = a.reshape(1, *s.shape)
+            elif s.shape == (1,) and a.ndim == 1:
+                a = a.reshape(-1, 1)  # one scalar per knot
             elif a.ndim != len(s.shape) + 1 or a.shape[1:] != s.shape:
                 raise InputError(
                     f"{self.name}: {what} {s.name!r} must have shape (K, *{s.shape}) or {s.shape}, "

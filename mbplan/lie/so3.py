@@ -8,7 +8,7 @@ from __future__ import annotations
 import casadi as cs
 import numpy as np
 
-from mbplan.lie.backend import Array, is_symbolic
+from mbplan.lie.backend import Array, as_numeric, check_symbolic_shape, is_symbolic
 from mbplan.lie.group import MatrixLieGroup, check_orthogonal
 
 _SMALL = 1e-6  # θ² below which Taylor series replace the closed forms
@@ -44,8 +44,9 @@ class SO3Group(MatrixLieGroup):
 
     def vee(self, A: Array) -> Array:
         if is_symbolic(A):
+            check_symbolic_shape(A, (3, 3), f"{self.name} Lie-algebra matrix")
             return 0.5 * cs.vertcat(A[2, 1] - A[1, 2], A[0, 2] - A[2, 0], A[1, 0] - A[0, 1])
-        A = np.asarray(A, dtype=float)
+        A = as_numeric(A, (3, 3), f"{self.name} Lie-algebra matrix")
         return 0.5 * np.stack(
             [A[..., 2, 1] - A[..., 1, 2], A[..., 0, 2] - A[..., 2, 0], A[..., 1, 0] - A[..., 0, 1]],
             -1,

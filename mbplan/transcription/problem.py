@@ -36,14 +36,12 @@ class Evaluation:
 class _TermLayout:
     """Where one term's residual rows and tangent columns land in the global NLP."""
 
-    def __init__(self, term: Term, row_offset: int, index: dict[str, np.ndarray]) -> None:
+    def __init__(self, term: Term, rows: np.ndarray, index: dict[str, np.ndarray]) -> None:
         f = term.function
-        K = len(term.knots)
         self.term = term
-        self.row_offset = row_offset
-        self.rows = slice(row_offset, row_offset + term.rows)
+        self.rows = rows  # (K, m) global rows within the term's kind
         cols = term.tangent_columns(index)  # (K, n_f)
-        self.jac_rows = row_offset + np.arange(K)[:, None] * f.m + f.jac_rows[None, :]
+        self.jac_rows = rows[:, f.jac_rows]
         self.jac_cols = cols[:, f.jac_cols]
         hr, hc = cols[:, f.hess_rows], cols[:, f.hess_cols]
         self.hess_rows, self.hess_cols = np.maximum(hr, hc), np.minimum(hr, hc)
@@ -60,26 +58,33 @@ class TrajectoryProblem:
             raise InputError(f"duplicate term names: {names}")
         index = {name: variables.tangent_index(name) for name in variables.blocks}
         for t in self.terms:
-            for arg, (block, off) in t.bind.items():
+            for arg, (block, ix) in t.bind.items():
                 if block not in variables.blocks:
                     raise InputError(
                         f"term {t.name!r}: argument {arg!r} bound to unknown block {block!r}"
                     )
-                knots = t.knots + off
-                if (
-                    knots.min(initial=0) < 0
-                    or knots.max(initial=0) >= variables.blocks[block].knots
-                ):
+                b = variables.blocks[block]
+                if ix.size and (ix.min() < 0 or ix.max() >= b.knots * b.count):
                     raise InputError(
-                        f"term {t.name!r}: knots of {arg!r} fall outside block {block!r}"
+                        f"term {t.name!r}: indices of {arg!r} fall outside block {block!r}"
                     )
         self.n = variables.n
         self._layouts: dict[str, list[_TermLayout]] = {"cost": [], "eq": [], "ineq": []}
         sizes = {"cost": 0, "eq": 0, "ineq": 0}
         for t in self.terms:
-            self._layouts[t.kind].append(_TermLayout(t, sizes[t.kind], index))
-            sizes[t.kind] += t.rows
+            m = t.function.m
+            if t.rows is None:
+                rows = sizes[t.kind] + np.arange(t.sites * m, dtype=np.int64).reshape(t.sites, m)
+                sizes[t.kind] += t.sites * m
+            else:
+                rows = t.rows
+                sizes[t.kind] = max(sizes[t.kind], int(rows.max(initial=-1)) + 1)
+            self._layouts[t.kind].append(_TermLayout(t, rows, index))
         self.n_eq, self.n_ineq = sizes["eq"], sizes["ineq"]
+        self._rows = {
+            kind: np.concatenate([lay.rows.ravel() for lay in lays] or [np.zeros(0, np.int64)])
+            for kind, lays in self._layouts.items()
+        }
         self._jac_patterns = {
             kind: self._jacobian_pattern(kind, sizes[kind]) for kind in ("eq", "ineq")
         }
@@ -116,15 +121,23 @@ class TrajectoryProblem:
         return self.variables.retract(point, dx)
 
     # ------------------------------------------------------------------ evaluation
+    def _flat(self, point: Point) -> Point:
+        return {name: b.flat(point[name]) for name, b in self.variables.blocks.items()}
+
+    def _scatter(self, kind: str, parts: list[np.ndarray]) -> np.ndarray:
+        size = self.n_eq if kind == "eq" else self.n_ineq
+        return np.bincount(self._rows[kind], weights=_cat(parts), minlength=size)
+
     def values(self, point: Point) -> tuple[float, np.ndarray, np.ndarray]:
         """Objective, equality and inequality residuals (for line-search trials)."""
+        flat = self._flat(point)
         out = {"cost": [], "eq": [], "ineq": []}
         for kind, lays in self._layouts.items():
             for lay in lays:
                 t = lay.term
-                out[kind].append(t.function.value(t.gather(point), t.parameters).ravel())
+                out[kind].append(t.function.value(t.gather(flat), t.parameters).ravel())
         f = float(sum(v.sum() for v in out["cost"]))
-        return f, _cat(out["eq"]), _cat(out["ineq"])
+        return f, self._scatter("eq", out["eq"]), self._scatter("ineq", out["ineq"])
 
     def evaluate(
         self,
@@ -139,18 +152,19 @@ class TrajectoryProblem:
         z = np.zeros(self.n_ineq) if z is None else np.asarray(z, dtype=float)
         if y.shape != (self.n_eq,) or z.shape != (self.n_ineq,):
             raise InputError(f"multipliers must have shapes ({self.n_eq},), ({self.n_ineq},)")
+        flat = self._flat(point)
         vals = {"cost": [], "eq": [], "ineq": []}
         jacs = {"cost": [], "eq": [], "ineq": []}
         hess = []
         for kind, lays in self._layouts.items():
             for lay in lays:
                 t, f = lay.term, lay.term.function
-                args = t.gather(point)
+                args = t.gather(flat)
                 if hessian:
                     if kind == "cost":
-                        lam = np.full((len(t.knots), 1), obj_factor)
+                        lam = np.full((t.sites, 1), obj_factor)
                     else:
-                        lam = (y if kind == "eq" else z)[lay.rows].reshape(len(t.knots), f.m)
+                        lam = (y if kind == "eq" else z)[lay.rows]
                     r, j, h = f.hessian(args, t.parameters, lam)
                     hess.append(h.ravel())
                 else:
@@ -165,9 +179,9 @@ class TrajectoryProblem:
         return Evaluation(
             objective=float(_cat(vals["cost"]).sum()),
             gradient=grad,
-            eq=_cat(vals["eq"]),
+            eq=self._scatter("eq", vals["eq"]),
             eq_jacobian=eq_pat.assemble(_cat(jacs["eq"])[eq_mask]),
-            ineq=_cat(vals["ineq"]),
+            ineq=self._scatter("ineq", vals["ineq"]),
             ineq_jacobian=in_pat.assemble(_cat(jacs["ineq"])[in_mask]),
             hessian_lower=self._hess_pattern.assemble(_cat(hess)[self._hess_mask])
             if hessian

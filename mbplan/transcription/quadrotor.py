@@ -14,11 +14,12 @@ from functools import cache
 import casadi as cs
 import numpy as np
 
-from mbplan.dynamics import nonstandard_inertia, quadrotor_step
+from mbplan.dynamics import quadrotor_step
 from mbplan.engine import RiemannianFunction
 from mbplan.engine.jit import jit_available
 from mbplan.errors import InputError
 from mbplan.lie import SO3, R
+from mbplan.multibody import nonstandard_inertia
 from mbplan.transcription.costs import chordal_cost, quadratic_cost
 from mbplan.transcription.problem import TrajectoryProblem
 from mbplan.transcription.terms import Term
@@ -136,7 +137,7 @@ def quadrotor_problem(ocp: QuadrotorOCP, jit: bool | None = None) -> TrajectoryP
     weights = np.tile([ocp.w_R, ocp.w_p, ocp.w_F, ocp.w_v], (N, 1))
     weights[-1] *= ocp.terminal_factor
     terms = [
-        Term(
+        Term.at_knots(
             "dynamics",
             "eq",
             step,
@@ -149,7 +150,7 @@ def quadrotor_problem(ocp: QuadrotorOCP, jit: bool | None = None) -> TrajectoryP
                 "dt": ocp.dt,
             },
         ),
-        Term(
+        Term.at_knots(
             "state_cost",
             "cost",
             _state_cost_function(jit),
@@ -157,7 +158,7 @@ def quadrotor_problem(ocp: QuadrotorOCP, jit: bool | None = None) -> TrajectoryP
             range(1, N + 1),
             {"R_d": ocp.R_goal, "p_d": ocp.p_goal, "w": weights},
         ),
-        Term(
+        Term.at_knots(
             "input_cost",
             "cost",
             _input_cost_function(jit),
@@ -170,7 +171,7 @@ def quadrotor_problem(ocp: QuadrotorOCP, jit: bool | None = None) -> TrajectoryP
         if ocp.thrust_limit is None or ocp.torque_limit is None:
             raise InputError("input limits need both thrust_limit and torque_limit")
         terms.append(
-            Term(
+            Term.at_knots(
                 "input_limits",
                 "ineq",
                 _input_limit_function(jit),
@@ -181,7 +182,7 @@ def quadrotor_problem(ocp: QuadrotorOCP, jit: bool | None = None) -> TrajectoryP
         )
     for i, c in enumerate(ocp.cylinders):
         terms.append(
-            Term(
+            Term.at_knots(
                 f"cylinder_{i}",
                 "ineq",
                 _cylinder_function(jit),

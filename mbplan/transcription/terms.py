@@ -1,8 +1,12 @@
-"""A term applies one :class:`~mbplan.engine.RiemannianFunction` at a range of knots.
+"""A term evaluates one :class:`~mbplan.engine.RiemannianFunction` at ``K`` sites.
 
-Each function argument is bound to a block and a knot offset: with ``bind={"R0": ("R", 0),
-"R1": ("R", 1)}`` and ``knots=range(N)``, knot ``k`` evaluates the function on ``R[k], R[k+1]``.
-Parameters are either shared (one value) or per knot (leading dimension ``len(knots)``).
+Each function argument is bound to a block and, per site, the flat index of an element of that
+block (``knot * count + element``). :meth:`Term.at_knots` covers the common case: with
+``bind={"R0": ("R", 0), "R1": ("R", 1)}`` and ``knots=range(N)``, site ``k`` evaluates the
+function on ``R[k], R[k+1]``. Parameters are shared (one value) or per site (leading dim ``K``).
+
+Residual rows are fresh by default; ``rows`` (K, m) instead adds the term into rows that other
+terms of the same kind own (e.g. joint constraint forces into the bodies' dynamics rows).
 """
 
 from __future__ import annotations
@@ -26,9 +30,9 @@ class Term:
     name: str
     kind: Kind
     function: RiemannianFunction
-    bind: Mapping[str, tuple[str, int]]
-    knots: Sequence[int]
+    bind: Mapping[str, tuple[str, np.ndarray]]
     parameters: Mapping[str, Any] = field(default_factory=dict)
+    rows: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in ("cost", "eq", "ineq"):
@@ -44,21 +48,50 @@ class Term:
             raise InputError(
                 f"term {self.name!r}: bind {sorted(self.bind)} must name {sorted(names)}"
             )
-        self.knots = np.asarray(self.knots, dtype=np.int64)
+        self.bind = {
+            a: (blk, np.asarray(ix, dtype=np.int64).ravel()) for a, (blk, ix) in self.bind.items()
+        }
+        sizes = {len(ix) for _, ix in self.bind.values()}
+        if len(sizes) != 1:
+            raise InputError(
+                f"term {self.name!r}: bound index arrays differ in length {sorted(sizes)}"
+            )
+        self.sites = sizes.pop()
+        if self.rows is not None:
+            self.rows = np.asarray(self.rows, dtype=np.int64)
+            if self.rows.shape != (self.sites, self.function.m):
+                raise InputError(
+                    f"term {self.name!r}: rows must have shape {(self.sites, self.function.m)}"
+                )
 
-    @property
-    def rows(self) -> int:
-        """Number of scalar residuals of the term over all its knots."""
-        return len(self.knots) * self.function.m
+    @classmethod
+    def at_knots(
+        cls,
+        name: str,
+        kind: Kind,
+        function: RiemannianFunction,
+        bind: Mapping[str, tuple[str, int]],
+        knots: Sequence[int],
+        parameters: Mapping[str, Any] | None = None,
+    ) -> Term:
+        """Bind each argument to ``block[k + offset]`` for every ``k`` in ``knots``."""
+        k = np.asarray(knots, dtype=np.int64)
+        return cls(
+            name,
+            kind,
+            function,
+            {a: (b, k + off) for a, (b, off) in bind.items()},
+            parameters or {},
+        )
 
-    def gather(self, point: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The function's variables at every knot of the term, as ``(K, *shape)`` arrays."""
-        return {arg: point[block][self.knots + off] for arg, (block, off) in self.bind.items()}
+    def gather(self, flat_point: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The function's variables at every site, from blocks flattened to ``(knots*count, …)``."""
+        return {arg: flat_point[block][ix] for arg, (block, ix) in self.bind.items()}
 
     def tangent_columns(self, index: Mapping[str, np.ndarray]) -> np.ndarray:
         """``(K, n_f)`` global tangent coordinate of each local coordinate (``-1`` if fixed)."""
-        cols = np.empty((len(self.knots), self.function.n), dtype=np.int64)
+        cols = np.empty((self.sites, self.function.n), dtype=np.int64)
         for s in self.function.variables:
-            block, off = self.bind[s.name]
-            cols[:, s.tangent] = index[block][self.knots + off]
+            block, ix = self.bind[s.name]
+            cols[:, s.tangent] = index[block][ix]
         return cols

@@ -1,7 +1,9 @@
-"""Trajectory variables: named blocks of per-knot group elements, some knots held fixed.
+"""Trajectory variables: named blocks of group elements per knot, some knots held fixed.
 
-A point is a ``dict`` mapping block names to arrays ``(knots, *element_shape)``. Its tangent
-space is R^n, the free knots' tangent coordinates stacked block by block, knot by knot.
+A block holds ``count`` elements per knot (e.g. one per rigid body). A point is a ``dict`` mapping
+block names to arrays ``(knots, *element_shape)`` (``count == 1``) or ``(knots, count,
+*element_shape)``. Elements are addressed by the flat index ``knot * count + element``. The
+tangent space is R^n: the free elements' tangent coordinates stacked block by block.
 """
 
 from __future__ import annotations
@@ -19,12 +21,23 @@ Point = dict[str, np.ndarray]
 
 @dataclass(frozen=True)
 class Block:
-    """``knots`` elements of ``group``; the knots in ``fixed`` are data, not variables."""
+    """``knots × count`` elements of ``group``; the knots in ``fixed`` are data, not variables."""
 
     name: str
     group: Any
     knots: int
     fixed: tuple[int, ...] = field(default=())
+    count: int = 1
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Shape of the block's array in a point."""
+        per_knot = () if self.count == 1 else (self.count,)
+        return (self.knots, *per_knot, *self.group.element_shape)
+
+    def flat(self, a: np.ndarray) -> np.ndarray:
+        """The block's array as ``(knots * count, *element_shape)``."""
+        return a.reshape(self.knots * self.count, *self.group.element_shape)
 
 
 class TrajectoryVariables:
@@ -39,9 +52,10 @@ class TrajectoryVariables:
                 raise InputError(
                     f"block {b.name!r}: fixed knots {b.fixed} outside 0..{b.knots - 1}"
                 )
-            free = np.ones(b.knots, dtype=bool)
+            free = np.ones((b.knots, b.count), dtype=bool)
             free[list(b.fixed)] = False
-            idx = -np.ones((b.knots, b.group.dim), dtype=np.int64)
+            free = free.ravel()
+            idx = -np.ones((b.knots * b.count, b.group.dim), dtype=np.int64)
             nfree = int(free.sum())
             idx[free] = offset + np.arange(nfree * b.group.dim).reshape(nfree, b.group.dim)
             offset += nfree * b.group.dim
@@ -49,7 +63,7 @@ class TrajectoryVariables:
         self.n = offset
 
     def tangent_index(self, name: str) -> np.ndarray:
-        """``(knots, dim)`` tangent coordinates of each knot of a block; ``-1`` for fixed knots."""
+        """``(knots * count, dim)`` tangent coordinates of each element; ``-1`` where fixed."""
         return self._index[name]
 
     def check_point(self, point: Mapping[str, np.ndarray], what: str = "point") -> Point:
@@ -59,9 +73,10 @@ class TrajectoryVariables:
             if b.name not in point:
                 raise InputError(f"{what}: missing block {b.name!r}")
             a = np.array(point[b.name], dtype=float)
-            shape = (b.knots, *b.group.element_shape)
-            if a.shape != shape:
-                raise InputError(f"{what}: block {b.name!r} must have shape {shape}, got {a.shape}")
+            if a.shape != b.shape:
+                raise InputError(
+                    f"{what}: block {b.name!r} must have shape {b.shape}, got {a.shape}"
+                )
             b.group.check(a)  # raises InputError naming the problem (NaN, not in group, ...)
             out[b.name] = a
         extra = sorted(set(point) - set(self.blocks))
@@ -70,16 +85,16 @@ class TrajectoryVariables:
         return out
 
     def retract(self, point: Point, dx: np.ndarray) -> Point:
-        """``X exp(ξ)`` on every free knot (``y + ξ`` for vector blocks)."""
+        """``X exp(ξ)`` on every free element (``y + ξ`` for vector blocks)."""
         out = dict(point)
         for b in self.blocks.values():
             idx = self._index[b.name]
             free = idx[:, 0] >= 0
             if not free.any():
                 continue
-            new = point[b.name].copy()
-            new[free] = b.group.retract(point[b.name][free], dx[idx[free]])
-            out[b.name] = new
+            new = b.flat(point[b.name]).copy()
+            new[free] = b.group.retract(new[free], dx[idx[free]])
+            out[b.name] = new.reshape(b.shape)
         return out
 
     def local(self, point: Point, other: Point) -> np.ndarray:
@@ -89,5 +104,7 @@ class TrajectoryVariables:
             idx = self._index[b.name]
             free = idx[:, 0] >= 0
             if free.any():
-                dx[idx[free]] = b.group.local(point[b.name][free], other[b.name][free])
+                dx[idx[free]] = b.group.local(
+                    b.flat(point[b.name])[free], b.flat(other[b.name])[free]
+                )
         return dx
