@@ -19,6 +19,37 @@ def _bench_engine(args: argparse.Namespace) -> int:
     return 0 if summary["rows"] else 1
 
 
+def _bench_drone(args: argparse.Namespace) -> int:
+    from mbplan.benchmarks.drone_docking import run
+
+    methods = tuple(m.strip() for m in args.methods.split(","))
+    run(
+        Path(args.out),
+        n=args.n,
+        seed=args.seed,
+        tol=args.tol,
+        methods=methods,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        scaling=not args.no_scaling,
+    )
+    print((Path(args.out) / "results.md").read_text())
+    return 0
+
+
+def _add_pool_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
+    p.add_argument("--scheduler", default=None, help="Dask scheduler address (runs on the cluster)")
+
+
+def _robots(args: argparse.Namespace) -> int:
+    from mbplan.robots import available_robots
+
+    for name in available_robots():
+        print(name)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="mbplan",
@@ -26,6 +57,9 @@ def build_parser() -> argparse.ArgumentParser:
         "(maximal coordinates on SO(3)×R³, LGVI dynamics, Riemannian interior point).",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    robots = sub.add_parser("robots", help="list the robot names mbplan can load")
+    robots.set_defaults(func=_robots)
 
     bench = sub.add_parser(
         "bench", help="run a benchmark and write its results (JSON, markdown, plot)"
@@ -41,6 +75,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     engine.add_argument("--seed", type=int, default=0, help="random seed of the evaluation points")
     engine.set_defaults(func=_bench_engine)
+    drone = bench_sub.add_parser(
+        "drone-docking",
+        help="RIPM vs quaternion IPOPT on seeded drone docking cases (Table II, Fig. 4)",
+    )
+    drone.add_argument("--n", type=int, default=100, help="number of cases")
+    drone.add_argument("--seed", type=int, default=0, help="seed of the case sampler")
+    drone.add_argument(
+        "--tol", type=float, default=1e-6, help="convergence tolerance of every method"
+    )
+    drone.add_argument(
+        "--methods", default="ripm,ripm-input-limits,ipopt-quaternion", help="comma-separated"
+    )
+    drone.add_argument("--out", default="benchmarks/results/drone-docking", help="output directory")
+    drone.add_argument("--no-scaling", action="store_true", help="skip the N=40 vs N=160 timing")
+    _add_pool_options(drone)
+    drone.set_defaults(func=_bench_drone)
     return parser
 
 

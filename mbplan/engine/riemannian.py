@@ -191,8 +191,6 @@ class RiemannianFunction:
                     f"{self.name}: {what} {s.name!r} must have shape (K, *{s.shape}) or {s.shape}, "
                     f"got {a.shape}"
                 )
-            if not np.all(np.isfinite(a)):
-                raise InputError(f"{self.name}: {what} {s.name!r} contains NaN or inf")
             if a.shape[0] != 1:
                 if K not in (None, a.shape[0]):
                     raise InputError(
@@ -205,7 +203,14 @@ class RiemannianFunction:
         for s, a in zip(slots, arrays, strict=True):
             # Column-major flattening per knot, as CasADi reshapes.
             out[:, s.offset : s.offset + s.size] = np.swapaxes(a, 1, -1).reshape(a.shape[0], -1)
+        if not np.isfinite(out).all():
+            bad = next(s.name for s, a in zip(slots, arrays, strict=True) if not np.isfinite(a).all())
+            raise InputError(f"{self.name}: {what} {bad!r} contains NaN or inf")
         return out
+
+    def pack_parameters(self, parameters: Mapping[str, Any] | None, K: int) -> np.ndarray:
+        """Parameters packed once as a ``(K, np)`` array, to pass instead of the mapping."""
+        return _tile(self.pack(self.parameters, parameters or {}, self.np, "parameters", K), K)
 
     def _call(self, kind: str, inputs: list[np.ndarray]) -> list[np.ndarray]:
         """Evaluate the ``K``-fold map of a function on C-ordered ``(K, ·)`` arrays, zero-copy."""
@@ -228,7 +233,10 @@ class RiemannianFunction:
 
     def _inputs(self, variables, parameters, K: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         z = self.pack(self.variables, variables, self.nz, "variables", K)
-        p = self.pack(self.parameters, parameters or {}, self.np, "parameters", K)
+        if isinstance(parameters, np.ndarray):
+            p = parameters
+        else:
+            p = self.pack(self.parameters, parameters or {}, self.np, "parameters", K)
         K = max(z.shape[0], p.shape[0])
         return _tile(z, K), _tile(p, K)
 

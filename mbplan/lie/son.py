@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg
 
 from mbplan.errors import InputError
 from mbplan.lie.backend import Array, is_symbolic
@@ -50,7 +51,27 @@ class SOnGroup(MatrixLieGroup):
         return X.T if is_symbolic(X) else np.swapaxes(X, -1, -2)
 
     def _principal_logm(self, X: np.ndarray) -> np.ndarray:
-        L = super()._principal_logm(X)
+        """Log from the real Schur form ``X = Q T Qᵀ``: T is block diagonal with 2×2 rotations
+        and ±1 entries; each rotation block gives its angle, and the −1 entries (an even number,
+        det X = 1) pair up into rotations by π. Exact at angle π, where ``logm`` goes complex."""
+        T, Q = scipy.linalg.schur(X, output="real")
+        L = np.zeros_like(T)
+        minus_one: list[int] = []
+        i = 0
+        while i < self.n:
+            if i + 1 < self.n and abs(T[i + 1, i]) > 1e-14:
+                angle = np.arctan2(
+                    0.5 * (T[i + 1, i] - T[i, i + 1]), 0.5 * (T[i, i] + T[i + 1, i + 1])
+                )
+                L[i + 1, i], L[i, i + 1] = angle, -angle
+                i += 2
+                continue
+            if T[i, i] < 0:
+                minus_one.append(i)
+            i += 1
+        for a, b in zip(minus_one[::2], minus_one[1::2], strict=True):
+            L[b, a], L[a, b] = np.pi, -np.pi
+        L = Q @ L @ Q.T
         return 0.5 * (L - L.T)
 
 

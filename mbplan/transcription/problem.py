@@ -40,6 +40,7 @@ class _TermLayout:
         f = term.function
         self.term = term
         self.rows = rows  # (K, m) global rows within the term's kind
+        self.parameters = f.pack_parameters(term.parameters, term.sites)
         cols = term.tangent_columns(index)  # (K, n_f)
         self.jac_rows = rows[:, f.jac_rows]
         self.jac_cols = cols[:, f.jac_cols]
@@ -135,7 +136,7 @@ class TrajectoryProblem:
         for kind, lays in self._layouts.items():
             for lay in lays:
                 t = lay.term
-                out[kind].append(t.function.value(t.gather(flat), t.parameters).ravel())
+                out[kind].append(t.function.value(t.gather(flat), lay.parameters).ravel())
         f = float(sum(v.sum() for v in out["cost"]))
         return f, self._scatter("eq", out["eq"]), self._scatter("ineq", out["ineq"])
 
@@ -165,10 +166,10 @@ class TrajectoryProblem:
                         lam = np.full((t.sites, 1), obj_factor)
                     else:
                         lam = (y if kind == "eq" else z)[lay.rows]
-                    r, j, h = f.hessian(args, t.parameters, lam)
+                    r, j, h = f.hessian(args, lay.parameters, lam)
                     hess.append(h.ravel())
                 else:
-                    r, j = f.jacobian(args, t.parameters)
+                    r, j = f.jacobian(args, lay.parameters)
                 vals[kind].append(r.ravel())
                 jacs[kind].append(j.ravel())
         grad = np.bincount(

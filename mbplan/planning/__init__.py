@@ -1,0 +1,1 @@
+"""Planning: a task → transcription → solver → a result record."""
