@@ -42,6 +42,22 @@ def _add_pool_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scheduler", default=None, help="Dask scheduler address (runs on the cluster)")
 
 
+def _bench_chain(args: argparse.Namespace) -> int:
+    from mbplan.benchmarks.chain_scaling import run
+
+    run(Path(args.out), N=args.horizon)
+    print((Path(args.out) / "results.md").read_text())
+    return 0
+
+
+def _validate_dynamics(args: argparse.Namespace) -> int:
+    from mbplan.benchmarks.validate_dynamics import run
+
+    run(args.robot, args.seed, Path(args.out), T=args.duration, long_steps=args.long_steps)
+    print((Path(args.out) / "results.md").read_text())
+    return 0
+
+
 def _robots(args: argparse.Namespace) -> int:
     from mbplan.robots import available_robots
 
@@ -57,6 +73,23 @@ def build_parser() -> argparse.ArgumentParser:
         "(maximal coordinates on SO(3)×R³, LGVI dynamics, Riemannian interior point).",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    validate = sub.add_parser(
+        "validate-dynamics",
+        help="simulate the maximal-coordinate LGVI and compare with Pinocchio (ABA, fine RK4)",
+    )
+    validate.add_argument(
+        "--robot", default="iiwa", help="robot name (see `mbplan robots`) or URDF path"
+    )
+    validate.add_argument(
+        "--seed", type=int, default=0, help="seed of the initial state and torques"
+    )
+    validate.add_argument("--duration", type=float, default=1.0, help="simulated time [s]")
+    validate.add_argument(
+        "--long-steps", type=int, default=10_000, help="steps of the long energy run"
+    )
+    validate.add_argument("--out", default="out/validate-dynamics", help="output directory")
+    validate.set_defaults(func=_validate_dynamics)
 
     robots = sub.add_parser("robots", help="list the robot names mbplan can load")
     robots.set_defaults(func=_robots)
@@ -75,6 +108,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     engine.add_argument("--seed", type=int, default=0, help="random seed of the evaluation points")
     engine.set_defaults(func=_bench_engine)
+    chain = bench_sub.add_parser(
+        "chain", help="0th/1st/2nd-order evaluation time of a serial chain of 1..64 bodies (Fig. 6)"
+    )
+    chain.add_argument("--out", default="benchmarks/results/chain-scaling", help="output directory")
+    chain.add_argument("--horizon", type=int, default=40, help="number of knots N")
+    chain.set_defaults(func=_bench_chain)
     drone = bench_sub.add_parser(
         "drone-docking",
         help="RIPM vs quaternion IPOPT on seeded drone docking cases (Table II, Fig. 4)",

@@ -1,0 +1,143 @@
+"""Parameters of the RIPM: Table IV of the RIPM paper where it gives one, IPOPT's defaults
+(Wächter & Biegler 2006, "WB" below) for the rest."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mbplan.errors import InputError
+
+
+@dataclass(frozen=True)
+class RIPMOptions:
+    """Every parameter of :func:`~mbplan.solvers.ripm.solve_ripm`; override any by keyword."""
+
+    # --- Table IV of the RIPM paper (Appendix B) ---
+    max_iter: int = 200
+    """N_max: iterations, restoration iterations included."""
+    max_ls_trials: int = 30
+    """J_max: trial points per line search."""
+    tol: float = 1e-11
+    """ε_tol: termination when the scaled KKT error E_0 (eq. 55-56) is below it."""
+    kappa_mu: float = 0.99
+    """κ_μ: linear decrease of μ (WB eq. 7)."""
+    theta_mu: float = 1.99
+    """θ_μ: superlinear decrease of μ (WB eq. 7)."""
+    tau_min: float = 0.995
+    """τ_min: fraction to the boundary τ = max(τ_min, 1 - μ) (WB eq. 8)."""
+    gamma_phi: float = 1e-6
+    """γ_φ: sufficient decrease of the barrier objective (WB eq. 18); Table IV's
+    "barrier problem cost progress"."""
+    theta_min_fact: float = 1e-4
+    """θ_min = theta_min_fact · max(1, θ(x_0)) (WB): below it the switching rule applies."""
+    eta_phi: float = 1e-4
+    """η_φ: Armijo factor (WB eq. 20)."""
+    gamma_theta: float = 1e-4
+    """γ_θ: sufficient decrease of the infeasibility (WB eq. 18)."""
+    beta: float = 0.5
+    """β: backtracking factor of the step size."""
+
+    # --- barrier problem and termination (WB) ---
+    mu_init: float = 0.1
+    kappa_eps: float = 10.0
+    """μ is decreased once E_μ ≤ κ_ε μ (WB eq. 7; Algorithm 1 uses 10)."""
+    s_max: float = 100.0
+    """Scaling threshold of s_d, s_c in the KKT error (WB eq. 5)."""
+    acceptable_tol: float = 1e-6
+    """E_0 ≤ acceptable_tol for ``acceptable_iter`` consecutive iterations ends with ACCEPTABLE."""
+    acceptable_iter: int = 15
+    constr_viol_tol: float = 1e-4
+    """A point with ‖h, g + s‖∞ above it that minimizes the infeasibility is locally infeasible."""
+
+    # --- filter line search (WB) ---
+    theta_max_fact: float = 1e4
+    """θ_max = theta_max_fact · max(1, θ(x_0)): the filter's upper bound on the infeasibility."""
+    delta: float = 1.0
+    s_theta: float = 1.1
+    s_phi: float = 2.3
+    gamma_alpha: float = 0.05
+    """Safety factor of α_min (WB eq. 23)."""
+    second_order_correction: bool = True
+    max_soc: int = 4
+    kappa_soc: float = 0.99
+    kappa_sigma: float = 1e10
+    """Safeguard κ_Σ of the multipliers z against μ/s (WB eq. 16)."""
+    tiny_step_tol: float = 10 * float(np.finfo(float).eps)
+
+    # --- initialization (WB) ---
+    bound_push: float = 1e-2
+    """Initial slacks s_0 = max(-g(x_0), bound_push)."""
+    bound_mult_init_val: float = 1.0
+    """Initial multipliers z_0 of the inequalities."""
+    constr_mult_init_max: float = 1e3
+    """Least-squares initial y_0 is discarded (y_0 = 0) if larger than this in max norm."""
+
+    # --- inertia correction (WB Algorithm IC) ---
+    delta_w_init: float = 1e-4
+    delta_w_min: float = 1e-20
+    delta_w_max: float = 1e40
+    kappa_w_minus: float = 1.0 / 3.0
+    kappa_w_plus: float = 8.0
+    kappa_w_plus_first: float = 100.0
+    delta_c_bar: float = 1e-8
+    kappa_c: float = 0.25
+
+    # --- linear solver (IPOPT's PDFullSpaceSolver) ---
+    static_regularization: float = 1e-9
+    """±ε on the diagonal of the factorized KKT matrix only (removed by iterative refinement),
+    so that qdldl, which does not pivot, never meets an exact zero pivot."""
+    max_refinement_steps: int = 10
+    residual_ratio_max: float = 1e-10
+    residual_ratio_singular: float = 1e-5
+
+    # --- feasibility restoration (damped Newton on ½‖h, g + s‖², a simplified WB restoration) ---
+    restoration: bool = True
+    bound_mult_reset_threshold: float = 1e3
+    """After restoration z = μ/s, or all z = 1 if max(μ/s) exceeds this (IPOPT's rule)."""
+    kappa_resto: float = 0.9
+    """Restoration returns once θ ≤ kappa_resto · θ at its start and the filter accepts."""
+    resto_stationarity_tol: float = 1e-8
+    """Stationarity of ½‖h, g + s‖² (relative to max(1, ‖h, g + s‖∞)) that proves infeasibility."""
+
+    print_level: int = 0
+    """0: silent; 1: an IPOPT-like line per iteration and a summary."""
+
+    def __post_init__(self) -> None:
+        checks = {
+            "max_iter": self.max_iter >= 0,
+            "max_ls_trials": self.max_ls_trials >= 1,
+            "tol": self.tol > 0,
+            "kappa_mu": 0 < self.kappa_mu < 1,
+            "theta_mu": 1 < self.theta_mu < 2,
+            "tau_min": 0 < self.tau_min < 1,
+            "beta": 0 < self.beta < 1,
+            "mu_init": self.mu_init > 0,
+            "gamma_theta": 0 < self.gamma_theta < 1,
+            "gamma_phi": 0 < self.gamma_phi < 1,
+            "eta_phi": 0 < self.eta_phi < 0.5,
+            "kappa_soc": 0 < self.kappa_soc < 1,
+            "kappa_resto": 0 < self.kappa_resto < 1,
+            "bound_push": self.bound_push > 0,
+            "bound_mult_init_val": self.bound_mult_init_val > 0,
+            "delta_w_min": 0 <= self.delta_w_min <= self.delta_w_init <= self.delta_w_max,
+            "kappa_w_minus": 0 < self.kappa_w_minus < 1,
+            "kappa_w_plus": self.kappa_w_plus > 1,
+            "kappa_w_plus_first": self.kappa_w_plus_first > 1,
+            "print_level": self.print_level >= 0,
+        }
+        bad = [name for name, ok in checks.items() if not ok]
+        if bad:
+            values = ", ".join(f"{name}={getattr(self, name)!r}" for name in bad)
+            raise InputError(f"RIPM option(s) out of range: {values}")
+
+    def replace(self, **overrides: Any) -> RIPMOptions:
+        """A copy with some parameters changed; unknown names raise :class:`InputError`."""
+        fields = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(overrides) - fields)
+        if unknown:
+            raise InputError(f"unknown RIPM option(s): {unknown}")
+        return dataclasses.replace(self, **overrides)

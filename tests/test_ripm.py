@@ -1,0 +1,399 @@
+"""The generic RIPM solver (mbplan.solvers): optimality against IPOPT and independent references,
+failure statuses with finite iterates, options, and the sparse LDLᵀ with inertia."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+import pytest
+import scipy.sparse as sp
+from scipy.optimize import minimize
+from scipy.spatial.transform import Rotation
+
+from mbplan.errors import InputError
+from mbplan.solvers import (
+    EuclideanNLP,
+    ManifoldNLP,
+    RIPMOptions,
+    RIPMProblem,
+    RIPMStatus,
+    solve_ripm,
+)
+from mbplan.solvers.examples import HS071_X0, BandedControlNLP, hs071
+from mbplan.solvers.linear_solver import KKTSystem
+
+
+def _ipopt(x, f, g, x0, lbg, ubg):
+    opts = {
+        "print_time": False,
+        "ipopt.print_level": 0,
+        "ipopt.tol": 1e-12,
+        "ipopt.bound_relax_factor": 0.0,
+    }
+    solver = ca.nlpsol("s", "ipopt", {"x": x, "f": f, "g": g}, opts)
+    sol = solver(x0=x0, lbg=lbg, ubg=ubg)
+    assert solver.stats()["success"]
+    return np.array(sol["x"]).ravel(), float(sol["f"]), np.array(sol["lam_g"]).ravel()
+
+
+def _independent_kkt_error(problem: EuclideanNLP, res) -> float:
+    """E_0 of eq. 55-56 / WB eq. 5 recomputed from the problem's own callables."""
+    x = res.x
+    r_d = (
+        problem.gradient(x) + problem.eq_jacobian(x).T @ res.y + problem.ineq_jacobian(x).T @ res.z
+    )
+    primal = max(np.abs(problem.eq(x)).max(initial=0), np.abs(problem.ineq(x) + res.s).max())
+    s_max = 100.0
+    s_d = max(s_max, (np.abs(res.y).sum() + np.abs(res.z).sum()) / (len(res.y) + len(res.z)))
+    s_c = max(s_max, np.abs(res.z).sum() / len(res.z))
+    return max(
+        np.abs(r_d).max() / (s_d / s_max), primal, np.abs(res.s * res.z).max() / (s_c / s_max)
+    )
+
+
+# ---------------------------------------------------------------------------- HS071
+def test_hs071_matches_ipopt():
+    res = solve_ripm(hs071(), HS071_X0)
+    assert res.status is RIPMStatus.CONVERGED and res.success
+    x = ca.SX.sym("x", 4)
+    f = x[0] * x[3] * (x[0] + x[1] + x[2]) + x[2]
+    g = ca.vertcat(x[0] * x[1] * x[2] * x[3], ca.sumsqr(x), x)
+    lbg = [25, 40, 1, 1, 1, 1]
+    ubg = [ca.inf, 40, 5, 5, 5, 5]
+    x_ip, f_ip, lam = _ipopt(x, f, g, HS071_X0, lbg, ubg)
+    assert np.max(np.abs(res.x - x_ip)) < 1e-8
+    assert abs(res.objective - f_ip) < 1e-8
+    assert abs(res.objective - 17.0140172891) < 1e-9  # the published optimum
+    # multipliers: y of Σx² - 40 = 0 is IPOPT's λ; z of 25 - Πx ≤ 0 is -λ; z of 1 - x₁ ≤ 0 too
+    assert abs(res.y[0] - lam[1]) < 1e-7
+    assert abs(res.z[0] + lam[0]) < 1e-7
+    assert abs(res.z[1] + lam[2]) < 1e-7
+    assert res.iterations <= 15
+
+
+def test_kkt_error_at_solution_is_below_tol():
+    problem = hs071()
+    res = solve_ripm(problem, HS071_X0, tol=1e-10)
+    assert res.success
+    assert res.kkt_error <= 1e-10
+    assert _independent_kkt_error(problem, res) <= 1e-10
+    assert np.all(res.z > 0) and np.all(res.s > 0)
+    assert np.all(problem.ineq(res.x) <= 1e-10)  # g(x) ≤ 0 up to the tolerance
+    hist = res.history.arrays()
+    assert len(hist["kkt_error"]) == res.iterations + 1
+    assert hist["kkt_error"][-1] == pytest.approx(res.kkt_error)
+    assert np.all(np.diff(hist["time_s"]) >= 0)
+    assert np.all(hist["mu"][1:] <= hist["mu"][:-1])  # monotone barrier update
+
+
+# ---------------------------------------------------------------------------- SO(3)
+def _skew_part(b: np.ndarray) -> np.ndarray:
+    """``a`` with ``tr(B ξ^) = a·ξ``."""
+    return np.array([b[1, 2] - b[2, 1], b[2, 0] - b[0, 2], b[0, 1] - b[1, 0]])
+
+
+def _sym_part(b: np.ndarray) -> np.ndarray:
+    """Hessian at 0 of ``ξ ↦ tr(B exp(ξ^))``: ``sym(B) - tr(B) I`` (from ``ξ^² = ξξᵀ - |ξ|²I``)."""
+    return 0.5 * (b + b.T) - np.trace(b) * np.eye(3)
+
+
+class NearestRotation(ManifoldNLP):
+    """``min ‖R - M‖²_F`` s.t. ``(R e₃)_z ≥ c`` on SO(3), retraction ``R exp(ξ^)``.
+
+    Pullbacks: ``f(R exp ξ^) = const - 2 tr(MᵀR exp ξ^)`` and ``g = c - tr(e₃e₃ᵀR exp ξ^)``, so
+    gradients and Hessians at ξ = 0 follow from :func:`_skew_part` and :func:`_sym_part`."""
+
+    n, n_eq, n_ineq = 3, 0, 1
+
+    def __init__(self, target: np.ndarray, c: float) -> None:
+        self.target, self.c = target, c
+
+    def retract(self, rot: np.ndarray, xi: np.ndarray) -> np.ndarray:
+        return rot @ pin.exp3(xi)
+
+    def objective(self, rot: np.ndarray) -> float:
+        return float(np.sum((rot - self.target) ** 2))
+
+    def gradient(self, rot: np.ndarray) -> np.ndarray:
+        return -2 * _skew_part(self.target.T @ rot)
+
+    def ineq(self, rot: np.ndarray) -> np.ndarray:
+        return np.array([self.c - rot[2, 2]])
+
+    def ineq_jacobian(self, rot: np.ndarray) -> sp.csr_matrix:
+        return sp.csr_matrix(-_skew_part(np.outer([0, 0, 1], rot[2]))[None, :])
+
+    def lagrangian_hessian(self, rot, obj_factor, y, z) -> sp.csr_matrix:
+        b_f, b_g = self.target.T @ rot, np.outer([0, 0, 1], rot[2])
+        return sp.csr_matrix(-2 * obj_factor * _sym_part(b_f) - z[0] * _sym_part(b_g))
+
+
+def test_so3_derivatives_are_those_of_the_pullback():
+    rng = np.random.default_rng(1)
+    prob = NearestRotation(rng.normal(size=(3, 3)), 0.3)
+    rot = pin.exp3(rng.normal(size=3))
+    z = np.array([0.7])
+
+    def lagrangian(xi):
+        r = prob.retract(rot, xi)
+        return prob.objective(r) + z @ prob.ineq(r)
+
+    h = 1e-4
+    eye = np.eye(3)
+    grad_fd = np.array([(lagrangian(h * e) - lagrangian(-h * e)) / (2 * h) for e in eye])
+    hess_fd = np.array(
+        [
+            [
+                (
+                    lagrangian(h * (a + b))
+                    - lagrangian(h * (a - b))
+                    - lagrangian(h * (b - a))
+                    + lagrangian(-h * (a + b))
+                )
+                / (4 * h * h)
+                for b in eye
+            ]
+            for a in eye
+        ]
+    )
+    grad = prob.gradient(rot) + prob.ineq_jacobian(rot).T @ z
+    assert np.allclose(grad, grad_fd, atol=1e-7)
+    assert np.allclose(prob.lagrangian_hessian(rot, 1.0, None, z).toarray(), hess_fd, atol=1e-6)
+
+
+def test_so3_nearest_rotation_with_active_constraint():
+    rng = np.random.default_rng(3)
+    target = pin.exp3(np.array([1.0, 0.0, 0.0])) + 0.1 * rng.normal(size=(3, 3))
+    c = 0.8
+    prob = NearestRotation(target, c)
+    assert isinstance(prob, RIPMProblem)
+    res = solve_ripm(prob, np.eye(3))
+    assert res.status is RIPMStatus.CONVERGED
+    rot = res.x
+    assert np.allclose(rot.T @ rot, np.eye(3), atol=1e-12) and np.linalg.det(rot) > 0
+    assert abs(rot[2, 2] - c) < 1e-9 and res.z[0] > 0.1  # the constraint is active
+
+    # the unconstrained optimum (polar factor) violates the constraint ...
+    u, _, vt = np.linalg.svd(target)
+    polar = u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt
+    assert polar[2, 2] < c - 0.1
+
+    # ... and an independent solver over rotation vectors (SLSQP) finds the same optimum
+    def objective(v):
+        return np.sum((Rotation.from_rotvec(v).as_matrix() - target) ** 2)
+
+    def constraint(v):
+        return Rotation.from_rotvec(v).as_matrix()[2, 2] - c
+
+    ref = minimize(
+        objective,
+        Rotation.from_matrix(polar).as_rotvec(),
+        method="SLSQP",
+        constraints=[{"type": "ineq", "fun": constraint}],
+        options={"ftol": 1e-15, "maxiter": 500},
+    )
+    rot_ref = Rotation.from_rotvec(ref.x).as_matrix()
+    assert np.max(np.abs(rot - rot_ref)) < 1e-6
+    assert res.objective <= ref.fun + 1e-10
+
+
+# ---------------------------------------------------------------------------- failures
+def _assert_finite(res):
+    assert np.all(np.isfinite(res.x)) and np.all(np.isfinite(res.y))
+    assert np.all(np.isfinite(res.z)) and np.all(np.isfinite(res.s)) and np.all(res.s > 0)
+    assert not res.success
+
+
+def test_infeasible_equality_is_detected():
+    prob = EuclideanNLP(
+        2,
+        lambda x: x[0] ** 2 + (x[1] - 1) ** 2,
+        lambda x: np.array([2 * x[0], 2 * (x[1] - 1)]),
+        lambda x, s, y, z: np.diag([2 * s + 2 * y[0], 2 * s]),
+        eq=lambda x: np.array([x[0] ** 2 + 1]),
+        eq_jacobian=lambda x: np.array([[2 * x[0], 0.0]]),
+        n_eq=1,
+    )
+    res = solve_ripm(prob, np.array([1.0, 3.0]))
+    assert res.status is RIPMStatus.LOCALLY_INFEASIBLE
+    _assert_finite(res)
+    assert abs(res.x[0]) < 1e-6  # the minimizer of the infeasibility x₁² + 1
+    assert res.inf_pr == pytest.approx(1.0, abs=1e-9)
+
+
+def test_infeasible_inequalities_are_detected():
+    prob = EuclideanNLP(
+        2,
+        lambda x: x[0] + x[1],
+        lambda x: np.ones(2),
+        lambda x, s, y, z: np.diag([2 * z[0], 0.0]),
+        ineq=lambda x: np.array([x[0] ** 2 + 1, -x[1]]),
+        ineq_jacobian=lambda x: np.array([[2 * x[0], 0.0], [0.0, -1.0]]),
+        n_ineq=2,
+    )
+    res = solve_ripm(prob, np.array([1.0, 3.0]))
+    assert res.status is RIPMStatus.LOCALLY_INFEASIBLE
+    _assert_finite(res)
+    assert any(res.history.restoration)
+
+
+def test_restoration_phase_recovers_wachter_biegler_example():
+    """min x₁ s.t. x₁² - x₂ - 1 = 0, x₁ - x₃ - ½ = 0, x₂, x₃ ≥ 0 from (-2, 1, 1), where
+    infeasible-start Newton steps stall (Wächter & Biegler 2000); x* = (1, 0, ½)."""
+    prob = EuclideanNLP(
+        3,
+        lambda x: x[0],
+        lambda x: np.array([1.0, 0.0, 0.0]),
+        lambda x, s, y, z: np.diag([2 * y[0], 0.0, 0.0]),
+        eq=lambda x: np.array([x[0] ** 2 - x[1] - 1, x[0] - x[2] - 0.5]),
+        eq_jacobian=lambda x: np.array([[2 * x[0], -1.0, 0.0], [1.0, 0.0, -1.0]]),
+        n_eq=2,
+        ineq=lambda x: -x[1:],
+        ineq_jacobian=lambda x: np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]),
+        n_ineq=2,
+    )
+    x0 = np.array([-2.0, 1.0, 1.0])
+    res = solve_ripm(prob, x0)
+    assert res.success and np.allclose(res.x, [1.0, 0.0, 0.5], atol=1e-8)
+    # with at most 3 trials per line search the main loop gives up at iteration 7, and the
+    # restoration phase brings the iterates to where Newton steps converge
+    res = solve_ripm(prob, x0, max_ls_trials=3)
+    assert res.success and np.allclose(res.x, [1.0, 0.0, 0.5], atol=1e-8)
+    resto = np.flatnonzero(res.history.restoration)
+    assert resto.size and resto[-1] < res.iterations - 2
+
+
+def _sqrt_problem(objective) -> EuclideanNLP:
+    return EuclideanNLP(
+        1,
+        objective,
+        lambda x: np.array([1.0 - 1.0 / np.sqrt(x[0])]),
+        lambda x, s, y, z: np.array([[s * 0.5 * x[0] ** -1.5]]),
+    )
+
+
+def test_nan_objective_trial_is_backtracked():
+    """f = x - 2√x: the Newton step from 4 lands at -4 where f is NaN."""
+
+    def objective(x):
+        with np.errstate(invalid="ignore"):
+            return x[0] - 2 * np.sqrt(x[0])
+
+    res = solve_ripm(_sqrt_problem(objective), np.array([4.0]))
+    assert res.status is RIPMStatus.CONVERGED
+    assert res.x[0] == pytest.approx(1.0, abs=1e-9)
+    assert res.history.ls_trials[1] >= 2
+
+
+def test_nan_everywhere_ends_with_numerical_error():
+    x0 = np.array([4.0])
+
+    def objective(x):
+        return x[0] - 2 * np.sqrt(x[0]) if np.array_equal(x, x0) else np.nan
+
+    res = solve_ripm(_sqrt_problem(objective), x0)
+    assert res.status is RIPMStatus.NUMERICAL_ERROR
+    _assert_finite(res)
+    assert np.isfinite(res.objective) and np.array_equal(res.x, x0)
+
+    res0 = solve_ripm(_sqrt_problem(lambda x: np.nan), x0)
+    assert res0.status is RIPMStatus.NUMERICAL_ERROR and res0.iterations == 0
+    _assert_finite(res0)
+
+
+# ---------------------------------------------------------------------------- options, log
+def test_defaults_are_table_iv_and_overrides_apply(capsys):
+    o = RIPMOptions()
+    table_iv = {
+        "max_iter": 200,
+        "max_ls_trials": 30,
+        "tol": 1e-11,
+        "kappa_mu": 0.99,
+        "theta_mu": 1.99,
+        "tau_min": 0.995,
+        "gamma_phi": 1e-6,
+        "theta_min_fact": 1e-4,
+        "eta_phi": 1e-4,
+        "gamma_theta": 1e-4,
+        "beta": 0.5,
+    }
+    assert {k: getattr(o, k) for k in table_iv} == table_iv
+
+    res = solve_ripm(hs071(), HS071_X0, max_iter=3, verbose=True)
+    assert res.status is RIPMStatus.MAX_ITER and not res.success
+    assert res.iterations == 3 and len(res.history) == 4
+    out = capsys.readouterr().out
+    assert "iter    objective    inf_pr   inf_du lg(mu)" in out and "MAX_ITER" in out
+    assert len([ln for ln in out.splitlines() if ln[:4].strip().isdigit()]) == 4
+
+    res = solve_ripm(hs071(), HS071_X0, RIPMOptions(tol=1e-6, mu_init=1.0))
+    assert res.success and res.history.mu[0] == 1.0 and res.kkt_error <= 1e-6
+    assert capsys.readouterr().out == ""  # print_level 0 by default
+    res = solve_ripm(hs071(), HS071_X0, tol=1e-20)  # unreachable: stops at the tiny-step rule
+    assert res.status is RIPMStatus.ACCEPTABLE and res.success and res.kkt_error < 1e-12
+    assert dataclasses.replace(o, beta=0.25).beta == 0.25
+    with pytest.raises(InputError, match="unknown"):
+        solve_ripm(hs071(), HS071_X0, not_an_option=1)
+    with pytest.raises(InputError, match="kappa_mu"):
+        RIPMOptions(kappa_mu=1.5)
+
+
+# ---------------------------------------------------------------------------- structure
+def test_block_banded_control_problem_matches_ipopt():
+    prob = BandedControlNLP(nx=4, nu=2, horizon=20)
+    res = solve_ripm(prob, prob.initial_guess())
+    assert res.status is RIPMStatus.CONVERGED
+    assert res.n_factorizations <= 2 * res.iterations
+    assert res.n_evaluations <= res.iterations + 3  # one per iterate (+ initialization)
+
+    nx, nu, n_k = prob.nx, prob.nu, prob.N
+    x = ca.SX.sym("x", prob.n)
+    knots = ca.reshape(x[: n_k * (nx + nu)], nx + nu, n_k)
+    xs, us, x_end = knots[:nx, :], knots[nx:, :], x[n_k * (nx + nu) :]
+    f = prob.w * ca.sumsqr(xs) + prob.r * ca.sumsqr(us) + prob.w_final * ca.sumsqr(x_end)
+    drift = ca.mtimes(ca.DM(prob.A), xs) + ca.mtimes(ca.DM(prob.B), us) + prob.c * ca.sin(xs)
+    dyn = ca.horzcat(xs[:, 1:], x_end) - (xs + prob.dt * drift)
+    g = ca.vertcat(xs[:, 0] - prob.x_init, ca.vec(dyn), ca.vec(us))
+    lbg = np.r_[np.zeros(prob.n_eq), -prob.u_max * np.ones(n_k * nu)]
+    ubg = np.r_[np.zeros(prob.n_eq), prob.u_max * np.ones(n_k * nu)]
+    x_ip, f_ip, _ = _ipopt(x, f, g, prob.initial_guess(), lbg, ubg)
+    assert abs(res.objective - f_ip) < 1e-7 * abs(f_ip)
+    assert np.max(np.abs(res.x - x_ip)) < 1e-6
+
+
+def test_kkt_system_inertia_pattern_cache_and_refinement():
+    rng = np.random.default_rng(0)
+    n, me, mi = 30, 10, 8
+    dense_h = rng.normal(size=(n, n))
+    hess = sp.csr_matrix(np.tril(dense_h + dense_h.T) * (rng.random((n, n)) < 0.2))
+    jac_e = sp.random(me, n, density=0.3, random_state=1, format="csr")
+    jac_i = sp.random(mi, n, density=0.3, random_state=2, format="csr")
+    kkt = KKTSystem(n, me, mi)
+    kkt.set_matrices(hess, jac_e, jac_i)
+    diag = np.concatenate([np.full(n, 0.5), np.zeros(me), -rng.random(mi)])
+    inertia = kkt.factorize(diag, static_reg=1e-9)
+    full = (hess + sp.tril(hess, -1).T).toarray() + 0.5 * np.eye(n)
+    k_dense = np.block(
+        [
+            [full, jac_e.T.toarray(), jac_i.T.toarray()],
+            [jac_e.toarray(), np.zeros((me, me)), np.zeros((me, mi))],
+            [jac_i.toarray(), np.zeros((mi, me)), np.diag(diag[n + me :])],
+        ]
+    )
+    eig = np.linalg.eigvalsh(k_dense)
+    assert (inertia.positive, inertia.negative) == (np.sum(eig > 0), np.sum(eig < 0))
+    assert inertia.zero == 0
+    rhs = rng.normal(size=n + me + mi)
+    sol, ratio = kkt.solve(rhs)
+    assert ratio < 1e-10
+    assert np.allclose(sol, np.linalg.solve(k_dense, rhs), atol=1e-8)
+
+    kkt.set_matrices(2 * hess, jac_e, jac_i)  # same pattern: no new analysis
+    kkt.factorize(diag)
+    assert kkt.n_analyses == 1
+    kkt.set_matrices(hess + sp.eye(n, format="csr"), jac_e, jac_i)  # new pattern
+    kkt.factorize(diag)
+    assert kkt.n_analyses == 2
