@@ -1,9 +1,17 @@
-"""Transcription of a fixed-base manipulator in maximal coordinates (RIPM paper §VIII.C).
+"""Transcription of a fixed-base manipulator task in maximal coordinates (RIPM paper §VIII.C).
 
-The multi-body LGVI of :mod:`mbplan.transcription.multibody` plus: tracking costs pulling every
-body to its pose at the target configuration (chordal (57) on ``R``, quadratic (59) on ``p``),
-velocity costs (``F → I``, ``v → 0``), torque regularisation, torque limits as inequalities and
-vertical-cylinder obstacles on each body's COM (eq. 62).
+The multi-body LGVI of :mod:`mbplan.transcription.multibody` plus the terms of the task, written
+on relative rotations ``R_rel = R_pᵀR_c = R_rel0 exp(θ a)`` of each revolute joint so that they
+match the generalized-coordinate transcription term by term:
+
+* joint tracking: the chordal distance (57) ``‖R_rel R_targetᵀ - I‖²`` weighted ``w_q/2``, which
+  is ``w_q (1 - cos Δθ) ≈ ½ w_q Δθ²``;
+* joint velocity: the chordal distance of ``R_rel`` at knots ``k`` and ``k+1``
+  (``R_rel,k+1 = F_pᵀ R_rel,k F_c``) weighted ``w_v/(2Δt²)`` ``≈ ½ w_v ((θ_{k+1} - θ_k)/Δt)²``;
+* torque regularisation ``½ w_τ τ²`` and torque limits ``|τ| ≤ τ_max``;
+* joint limits ``cos(θ - θ_mid) ≥ cos(θ_half)`` and velocity limits
+  ``cos(θ_{k+1} - θ_k) ≥ cos(v_max Δt)`` (exact for ranges below 2π);
+* each body's COM outside vertical cylinders (eq. 62).
 """
 
 from __future__ import annotations
@@ -16,8 +24,8 @@ import numpy as np
 
 from mbplan.engine import RiemannianFunction
 from mbplan.lie import SO3, R
-from mbplan.multibody import MaximalModel, body_poses
-from mbplan.transcription.costs import chordal_cost, quadratic_cost
+from mbplan.multibody import MaximalModel
+from mbplan.transcription.costs import chordal_cost
 from mbplan.transcription.multibody import multibody_layout
 from mbplan.transcription.problem import TrajectoryProblem
 from mbplan.transcription.terms import Term
@@ -26,40 +34,64 @@ from mbplan.transcription.variables import TrajectoryVariables
 
 @dataclass(frozen=True)
 class ManipulatorOCP:
-    """Weights are per body (pose, velocity) and per joint (torque)."""
+    """Joint-space task data; weights as in :mod:`mbplan.tasks.obstacle`'s cost."""
 
     N: int
     dt: float
-    q_target: np.ndarray
-    w_R: float = 1.0
-    w_p: float = 10.0
-    w_F: float = 1.0
+    q_target: np.ndarray  # (nb,) joint angles
+    w_q: float = 1.0
     w_v: float = 0.1
-    w_tau: float = 1e-3
+    w_tau: float = 1e-4
     terminal_factor: float = 50.0
     torque_limit: np.ndarray | None = None  # (nb,) symmetric bounds
+    velocity_limit: np.ndarray | None = None  # (nb,)
+    position_limits: tuple[np.ndarray, np.ndarray] | None = None  # (lower (nb,), upper (nb,))
     cylinders: tuple[tuple[float, float, float], ...] = ()  # (x_c, y_c, r) on every body COM
 
 
-def _pose_cost(R, p, F, v, R_d, p_d, w):
+def _relative(Rp, Fp, Rc, Fc):
+    """``R_rel`` at knot k and k+1 from the bodies' orientations and pose changes."""
+    rel = cs.mtimes(Rp.T, Rc)
+    return rel, cs.mtimes([Fp.T, rel, Fc])
+
+
+def _cos_angle(A, B):
+    """``cos`` of the rotation angle of ``AᵀB``: ``(tr(AᵀB) - 1)/2``."""
+    return 0.5 * (cs.trace(cs.mtimes(A.T, B)) - 1.0)
+
+
+def _joint_cost(Rp, Fp, Rc, Fc, R_t, w):
+    rel, rel_next = _relative(Rp, Fp, Rc, Fc)
     I3 = cs.DM.eye(3)
-    return (
-        chordal_cost(R, R_d, w[0] * I3)
-        + quadratic_cost(p, p_d, w[1] * I3)
-        + chordal_cost(F, I3, w[2] * I3)
-        + quadratic_cost(v, cs.DM.zeros(3), w[3] * I3)
-    )
+    return chordal_cost(rel, R_t, w[0] * I3) + chordal_cost(rel_next, rel, w[1] * I3)
+
+
+def _joint_limits(Rp, Fp, Rc, Fc, R_mid, cos_half, cos_step):
+    rel, rel_next = _relative(Rp, Fp, Rc, Fc)
+    return cs.vertcat(cos_half - _cos_angle(R_mid, rel), cos_step - _cos_angle(rel, rel_next))
+
+
+def _world_variant(fn):
+    """The same function with a fixed parent (``R_p = F_p = I``, the world)."""
+
+    def world(Rc, Fc, **params):
+        return fn(cs.DM.eye(3), cs.DM.eye(3), Rc, Fc, **params)
+
+    return world
+
+
+_JOINT_VARS = [("Rp", SO3), ("Fp", SO3), ("Rc", SO3), ("Fc", SO3)]
 
 
 @cache
-def _pose_cost_function(jit: bool) -> RiemannianFunction:
-    return RiemannianFunction(
-        "body_pose_cost",
-        [("R", SO3), ("p", R(3)), ("F", SO3), ("v", R(3))],
-        _pose_cost,
-        [("R_d", (3, 3)), ("p_d", 3), ("w", 4)],
-        jit=jit,
-    )
+def _joint_function(kind: str, jit: bool, world: bool) -> RiemannianFunction:
+    fn, params = {
+        "cost": (_joint_cost, [("R_t", (3, 3)), ("w", 2)]),
+        "limits": (_joint_limits, [("R_mid", (3, 3)), ("cos_half", 1), ("cos_step", 1)]),
+    }[kind]
+    variables = _JOINT_VARS[2:] if world else _JOINT_VARS
+    name = f"joint_{kind}{'_world' if world else ''}"
+    return RiemannianFunction(name, variables, _world_variant(fn) if world else fn, params, jit=jit)
 
 
 @cache
@@ -89,26 +121,70 @@ def _com_cylinder_function(jit: bool) -> RiemannianFunction:
     return RiemannianFunction("com_cylinder_clearance", [("p", R(3))], outside, [("c", 3)], jit=jit)
 
 
+def _about_axis(mm: MaximalModel, angles: np.ndarray) -> np.ndarray:
+    """``R_rel0 exp(θ a_c)`` per joint: the relative rotation at joint angles ``θ``."""
+    return mm.R_rel0 @ SO3.exp(angles[:, None] * mm.axis_child)
+
+
 def manipulator_problem(mm: MaximalModel, ocp: ManipulatorOCP, jit: bool) -> TrajectoryProblem:
-    """The NLP of a point-to-point motion with obstacles (eq. 27–28, 57, 59, 62)."""
+    """The NLP of a point-to-point motion with obstacles (eq. 27–28, 57, 62)."""
     N, nb = ocp.N, mm.nb
     layout = multibody_layout(mm, N, ocp.dt, jit=jit)
     terms = list(layout.terms)
-    R_t, p_t = body_poses(mm, ocp.q_target)
     k, b = (a.ravel() for a in np.meshgrid(np.arange(1, N + 1), np.arange(nb), indexing="ij"))
-    sites = k * nb + b
-    w = np.tile([ocp.w_R, ocp.w_p, ocp.w_F, ocp.w_v], (len(sites), 1))
-    w[k == N] *= ocp.terminal_factor
-    bind = {n: (n, sites) for n in ("R", "p", "F", "v")}
-    terms.append(
-        Term(
-            "pose_cost",
-            "cost",
-            _pose_cost_function(jit),
-            bind,
-            {"R_d": R_t[b], "p_d": p_t[b], "w": w},
+    scale = np.where(k == N, ocp.terminal_factor, 1.0)
+    weights = np.stack([0.5 * ocp.w_q * scale, 0.5 * ocp.w_v * scale / ocp.dt**2], axis=1)
+    R_target = _about_axis(mm, np.asarray(ocp.q_target, dtype=float))
+    limit_params = None
+    if ocp.position_limits is not None or ocp.velocity_limit is not None:
+        lo, hi = (
+            ocp.position_limits
+            if ocp.position_limits is not None
+            else (np.full(nb, -np.pi), np.full(nb, np.pi))
         )
-    )
+        vmax = (
+            np.full(nb, np.inf)
+            if ocp.velocity_limit is None
+            else np.asarray(ocp.velocity_limit, dtype=float)
+        )
+        half = np.minimum(0.5 * (hi - lo), np.pi)
+        limit_params = {
+            "R_mid": _about_axis(mm, 0.5 * (lo + hi))[b],
+            "cos_half": np.cos(half)[b],
+            "cos_step": np.cos(np.minimum(vmax * ocp.dt, np.pi))[b],
+        }
+    for world in (True, False):
+        mask = (mm.parent[b] < 0) == world
+        if not mask.any():
+            continue
+        kk, bb = k[mask], b[mask]
+        bind = {"Rc": ("R", kk * nb + bb), "Fc": ("F", kk * nb + bb)}
+        if not world:
+            par = mm.parent[bb]
+            bind |= {"Rp": ("R", kk * nb + par), "Fp": ("F", kk * nb + par)}
+        suffix = "_world" if world else ""
+        cost_params = {"R_t": R_target[bb], "w": weights[mask]}
+        terms.append(
+            Term(
+                f"joint_cost{suffix}",
+                "cost",
+                _joint_function("cost", jit, world),
+                bind,
+                cost_params,
+            )
+        )
+        if limit_params is not None:
+            params = {n: v[mask] for n, v in limit_params.items()}
+            terms.append(
+                Term(
+                    f"joint_limits{suffix}",
+                    "ineq",
+                    _joint_function("limits", jit, world),
+                    bind,
+                    params,
+                )
+            )
+    sites = k * nb + b
     terms.append(
         Term(
             "torque_cost",

@@ -1,0 +1,141 @@
+"""The outcome of a trajectory optimization, common to all methods, and its ``.npz`` file format."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mbplan.errors import InputError
+
+_ARRAYS = ("q", "v", "tau", "kkt_history", "R", "p")
+_OPTIONAL = ("R", "p", "body_names")
+
+
+@dataclass(frozen=True, eq=False)
+class PlanResult:
+    """A planned trajectory and solver statistics (like ``scipy.optimize.OptimizeResult``).
+
+    ``q (N+1, nq)``, ``v (N+1, nv)`` at the knots, ``tau (N, nv)`` held over ``[t_k, t_{k+1}]``,
+    ``dt`` (s). ``status`` is the solver's status string, ``success`` its convergence flag; a
+    result with non-finite ``q``, ``v`` or ``tau`` is never successful. ``solve_time_s`` is the
+    solver's wall time (including callbacks), ``total_time_s`` adds building the problem,
+    ``time_per_iter_s = solve_time_s / max(iterations, 1)``. ``kkt_history (iterations+1, 2)``
+    holds the primal and dual infeasibility ``(inf_pr, inf_du)`` per iteration, iteration 0 first.
+    ``entered_restoration`` is None when the solver has no restoration phase. Maximal-coordinate
+    solutions add body orientations ``R (N+1, nb, 3, 3)``, COM positions ``p (N+1, nb, 3)`` and
+    ``body_names``. ``extra`` holds method-specific numbers (JSON-serialisable).
+    """
+
+    method: str
+    status: str
+    success: bool
+    message: str
+    iterations: int
+    solve_time_s: float
+    total_time_s: float
+    time_per_iter_s: float
+    q: np.ndarray
+    v: np.ndarray
+    tau: np.ndarray
+    dt: float
+    kkt_history: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    entered_restoration: bool | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+    R: np.ndarray | None = None
+    p: np.ndarray | None = None
+    body_names: tuple[str, ...] | None = None
+
+    def __post_init__(self) -> None:
+        for name in _ARRAYS:
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, np.asarray(value, dtype=float))
+        q, v, tau = self.q, self.v, self.tau
+        if (
+            q.ndim != 2
+            or v.ndim != 2
+            or tau.ndim != 2
+            or len(q) != len(v)
+            or len(tau) != len(q) - 1
+        ):
+            raise InputError(
+                f"PlanResult: expected q (N+1, nq), v (N+1, nv), tau (N, nv); got "
+                f"{q.shape}, {v.shape}, {tau.shape}"
+            )
+        if self.kkt_history.ndim != 2 or self.kkt_history.shape[1] != 2:
+            raise InputError(
+                f"PlanResult.kkt_history: expected (n, 2), got {self.kkt_history.shape}"
+            )
+        finite = all(np.all(np.isfinite(a)) for a in (q, v, tau))
+        if self.success and not finite:
+            raise InputError("PlanResult: success=True with non-finite q, v or tau")
+        if self.body_names is not None:
+            object.__setattr__(self, "body_names", tuple(str(n) for n in self.body_names))
+
+
+def save_npz(result: PlanResult, path: str | os.PathLike[str]) -> Path:
+    """Write ``result`` to ``path`` (``.npz``) atomically: a temporary file in the same folder,
+    then :func:`os.replace`. Every field is stored (``extra`` as JSON; None fields are left out);
+    returns the path written."""
+    path = Path(path)
+    if path.suffix != ".npz":
+        raise InputError(f"save_npz: {path} must end in .npz")
+    arrays: dict[str, np.ndarray] = {}
+    for f in fields(PlanResult):
+        value = getattr(result, f.name)
+        if value is None:
+            continue
+        if f.name == "extra":
+            try:
+                value = json.dumps(value, default=_to_json)
+            except (TypeError, ValueError) as err:
+                raise InputError(
+                    f"save_npz: PlanResult.extra is not JSON-serialisable: {err}"
+                ) from None
+        arrays[f.name] = np.asarray(value)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
+
+
+def load_npz(path: str | os.PathLike[str]) -> PlanResult:
+    """Read a :class:`PlanResult` written by :func:`save_npz`."""
+    with np.load(Path(path), allow_pickle=False) as data:
+        missing = [f.name for f in fields(PlanResult) if f.name not in data and _required(f.name)]
+        if missing:
+            raise InputError(f"load_npz: {path} lacks the fields {missing}")
+        kwargs: dict[str, Any] = {}
+        for f in fields(PlanResult):
+            if f.name not in data:
+                continue
+            value = data[f.name]
+            if f.name == "extra":
+                kwargs[f.name] = json.loads(str(value))
+            elif f.name == "body_names":
+                kwargs[f.name] = tuple(str(n) for n in value)
+            elif f.name in _ARRAYS:
+                kwargs[f.name] = np.array(value)
+            else:
+                kwargs[f.name] = value.item()
+    return PlanResult(**kwargs)
+
+
+def _required(name: str) -> bool:
+    return name not in _OPTIONAL and name not in ("kkt_history", "entered_restoration", "extra")
+
+
+def _to_json(value: Any) -> Any:
+    if isinstance(value, np.ndarray | np.generic):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
