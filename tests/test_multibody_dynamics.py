@@ -125,8 +125,9 @@ def _rand_rotation(rng: np.random.Generator) -> np.ndarray:
 
 
 def _joint_params(
-    rng: np.random.Generator, world: bool, dt: float = 0.01
+    rng: np.random.Generator, world: bool, dt: float | None = 0.01
 ) -> dict[str, np.ndarray | float]:
+    """Joint parameters; ``dt=None`` for the joint-force functions, which take no time step."""
     axis = rng.standard_normal(3)
     axis /= np.linalg.norm(axis)
     perp = np.linalg.qr(np.column_stack([axis, rng.standard_normal((3, 2))]))[0][:, 1:]
@@ -135,8 +136,9 @@ def _joint_params(
         "r_c": rng.standard_normal(3),
         "perp_p": perp,
         "axis_c": axis,
-        "dt": dt,
     }
+    if dt is not None:
+        params["dt"] = dt
     if world:
         params |= {"Rp": _rand_rotation(rng), "pp": rng.standard_normal(3)}
     return params
@@ -179,7 +181,7 @@ def test_multibody_residual_derivatives_match_finite_differences(kind, factory, 
             "dt": dt,
         }
     else:
-        params = _joint_params(rng, world, dt)
+        params = _joint_params(rng, world, None if kind == "joint_forces" else dt)
     for _ in range(3):
         check = check_derivatives(f, _random_variables(f, rng), params, rng=rng)
         assert check.ok(1e-6), (f.name, check)
@@ -188,9 +190,9 @@ def test_multibody_residual_derivatives_match_finite_differences(kind, factory, 
 def test_joint_forces_equal_hand_derived_jacobian_transpose() -> None:
     """Pivot: parent gets force λ and torque r_p × R_pᵀλ, child -λ and -r_c × R_cᵀλ; axis ``i``
     with multiplier μ_i: torques e_i × R_pᵀR_c a (parent) and a × R_cᵀR_p e_i (child);
-    actuation τ: +τ a (child), -τ R_pᵀR_c a (parent). Rows scaled by -Δt² (torque), -Δt (force)."""
+    actuation τ: +τ a (child), -τ R_pᵀR_c a (parent). Rows in N·m (torque) and N (force), negated."""
     rng = np.random.default_rng(11)
-    params = _joint_params(rng, world=False)
+    params = _joint_params(rng, world=False, dt=None)
     Rp, Rc = _rand_rotation(rng), _rand_rotation(rng)
     pp, pc = rng.standard_normal(3), rng.standard_normal(3)
     lam, tau = rng.standard_normal(5), rng.standard_normal(1)
@@ -204,8 +206,7 @@ def test_joint_forces_equal_hand_derived_jacobian_transpose() -> None:
     for i in range(2):
         torque_p += mu[i] * np.cross(e[:, i], a_in_parent)
         torque_c += mu[i] * np.cross(a, Rc.T @ Rp @ e[:, i])
-    dt = params["dt"]
-    expected = np.concatenate([-(dt**2) * torque_p, -dt * force, -(dt**2) * torque_c, dt * force])
+    expected = np.concatenate([-torque_p, -force, -torque_c, force])
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-15)
 
     # A joint to the world: the same child rows.

@@ -2,9 +2,9 @@
 Table I rows 5–6) and the generalized forces ``J(x)ᵀλ`` (eq. 25–27) plus actuation they apply.
 
 Generalized forces are expressed per body as a body-frame torque and a world-frame force, the
-same coordinates as the body's LGVI rows (:func:`mbplan.dynamics.rigid_body.body_dynamics`), so a
-joint term adds ``-Δt²·torque`` to a body's rotational and ``-Δt·force`` to its translational row.
-With that scaling, pivot multipliers are forces in N and axis multipliers torques in N·m.
+same coordinates as the body's LGVI rows (:func:`mbplan.dynamics.rigid_body.body_dynamics`, in
+N·m and N), so a joint term adds ``-torque`` to a body's rotational and ``-force`` to its
+translational row. Pivot multipliers are then forces in N and axis multipliers torques in N·m.
 """
 
 from __future__ import annotations
@@ -58,7 +58,6 @@ def revolute_forces(
     r_c: cs.SX,
     perp_p: cs.SX,
     axis_c: cs.SX,
-    dt: cs.SX,
 ) -> cs.SX:
     """Contributions of a revolute joint to the dynamics rows of its two bodies (12 rows).
 
@@ -73,7 +72,7 @@ def revolute_forces(
     (tp, fp), (tc, fc) = constraint_forces(h, [(Rp, pp), (Rc, pc)], lam)
     act_c = tau * axis_c
     act_p = -tau * cs.mtimes([Rp.T, Rc, axis_c])
-    return cs.vertcat(-(dt**2) * (tp + act_p), -dt * fp, -(dt**2) * (tc + act_c), -dt * fc)
+    return cs.vertcat(-(tp + act_p), -fp, -(tc + act_c), -fc)
 
 
 def revolute_forces_on_child(
@@ -87,7 +86,6 @@ def revolute_forces_on_child(
     r_c: cs.SX,
     perp_p: cs.SX,
     axis_c: cs.SX,
-    dt: cs.SX,
 ) -> cs.SX:
     """:func:`revolute_forces` for a joint to a fixed parent (the world): child rows only (6)."""
-    return revolute_forces(Rp, pp, Rc, pc, lam, tau, r_p, r_c, perp_p, axis_c, dt)[6:]
+    return revolute_forces(Rp, pp, Rc, pc, lam, tau, r_p, r_c, perp_p, axis_c)[6:]

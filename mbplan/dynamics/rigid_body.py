@@ -59,10 +59,15 @@ def body_dynamics(
     torque: cs.SX | None = None,
     force: cs.SX | None = None,
 ) -> cs.SX:
-    """Forced LGVI (eq. 34–35, 60): Table I rows 3–4, 6 residuals; forces act at the new knot."""
+    """Forced LGVI (eq. 34–35, 60): Table I rows 3–4, 6 residuals; forces act at the new knot.
+
+    The rows are divided by ``Δt²`` and ``Δt`` so that they read as torques (N·m) and forces (N):
+    the same roots as eq. (34)–(35), but rows of comparable size to the joint constraints, which
+    keeps the KKT systems of the interior point method well scaled for any ``Δt``.
+    """
     return cs.vertcat(
-        rotational_dynamics(F0, F1, J, dt, torque),
-        translational_dynamics(v0, v1, mass, gravity, dt, force),
+        rotational_dynamics(F0, F1, J, dt, torque) / dt**2,
+        translational_dynamics(v0, v1, mass, gravity, dt, force) / dt,
     )
 
 

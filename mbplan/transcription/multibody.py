@@ -68,14 +68,14 @@ def _joint_forces_function(jit: bool, world_parent: bool) -> RiemannianFunction:
             "revolute_forces_world",
             child,
             revolute_forces_on_child,
-            [("Rp", (3, 3)), ("pp", 3), *_JOINT_PARAMS, ("dt", 1)],
+            [("Rp", (3, 3)), ("pp", 3), *_JOINT_PARAMS],
             jit=jit,
         )
     return RiemannianFunction(
         "revolute_forces",
         [("Rp", SO3), ("pp", R(3)), *child],
         revolute_forces,
-        [*_JOINT_PARAMS, ("dt", 1)],
+        _JOINT_PARAMS,
         jit=jit,
     )
 
@@ -202,7 +202,8 @@ def multibody_layout(
             child |= {"Rp": ("R", nxt + par), "pp": ("p", nxt + par)}
             rows = np.concatenate([dyn_rows(kj, par), rows], axis=1)
         name = "joint_forces_world" if world else "joint_forces"
-        terms.append(Term(name, "eq", _joint_forces_function(jit, world), child, params, rows=rows))
+        forces = {n: v for n, v in params.items() if n != "dt"}
+        terms.append(Term(name, "eq", _joint_forces_function(jit, world), child, forces, rows=rows))
         # Constraints on x_{k+2} = (R_{k+1} F_{k+1}, p_{k+1} + v_{k+1} Δt), from knot k+1's data.
         cons = {f"{n}c": (n, nxt + j) for n in ("R", "F", "p", "v")}
         if not world:
