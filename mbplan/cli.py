@@ -7,7 +7,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from mbplan.errors import MbplanError
+from mbplan.errors import InputError, MbplanError
 
 
 def _bench_engine(args: argparse.Namespace) -> int:
@@ -58,6 +58,51 @@ def _validate_dynamics(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_iiwa(args: argparse.Namespace) -> int:
+    from mbplan.benchmarks.iiwa_obstacle import run
+
+    methods = tuple(m.strip() for m in args.methods.split(","))
+    run(
+        Path(args.out),
+        n=args.n,
+        seed=args.seed,
+        methods=methods,
+        N=args.horizon,
+        workers=args.workers,
+        scheduler=args.scheduler,
+    )
+    print((Path(args.out) / "results.md").read_text())
+    return 0
+
+
+def _plan(args: argparse.Namespace) -> int:
+    from mbplan.planning.solve import plan
+    from mbplan.results import save_npz
+    from mbplan.tasks.obstacle import ObstacleTask, sample_obstacle_cases
+    from mbplan.verification import verify
+
+    if args.task != "obstacle":
+        raise InputError(f"unknown task {args.task!r}; available: obstacle")
+    if args.seed is None:
+        task = ObstacleTask(robot=args.robot, N=args.horizon)
+    else:
+        task = sample_obstacle_cases(args.robot, 1, args.seed, N=args.horizon)[0]
+    result = plan(task, args.method, tol=args.tol, max_iter=args.max_iter)
+    check = verify(task, result)
+    print(
+        f"{result.method}: {result.status} after {result.iterations} iterations, "
+        f"{result.solve_time_s:.2f} s ({1e3 * result.time_per_iter_s:.1f} ms/iteration)"
+    )
+    print(
+        f"verification: {'passed' if check.passed else 'FAILED'}; min obstacle clearance "
+        f"{check.min_obstacle_distance_m:.3f} m, final goal error {check.final_goal_error_rad:.3f} rad"
+        + "".join(f"\n  - {r}" for r in check.reasons)
+    )
+    if args.out:
+        print(f"saved {save_npz(result, args.out)}")
+    return 0 if result.success and check.passed else 1
+
+
 def _robots(args: argparse.Namespace) -> int:
     from mbplan.robots import available_robots
 
@@ -73,6 +118,22 @@ def build_parser() -> argparse.ArgumentParser:
         "(maximal coordinates on SO(3)×R³, LGVI dynamics, Riemannian interior point).",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    plan = sub.add_parser("plan", help="plan a task with one method and verify the result")
+    plan.add_argument("--robot", default="iiwa", help="robot name (see `mbplan robots`)")
+    plan.add_argument("--task", default="obstacle", help="task family (obstacle)")
+    plan.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="random start of the task sampler (default: the fixed demo start)",
+    )
+    plan.add_argument("--method", default="ripm", help="ripm | ipopt | ipopt-no-restoration")
+    plan.add_argument("--horizon", type=int, default=40, help="number of steps N")
+    plan.add_argument("--tol", type=float, default=1e-6, help="convergence tolerance")
+    plan.add_argument("--max-iter", type=int, default=500, help="iteration limit")
+    plan.add_argument("--out", default=None, help="write the result to this .npz file")
+    plan.set_defaults(func=_plan)
 
     validate = sub.add_parser(
         "validate-dynamics",
@@ -130,6 +191,19 @@ def build_parser() -> argparse.ArgumentParser:
     drone.add_argument("--no-scaling", action="store_true", help="skip the N=40 vs N=160 timing")
     _add_pool_options(drone)
     drone.set_defaults(func=_bench_drone)
+    iiwa = bench_sub.add_parser(
+        "iiwa-obstacle",
+        help="maximal (RIPM) vs generalized (IPOPT) coordinates on seeded iiwa cases (Table III)",
+    )
+    iiwa.add_argument("--n", type=int, default=100, help="number of cases")
+    iiwa.add_argument("--seed", type=int, default=0, help="seed of the case sampler")
+    iiwa.add_argument(
+        "--methods", default="ripm,ipopt,ipopt-no-restoration", help="comma-separated"
+    )
+    iiwa.add_argument("--horizon", type=int, default=40, help="number of steps N")
+    iiwa.add_argument("--out", default="benchmarks/results/iiwa-obstacle", help="output directory")
+    _add_pool_options(iiwa)
+    iiwa.set_defaults(func=_bench_iiwa)
     return parser
 
 
