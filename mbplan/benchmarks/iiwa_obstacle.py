@@ -139,7 +139,8 @@ def _plots(rows: list[dict], methods: tuple[str, ...], out: Path) -> None:
         if its:
             axes[0].hist(its, bins=30, alpha=0.5, label=m)
     axes[0].set_xlabel("iterations (converged cases)")
-    axes[0].legend()
+    if axes[0].get_legend_handles_labels()[0]:
+        axes[0].legend()
     data = [[r["total_time_s"] for r in rows if r["method"] == m] for m in methods]
     axes[1].boxplot(data, tick_labels=list(methods))
     axes[1].set_yscale("log")

@@ -1,0 +1,75 @@
+"""Small end-to-end runs of the benchmarks (the full runs are committed under benchmarks/results)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from mbplan.benchmarks import drone_docking, iiwa_obstacle
+from mbplan.cli import main
+from mbplan.errors import InputError
+from mbplan.results import load_npz
+
+
+def test_drone_docking_three_cases_each_method(tmp_path):
+    s = drone_docking.run(tmp_path, n=3, seed=0, scaling=False)
+    for name in drone_docking.METHODS:
+        m = s["methods"][name]
+        assert m["n"] == 3
+        assert m["converged"] == 3, (name, s["failures"])
+    rows = [json.loads(line) for line in (tmp_path / "results.jsonl").read_text().splitlines()]
+    assert len(rows) == 9
+    # Every converged solution replays through the independent LGVI simulator.
+    assert max(r["replay_deviation_m"] for r in rows) < 1e-4
+    assert (tmp_path / "convergence.png").stat().st_size > 0
+    assert "| ripm |" in (tmp_path / "results.md").read_text()
+
+
+@pytest.mark.parametrize(("method", "max_iter", "at_least"), [("ripm", 60, 1), ("ipopt", 500, 2)])
+def test_iiwa_small_runs_are_verified(tmp_path, method, max_iter, at_least):
+    """Three seeded cases of the real task; the full 100-case run is the benchmark."""
+    s = iiwa_obstacle.run(tmp_path, n=3, seed=0, methods=(method,), max_iter=max_iter)
+    m = s["methods"][method]
+    assert m["n"] == 3
+    rows = [json.loads(line) for line in (tmp_path / "results.jsonl").read_text().splitlines()]
+    # Solved means: the solver succeeded AND the independent replay passed.
+    assert m["verified"] == sum(r["success"] and r["verified"] for r in rows)
+    assert all(r["verification_reasons"] for r in rows if not r["verified"])
+    assert m["verified"] >= at_least, rows
+
+
+def test_unknown_method_is_named(tmp_path):
+    with pytest.raises(InputError, match="unknown method"):
+        iiwa_obstacle.run(tmp_path, n=1, methods=("fddp",))
+
+
+def test_cli_plan_writes_npz(tmp_path, capsys):
+    out = tmp_path / "plan.npz"
+    code = main(
+        [
+            "plan",
+            "--robot",
+            "iiwa",
+            "--method",
+            "ipopt",
+            "--seed",
+            "1",
+            "--horizon",
+            "10",
+            "--out",
+            str(out),
+        ]
+    )
+    text = capsys.readouterr().out
+    assert "verification" in text
+    r = load_npz(out)
+    assert r.q.shape == (11, 7) and r.tau.shape == (10, 7)
+    assert code == (0 if r.success and "passed" in text else 1)
+    assert np.all(np.isfinite(r.q))
+
+
+def test_cli_help_and_errors(capsys):
+    assert main([]) == 2
+    assert "plan" in capsys.readouterr().out
+    assert main(["plan", "--task", "juggling"]) == 2
+    assert "unknown task" in capsys.readouterr().err
