@@ -32,26 +32,15 @@ from mbplan.engine import DerivativeCheck, RiemannianFunction, check_derivatives
 from mbplan.errors import InputError
 from mbplan.lie import SE3, SL, SO, SO3, R
 from mbplan.lie.so3 import SO3Group
+from mbplan.transcription.costs import chordal_cost, quadratic_cost
 
 TOL = 1e-6
 E_Z = cs.DM([0.0, 0.0, 1.0])
 
 
 # ---------------------------------------------------------------------------------------------
-# Residuals written inline (paper eq. 57, 59, 60)
+# Residuals written inline (paper eq. 60)
 # ---------------------------------------------------------------------------------------------
-def chordal_cost(R: cs.SX, R_d: cs.SX, W: cs.SX) -> cs.SX:
-    """``½ tr((R R_dᵀ - I) W (R R_dᵀ - I)ᵀ)`` (eq. 57)."""
-    E = cs.mtimes(R, R_d.T) - cs.DM.eye(3)
-    return 0.5 * cs.trace(cs.mtimes([E, W, E.T]))
-
-
-def quadratic_cost(p: cs.SX, p_d: cs.SX, W: cs.SX) -> cs.SX:
-    """``½ (p - p_d)ᵀ W (p - p_d)`` (eq. 59)."""
-    e = p - p_d
-    return 0.5 * cs.mtimes([e.T, W, e])
-
-
 def forced_translational_dynamics(v0, v1, R1, u, mass, gravity, dt):
     """Eq. 60: ``m v₁ - m v₀ - m g Δt - R₁ e_z u Δt`` (thrust along the new body z axis)."""
     return translational_dynamics(v0, v1, mass, gravity, dt, force=cs.mtimes(R1, E_Z) * u)
@@ -216,12 +205,12 @@ CASES = [
     ),
     Case(
         "quadratic_cost",
-        [("p", R(3))],
+        [("x", R(3))],
         quadratic_cost,
-        [("p_d", 3), ("W", (3, 3))],
+        [("x_d", 3), ("W", (3, 3))],
         lambda rng: (
-            {"p": rng.standard_normal(3)},
-            {"p_d": rng.standard_normal(3), "W": spd(rng, 3)},
+            {"x": rng.standard_normal(3)},
+            {"x_d": rng.standard_normal(3), "W": spd(rng, 3)},
         ),
     ),
     Case(

@@ -58,6 +58,7 @@ import pinocchio as pin
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
+from mbplan.baselines.ipopt import IpoptStats, base_options
 from mbplan.errors import InputError
 from mbplan.results import PlanResult
 from mbplan.tasks.obstacle import (
@@ -67,10 +68,10 @@ from mbplan.tasks.obstacle import (
     robot_description,
     validate,
 )
+from mbplan.validation import as_arrays
 
 METHOD = "generalized_ipopt"
 FD_STEP_Q = 1e-5  # rad: central differences of the analytic RNEA derivatives in q
-_EVAL_TIMERS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
 _ITERATION_LINE = re.compile(r"^\s*\d+(r?)\s+[-+]?\d\.\d+e[-+]\d+\s")
 
 
@@ -424,24 +425,6 @@ class GeneralizedTranscription:
         )
 
 
-def _check_guess(guess: Mapping[str, ArrayLike], N: int, nv: int) -> dict[str, np.ndarray]:
-    shapes = {"q": (N + 1, nv), "v": (N + 1, nv), "tau": (N, nv)}
-    out = {}
-    for key, shape in shapes.items():
-        if key not in guess:
-            raise InputError(f"initial_guess: missing {key!r} (keys q, v, tau)")
-        try:
-            value = np.array(guess[key], dtype=float)
-        except (TypeError, ValueError) as err:
-            raise InputError(f"initial_guess[{key!r}]: not a numeric array ({err})") from None
-        if value.shape != shape:
-            raise InputError(f"initial_guess[{key!r}]: expected shape {shape}, got {value.shape}")
-        if not np.all(np.isfinite(value)):
-            raise InputError(f"initial_guess[{key!r}]: contains NaN or inf")
-        out[key] = value
-    return out
-
-
 def _restoration_iterations(log: str) -> int:
     """Number of iteration lines of IPOPT's log marked ``r`` (restoration phase)."""
     marks = (_ITERATION_LINE.match(line) for line in log.splitlines())
@@ -474,33 +457,23 @@ def solve_generalized_ipopt(
     start = time.perf_counter()
     if not isinstance(task, ObstacleTask):
         raise InputError(f"task: expected ObstacleTask, got {type(task).__name__}")
-    if not isinstance(max_iter, int | np.integer) or isinstance(max_iter, bool) or max_iter < 0:
-        raise InputError(f"max_iter: expected an integer >= 0, got {max_iter!r}")
-    if not (isinstance(tol, int | float) and np.isfinite(tol) and tol > 0):
-        raise InputError(f"tol: expected a finite number > 0, got {tol!r}")
+    options = base_options(max_iter, tol)
     reserved = {"output_file", "file_print_level"} & set(ipopt_options or {})
     if reserved:
         raise InputError(f"ipopt_options: {sorted(reserved)} are used to detect restoration")
     validate(task)
     tr = GeneralizedTranscription(task)
-    guess = _check_guess(
-        tr.initial_guess() if initial_guess is None else initial_guess, tr.N, tr.nv
+    guess = as_arrays(
+        tr.initial_guess() if initial_guess is None else initial_guess,
+        {"q": (tr.N + 1, tr.nv), "v": (tr.N + 1, tr.nv), "tau": (tr.N, tr.nv)},
+        "initial_guess",
     )
     g_fn, jac_fn, hess_fn = tr.callbacks()
     z = cs.MX.sym("z", tr.n)
     cost = 0.5 * cs.dot(cs.DM(tr.weights), (z - cs.DM(tr.reference)) ** 2)
     fd, log_path = tempfile.mkstemp(prefix="ipopt_", suffix=".log")
     os.close(fd)
-    options: dict[str, Any] = {
-        "max_iter": int(max_iter),
-        "tol": float(tol),
-        "linear_solver": "mumps",
-        "hessian_approximation": "exact",
-        "print_level": 0,
-        "sb": "yes",
-        "output_file": log_path,
-        "file_print_level": 5,
-    }
+    options |= {"output_file": log_path, "file_print_level": 5}
     if not restoration:
         options["max_resto_iter"] = 0
     options.update(ipopt_options or {})
@@ -523,47 +496,41 @@ def solve_generalized_ipopt(
         sol = solver(
             x0=tr.pack(guess["q"], guess["v"], guess["tau"]), lbx=lbz, ubx=ubz, lbg=lbg, ubg=ubg
         )
-        stats = solver.stats()
+        stats = IpoptStats.of(solver.stats())
         with open(log_path, encoding="utf-8", errors="replace") as fh:
             resto = _restoration_iterations(fh.read())
     finally:
         os.unlink(log_path)
 
     q, v, tau = tr.unpack(np.asarray(sol["x"]).ravel())
-    status = str(stats["return_status"])
-    iterations = int(stats["iter_count"])
-    history = stats.get("iterations", {})
-    kkt = np.column_stack([history.get("inf_pr", []), history.get("inf_du", [])])
-    solve_time = float(stats["t_wall_total"])
-    eval_time = sum(float(stats.get(f"t_wall_{name}", 0.0)) for name in _EVAL_TIMERS)
     finite = all(np.all(np.isfinite(x)) for x in (q, v, tau))
-    success = status == "Solve_Succeeded" and finite
-    message = status.replace("_", " ")
+    success = stats.status == "Solve_Succeeded" and finite
+    message = stats.status.replace("_", " ")
     if not restoration and resto:
         message = "stopped on entering the restoration phase, which is disabled (max_resto_iter=0)"
     elif not finite:
         message = f"{message}; the solution contains NaN or inf"
     return PlanResult(
         method=METHOD,
-        status=status,
+        status=stats.status,
         success=success,
         message=message,
-        iterations=iterations,
-        solve_time_s=solve_time,
+        iterations=stats.iterations,
+        solve_time_s=stats.solve_time,
         total_time_s=time.perf_counter() - start,
-        time_per_iter_s=solve_time / max(iterations, 1),
+        time_per_iter_s=stats.time_per_iteration,
         q=q,
         v=v,
         tau=tau,
         dt=task.dt,
-        kkt_history=kkt.reshape(-1, 2),
+        kkt_history=np.column_stack([stats.inf_pr, stats.inf_du]).reshape(-1, 2),
         entered_restoration=resto > 0,
         extra={
             "objective": float(sol["f"]),
             "restoration_iterations": resto,
-            "eval_time_s": eval_time,
+            "eval_time_s": stats.eval_time,
             "build_time_s": build_time,
-            "solver_time_per_iter_s": (solve_time - eval_time) / max(iterations, 1),
+            "solver_time_per_iter_s": stats.solver_time_per_iteration,
             "n_variables": tr.n,
             "n_constraints": tr.m,
         },

@@ -30,10 +30,10 @@ import casadi as cs
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mbplan.errors import InputError
+from mbplan.baselines.ipopt import IpoptStats, base_options
+from mbplan.lie import SO3
 from mbplan.tasks.drone import DockingTask, geodesic_initial_guess
-
-_EVAL_TIMERS = ("nlp_f", "nlp_g", "nlp_grad_f", "nlp_jac_g", "nlp_hess_l")
+from mbplan.validation import as_arrays
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,10 +77,6 @@ def _quat_to_rot(q: cs.SX) -> cs.SX:
     """Homogeneous quadratic map ``(w² - ‖q_v‖²) I + 2 q_v q_vᵀ + 2 w q_v^``."""
     w, qv = q[0], q[1:]
     return (w**2 - cs.dot(qv, qv)) * cs.DM.eye(3) + 2 * cs.mtimes(qv, qv.T) + 2 * w * cs.skew(qv)
-
-
-def _vee(A: cs.SX) -> cs.SX:
-    return 0.5 * cs.vertcat(A[2, 1] - A[1, 2], A[0, 2] - A[2, 0], A[1, 0] - A[0, 1])
 
 
 def _chordal(R: cs.SX, R_ref: np.ndarray) -> cs.SX:
@@ -150,7 +146,7 @@ def _transcribe(
         if redundant_norms or k == N - 1:
             add(cs.sumsqr(f[k + 1]) - 1.0, 0.0, 0.0)
         add(p[k + 1] - p[k] - v[k] * dt, 0.0, 0.0)
-        add(_vee(momentum) / dt**2 - U[1:, k], 0.0, 0.0)
+        add(SO3.vee(momentum) / dt**2 - U[1:, k], 0.0, 0.0)
         add(
             m * (v[k + 1] - v[k]) / dt
             - m * cs.DM(prm.gravity)
@@ -183,17 +179,13 @@ def solve_quaternion_ipopt(
     ambient formulation, whose constraint Jacobian is rank deficient (IPOPT then relies on its
     regularisation and converges less often).
     """
-    if not isinstance(max_iter, int | np.integer) or isinstance(max_iter, bool) or max_iter < 0:
-        raise InputError(f"max_iter: expected an integer >= 0, got {max_iter!r}")
-    if not (isinstance(tol, int | float) and np.isfinite(tol) and tol > 0):
-        raise InputError(f"tol: expected a finite number > 0, got {tol!r}")
+    options = base_options(max_iter, tol)
     N = task.N
-    guess = geodesic_initial_guess(task) if initial_guess is None else initial_guess
-    shapes = {"R": (N + 1, 3, 3), "p": (N + 1, 3), "F": (N + 1, 3, 3), "v": (N + 1, 3), "u": (N, 4)}
-    for key, shape in shapes.items():
-        value = np.asarray(guess.get(key, np.empty(0)), dtype=float)
-        if value.shape != shape or not np.all(np.isfinite(value)):
-            raise InputError(f"initial_guess[{key!r}]: expected finite array of shape {shape}")
+    guess = as_arrays(
+        geodesic_initial_guess(task) if initial_guess is None else initial_guess,
+        {"R": (N + 1, 3, 3), "p": (N + 1, 3), "F": (N + 1, 3, 3), "v": (N + 1, 3), "u": (N, 4)},
+        "initial_guess",
+    )
 
     nlp, lbg, ubg, blocks = _transcribe(task, redundant_norms)
     lower = [np.full(b.shape, -np.inf, order="F") for b in blocks]
@@ -205,30 +197,26 @@ def solve_quaternion_ipopt(
         lower[4][:] = np.array([[0.0], [-tau], [-tau], [-tau]])
         upper[4][:] = np.array([[task.params.thrust_limit], [tau], [tau], [tau]])
     start = [
-        _to_quaternions(np.asarray(guess["R"])[1:]).T,
-        _to_quaternions(np.asarray(guess["F"])[1:]).T,
-        np.asarray(guess["p"])[1:].T,
-        np.asarray(guess["v"])[1:].T,
-        np.asarray(guess["u"]).T,
+        _to_quaternions(guess["R"][1:]).T,
+        _to_quaternions(guess["F"][1:]).T,
+        guess["p"][1:].T,
+        guess["v"][1:].T,
+        guess["u"].T,
     ]
 
     def flat(arrays: list[np.ndarray]) -> np.ndarray:
         return np.concatenate([np.ravel(a, order="F") for a in arrays])
 
-    options = {
-        "ipopt.max_iter": int(max_iter),
-        "ipopt.tol": float(tol),
-        "ipopt.linear_solver": "mumps",
-        "ipopt.hessian_approximation": "exact",
-        "ipopt.print_level": 0,
-        "ipopt.sb": "yes",
-        "print_time": False,
-        "record_time": True,
-    }
-    options.update({f"ipopt.{key}": value for key, value in (ipopt_options or {}).items()})
-    solver = cs.nlpsol("quaternion_docking", "ipopt", nlp, options)
+    options.update(ipopt_options or {})
+    solver = cs.nlpsol(
+        "quaternion_docking",
+        "ipopt",
+        nlp,
+        {"ipopt": options, "print_time": False, "record_time": True},
+    )
     sol = solver(x0=flat(start), lbx=flat(lower), ubx=flat(upper), lbg=lbg, ubg=ubg)
     stats = solver.stats()
+    ipopt = IpoptStats.of(stats)
 
     x = np.asarray(sol["x"]).ravel()
     sizes = np.cumsum([b.numel() for b in blocks])[:-1]
@@ -242,26 +230,19 @@ def solve_quaternion_ipopt(
     v = np.vstack([task.v0, v])
     R, F = _to_rotations(q), _to_rotations(f)
 
-    iterations = int(stats["iter_count"])
-    history = stats.get("iterations", {})
-    inf_pr = np.asarray(history.get("inf_pr", []), dtype=float)
-    inf_du = np.asarray(history.get("inf_du", []), dtype=float)
-    solve_time = float(stats["t_wall_total"])
-    eval_time = sum(float(stats.get(f"t_wall_{name}", 0.0)) for name in _EVAL_TIMERS)
     objective = float(sol["f"])
     finite = all(np.all(np.isfinite(a)) for a in (q, f, R, F, p, v, u)) and np.isfinite(objective)
-    status = str(stats["return_status"])
     return QuaternionIpoptResult(
-        status=status,
-        success=bool(stats["success"]) and status == "Solve_Succeeded" and bool(finite),
-        iterations=iterations,
-        solve_time=solve_time,
-        time_per_iteration=solve_time / max(iterations, 1),
-        solver_time_per_iteration=(solve_time - eval_time) / max(iterations, 1),
+        status=ipopt.status,
+        success=bool(stats["success"]) and ipopt.status == "Solve_Succeeded" and bool(finite),
+        iterations=ipopt.iterations,
+        solve_time=ipopt.solve_time,
+        time_per_iteration=ipopt.time_per_iteration,
+        solver_time_per_iteration=ipopt.solver_time_per_iteration,
         objective=objective,
-        inf_pr=inf_pr,
-        inf_du=inf_du,
-        kkt_history=np.maximum(inf_pr, inf_du),
+        inf_pr=ipopt.inf_pr,
+        inf_du=ipopt.inf_du,
+        kkt_history=np.maximum(ipopt.inf_pr, ipopt.inf_du),
         q=q,
         f=f,
         R=R,

@@ -17,7 +17,7 @@ import numpy as np
 import pinocchio as pin
 from tqdm import tqdm
 
-from mbplan.benchmarks.common import machine_info, median_time, write_atomic, write_json
+from mbplan.benchmarks.common import machine_info, median_time, save_plot, write_atomic, write_json
 from mbplan.multibody import maximal_model
 from mbplan.simulation.warm_start import maximal_warm_start
 from mbplan.transcription.multibody import multibody_layout
@@ -178,8 +178,4 @@ def _plot(rows: list[dict], N: int, path: Path) -> None:
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    tmp.replace(path)
+    save_plot(fig, path, dpi=120)

@@ -1,4 +1,4 @@
-"""Shared helpers of the benchmarks: timing, atomic result files."""
+"""Shared helpers of the benchmarks: timing, atomic result files and plots."""
 
 from __future__ import annotations
 
@@ -6,12 +6,16 @@ import json
 import os
 import platform
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import casadi as cs
 import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def median_time(fn: Callable[[], Any], min_repeats: int = 5, min_seconds: float = 0.2) -> float:
@@ -37,13 +41,36 @@ def machine_info() -> dict[str, Any]:
     }
 
 
-def write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` via a temporary file, so no half-written result is left."""
+@contextmanager
+def _replacing(path: Path) -> Iterator[Path]:
+    """A temporary file next to ``path`` that replaces ``path`` when the block succeeds (and is
+    removed if it fails), so no half-written result is left."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` via a temporary file."""
+    with _replacing(path) as tmp:
+        tmp.write_text(text)
 
 
 def write_json(path: Path, data: Any) -> None:
     write_atomic(path, json.dumps(data, indent=2) + "\n")
+
+
+def save_plot(fig: Figure, path: Path, dpi: int) -> None:
+    """Save a matplotlib figure to ``path`` (format from the suffix) via a temporary file, then
+    close it."""
+    import matplotlib.pyplot as plt
+
+    try:
+        with _replacing(path) as tmp:
+            fig.savefig(tmp, dpi=dpi)
+    finally:
+        plt.close(fig)

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from mbplan.baselines.quaternion_ipopt import solve_quaternion_ipopt
-from mbplan.benchmarks.common import machine_info, write_atomic, write_json
+from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, write_json
 from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
 from mbplan.planning.drone import plan_docking
@@ -189,7 +189,4 @@ def _plots(rows: list[dict], methods: tuple[str, ...], out: Path) -> None:
     ax.legend()
     fig.suptitle("Drone docking: convergence (dashed: not converged)")
     fig.tight_layout()
-    tmp = out / ".convergence.tmp.png"
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(out / "convergence.png")
+    save_plot(fig, out / "convergence.png", dpi=110)

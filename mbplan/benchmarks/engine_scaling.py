@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from mbplan.benchmarks.common import machine_info, median_time, write_atomic, write_json
+from mbplan.benchmarks.common import machine_info, median_time, save_plot, write_atomic, write_json
 from mbplan.dynamics import quadrotor_step
 from mbplan.engine import RiemannianFunction
 from mbplan.lie import SO3, R
@@ -129,7 +129,4 @@ def _plot(rows: list[dict], path: Path) -> None:
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    tmp.replace(path)
+    save_plot(fig, path, dpi=120)

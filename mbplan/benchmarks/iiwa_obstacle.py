@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mbplan.benchmarks.common import machine_info, write_atomic, write_json
+from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, write_json
 from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
 from mbplan.planning.solve import METHODS, plan
@@ -153,7 +153,4 @@ def _plots(rows: list[dict], methods: tuple[str, ...], out: Path) -> None:
     axes[2].set_ylabel("max(inf_pr, inf_du)")
     axes[2].set_title("convergence (dashed: not verified)")
     fig.tight_layout()
-    tmp = out / ".plots.tmp.png"
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(out / "iiwa_obstacle.png")
+    save_plot(fig, out / "iiwa_obstacle.png", dpi=110)

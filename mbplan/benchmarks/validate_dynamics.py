@@ -26,7 +26,7 @@ import numpy as np
 import pinocchio as pin
 from tqdm import tqdm
 
-from mbplan.benchmarks.common import machine_info, write_atomic, write_json
+from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, write_json
 from mbplan.errors import InputError, MbplanError
 from mbplan.lie import SO3
 from mbplan.multibody import MaximalModel, joint_positions, maximal_model
@@ -464,8 +464,4 @@ def _plot(s: dict, energies: dict[float, np.ndarray], long: dict | None, path: P
     ax.set_ylabel("(E_k - E_0) / |E_0|")
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    tmp.replace(path)
+    save_plot(fig, path, dpi=120)

@@ -204,7 +204,9 @@ class RiemannianFunction:
             # Column-major flattening per knot, as CasADi reshapes.
             out[:, s.offset : s.offset + s.size] = np.swapaxes(a, 1, -1).reshape(a.shape[0], -1)
         if not np.isfinite(out).all():
-            bad = next(s.name for s, a in zip(slots, arrays, strict=True) if not np.isfinite(a).all())
+            bad = next(
+                s.name for s, a in zip(slots, arrays, strict=True) if not np.isfinite(a).all()
+            )
             raise InputError(f"{self.name}: {what} {bad!r} contains NaN or inf")
         return out
 

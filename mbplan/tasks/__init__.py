@@ -1,25 +1,10 @@
-"""Benchmark tasks of the RIPM paper (§VIII) as plain data, with initial guesses and simulators."""
+"""Benchmark tasks of the RIPM paper (§VIII) as plain data, with initial guesses and simulators.
 
-from mbplan.tasks.drone import (
-    CostWeights,
-    DockingTask,
-    QuadrotorParams,
-    cluttered_task,
-    geodesic_initial_guess,
-    rotation_angles,
-    sample_docking_cases,
-    simulate,
-    trajectory_cost,
-)
+The package exports the drone docking task (:mod:`mbplan.tasks.drone`, whose ``__all__`` lists
+the names); the manipulator task is :mod:`mbplan.tasks.obstacle`.
+"""
 
-__all__ = [
-    "CostWeights",
-    "DockingTask",
-    "QuadrotorParams",
-    "cluttered_task",
-    "geodesic_initial_guess",
-    "rotation_angles",
-    "sample_docking_cases",
-    "simulate",
-    "trajectory_cost",
-]
+from mbplan.tasks import drone
+from mbplan.tasks.drone import *  # noqa: F403  (the names of drone.__all__)
+
+__all__ = drone.__all__

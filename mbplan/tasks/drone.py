@@ -29,62 +29,27 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.spatial.transform import Rotation
 
 from mbplan.errors import InfeasibleRequestError, InputError
+from mbplan.lie import SO3
+from mbplan.validation import as_array, as_int, as_real, as_rotation
+
+__all__ = [
+    "CostWeights",
+    "DockingTask",
+    "QuadrotorParams",
+    "cluttered_task",
+    "geodesic_initial_guess",
+    "rotation_angles",
+    "sample_docking_cases",
+    "simulate",
+    "trajectory_cost",
+]
 
 E_Z = np.array([0.0, 0.0, 1.0])  # thrust axis in the body frame (eq. 60)
-_ROTATION_TOL = 1e-8  # max |RᵀR - I| accepted for a rotation matrix
+_HAT_BASIS = SO3.hat(np.eye(3))  # e_i^ for the unit vectors e_i
 _NEWTON_MAX_ITER = 30
 _NEWTON_STEP_TOL = 1e-14  # |ξ| of the last Newton update on SO(3)
-
-
-def _array(value: ArrayLike, shape: tuple[int, ...], name: str) -> np.ndarray:
-    """Read-only float copy of ``value``; raise :class:`InputError` on bad shape or non-finite."""
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{name}: not a numeric array ({exc})") from None
-    if arr.shape != shape:
-        raise InputError(f"{name}: expected shape {shape}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise InputError(f"{name}: contains NaN or inf")
-    arr.setflags(write=False)
-    return arr
-
-
-def _rotation(value: ArrayLike, name: str) -> np.ndarray:
-    R = _array(value, (3, 3), name)
-    err = np.max(np.abs(R.T @ R - np.eye(3)))
-    if err > _ROTATION_TOL:
-        raise InputError(f"{name}: not a rotation matrix (max |RᵀR - I| = {err:.2e})")
-    if np.linalg.det(R) <= 0.0:
-        raise InputError(f"{name}: determinant is not +1 (a reflection)")
-    return R
-
-
-def _positive(value: float, name: str) -> float:
-    if not isinstance(value, int | float) or isinstance(value, bool):
-        raise InputError(f"{name}: expected a real number, got {type(value).__name__}")
-    if not (math.isfinite(value) and value > 0.0):
-        raise InputError(f"{name}: must be finite and > 0, got {value}")
-    return float(value)
-
-
-def _hat(w: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-
-
-def _vee(A: np.ndarray) -> np.ndarray:
-    return 0.5 * np.array([A[2, 1] - A[1, 2], A[0, 2] - A[2, 0], A[1, 0] - A[0, 1]])
-
-
-def _exp(phi: np.ndarray) -> np.ndarray:
-    return Rotation.from_rotvec(phi).as_matrix()
-
-
-def _log(R: np.ndarray) -> np.ndarray:
-    return Rotation.from_matrix(R).as_rotvec()
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,8 +71,8 @@ class QuadrotorParams:
     thrust_limit: float = 9.81
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "mass", _positive(self.mass, "mass"))
-        inertia = _array(self.inertia, (3, 3), "inertia")
+        object.__setattr__(self, "mass", as_real(self.mass, "mass", positive=True))
+        inertia = as_array(self.inertia, (3, 3), "inertia")
         if not np.allclose(inertia, inertia.T, rtol=0.0, atol=1e-12 * np.abs(inertia).max()):
             raise InputError("inertia: not symmetric")
         moments = np.linalg.eigvalsh(inertia)
@@ -119,9 +84,9 @@ class QuadrotorParams:
                 "(not a physical rigid body)"
             )
         object.__setattr__(self, "inertia", inertia)
-        object.__setattr__(self, "gravity", _array(self.gravity, (3,), "gravity"))
-        object.__setattr__(self, "torque_limit", _positive(self.torque_limit, "torque_limit"))
-        object.__setattr__(self, "thrust_limit", _positive(self.thrust_limit, "thrust_limit"))
+        object.__setattr__(self, "gravity", as_array(self.gravity, (3,), "gravity"))
+        for name in ("torque_limit", "thrust_limit"):
+            object.__setattr__(self, name, as_real(getattr(self, name), name, positive=True))
 
     @property
     def nonstandard_inertia(self) -> np.ndarray:
@@ -153,12 +118,7 @@ class CostWeights:
 
     def __post_init__(self) -> None:
         for name in ("w_R", "w_F", "w_p", "w_v", "w_u", "terminal_factor"):
-            value = getattr(self, name)
-            if not isinstance(value, int | float) or isinstance(value, bool):
-                raise InputError(f"weights.{name}: expected a real number, got {value!r}")
-            if not (math.isfinite(value) and value >= 0.0):
-                raise InputError(f"weights.{name}: must be finite and >= 0, got {value}")
-            object.__setattr__(self, name, float(value))
+            object.__setattr__(self, name, as_real(getattr(self, name), f"weights.{name}"))
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,19 +151,17 @@ class DockingTask:
             raise InputError(f"params: expected QuadrotorParams, got {type(self.params).__name__}")
         if not isinstance(self.weights, CostWeights):
             raise InputError(f"weights: expected CostWeights, got {type(self.weights).__name__}")
-        if not isinstance(self.N, int | np.integer) or isinstance(self.N, bool) or self.N < 1:
-            raise InputError(f"N: horizon must be an integer >= 1, got {self.N!r}")
-        object.__setattr__(self, "N", int(self.N))
-        object.__setattr__(self, "dt", _positive(self.dt, "dt"))
+        object.__setattr__(self, "N", as_int(self.N, "N", minimum=1, what="horizon"))
+        object.__setattr__(self, "dt", as_real(self.dt, "dt", positive=True))
         for name in ("R0", "F0", "R_goal"):
-            object.__setattr__(self, name, _rotation(getattr(self, name), name))
+            object.__setattr__(self, name, as_rotation(getattr(self, name), name))
         for name in ("p0", "v0", "p_goal"):
-            object.__setattr__(self, name, _array(getattr(self, name), (3,), name))
+            object.__setattr__(self, name, as_array(getattr(self, name), (3,), name))
         object.__setattr__(self, "with_input_limits", bool(self.with_input_limits))
         obstacles = []
         for i, obstacle in enumerate(self.obstacles):
-            xc, yc, r = _array(obstacle, (3,), f"obstacles[{i}]")
-            _positive(float(r), f"obstacles[{i}] radius")
+            xc, yc, r = as_array(obstacle, (3,), f"obstacles[{i}]")
+            as_real(r, f"obstacles[{i}] radius", positive=True)
             for name, p in (("p0", self.p0), ("p_goal", self.p_goal)):
                 if (p[0] - xc) ** 2 + (p[1] - yc) ** 2 < r**2:
                     raise InfeasibleRequestError(f"{name} = {p} lies inside obstacles[{i}]")
@@ -221,13 +179,12 @@ def sample_docking_cases(
 ) -> list[DockingTask]:
     """``n`` docking tasks as in §VIII.B / Fig. 3: ``p0`` uniform in ``box = (low, high)`` and
     ``R0 = exp(θ a^)`` with ``θ`` uniform in ``[0, max_angle]`` and ``a`` uniform on the sphere."""
-    if not isinstance(n, int | np.integer) or isinstance(n, bool) or n < 1:
-        raise InputError(f"n: number of cases must be an integer >= 1, got {n!r}")
-    low = _array(box[0], (3,), "box low corner")
-    high = _array(box[1], (3,), "box high corner")
+    as_int(n, "n", minimum=1, what="number of cases")
+    low = as_array(box[0], (3,), "box low corner")
+    high = as_array(box[1], (3,), "box high corner")
     if np.any(low > high):
         raise InputError(f"box: low corner {low} exceeds high corner {high}")
-    max_angle = _positive(max_angle, "max_angle")
+    max_angle = as_real(max_angle, "max_angle", positive=True)
     if max_angle > math.pi:
         raise InputError(f"max_angle: must be <= π, got {max_angle}")
     params = QuadrotorParams() if params is None else params
@@ -237,7 +194,7 @@ def sample_docking_cases(
         p0 = rng.uniform(low, high)
         axis = rng.standard_normal(3)
         angle = rng.uniform(0.0, max_angle)
-        R0 = _exp(angle * axis / np.linalg.norm(axis))
+        R0 = SO3.exp(angle * axis / np.linalg.norm(axis))
         tasks.append(DockingTask(params=params, R0=R0, p0=p0, with_input_limits=with_input_limits))
     return tasks
 
@@ -249,7 +206,7 @@ def cluttered_task(
     crosses the first one and the way on passes a 0.4 m gap between the other two."""
     return DockingTask(
         params=QuadrotorParams() if params is None else params,
-        R0=_exp(np.array([0.0, 0.0, 0.5 * math.pi])),
+        R0=SO3.exp(np.array([0.0, 0.0, 0.5 * math.pi])),
         p0=np.array([-2.0, -0.4, 0.5]),
         with_input_limits=with_input_limits,
         obstacles=((-1.4, -0.25, 0.25), (-0.8, 0.25, 0.2), (-0.7, -0.55, 0.2)),
@@ -267,12 +224,12 @@ def geodesic_initial_guess(task: DockingTask) -> dict[str, np.ndarray]:
     """
     N = task.N
     t = np.arange(N + 1) / N
-    phi = _log(task.R0.T @ task.R_goal)
-    R = task.R0 @ _exp(t[:, None] * phi)
+    phi = SO3.log(task.R0.T @ task.R_goal)
+    R = task.R0 @ SO3.exp(t[:, None] * phi)
     R[-1] = task.R_goal
     p = task.p0 + t[:, None] * (task.p_goal - task.p0)
     F = np.repeat(np.eye(3)[None], N + 1, axis=0)
-    F[:N] = _exp(phi / N)
+    F[:N] = SO3.exp(phi / N)
     v = np.zeros((N + 1, 3))
     v[:N] = (task.p_goal - task.p0) / (N * task.dt)
     F[0], v[0] = task.F0, task.v0
@@ -286,15 +243,14 @@ def _solve_rotational_step(target: np.ndarray, J: np.ndarray, F: np.ndarray, k: 
     The update is ``F ← F exp(ξ^)``; the Jacobian of ``(F exp(ξ^) J - J exp(-ξ^) Fᵀ)^∨`` at
     ``ξ = 0`` is ``ξ ↦ (F ξ^ J + J ξ^ Fᵀ)^∨``.
     """
-    basis = np.eye(3)
     for _ in range(_NEWTON_MAX_ITER):
-        residual = _vee(F @ J - J @ F.T) - target
-        jac = np.column_stack([_vee(F @ _hat(e) @ J + J @ _hat(e) @ F.T) for e in basis])
+        residual = SO3.vee(F @ J - J @ F.T) - target
+        jac = np.column_stack([SO3.vee(F @ E @ J + J @ E @ F.T) for E in _HAT_BASIS])
         try:
             xi = -np.linalg.solve(jac, residual)
         except np.linalg.LinAlgError:
             break
-        F = F @ _exp(xi)
+        F = F @ SO3.exp(xi)
         if np.linalg.norm(xi) <= _NEWTON_STEP_TOL:
             return F
     raise InputError(
@@ -325,7 +281,7 @@ def simulate(task: DockingTask, u: ArrayLike) -> dict[str, np.ndarray]:
     for k in range(K):
         R[k + 1] = R[k] @ F[k]
         p[k + 1] = p[k] + v[k] * dt
-        target = _vee(J @ F[k] - F[k].T @ J) + u[k, 1:] * dt**2
+        target = SO3.vee(J @ F[k] - F[k].T @ J) + u[k, 1:] * dt**2
         F[k + 1] = _solve_rotational_step(target, J, F[k], k)
         v[k + 1] = v[k] + prm.gravity * dt + R[k + 1] @ E_Z * (u[k, 0] * dt / prm.mass)
     return {"R": R, "p": p, "F": F, "v": v}
@@ -344,7 +300,7 @@ def trajectory_cost(task: DockingTask, traj: dict[str, np.ndarray]) -> float:
     """
     N, w = task.N, task.weights
     shapes = {"R": (N + 1, 3, 3), "p": (N + 1, 3), "F": (N + 1, 3, 3), "v": (N + 1, 3), "u": (N, 4)}
-    x = {key: _array(traj[key], shape, f"traj[{key!r}]") for key, shape in shapes.items()}
+    x = {key: as_array(traj[key], shape, f"traj[{key!r}]") for key, shape in shapes.items()}
     scale = np.ones(N)
     scale[-1] = w.terminal_factor
     state = (
@@ -359,4 +315,4 @@ def trajectory_cost(task: DockingTask, traj: dict[str, np.ndarray]) -> float:
 
 def rotation_angles(R: ArrayLike) -> np.ndarray:
     """Angles ``‖log R‖ ∈ [0, π]`` of a stack of rotations."""
-    return np.linalg.norm(Rotation.from_matrix(np.asarray(R)).as_rotvec().reshape(-1, 3), axis=1)
+    return np.linalg.norm(SO3.log(R).reshape(-1, 3), axis=1)

@@ -20,7 +20,6 @@ with ``s_k = 1`` and ``s_N = terminal_factor``; knot 0 is fixed at ``(q0, v0 = 0
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from functools import cache
 from typing import Literal
@@ -28,10 +27,10 @@ from typing import Literal
 import coal
 import numpy as np
 import pinocchio as pin
-from numpy.typing import ArrayLike
 
 from mbplan.errors import InfeasibleRequestError, InputError, RobotModelError
 from mbplan.robots import RobotDescription, load
+from mbplan.validation import as_array, as_int, as_real, as_rotation
 
 ShapeName = Literal["box", "cylinder", "sphere", "capsule"]
 _SHAPE_SIZES: dict[str, tuple[str, ...]] = {
@@ -52,29 +51,6 @@ IIWA_TARGET = (1.0, 0.6, 0.0, -1.4, 0.0, 1.0, 0.0)
 IIWA_START = (-0.8, 0.2, 0.5, -1.6, 0.0, 1.0, 0.0)
 
 
-def _array(value: ArrayLike, shape: tuple[int, ...], name: str) -> np.ndarray:
-    """Read-only float copy of ``value``; :class:`InputError` on bad shape or non-finite."""
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{name}: not a numeric array ({exc})") from None
-    if arr.shape != shape:
-        raise InputError(f"{name}: expected shape {shape}, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise InputError(f"{name}: contains NaN or inf")
-    arr.setflags(write=False)
-    return arr
-
-
-def _real(value: object, name: str, *, positive: bool = False) -> float:
-    if not isinstance(value, int | float | np.floating | np.integer) or isinstance(value, bool):
-        raise InputError(f"{name}: expected a real number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value) or value < 0.0 or (positive and value == 0.0):
-        raise InputError(f"{name}: must be finite and {'> 0' if positive else '>= 0'}, got {value}")
-    return value
-
-
 @dataclass(frozen=True)
 class Cylinder:
     """Vertical cylinder of ``radius`` around the axis through ``center_xy``, from ``z_min`` to
@@ -86,10 +62,10 @@ class Cylinder:
     z_max: float = 1.5
 
     def __post_init__(self) -> None:
-        c = _array(self.center_xy, (2,), "Cylinder.center_xy")
+        c = as_array(self.center_xy, (2,), "Cylinder.center_xy")
         object.__setattr__(self, "center_xy", (float(c[0]), float(c[1])))
-        object.__setattr__(self, "radius", _real(self.radius, "Cylinder.radius", positive=True))
-        z = _array([self.z_min, self.z_max], (2,), "Cylinder z_min, z_max")
+        object.__setattr__(self, "radius", as_real(self.radius, "Cylinder.radius", positive=True))
+        z = as_array([self.z_min, self.z_max], (2,), "Cylinder z_min, z_max")
         if z[1] <= z[0]:
             raise InputError(f"Cylinder: z_max = {z[1]} must exceed z_min = {z[0]}")
         object.__setattr__(self, "z_min", float(z[0]))
@@ -122,10 +98,8 @@ class Obstacle:
     def __post_init__(self) -> None:
         if self.shape not in _SHAPE_SIZES:
             raise InputError(f"Obstacle.shape: {self.shape!r} is not one of {list(_SHAPE_SIZES)}")
-        pose = _array(self.pose, (4, 4), "Obstacle.pose")
-        R = pose[:3, :3]
-        if not np.allclose(R.T @ R, np.eye(3), atol=1e-9) or np.linalg.det(R) <= 0.0:
-            raise InputError("Obstacle.pose: top-left 3x3 block is not a rotation matrix")
+        pose = as_array(self.pose, (4, 4), "Obstacle.pose")
+        as_rotation(pose[:3, :3], "Obstacle.pose rotation (top-left 3x3 block)")
         if not np.array_equal(pose[3], [0.0, 0.0, 0.0, 1.0]):
             raise InputError("Obstacle.pose: last row must be (0, 0, 0, 1)")
         names = _SHAPE_SIZES[self.shape]
@@ -136,7 +110,8 @@ class Obstacle:
         if len(size) != len(names):
             raise InputError(f"Obstacle.size of a {self.shape}: expected {names}, got {size}")
         size = tuple(
-            _real(s, f"Obstacle.size {n}", positive=True) for s, n in zip(size, names, strict=True)
+            as_real(s, f"Obstacle.size {n}", positive=True)
+            for s, n in zip(size, names, strict=True)
         )
         object.__setattr__(self, "pose", pose)
         object.__setattr__(self, "size", size)
@@ -180,7 +155,7 @@ class CostWeights:
 
     def __post_init__(self) -> None:
         for name in ("w_q", "w_v", "w_tau", "terminal_factor"):
-            object.__setattr__(self, name, _real(getattr(self, name), f"weights.{name}"))
+            object.__setattr__(self, name, as_real(getattr(self, name), f"weights.{name}"))
 
 
 @dataclass(frozen=True, eq=False)
@@ -218,15 +193,15 @@ class ObstacleTask:
             raise InputError(f"robot: expected a robot name, got {type(self.robot).__name__}")
         model = robot_description(self.robot).model
         nq, nv, is_iiwa = model.nq, model.nv, self.robot == "iiwa"
-        if not isinstance(self.N, int | np.integer) or isinstance(self.N, bool) or self.N < 2:
-            raise InputError(f"N: horizon must be an integer >= 2, got {self.N!r}")
-        object.__setattr__(self, "N", int(self.N))
-        object.__setattr__(self, "dt", _real(self.dt, "dt", positive=True))
+        object.__setattr__(self, "N", as_int(self.N, "N", minimum=2, what="horizon"))
+        object.__setattr__(self, "dt", as_real(self.dt, "dt", positive=True))
         for name, default in (("q0", IIWA_START), ("q_target", IIWA_TARGET)):
             value = getattr(self, name)
             if value is None and not is_iiwa:
                 raise InputError(f"{name}: required for robot {self.robot!r}")
-            object.__setattr__(self, name, _array(default if value is None else value, (nq,), name))
+            object.__setattr__(
+                self, name, as_array(default if value is None else value, (nq,), name)
+            )
         obstacles = (IIWA_CYLINDER,) if self.obstacles is None and is_iiwa else self.obstacles
         obstacles = tuple(obstacles or ())
         for i, obstacle in enumerate(obstacles):
@@ -237,7 +212,7 @@ class ObstacleTask:
             ("torque_limit", model.effortLimit),
             ("velocity_limit", model.velocityLimit),
         ):
-            value = _array(
+            value = as_array(
                 urdf if getattr(self, name) is None else getattr(self, name), (nv,), name
             )
             if np.any(value <= 0.0):
@@ -245,8 +220,8 @@ class ObstacleTask:
             object.__setattr__(self, name, value)
         if not isinstance(self.weights, CostWeights):
             raise InputError(f"weights: expected CostWeights, got {type(self.weights).__name__}")
-        object.__setattr__(self, "margin", _real(self.margin, "margin"))
-        object.__setattr__(self, "goal_tolerance", _real(self.goal_tolerance, "goal_tolerance"))
+        object.__setattr__(self, "margin", as_real(self.margin, "margin"))
+        object.__setattr__(self, "goal_tolerance", as_real(self.goal_tolerance, "goal_tolerance"))
 
     @property
     def cylinders(self) -> tuple[Cylinder, ...]:
@@ -382,8 +357,7 @@ def sample_obstacle_cases(
     :func:`validate` would reject it (COM inside a cylinder + margin, eq. 62, or robot geometry
     penetrating an obstacle). Target and obstacles are fixed (``task_fields`` are passed on to
     :class:`ObstacleTask`, e.g. ``dt``, ``q_target``, ``obstacles``, ``margin``)."""
-    if not isinstance(n, int | np.integer) or isinstance(n, bool) or n < 1:
-        raise InputError(f"n: number of cases must be an integer >= 1, got {n!r}")
+    as_int(n, "n", minimum=1, what="number of cases")
     if "q0" in task_fields:
         raise InputError("q0 is sampled; do not pass it")
     model = robot_description(robot).model

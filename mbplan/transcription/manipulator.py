@@ -25,6 +25,7 @@ import numpy as np
 from mbplan.engine import RiemannianFunction
 from mbplan.lie import SO3, R
 from mbplan.multibody import MaximalModel
+from mbplan.transcription.constraints import cylinder_clearance_function
 from mbplan.transcription.costs import chordal_cost
 from mbplan.transcription.multibody import multibody_layout
 from mbplan.transcription.problem import TrajectoryProblem
@@ -110,15 +111,6 @@ def _torque_limit_function(jit: bool) -> RiemannianFunction:
         [("lim", 1)],
         jit=jit,
     )
-
-
-@cache
-def _com_cylinder_function(jit: bool) -> RiemannianFunction:
-    def outside(p, c):
-        d = p[0:2] - c[0:2]
-        return c[2] ** 2 - cs.dot(d, d)
-
-    return RiemannianFunction("com_cylinder_clearance", [("p", R(3))], outside, [("c", 3)], jit=jit)
 
 
 def _about_axis(mm: MaximalModel, angles: np.ndarray) -> np.ndarray:
@@ -210,7 +202,7 @@ def manipulator_problem(mm: MaximalModel, ocp: ManipulatorOCP, jit: bool) -> Tra
             Term(
                 f"com_cylinder_{i}",
                 "ineq",
-                _com_cylinder_function(jit),
+                cylinder_clearance_function(jit),
                 {"p": ("p", sites)},
                 {"c": c},
             )

@@ -18,6 +18,7 @@ from mbplan.engine import RiemannianFunction
 from mbplan.engine.jit import jit_available
 from mbplan.lie import SO3, R
 from mbplan.tasks.drone import DockingTask
+from mbplan.transcription.constraints import cylinder_clearance_function
 from mbplan.transcription.costs import chordal_cost, quadratic_cost
 from mbplan.transcription.problem import TrajectoryProblem
 from mbplan.transcription.terms import Term
@@ -82,15 +83,6 @@ def _input_limit_function(jit: bool) -> RiemannianFunction:
     )
 
 
-@cache
-def _cylinder_function(jit: bool) -> RiemannianFunction:
-    def outside(p, c):
-        d = p[0:2] - c[0:2]
-        return c[2] ** 2 - cs.dot(d, d)
-
-    return RiemannianFunction("cylinder_clearance", [("p", R(3))], outside, [("c", 3)], jit=jit)
-
-
 def quadrotor_problem(task: DockingTask, jit: bool | None = None) -> TrajectoryProblem:
     """Build the NLP: costs (57) + (59), dynamics (60), optional input limits and cylinders."""
     jit = jit_available() if jit is None else jit
@@ -144,7 +136,7 @@ def quadrotor_problem(task: DockingTask, jit: bool | None = None) -> TrajectoryP
             Term.at_knots(
                 f"cylinder_{i}",
                 "ineq",
-                _cylinder_function(jit),
+                cylinder_clearance_function(jit),
                 {"p": ("p", 0)},
                 range(1, N + 1),
                 {"c": c},

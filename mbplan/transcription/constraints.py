@@ -1,0 +1,25 @@
+"""Constraint residuals shared by the transcriptions (RIPM paper §VIII): obstacle clearance."""
+
+from __future__ import annotations
+
+from functools import cache
+
+import casadi as cs
+
+from mbplan.engine import RiemannianFunction
+from mbplan.lie import R
+
+
+def cylinder_clearance(p: cs.SX, c: cs.SX) -> cs.SX:
+    """``r² - ‖p_xy - c_xy‖²`` for the vertical cylinder ``c = (x_c, y_c, r)``: ``≤ 0`` iff the
+    point ``p`` is outside it (eq. 62)."""
+    d = p[0:2] - c[0:2]
+    return c[2] ** 2 - cs.dot(d, d)
+
+
+@cache
+def cylinder_clearance_function(jit: bool) -> RiemannianFunction:
+    """:func:`cylinder_clearance` of a point ``p ∈ R³`` with the cylinder as parameter ``c``."""
+    return RiemannianFunction(
+        "cylinder_clearance", [("p", R(3))], cylinder_clearance, [("c", 3)], jit=jit
+    )
