@@ -100,7 +100,27 @@ def _plan(args: argparse.Namespace) -> int:
     )
     if args.out:
         print(f"saved {save_npz(result, args.out)}")
+    if args.viz or args.html:
+        from mbplan.viz import replay
+
+        print(replay([result], task, html=args.html, open_browser=args.viz))
     return 0 if result.success and check.passed else 1
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from mbplan.viz import replay_main
+
+    return replay_main(args.results, args.html, args.no_browser, robot=args.robot)
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from mbplan.viz import plot_convergence, plot_trajectories, read_result
+
+    results = [read_result(p) for p in args.results]
+    labels = [f"{r.method} ({Path(p).name})" for r, p in zip(results, args.results, strict=True)]
+    plot = {"convergence": plot_convergence, "trajectories": plot_trajectories}[args.kind]
+    print(f"wrote {plot(results, args.out, labels=labels)}")
+    return 0
 
 
 def _robots(args: argparse.Namespace) -> int:
@@ -133,7 +153,26 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--tol", type=float, default=1e-6, help="convergence tolerance")
     plan.add_argument("--max-iter", type=int, default=500, help="iteration limit")
     plan.add_argument("--out", default=None, help="write the result to this .npz file")
+    plan.add_argument(
+        "--viz", action="store_true", help="replay the result in meshcat (127.0.0.1) at the end"
+    )
+    plan.add_argument("--html", default=None, help="also write a self-contained replay page")
     plan.set_defaults(func=_plan)
+
+    rep = sub.add_parser("replay", help="replay result.npz files in meshcat, side by side")
+    rep.add_argument("results", nargs="+", help="one or more result .npz files")
+    rep.add_argument("--html", default=None, help="write a self-contained page instead of serving")
+    rep.add_argument(
+        "--no-browser", action="store_true", help="do not open a browser (print the URL)"
+    )
+    rep.add_argument("--robot", default="iiwa", help="robot of the results (default iiwa)")
+    rep.set_defaults(func=_replay)
+
+    plot = sub.add_parser("plot", help="plot result.npz files (convergence or joint trajectories)")
+    plot.add_argument("kind", choices=("convergence", "trajectories"), help="what to plot")
+    plot.add_argument("results", nargs="+", help="result .npz files")
+    plot.add_argument("--out", default="out/plot.png", help="output file (.png, .svg or .pdf)")
+    plot.set_defaults(func=_plot)
 
     validate = sub.add_parser(
         "validate-dynamics",
