@@ -73,10 +73,11 @@ def to_plan_result(
         q[k] = joint_positions(mm, R[k], q_ref=q[k - 1])
     v = np.zeros((N + 1, mm.nv))
     v[1:] = (q[2:] - q[:-2]) / (2 * dt)
-    knot_tau = x["tau"][:, :, 0].copy()
-    data = mm.model.createData()
-    knot_tau[0] = pin.rnea(mm.model, data, q[0], np.zeros(mm.nv), np.zeros(mm.nv))
+    knot_tau = x["tau"][:, :, 0]
     tau = 0.5 * (knot_tau[:-1] + knot_tau[1:])
+    # The arm rests over the first step (x_1 = x_0, as q_1 = q_0 in eq. 61); the torque over
+    # [t_0, t_1] is the one for which eq. (61)'s first step reaches the planned v_1.
+    tau[0] = pin.rnea(mm.model, mm.model.createData(), q[0], v[0], (v[1] - v[0]) / dt)
     h = result.history.arrays()
     converged = result.status is RIPMStatus.CONVERGED
     finite = all(np.all(np.isfinite(a)) for a in (q, v, tau))
