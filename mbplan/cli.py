@@ -148,7 +148,9 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="random start of the task sampler (default: the fixed demo start)",
     )
-    plan.add_argument("--method", default="ripm", help="ripm | ipopt | ipopt-no-restoration")
+    plan.add_argument(
+        "--method", default="ripm", help="ripm | ipopt | ipopt-no-restoration | fddp | csqp"
+    )
     plan.add_argument("--horizon", type=int, default=40, help="number of steps N")
     plan.add_argument("--tol", type=float, default=1e-6, help="convergence tolerance")
     plan.add_argument("--max-iter", type=int, default=500, help="iteration limit")

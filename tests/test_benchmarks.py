@@ -40,7 +40,7 @@ def test_iiwa_small_runs_are_verified(tmp_path, method, max_iter, at_least):
 
 def test_unknown_method_is_named(tmp_path):
     with pytest.raises(InputError, match="unknown method"):
-        iiwa_obstacle.run(tmp_path, n=1, methods=("fddp",))
+        iiwa_obstacle.run(tmp_path, n=1, methods=("snopt",))
 
 
 def test_cli_plan_writes_npz(tmp_path, capsys):

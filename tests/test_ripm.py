@@ -240,10 +240,9 @@ def test_infeasible_inequalities_are_detected():
     assert any(res.history.restoration)
 
 
-def test_restoration_phase_recovers_wachter_biegler_example():
-    """min x₁ s.t. x₁² - x₂ - 1 = 0, x₁ - x₃ - ½ = 0, x₂, x₃ ≥ 0 from (-2, 1, 1), where
-    infeasible-start Newton steps stall (Wächter & Biegler 2000); x* = (1, 0, ½)."""
-    prob = EuclideanNLP(
+def _wachter_biegler() -> EuclideanNLP:
+    """min x₁ s.t. x₁² - x₂ - 1 = 0, x₁ - x₃ - ½ = 0, x₂, x₃ ≥ 0; x* = (1, 0, ½)."""
+    return EuclideanNLP(
         3,
         lambda x: x[0],
         lambda x: np.array([1.0, 0.0, 0.0]),
@@ -255,15 +254,73 @@ def test_restoration_phase_recovers_wachter_biegler_example():
         ineq_jacobian=lambda x: np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]),
         n_ineq=2,
     )
+
+
+def test_wachter_biegler_example_converges():
+    """From (-2, 1, 1), where infeasible-start Newton steps stall (Wächter & Biegler 2000)."""
     x0 = np.array([-2.0, 1.0, 1.0])
-    res = solve_ripm(prob, x0)
-    assert res.success and np.allclose(res.x, [1.0, 0.0, 0.5], atol=1e-8)
-    # with at most 3 trials per line search the main loop gives up at iteration 7, and the
-    # restoration phase brings the iterates to where Newton steps converge
-    res = solve_ripm(prob, x0, max_ls_trials=3)
-    assert res.success and np.allclose(res.x, [1.0, 0.0, 0.5], atol=1e-8)
+    for options in ({}, {"max_ls_trials": 3}, {"restoration_method": "simple"}):
+        res = solve_ripm(_wachter_biegler(), x0, **options)
+        assert res.success and np.allclose(res.x, [1.0, 0.0, 0.5], atol=1e-8)
+
+
+def _outside_disc() -> EuclideanNLP:
+    """min (x₁ - 2)² + x₂² s.t. x₁² + x₂² ≥ 1 (a concave g): x* = (2, 0)."""
+    return EuclideanNLP(
+        2,
+        lambda x: (x[0] - 2) ** 2 + x[1] ** 2,
+        lambda x: np.array([2 * (x[0] - 2), 2 * x[1]]),
+        lambda x, s, y, z: (2 * s - 2 * z[0]) * np.eye(2),
+        ineq=lambda x: np.array([1.0 - x[0] ** 2 - x[1] ** 2]),
+        ineq_jacobian=lambda x: np.array([[-2 * x[0], -2 * x[1]]]),
+        n_ineq=1,
+    )
+
+
+def test_elastic_restoration_escapes_jamming():
+    """Started near the centre of the disc, the slack of the violated concave constraint is
+    driven to zero and z blows up (jamming): the main loop's line search fails. The elastic ℓ1
+    restoration phase (WB §3.3) moves x out; the simple Gauss-Newton one ends on the circle
+    with a failed line search."""
+    x0 = np.array([0.0, 1e-3])
+    res = solve_ripm(_outside_disc(), x0)
+    assert res.status is RIPMStatus.CONVERGED
+    assert np.allclose(res.x, [2.0, 0.0], atol=1e-8)
     resto = np.flatnonzero(res.history.restoration)
     assert resto.size and resto[-1] < res.iterations - 2
+    simple = solve_ripm(_outside_disc(), x0, restoration_method="simple")
+    assert not simple.success and any(simple.history.restoration)
+    _assert_finite(simple)
+    off = solve_ripm(_outside_disc(), x0, restoration=False)
+    assert off.status is RIPMStatus.LINE_SEARCH_FAILED and not any(off.history.restoration)
+
+
+def test_adaptive_mu_watchdog_elastic_and_slack_regularization_options():
+    """Each globalization option still solves HS071, the banded control problem and the
+    jamming example; adaptive μ is not monotone."""
+    banded = BandedControlNLP(nx=4, nu=2, horizon=20)
+    reference = solve_ripm(banded, banded.initial_guess())
+    variants = (
+        {"mu_strategy": "adaptive"},
+        {"watchdog_shortened_iter_trigger": 2},
+        {"elastic_inequalities": True},
+        {"regularize_slacks": True},
+    )
+    for options in variants:
+        res = solve_ripm(hs071(), HS071_X0, **options)
+        assert res.status is RIPMStatus.CONVERGED, options
+        assert abs(res.objective - 17.0140172891) < 1e-8
+        res = solve_ripm(banded, banded.initial_guess(), **options)
+        assert res.status is RIPMStatus.CONVERGED, options
+        assert abs(res.objective - reference.objective) < 1e-7 * abs(reference.objective)
+        res = solve_ripm(_outside_disc(), np.array([0.0, 1e-3]), **options)
+        assert res.success and np.allclose(res.x, [2.0, 0.0], atol=1e-6), options
+    mu = np.array(solve_ripm(hs071(), HS071_X0, mu_strategy="adaptive").history.mu)
+    assert np.any(np.diff(mu) > 0)
+    with pytest.raises(InputError, match="mu_strategy"):
+        RIPMOptions(mu_strategy="mehrotra")
+    with pytest.raises(InputError, match="restoration_method"):
+        RIPMOptions(restoration_method="none")
 
 
 def _sqrt_problem(objective) -> EuclideanNLP:

@@ -7,14 +7,16 @@ from mbplan.results import PlanResult
 from mbplan.solvers import RIPMOptions
 from mbplan.tasks.obstacle import ObstacleTask
 
-METHODS = ("ripm", "ipopt", "ipopt-no-restoration")
+METHODS = ("ripm", "ipopt", "ipopt-no-restoration", "fddp", "csqp")
 
 
 def plan(
     task: ObstacleTask, method: str = "ripm", tol: float = 1e-6, max_iter: int = 500
 ) -> PlanResult:
     """Plan ``task`` with ``method``: ``ripm`` (maximal coordinates, RIPM), ``ipopt``
-    (generalized coordinates, IPOPT with restoration) or ``ipopt-no-restoration``."""
+    (generalized coordinates, IPOPT with restoration), ``ipopt-no-restoration``, ``fddp``
+    (Crocoddyl BoxFDDP, obstacle as a penalty) or ``csqp`` (mim-solvers, obstacle as a hard
+    constraint); the last two need the ``baselines`` extra."""
     if method == "ripm":
         from mbplan.planning.manipulator import plan_maximal
 
@@ -25,7 +27,10 @@ def plan(
         return solve_generalized_ipopt(
             task, max_iter=max_iter, tol=tol, restoration=method == "ipopt"
         )
-    raise InputError(
-        f"unknown method {method!r}; choose from {', '.join(METHODS)} "
-        "(Crocoddyl FDDP and mim-solvers CSQP are not implemented yet)"
-    )
+    if method in ("fddp", "csqp"):
+        from mbplan.baselines.crocoddyl_solvers import solve_csqp, solve_fddp
+
+        # Solver-native tolerances (Crocoddyl's stopping criterion, CSQP's KKT 1e-3): CSQP's KKT
+        # stalls near 1e-3 where the obstacle is active, so IPOPT's 1e-6 is not passed on.
+        return (solve_fddp if method == "fddp" else solve_csqp)(task, max_iter=max_iter)
+    raise InputError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")

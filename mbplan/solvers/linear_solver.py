@@ -105,11 +105,33 @@ class KKTSystem:
             slot[a:b] for a, b in itertools.pairwise(sizes)
         )
         rows = unique // N
-        self._indices = (unique % N).astype(np.int32)
+        cols = unique % N
+        self._indices = cols.astype(np.int32)
         self._indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=N))]).astype(
             np.int32
         )
         self._base = np.zeros(len(unique))
+        self._data = np.zeros(len(unique))
+        # the factorized matrix: qdldl reads the lower CSR arrays as upper CSC; one persistent
+        # object whose values are overwritten (no scipy constructor per factorization)
+        self._upper = sp.csc_matrix(
+            (np.zeros(len(unique)), self._indices, self._indptr), shape=(N, N)
+        )
+        # the full symmetric matrix for refinement residuals: one SpMV; entry e of the lower
+        # triangle lands in slot _full_map[e] and, off the diagonal, also in _full_mirror[.]
+        off = rows != cols
+        f_rows = np.concatenate([rows, cols[off]])
+        f_cols = np.concatenate([cols, rows[off]])
+        order = np.lexsort((f_cols, f_rows))
+        self._full_src = np.concatenate([np.arange(len(unique)), np.flatnonzero(off)])[order]
+        self._full = sp.csr_matrix(
+            (
+                np.zeros(len(order)),
+                f_cols[order].astype(np.int32),
+                np.concatenate([[0], np.cumsum(np.bincount(f_rows, minlength=N))]).astype(np.int32),
+            ),
+            shape=(N, N),
+        )
         self._solver = None
         self.n_analyses += 1
 
@@ -150,15 +172,15 @@ class KKTSystem:
         *factorized* matrix only (not of ``K``): it keeps qdldl away from zero pivots of a
         structurally zero diagonal, and :meth:`solve` removes its effect by iterative refinement
         against ``K``. Returns the inertia, or ``None`` when the factorization broke down."""
-        data = self._base.copy()
+        data = self._data
+        np.copyto(data, self._base)
         data[self._diag_slot] += diagonal
-        self._matrix = sp.csr_matrix((data, self._indices, self._indptr), shape=(self.dim,) * 2)
-        self._diag = data[self._diag_slot]
+        self._full.data[:] = data[self._full_src]
+        upper_csc = self._upper
+        np.copyto(upper_csc.data, data)
         if static_reg:
-            data = data.copy()
-            data[self._diag_slot[: self.n]] += static_reg
-            data[self._diag_slot[self.n :]] -= static_reg
-        upper_csc = sp.csc_matrix((data, self._indices, self._indptr), shape=(self.dim,) * 2)
+            upper_csc.data[self._diag_slot[: self.n]] += static_reg
+            upper_csc.data[self._diag_slot[self.n :]] -= static_reg
         self.n_factorizations += 1
         try:
             if self._solver is None:
@@ -177,17 +199,11 @@ class KKTSystem:
     def matrix(self) -> sp.csc_matrix:
         """The last factorized ``K`` (diagonal included, static regularization excluded), full,
         with the fixed pattern (explicit zeros kept)."""
-        lower = self._matrix.tocoo()
-        off = lower.row != lower.col
-        rows = np.concatenate([lower.row, lower.col[off]])
-        cols = np.concatenate([lower.col, lower.row[off]])
-        data = np.concatenate([lower.data, lower.data[off]])
-        return sp.csc_matrix((data, (rows, cols)), shape=lower.shape)
+        return self._full.tocsc(copy=True)
 
     def matvec(self, v: np.ndarray) -> np.ndarray:
-        """``K v`` with the last factorized matrix (lower triangle + its transpose)."""
-        lower = self._matrix
-        return lower @ v + lower.T @ v - self._diag * v
+        """``K v`` with the last factorized matrix (one SpMV with the full symmetric pattern)."""
+        return self._full @ v
 
     def solve(
         self, rhs: np.ndarray, max_refinement: int = 10, ratio_max: float = 1e-10
