@@ -70,6 +70,7 @@ def _bench_iiwa(args: argparse.Namespace) -> int:
         N=args.horizon,
         workers=args.workers,
         scheduler=args.scheduler,
+        warm_start=args.warm_start,
     )
     print((Path(args.out) / "results.md").read_text())
     return 0
@@ -84,9 +85,11 @@ def _plan(args: argparse.Namespace) -> int:
     if args.task != "obstacle":
         raise InputError(f"unknown task {args.task!r}; available: obstacle")
     if args.seed is None:
-        task = ObstacleTask(robot=args.robot, N=args.horizon)
+        task = ObstacleTask(robot=args.robot, N=args.horizon, warm_start=args.warm_start)
     else:
-        task = sample_obstacle_cases(args.robot, 1, args.seed, N=args.horizon)[0]
+        task = sample_obstacle_cases(
+            args.robot, 1, args.seed, N=args.horizon, warm_start=args.warm_start
+        )[0]
     result = plan(task, args.method, tol=args.tol, max_iter=args.max_iter)
     check = verify(task, result)
     print(
@@ -155,6 +158,12 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--tol", type=float, default=1e-6, help="convergence tolerance")
     plan.add_argument("--max-iter", type=int, default=500, help="iteration limit")
     plan.add_argument("--out", default=None, help="write the result to this .npz file")
+    plan.add_argument(
+        "--warm-start",
+        default="linear",
+        choices=("linear", "via"),
+        help="initial guess: linear joint interpolation (paper) or a collision-free via point",
+    )
     plan.add_argument(
         "--viz", action="store_true", help="replay the result in meshcat (127.0.0.1) at the end"
     )
@@ -243,6 +252,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     iiwa.add_argument("--horizon", type=int, default=40, help="number of steps N")
     iiwa.add_argument("--out", default="benchmarks/results/iiwa-obstacle", help="output directory")
+    iiwa.add_argument(
+        "--warm-start",
+        default="linear",
+        choices=("linear", "via"),
+        help="initial guess of every method: linear joint interpolation (paper) or a collision-free via point",
+    )
     _add_pool_options(iiwa)
     iiwa.set_defaults(func=_bench_iiwa)
     return parser

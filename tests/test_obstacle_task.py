@@ -176,3 +176,26 @@ def test_link_names_coms_and_distances() -> None:
     d = geometry_distances(DESC, np.zeros(7), (sphere, far))
     assert d.shape == (DESC.collision_model.ngeoms, 2)
     assert d[:, 0].min() < 0.0 and d[:, 1].min() > 4.0
+
+
+def test_via_warm_start_is_collision_free_where_linear_is_not():
+    """Case 0 (seed 0): the linear guess drives links through the cylinder; the "via" guess keeps
+    every COM outside it (+ margin) at every knot, starts at q0 and ends at q_target."""
+    from mbplan.tasks.obstacle import _path_clearance, joint_interpolation, sample_obstacle_cases
+
+    linear_task, via_task = (
+        sample_obstacle_cases("iiwa", 1, 0, warm_start=w)[0] for w in ("linear", "via")
+    )
+    linear, via = joint_interpolation(linear_task), joint_interpolation(via_task)
+    assert _path_clearance(linear_task, linear) < 0
+    assert _path_clearance(via_task, via) >= 0
+    np.testing.assert_allclose(
+        via[[0, 1, -1]], [via_task.q0, via_task.q0, via_task.q_target], atol=1e-12
+    )
+    # Deterministic: the same guess twice.
+    np.testing.assert_array_equal(via, joint_interpolation(via_task))
+
+
+def test_bad_warm_start_is_named():
+    with pytest.raises(InputError, match="warm_start"):
+        ObstacleTask(warm_start="rrt")

@@ -60,6 +60,7 @@ def run(
     max_iter: int = 500,
     workers: int = 1,
     scheduler: str | None = None,
+    warm_start: str = "linear",
 ) -> dict:
     """Run (resumably), then write summary.json, results.md and plots."""
     unknown = sorted(set(methods) - set(METHODS))

@@ -187,6 +187,7 @@ class ObstacleTask:
     weights: CostWeights = field(default_factory=CostWeights)
     margin: float = 0.03
     goal_tolerance: float = 0.05
+    warm_start: Literal["linear", "via"] = "linear"
 
     def __post_init__(self) -> None:
         if not isinstance(self.robot, str):
@@ -222,6 +223,8 @@ class ObstacleTask:
             raise InputError(f"weights: expected CostWeights, got {type(self.weights).__name__}")
         object.__setattr__(self, "margin", as_real(self.margin, "margin"))
         object.__setattr__(self, "goal_tolerance", as_real(self.goal_tolerance, "goal_tolerance"))
+        if self.warm_start not in ("linear", "via"):
+            raise InputError(f"warm_start: expected 'linear' or 'via', got {self.warm_start!r}")
 
     @property
     def cylinders(self) -> tuple[Cylinder, ...]:
@@ -380,9 +383,46 @@ def sample_obstacle_cases(
     return tasks
 
 
+VIA_CANDIDATES = 256  # random via points tried by the "via" warm start
+
+
 def joint_interpolation(task: ObstacleTask) -> np.ndarray:
-    """Initial guess ``q (N+1, nq)``: linear in joint space from ``q0`` to ``q_target`` over
-    knots ``1..N`` with ``q_1 = q_0`` (§VIII.C). The arm starts at rest, so both eq. (61) and the
-    LGVI give ``q_1 = q_0``; the guess is then consistent with either transcription."""
+    """Initial guess ``q (N+1, nq)`` shared by every method, with ``q_1 = q_0`` (the arm starts at
+    rest, so both eq. (61) and the LGVI give ``q_1 = q_0``).
+
+    ``task.warm_start == "linear"``: linear in joint space from ``q0`` to ``q_target`` over knots
+    ``1..N`` (§VIII.C). ``"via"``: the same if every knot keeps the COMs outside the cylinders
+    (+ margin, eq. 62); otherwise the shortest collision-free two-segment path
+    ``q0 → q_via → q_target`` among :data:`VIA_CANDIDATES` seeded random via points (falls back
+    to linear if none is collision-free at the knots).
+    """
     s = np.concatenate([[0.0], np.linspace(0.0, 1.0, task.N)])
-    return task.q0 + s[:, None] * (task.q_target - task.q0)
+    linear = task.q0 + s[:, None] * (task.q_target - task.q0)
+    if task.warm_start == "linear" or _path_clearance(task, linear) >= 0:
+        return linear
+    model = robot_description(task.robot).model
+    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    rng = np.random.default_rng(0)
+    mid = 0.5 * (task.q0 + task.q_target)
+    best, best_length = linear, np.inf
+    for _ in range(VIA_CANDIDATES):
+        via = np.clip(mid + 0.5 * rng.uniform(-1.0, 1.0, mid.shape) * (hi - lo), lo, hi)
+        length = float(np.linalg.norm(via - task.q0) + np.linalg.norm(task.q_target - via))
+        if length >= best_length:
+            continue
+        first = np.minimum(2 * s, 1.0)[:, None]
+        second = np.maximum(2 * s - 1.0, 0.0)[:, None]
+        path = task.q0 + first * (via - task.q0) + second * (task.q_target - via)
+        if _path_clearance(task, path) >= 0:
+            best, best_length = path, length
+    return best
+
+
+def _path_clearance(task: ObstacleTask, path: np.ndarray) -> float:
+    """Smallest eq. (62) clearance minus the margin over the knots of a joint path."""
+    if not task.cylinders:
+        return np.inf
+    model = robot_description(task.robot).model
+    data = model.createData()
+    coms = np.array([link_coms(model, data, q) for q in path])
+    return float(np.min(com_clearances(task, coms))) - task.margin
