@@ -22,10 +22,10 @@ from mbplan.verification import verify
 
 
 def solve_case(
-    method: str, n: int, seed: int, index: int, N: int, tol: float, max_iter: int
+    method: str, n: int, seed: int, index: int, N: int, tol: float, max_iter: int, warm_start: str
 ) -> dict:
     """One (case, method) solve and its verification as a JSON-serialisable row."""
-    task = sample_obstacle_cases("iiwa", n, seed, N=N)[index]
+    task = sample_obstacle_cases("iiwa", n, seed, N=N, warm_start=warm_start)[index]
     t0 = time.perf_counter()
     result = plan(task, method, tol=tol, max_iter=max_iter)
     wall = time.perf_counter() - t0
@@ -66,9 +66,12 @@ def run(
     unknown = sorted(set(methods) - set(METHODS))
     if unknown:
         raise InputError(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
-    sample_obstacle_cases("iiwa", n, seed, N=N)  # fail fast on an infeasible request
+    sample_obstacle_cases("iiwa", n, seed, N=N, warm_start=warm_start)  # fail fast on bad input
+    args = (n, seed)
     jobs = [
-        Job(i, m, solve_case, (m, n, seed, i, N, tol, max_iter)) for i in range(n) for m in methods
+        Job(i, m, solve_case, (m, *args, i, N, tol, max_iter, warm_start))
+        for i in range(n)
+        for m in methods
     ]
     rows = run_jobs(
         jobs,
@@ -88,8 +91,10 @@ def run(
         entry["statuses"] = {
             s: sum(r["status"] == s for r in rs) for s in sorted({r["status"] for r in rs})
         }
+    summary["warm_start"] = warm_start
     summary["command"] = (
-        f"mbplan bench iiwa-obstacle --n {n} --seed {seed} --methods {','.join(methods)} --out {out}"
+        f"mbplan bench iiwa-obstacle --n {n} --seed {seed} --methods {','.join(methods)} "
+        f"--warm-start {warm_start} --out {out}"
     )
     summary["machine"] = machine_info()
     write_json(out / "summary.json", summary)
@@ -105,7 +110,8 @@ def _markdown(s: dict) -> str:
     lines = [
         "# iiwa around an obstacle: maximal (RIPM) vs generalized (IPOPT) coordinates",
         "",
-        f"Command: `{s['command']}`",
+        f"Command: `{s['command']}`  ",
+        f"Warm start of every method: {s.get('warm_start', 'linear')} (see `mbplan.tasks.obstacle.joint_interpolation`).",
         "",
         "| method | solved & verified | converged | iters median / mean / max | time/iter [ms] "
         "| total time [s] (median) | entered restoration |",
