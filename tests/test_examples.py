@@ -36,7 +36,9 @@ def test_other_arm_both_formulations(tmp_path):
 
 def test_compare_formulations_reduced(tmp_path):
     """Reduced size: 30 iterations per solver (the full comparison is the iiwa benchmark)."""
-    proc = run_example("compare_formulations.py", "--seed", "1", "--max-iter", "30", "--out", str(tmp_path))
+    proc = run_example(
+        "compare_formulations.py", "--seed", "1", "--max-iter", "30", "--out", str(tmp_path)
+    )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     for name in ("ripm.npz", "ipopt.npz", "side_by_side.html", "convergence.png"):
         assert (tmp_path / name).stat().st_size > 0, name
