@@ -367,6 +367,19 @@ def _prepare(task: ObstacleTask, max_iter: object, tol: object) -> tuple[int, fl
     return max_iter, tol
 
 
+def _solve(
+    solver, builder: _Builder, history, max_iter: int, start: float
+) -> tuple[bool, float, float]:
+    """Run a Crocoddyl-style solver from the builder's warm start with ``history`` as callback;
+    ``(converged, build time since start, solve time)``."""
+    solver.setCallbacks([history])
+    xs, us = builder.warm_start()
+    build_time = time.perf_counter() - start
+    tic = time.perf_counter()
+    converged = solver.solve(xs, us, max_iter, False)
+    return converged, build_time, time.perf_counter() - tic
+
+
 def solve_fddp(task: ObstacleTask, max_iter: int = 500, tol: float = 1e-9) -> PlanResult:
     """Solve ``task`` with Crocoddyl's ``SolverBoxFDDP`` (module docstring for the model).
 
@@ -383,12 +396,7 @@ def solve_fddp(task: ObstacleTask, max_iter: int = 500, tol: float = 1e-9) -> Pl
     solver = crocoddyl.SolverBoxFDDP(builder.problem())
     solver.th_stop = tol
     history = _History()
-    solver.setCallbacks([history])
-    xs, us = builder.warm_start()
-    build_time = time.perf_counter() - start
-    tic = time.perf_counter()
-    converged = solver.solve(xs, us, max_iter, False)
-    solve_time = time.perf_counter() - tic
+    converged, build_time, solve_time = _solve(solver, builder, history, max_iter, start)
     iterations = len(history.rows)
     rows = [*history.rows, _fddp_final_row(solver)]
     return _result(
@@ -444,12 +452,7 @@ def solve_csqp(task: ObstacleTask, max_iter: int = 500, tol: float = 1e-3) -> Pl
     solver.termination_tolerance = tol
     solver.extra_iteration_for_last_kkt = True  # the KKT row of the last iterate
     history = _CsqpHistory()
-    solver.setCallbacks([history])
-    xs, us = builder.warm_start()
-    build_time = time.perf_counter() - start
-    tic = time.perf_counter()
-    converged = solver.solve(xs, us, max_iter, False)
-    solve_time = time.perf_counter() - tic
+    converged, build_time, solve_time = _solve(solver, builder, history, max_iter, start)
     iterations = int(solver.iter)
     return _result(
         task,

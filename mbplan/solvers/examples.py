@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from mbplan.solvers.problem import EuclideanNLP, ManifoldNLP, NLPEvaluation
+from mbplan.solvers.problem import EuclideanNLP, ManifoldNLP
 
 HS071_X0 = np.array([1.0, 5.0, 5.0, 1.0])
 
@@ -179,26 +179,6 @@ class BandedControlNLP(ManifoldNLP):
         lam = y[self.nx : self.nx + self.N * self.nx].reshape(self.N, self.nx)
         d[self.ix[:-1]] += lam * self.dt * self.c * np.sin(z[self.ix[:-1]])
         return self._hess.assemble(d)
-
-    def evaluate(
-        self,
-        x: np.ndarray,
-        obj_factor: float = 1.0,
-        y: np.ndarray | None = None,
-        z: np.ndarray | None = None,
-        hessian: bool = True,
-    ) -> NLPEvaluation:
-        y = np.zeros(self.n_eq) if y is None else y
-        z = np.zeros(self.n_ineq) if z is None else z
-        return NLPEvaluation(
-            objective=self.objective(x),
-            gradient=self.gradient(x),
-            eq=self.eq(x),
-            eq_jacobian=self.eq_jacobian(x),
-            ineq=self.ineq(x),
-            ineq_jacobian=self.ineq_jacobian(x),
-            hessian_lower=self.lagrangian_hessian(x, obj_factor, y, z) if hessian else None,
-        )
 
 
 class _Pattern:
