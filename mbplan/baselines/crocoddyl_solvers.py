@@ -26,6 +26,9 @@ cylinder ``c``, ``r_ic = ‖(x_i, y_i) - c‖ - radius_c`` (as :func:`~mbplan.ta
 com_clearances`) with its exact Jacobian; eq. (62) is ``r_ic ≥ margin`` at knots ``1..N``.
 Crocoddyl has no distance-to-an-axis residual, and ``ResidualModelFrameTranslation`` with a box
 barrier on ``(x, y)`` would model a square prism, not the cylinder, hence this Python residual.
+With ``obstacle_constraint = "distance"``, :class:`ResidualModelCoalDistance` gives the coal
+distance of every (link geometry, obstacle) pair instead (Crocoddyl's ``ResidualModelPairCollision``
+returns the witness-point difference, not a signed distance), under the same ``≥ margin``.
 
 * FDDP penalises ``½ W Σ max(margin - r_ic, 0)²`` per knot (``ActivationModelQuadraticBarrier``,
   ``W =`` :data:`OBSTACLE_WEIGHT`) and the URDF joint-position limits and the task's velocity
@@ -58,12 +61,19 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import InputError, MbplanError
+from mbplan.multibody.collision import (
+    CollisionPairs,
+    chain_kinematics,
+    joint_space_contacts,
+    joint_support,
+)
 from mbplan.results import PlanResult
 from mbplan.tasks.obstacle import (
-    Obstacle,
     ObstacleTask,
     joint_interpolation,
+    require_eq62,
     robot_description,
+    task_collision_pairs,
     validate,
 )
 from mbplan.validation import as_int, as_real
@@ -153,10 +163,7 @@ class ResidualModelCylinderClearance(crocoddyl.ResidualModelAbstract):
             self, state, len(self.links) * len(self.radii), nu, True, False, False
         )
         self.levers = [model.inertias[j].lever for j in self.links]
-        # support[i, j]: velocity j moves link i (1-dof joints)
-        self.support = np.zeros((len(self.links), model.nv), bool)
-        for i, j in enumerate(self.links):
-            self.support[i, [model.joints[s].idx_v for s in model.supports[j][1:]]] = True
+        self.support = joint_support(model)[1:]  # [i, j]: velocity j moves link i
 
     def _offsets(self, data: pin.Data) -> tuple[np.ndarray, np.ndarray]:
         """COMs ``p (nl, 3)`` and horizontal offsets ``(x_i, y_i) - c`` ``(nl, nc, 2)``."""
@@ -186,6 +193,44 @@ class ResidualModelCylinderClearance(crocoddyl.ResidualModelAbstract):
 
     def createData(self, collector: Any) -> ResidualDataCylinderClearance:
         return ResidualDataCylinderClearance(self, collector)
+
+
+class ResidualDataCoalDistance(crocoddyl.ResidualDataAbstract):
+    """Data of :class:`ResidualModelCoalDistance`: its own Pinocchio data."""
+
+    def __init__(self, model: ResidualModelCoalDistance, collector: Any):
+        crocoddyl.ResidualDataAbstract.__init__(self, model, collector)
+        self.pinocchio = model.state.pinocchio.createData()
+
+
+class ResidualModelCoalDistance(crocoddyl.ResidualModelAbstract):
+    """``r[p] = d_p(q)``: coal's signed distance of every (link geometry, obstacle) pair, with
+    the Jacobian ``-nᵀ J₁`` of :mod:`mbplan.multibody.collision` (Crocoddyl uses Gauss–Newton
+    Hessians of residuals, so no second-order term)."""
+
+    def __init__(self, state: crocoddyl.StateMultibody, nu: int, pairs: CollisionPairs):
+        self.pairs = pairs
+        crocoddyl.ResidualModelAbstract.__init__(self, state, pairs.size, nu, True, False, False)
+
+    def _contacts(self, data: ResidualDataCoalDistance, x: np.ndarray):
+        model = self.state.pinocchio
+        kin = chain_kinematics(model, data.pinocchio, x[None, : model.nq])
+        contacts, J = joint_space_contacts(self.pairs, kin)
+        return contacts.distance[0], contacts.normal[0], J[0]
+
+    def calc(
+        self, data: ResidualDataCoalDistance, x: np.ndarray, u: np.ndarray | None = None
+    ) -> None:
+        data.r[:] = self._contacts(data, x)[0]
+
+    def calcDiff(
+        self, data: ResidualDataCoalDistance, x: np.ndarray, u: np.ndarray | None = None
+    ) -> None:
+        _, normal, J = self._contacts(data, x)
+        data.Rx[:, : self.state.nv] = -np.einsum("pa,pja->pj", normal, J)
+
+    def createData(self, collector: Any) -> ResidualDataCoalDistance:
+        return ResidualDataCoalDistance(self, collector)
 
 
 class _History(crocoddyl.CallbackAbstract):
@@ -225,7 +270,9 @@ class _Builder:
         self.x_weights = np.concatenate([np.full(m.nv, w.w_q), np.full(m.nv, w.w_v)])
         self.x_target = np.concatenate([task.q_target, np.zeros(m.nv)])
 
-    def _clearance(self) -> ResidualModelCylinderClearance | None:
+    def _clearance(self) -> ResidualModelCylinderClearance | ResidualModelCoalDistance | None:
+        if self.task.obstacle_constraint == "distance" and self.task.obstacles:
+            return ResidualModelCoalDistance(self.state, self.nu, task_collision_pairs(self.task))
         cylinders = self.task.cylinders
         if not cylinders:
             return None
@@ -356,11 +403,7 @@ def _prepare(task: ObstacleTask, max_iter: object, tol: object) -> tuple[int, fl
     """Checked ``max_iter`` and ``tol``; raise on a bad task or an infeasible request."""
     if not isinstance(task, ObstacleTask):
         raise InputError(f"task: expected ObstacleTask, got {type(task).__name__}")
-    if any(isinstance(o, Obstacle) for o in task.obstacles):
-        raise InputError(
-            "the Crocoddyl baselines handle vertical Cylinder obstacles (eq. 62) only, "
-            "not general Obstacle shapes"
-        )
+    require_eq62(task, "the Crocoddyl baselines")
     max_iter = as_int(max_iter, "max_iter", minimum=0, what="iteration limit")
     tol = as_real(tol, "tol", positive=True)
     validate(task)

@@ -8,7 +8,12 @@ Constraints for ``k = 0..N-1`` (eq. 61, explicit Euler as the paper writes it)::
 
 and for ``k = 1..N``, every link ``i`` (COM ``p_i``) and cylinder ``c`` (eq. 62)::
 
-    (x_i - x_c)² + (y_i - y_c)² - (r_c + margin)² ≥ 0.
+    (x_i - x_c)² + (y_i - y_c)² - (r_c + margin)² ≥ 0,
+
+or, for ``obstacle_constraint = "distance"``, every (link geometry, obstacle) pair
+(:mod:`mbplan.multibody.collision`)::
+
+    d(q_k) - margin ≥ 0.
 
 Bounds: URDF joint position limits on ``q_k``, the task's velocity limits on ``v_k`` and torque
 limits on ``τ_k``. The cost is the joint-space tracking cost of :mod:`mbplan.tasks.obstacle`.
@@ -22,9 +27,11 @@ evaluates all knots in one Python call:
 * Jacobian (exact): ``computeRNEADerivatives`` gives ``∂τ/∂q``, ``∂τ/∂v`` and ``M = ∂τ/∂a``; the
   COM Jacobian of link ``i`` is ``J_ij = v_j + ω_j × p_i`` for the world-frame joint twists
   ``(v_j, ω_j)`` (``data.J`` of ``computeJointJacobians``) of the joints ``j`` that move ``i``;
+  a distance row is ``-nᵀ J₁`` with ``J₁`` the same Jacobian at coal's robot witness point;
 * Lagrangian Hessian: the cost part is exact (a constant diagonal) and so is the eq.-62 part,
   from the second derivative of a point moved by a chain of 1-dof joints,
-  ``∂²p_i/∂q_j∂q_l = ω_min(j,l) × J_i,max(j,l)``. The dynamics part ``∇²(λ_kᵀ RNEA)`` is a finite
+  ``∂²p_i/∂q_j∂q_l = ω_min(j,l) × J_i,max(j,l)``; a distance row contributes
+  ``-nᵀ ∂²p₁/∂q²`` (fixed witness point and normal, as in the maximal transcription). The dynamics part ``∇²(λ_kᵀ RNEA)`` is a finite
   difference of Pinocchio's analytic first derivatives contracted with ``λ_k`` (the Python
   bindings of Pinocchio 4.0 do not expose ``ComputeRNEASecondOrderDerivatives``): central
   differences in ``q`` (step :data:`FD_STEP_Q`, error ~1e-9 relative) give every row of the
@@ -60,12 +67,21 @@ from numpy.typing import ArrayLike
 
 from mbplan.baselines.ipopt import IpoptStats, base_options
 from mbplan.errors import InputError
+from mbplan.multibody.collision import (
+    ChainKinematics,
+    chain_kinematics,
+    joint_space_contacts,
+    joint_support,
+    point_hessians,
+    point_jacobians,
+)
 from mbplan.results import PlanResult
 from mbplan.tasks.obstacle import (
-    Obstacle,
     ObstacleTask,
     joint_interpolation,
+    require_eq62,
     robot_description,
+    task_collision_pairs,
     validate,
 )
 from mbplan.validation import as_arrays
@@ -139,15 +155,12 @@ class GeneralizedTranscription:
     """Eq. (61)–(62) for ``task``: variable layout, bounds, cost and the NLP callbacks.
 
     Constraint rows: kinematics of steps ``0..N-1`` (``nv`` each), dynamics of steps
-    ``0..N-1``, then eq. 62 for knots ``1..N`` × links × cylinders (``g ≥ 0``).
+    ``0..N-1``, then eq. 62 for knots ``1..N`` × links × cylinders, then coal distances for
+    knots ``1..N`` × pairs (``g ≥ 0``).
     """
 
     def __init__(self, task: ObstacleTask):
-        if any(isinstance(o, Obstacle) for o in task.obstacles):
-            raise InputError(
-                "generalized_ipopt handles vertical Cylinder obstacles (eq. 62) only, "
-                "not general Obstacle shapes"
-            )
+        require_eq62(task, METHOD)
         self.task = task
         self.model = robot_description(task.robot).model
         self.data = self.model.createData()
@@ -155,15 +168,17 @@ class GeneralizedTranscription:
         self.N, self.nv, self.dt = N, nv, task.dt
         self.centers = np.array([c.center_xy for c in task.cylinders]).reshape(-1, 2)
         self.radii = np.array([c.radius + task.margin for c in task.cylinders])
-        self.links = range(1, self.model.njoints)
-        self.levers = np.array([self.model.inertias[j].lever for j in self.links])
+        self.links = np.arange(1, self.model.njoints)
+        self.levers = np.array([self.model.inertias[int(j)].lever for j in self.links])
         self.nl, self.nc = len(self.links), len(self.radii)
-        # support[i, j]: velocity j moves link i (1-dof joints: velocity index = joint index - 1)
-        self.support = np.zeros((self.nl, nv), bool)
-        for i, j in enumerate(self.links):
-            self.support[i, np.asarray(self.model.supports[j][1:]) - 1] = True
+        self.pairs = (
+            task_collision_pairs(task)
+            if task.obstacle_constraint == "distance" and task.obstacles
+            else None
+        )
+        self.npairs = 0 if self.pairs is None else self.pairs.size
         self.n = 3 * N * nv
-        self.m = 2 * N * nv + N * self.nl * self.nc
+        self.m = 2 * N * nv + N * self.nl * self.nc + N * self.npairs
         a_of_x = np.zeros((3 * nv, 3 * nv))  # (q, v, a) from (q_k, v_k, v_{k+1})
         a_of_x[: 2 * nv, : 2 * nv] = np.eye(2 * nv)
         a_of_x[2 * nv :, nv : 2 * nv] = -np.eye(nv) / self.dt
@@ -228,35 +243,17 @@ class GeneralizedTranscription:
         tau = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
         return {"q": q, "v": v, "tau": tau}
 
-    # -- kinematics of the link COMs ------------------------------------------------------------
-    def _coms(self, q: np.ndarray) -> np.ndarray:
-        """COMs ``(K, nl, 3)`` of the links at ``q (K, nv)``."""
-        p = np.empty((len(q), self.nl, 3))
-        for k, qk in enumerate(q):
-            pin.forwardKinematics(self.model, self.data, qk)
-            p[k] = [
-                self.data.oMi[j].act(lever)
-                for j, lever in zip(self.links, self.levers, strict=True)
-            ]
-        return p
+    # -- kinematics of the link COMs and witness points ------------------------------------------
+    def _kinematics(self, q: np.ndarray) -> ChainKinematics | None:
+        """Joint placements and Jacobians at ``q (K, nv)`` if any obstacle row needs them."""
+        if not (self.nc or self.npairs):
+            return None
+        return chain_kinematics(self.model, self.data, q)
 
-    def _com_jacobians(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """COMs ``p (K, nl, 3)``, their Jacobians ``J (K, nl, nv, 3)`` (column ``j`` =
-        ``∂p_i/∂q_j``) and the world joint axes ``ω (K, nv, 3)`` at ``q (K, nv)``."""
-        K = len(q)
-        twists = np.empty((K, 6, self.nv))
-        p = np.empty((K, self.nl, 3))
-        for k, qk in enumerate(q):
-            pin.computeJointJacobians(self.model, self.data, qk)
-            twists[k] = self.data.J
-            p[k] = [
-                self.data.oMi[j].act(lever)
-                for j, lever in zip(self.links, self.levers, strict=True)
-            ]
-        lin = np.swapaxes(twists[:, :3], 1, 2)
-        omega = np.swapaxes(twists[:, 3:], 1, 2)
-        J = lin[:, None] + np.cross(omega[:, None], p[:, :, None, :])
-        return p, J * self.support[None, :, :, None], omega
+    def _coms(self, kin: ChainKinematics) -> np.ndarray:
+        """COMs ``(K, nl, 3)`` of the links."""
+        R = kin.rotation[:, self.links]
+        return kin.translation[:, self.links] + np.einsum("klij,lj->kli", R, self.levers)
 
     def _clearance_terms(self, p: np.ndarray) -> np.ndarray:
         """``(x_i, y_i) - c`` of every COM and cylinder, ``(K, nl, nc, 2)``."""
@@ -271,9 +268,13 @@ class GeneralizedTranscription:
         dyn = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
         dyn -= tau
         parts = [kin.ravel(), dyn.ravel()]
+        chain = self._kinematics(q[1:])
         if self.nc:
-            d = self._clearance_terms(self._coms(q[1:]))
+            d = self._clearance_terms(self._coms(chain))
             parts.append((np.sum(d**2, axis=-1) - self.radii**2).ravel())
+        if self.npairs:
+            contacts, _ = joint_space_contacts(self.pairs, chain)
+            parts.append((contacts.distance - self.task.margin).ravel())
         return np.concatenate(parts)
 
     def _jacobian_pattern(self) -> None:
@@ -282,8 +283,12 @@ class GeneralizedTranscription:
         kin = steps[:, None] * nv + np.arange(nv)
         dyn = kin + N * nv
         obs = 2 * N * nv + np.arange(N * nl * nc).reshape(N, nl, nc)
-        self._obs_mask = np.broadcast_to(self.support[None, :, None, :], (N, nl, nc, nv))
+        support = joint_support(self.model)
+        self._obs_mask = np.broadcast_to(support[self.links][None, :, None, :], (N, nl, nc, nv))
         knots = self.iq(np.arange(1, N + 1))[:, None, None, :]
+        dist = obs.size + 2 * N * nv + np.arange(N * self.npairs).reshape(N, self.npairs)
+        moved = support[self.pairs.joint] if self.npairs else np.zeros((0, nv), bool)
+        self._dist_mask = np.broadcast_to(moved[None], (N, self.npairs, nv))
         triplets = [
             (kin.ravel(), self.iq(steps + 1).ravel()),  # I/Δt on q_{k+1}
             (kin[inner].ravel(), self.iq(inner).ravel()),  # -I/Δt on q_k
@@ -295,6 +300,10 @@ class GeneralizedTranscription:
             (
                 np.broadcast_to(obs[..., None], self._obs_mask.shape)[self._obs_mask],
                 np.broadcast_to(knots, self._obs_mask.shape)[self._obs_mask],
+            ),
+            (
+                np.broadcast_to(dist[..., None], self._dist_mask.shape)[self._dist_mask],
+                np.broadcast_to(knots[:, 0], self._dist_mask.shape)[self._dist_mask],
             ),
         ]
         rows = np.concatenate([r for r, _ in triplets])
@@ -322,11 +331,17 @@ class GeneralizedTranscription:
             (M / self.dt).ravel(),
             np.full(self.N * self.nv, -1.0),
         ]
+        chain = self._kinematics(q[1:])
         if self.nc:
-            p, J, _ = self._com_jacobians(q[1:])
+            p = self._coms(chain)
+            J = point_jacobians(chain, self.links, p)
             d = self._clearance_terms(p)
             grad = 2.0 * np.einsum("kica,kija->kicj", d, J[..., :2])
             parts.append(grad[self._obs_mask])
+        if self.npairs:
+            contacts, J = joint_space_contacts(self.pairs, chain)
+            grad = -np.einsum("kpa,kpja->kpj", contacts.normal, J)
+            parts.append(grad[self._dist_mask])
         return np.concatenate(parts)
 
     def jacobian(self, z: np.ndarray) -> sp.csc_matrix:
@@ -338,7 +353,7 @@ class GeneralizedTranscription:
         inner, knots = np.arange(1, N), np.arange(1, N + 1)
         local = np.concatenate([self.iq(inner), self.iv(inner), self.iv(inner + 1)], axis=1)
         triplets = [_block(local, local)]
-        if self.nc:
+        if self.nc or self.npairs:
             triplets.append(_block(self.iq(knots), self.iq(knots)))
         triplets.append((np.arange(self.n), np.arange(self.n)))
         rows = np.concatenate([r for r, _ in triplets])
@@ -378,20 +393,27 @@ class GeneralizedTranscription:
             [T.T @ self._rnea_hessian(q[k], v[k], a[k], lam_dyn[k]) @ T for k in range(1, N)]
         )
         parts = [dyn.ravel()]
+        if self.nc or self.npairs:
+            chain = self._kinematics(q[1:])
+            obstacles = np.zeros((N, nv, nv))
+            start = 2 * N * nv
         if self.nc:
-            mu = lam[2 * N * nv :].reshape(N, self.nl, self.nc)
-            p, J, omega = self._com_jacobians(q[1:])
+            mu = lam[start : start + N * self.nl * self.nc].reshape(N, self.nl, self.nc)
+            p = self._coms(chain)
+            J = point_jacobians(chain, self.links, p)
             d = self._clearance_terms(p)
             Jxy = J[..., :2]
-            first = 2.0 * np.einsum("ki,kija,kila->kjl", mu.sum(axis=2), Jxy, Jxy)
-            # ∂²p_i/∂q_j∂q_l = ω_min(j,l) × J_i,max(j,l) for j, l moving link i
-            C = np.cross(omega[:, None, :, None, :], J[:, :, None, :, :])[..., :2]
-            upper = np.triu(np.ones((nv, nv), bool))[None, None, :, :, None]
-            P = np.where(upper, C, np.swapaxes(C, 2, 3))
-            P *= (self.support[:, :, None] & self.support[:, None, :])[None, ..., None]
+            obstacles += 2.0 * np.einsum("ki,kija,kila->kjl", mu.sum(axis=2), Jxy, Jxy)
             weight = np.einsum("kic,kica->kia", mu, d)
-            second = 2.0 * np.einsum("kia,kijla->kjl", weight, P)
-            parts.append((first + second).ravel())
+            P = point_hessians(chain, self.links, J)[..., :2]
+            obstacles += 2.0 * np.einsum("kia,kijla->kjl", weight, P)
+        if self.npairs:
+            mu = lam[start + N * self.nl * self.nc :].reshape(N, self.npairs)
+            contacts, J = joint_space_contacts(self.pairs, chain)
+            P = point_hessians(chain, self.pairs.joint, J)
+            obstacles -= np.einsum("kp,kpa,kpjla->kjl", mu, contacts.normal, P)
+        if self.nc or self.npairs:
+            parts.append(obstacles.ravel())
         parts.append(sigma * self.weights)
         return np.concatenate(parts)
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from mbplan.engine.riemannian import RiemannianFunction
+from mbplan.engine.site_function import SiteFunction
 
 
 @dataclass(frozen=True)
@@ -27,7 +27,7 @@ class DerivativeCheck:
         return self.jacobian_error <= tol and self.hessian_error <= tol
 
 
-def _perturbed(f: RiemannianFunction, variables: Mapping[str, Any], xis: np.ndarray) -> dict:
+def _perturbed(f: SiteFunction, variables: Mapping[str, Any], xis: np.ndarray) -> dict:
     """Variables of one knot moved along each row of ``xis`` (P, n), as a batch of P knots."""
     tiled = {
         s.name: np.broadcast_to(np.asarray(variables[s.name], dtype=float), (len(xis), *s.shape))
@@ -37,7 +37,7 @@ def _perturbed(f: RiemannianFunction, variables: Mapping[str, Any], xis: np.ndar
 
 
 def check_derivatives(
-    f: RiemannianFunction,
+    f: SiteFunction,
     variables: Mapping[str, Any],
     parameters: Mapping[str, Any] | None = None,
     multipliers: np.ndarray | None = None,

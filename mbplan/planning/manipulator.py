@@ -17,7 +17,14 @@ from mbplan.multibody import MaximalModel, joint_positions, maximal_model
 from mbplan.results import PlanResult
 from mbplan.simulation.warm_start import maximal_warm_start
 from mbplan.solvers import RIPMOptions, RIPMResult, RIPMStatus, solve_ripm
-from mbplan.tasks.obstacle import ObstacleTask, joint_interpolation, robot_description, validate
+from mbplan.tasks.obstacle import (
+    ObstacleTask,
+    joint_interpolation,
+    require_eq62,
+    robot_description,
+    task_collision_pairs,
+    validate,
+)
 from mbplan.transcription.manipulator import ManipulatorOCP, manipulator_problem
 
 
@@ -37,6 +44,12 @@ def task_ocp(task: ObstacleTask, mm: MaximalModel) -> ManipulatorOCP:
         velocity_limit=np.asarray(task.velocity_limit)[mm.idx_v],
         position_limits=(model.lowerPositionLimit[mm.idx_q], model.upperPositionLimit[mm.idx_q]),
         cylinders=tuple((*c.center_xy, c.radius + task.margin) for c in task.cylinders),
+        collision_pairs=(
+            task_collision_pairs(task)
+            if task.obstacle_constraint == "distance" and task.obstacles
+            else None
+        ),
+        collision_margin=task.margin,
     )
 
 
@@ -44,6 +57,7 @@ def plan_maximal(
     task: ObstacleTask, options: RIPMOptions | None = None, jit: bool | None = None
 ) -> PlanResult:
     """Solve ``task`` with the RIPM on the maximal-coordinate LGVI; return joint-space arrays too."""
+    require_eq62(task, "ripm")
     validate(task)
     t0 = time.perf_counter()
     jit = jit_available() if jit is None else jit

@@ -11,7 +11,8 @@ match the generalized-coordinate transcription term by term:
 * torque regularisation ``½ w_τ τ²`` and torque limits ``|τ| ≤ τ_max``;
 * joint limits ``cos(θ - θ_mid) ≥ cos(θ_half)`` and velocity limits
   ``cos(θ_{k+1} - θ_k) ≥ cos(v_max Δt)`` (exact for ranges below 2π);
-* each body's COM outside vertical cylinders (eq. 62).
+* each body's COM outside vertical cylinders (eq. 62), and/or coal signed distances between the
+  bodies' collision geometry and obstacles at least a margin (:mod:`mbplan.transcription.distance`).
 """
 
 from __future__ import annotations
@@ -25,8 +26,10 @@ import numpy as np
 from mbplan.engine import RiemannianFunction
 from mbplan.lie import SO3, R
 from mbplan.multibody import MaximalModel
+from mbplan.multibody.collision import CollisionPairs
 from mbplan.transcription.constraints import cylinder_clearance_function
 from mbplan.transcription.costs import chordal_cost
+from mbplan.transcription.distance import distance_constraint_function, pair_bodies
 from mbplan.transcription.multibody import multibody_layout
 from mbplan.transcription.problem import TrajectoryProblem
 from mbplan.transcription.terms import Term
@@ -48,6 +51,8 @@ class ManipulatorOCP:
     velocity_limit: np.ndarray | None = None  # (nb,)
     position_limits: tuple[np.ndarray, np.ndarray] | None = None  # (lower (nb,), upper (nb,))
     cylinders: tuple[tuple[float, float, float], ...] = ()  # (x_c, y_c, r) on every body COM
+    collision_pairs: CollisionPairs | None = None  # coal distance >= collision_margin, knots 1..N
+    collision_margin: float = 0.0
 
 
 def _relative(Rp, Fp, Rc, Fc):
@@ -205,6 +210,22 @@ def manipulator_problem(mm: MaximalModel, ocp: ManipulatorOCP, jit: bool) -> Tra
                 cylinder_clearance_function(jit),
                 {"p": ("p", sites)},
                 {"c": c},
+            )
+        )
+    if ocp.collision_pairs is not None:
+        pairs = ocp.collision_pairs
+        kp, ip = (
+            a.ravel()
+            for a in np.meshgrid(np.arange(1, N + 1), np.arange(pairs.size), indexing="ij")
+        )
+        body_sites = kp * nb + pair_bodies(mm, pairs)[ip]
+        terms.append(
+            Term(
+                "coal_distance",
+                "ineq",
+                distance_constraint_function(mm, pairs),
+                {"R": ("R", body_sites), "p": ("p", body_sites)},
+                {"pair": ip.astype(float), "margin": ocp.collision_margin},
             )
         )
     return TrajectoryProblem(TrajectoryVariables(layout.blocks), terms)

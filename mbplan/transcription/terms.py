@@ -1,4 +1,4 @@
-"""A term evaluates one :class:`~mbplan.engine.RiemannianFunction` at ``K`` sites.
+"""A term evaluates one :class:`~mbplan.engine.SiteFunction` (CasADi or callback) at ``K`` sites.
 
 Each function argument is bound to a block and, per site, the flat index of an element of that
 block (``knot * count + element``). :meth:`Term.at_knots` covers the common case: with
@@ -17,7 +17,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from mbplan.engine import RiemannianFunction
+from mbplan.engine import SiteFunction
 from mbplan.errors import InputError
 
 Kind = Literal["cost", "eq", "ineq"]
@@ -29,7 +29,7 @@ class Term:
 
     name: str
     kind: Kind
-    function: RiemannianFunction
+    function: SiteFunction
     bind: Mapping[str, tuple[str, np.ndarray]]
     parameters: Mapping[str, Any] = field(default_factory=dict)
     rows: np.ndarray | None = None
@@ -69,7 +69,7 @@ class Term:
         cls,
         name: str,
         kind: Kind,
-        function: RiemannianFunction,
+        function: SiteFunction,
         bind: Mapping[str, tuple[str, int]],
         knots: Sequence[int],
         parameters: Mapping[str, Any] | None = None,

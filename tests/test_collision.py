@@ -1,0 +1,205 @@
+"""Coal signed-distance constraints: derivatives in maximal coordinates and in joint space."""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.spatial.transform import Rotation
+
+from mbplan.engine import check_derivatives
+from mbplan.errors import InfeasibleRequestError, InputError
+from mbplan.lie import SO3
+from mbplan.multibody import body_poses, maximal_model
+from mbplan.multibody.collision import (
+    chain_kinematics,
+    collision_pairs,
+    joint_space_contacts,
+    point_hessians,
+    point_jacobians,
+    signed_distances,
+)
+from mbplan.robots import load
+from mbplan.tasks.obstacle import Obstacle, ObstacleTask, pair_distances, validate
+from mbplan.transcription.distance import distance_constraint_function, pair_bodies
+
+DESC = load("iiwa")
+MM = maximal_model(DESC)
+MODEL = DESC.model
+
+
+def _pose(xyz, rotvec) -> np.ndarray:
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
+    pose[:3, 3] = xyz
+    return pose
+
+
+# tilted shapes near the arm: no parallel faces or axes (degenerate contacts) with the links
+OBSTACLES = [
+    (coal.Sphere(0.1), _pose((0.35, 0.25, 0.6), (0.0, 0.0, 0.0))),
+    (coal.Capsule(0.05, 0.3), _pose((0.3, -0.3, 0.8), (0.4, 0.3, 0.1))),
+    (coal.Box(0.2, 0.15, 0.3), _pose((-0.35, 0.2, 0.5), (0.2, -0.5, 0.3))),
+    (coal.Cylinder(0.08, 0.4), _pose((0.0, 0.45, 1.0), (0.7, 0.2, -0.3))),
+]
+PAIRS = collision_pairs(DESC.collision_model, OBSTACLES)
+Q = np.array([0.3, 0.5, -0.4, -1.2, 0.6, 0.8, -0.2])
+
+
+def _contacts():
+    kin = chain_kinematics(MODEL, MODEL.createData(), Q[None])
+    contacts, J = joint_space_contacts(PAIRS, kin)
+    return kin, contacts, J
+
+
+def test_pairs_cover_moving_geometry_and_coal_agrees_with_pinocchio_placements() -> None:
+    moving = [o for o in DESC.collision_model.geometryObjects if o.parentJoint > 0]
+    assert PAIRS.size == len(moving) * len(OBSTACLES)
+    _, contacts, _ = _contacts()
+    gdata = DESC.collision_model.createData()
+    pin.updateGeometryPlacements(MODEL, MODEL.createData(), DESC.collision_model, gdata, Q)
+    for i in range(PAIRS.size):
+        M = gdata.oMg[int(PAIRS.geometry[i])]
+        shape, pose = OBSTACLES[PAIRS.obstacle[i]]
+        d = coal.distance(
+            PAIRS.robot_shapes[i],
+            coal.Transform3s(M.rotation, M.translation),
+            shape,
+            coal.Transform3s(pose[:3, :3], pose[:3, 3]),
+            coal.DistanceRequest(),
+            coal.DistanceResult(),
+        )
+        assert contacts.distance[0, i] == pytest.approx(d, abs=1e-6)
+    assert np.allclose(np.linalg.norm(contacts.normal, axis=-1), 1.0)
+    # every pair is separated (EPA's penetration depth is only accurate to 1e-8): all are
+    # checked by finite differences below
+    assert contacts.distance.min() > 0.05
+
+
+def test_joint_space_gradient_matches_finite_differences() -> None:
+    """``∂d/∂q = -nᵀ J₁`` against central differences of coal's distance (step 1e-5 rad)."""
+    _, contacts, J = _contacts()
+    grad = -np.einsum("kpa,kpja->kpj", contacts.normal, J)[0]
+    h = 1e-5
+    for j in range(MODEL.nv):
+        e = h * np.eye(MODEL.nv)[j]
+        fd = (pair_distances_at(Q + e) - pair_distances_at(Q - e)) / (2 * h)
+        np.testing.assert_allclose(grad[:, j], fd, atol=1e-6)
+
+
+def pair_distances_at(q: np.ndarray) -> np.ndarray:
+    return joint_space_contacts(PAIRS, chain_kinematics(MODEL, MODEL.createData(), q[None]))[
+        0
+    ].distance[0]
+
+
+def test_point_hessians_match_differences_of_point_jacobians() -> None:
+    rng = np.random.default_rng(0)
+    local = rng.uniform(-0.1, 0.1, (PAIRS.size, 3))  # points fixed in the links
+
+    def jacobians(q: np.ndarray) -> tuple[np.ndarray, np.ndarray, object]:
+        kin = chain_kinematics(MODEL, MODEL.createData(), q[None])
+        R, t = kin.rotation[0, PAIRS.joint], kin.translation[0, PAIRS.joint]
+        points = t + np.einsum("pij,pj->pi", R, local)
+        return point_jacobians(kin, PAIRS.joint, points[None])[0], points, kin
+
+    J, _, kin = jacobians(Q)
+    H = point_hessians(kin, PAIRS.joint, J[None])[0]
+    h = 1e-6
+    for j in range(MODEL.nv):
+        e = h * np.eye(MODEL.nv)[j]
+        fd = (jacobians(Q + e)[0] - jacobians(Q - e)[0]) / (2 * h)  # (P, nv, 3) d/dq_j
+        np.testing.assert_allclose(H[:, j], fd, atol=1e-8)
+        # and the Jacobian itself against differences of the points
+        fd_points = (jacobians(Q + e)[1] - jacobians(Q - e)[1]) / (2 * h)
+        np.testing.assert_allclose(J[:, j], fd_points, atol=1e-8)
+
+
+def _maximal_sites():
+    R, p = body_poses(MM, Q)
+    bodies = pair_bodies(MM, PAIRS)
+    f = distance_constraint_function(MM, PAIRS)
+    return f, R[bodies], p[bodies]
+
+
+def test_maximal_jacobian_matches_finite_differences_along_the_retraction() -> None:
+    f, R, p = _maximal_sites()
+    c = f.value({"R": R, "p": p}, {"pair": np.arange(PAIRS.size), "margin": 0.02})[:, 0]
+    _, contacts, _ = _contacts()
+    np.testing.assert_allclose(c, 0.02 - contacts.distance[0], atol=1e-9)
+    for i in range(PAIRS.size):
+        check = check_derivatives(
+            f, {"R": R[i], "p": p[i]}, {"pair": i, "margin": 0.02}, step_jacobian=1e-5
+        )
+        assert check.jacobian_error < 2e-6, (PAIRS.names[i], check)
+
+
+def test_maximal_hessian_is_the_fixed_witness_point_model() -> None:
+    """The Hessian is that of ``margin - nᵀ(p₂ - p - δp - R exp(ω) a)`` with the witness point
+    ``a`` (body frame) and the normal held fixed (documented in mbplan.multibody.collision):
+    compare with four-point differences of that model along the exact retraction."""
+    f, R, p = _maximal_sites()
+    bodies = pair_bodies(MM, PAIRS)
+    rng = np.random.default_rng(1)
+    lam = rng.uniform(0.5, 2.0, (PAIRS.size, 1))
+    params = {"pair": np.arange(PAIRS.size), "margin": 0.0}
+    _, _, hnz = f.hessian({"R": R, "p": p}, params, lam)
+    H = f.dense_hessian(hnz)
+    Rb, pb = body_poses(MM, Q)
+    geometry_R = Rb[bodies] @ PAIRS.placement[:, :3, :3]
+    geometry_t = pb[bodies] + np.einsum(
+        "pij,pj->pi", Rb[bodies], PAIRS.placement[:, :3, 3] - MM.com_in_joint[bodies]
+    )
+    contacts = signed_distances(PAIRS, np.arange(PAIRS.size), geometry_R, geometry_t)
+    a = np.einsum("pji,pj->pi", R, contacts.robot_point - p)
+    h = 1e-4
+    eye = np.eye(6)
+    for i in range(PAIRS.size):
+
+        def model(xi: np.ndarray, i: int = i) -> float:
+            point = p[i] + xi[3:] + SO3.retract(R[i], xi[:3]) @ a[i]
+            return float(lam[i, 0] * contacts.normal[i] @ point)
+
+        fd = np.array(
+            [
+                [
+                    (
+                        model(h * (eye[r] + eye[c]))
+                        - model(h * (eye[r] - eye[c]))
+                        - model(h * (eye[c] - eye[r]))
+                        + model(-h * (eye[r] + eye[c]))
+                    )
+                    / (4 * h * h)
+                    for c in range(6)
+                ]
+                for r in range(6)
+            ]
+        )
+        np.testing.assert_allclose(H[i], fd, atol=1e-6)
+
+
+def test_distance_task_validation_names_the_geometry() -> None:
+    with pytest.raises(InputError, match="obstacle_constraint"):
+        ObstacleTask(obstacle_constraint="mesh")  # type: ignore[arg-type]
+    q0 = np.array([-0.8, 0.2, 0.5, -1.6, 0.0, 1.0, 0.0])
+    kin = chain_kinematics(MODEL, MODEL.createData(), q0[None])
+    wrist = kin.translation[0, 6]
+    blocked = ObstacleTask(
+        obstacles=(
+            Obstacle("sphere", _pose(wrist + np.array([0.0, 0.0, 0.12]), (0, 0, 0)), (0.05,)),
+        ),
+        obstacle_constraint="distance",
+    )
+    with pytest.raises(InfeasibleRequestError, match=r"q0 overlaps.*geometry 'iiwa_link_\d_0'"):
+        validate(blocked)
+    task = ObstacleTask(obstacle_constraint="distance")
+    validate(task)
+    assert pair_distances(task, np.vstack([task.q0, task.q_target])).min() >= task.margin
+    # eq.-62 planners refuse general shapes instead of ignoring them
+    from mbplan.planning.manipulator import plan_maximal
+
+    with pytest.raises(InputError, match="obstacle_constraint='distance'"):
+        plan_maximal(
+            ObstacleTask(obstacles=(Obstacle("sphere", _pose((2, 0, 0), (0, 0, 0)), (0.1,)),))
+        )
