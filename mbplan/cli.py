@@ -71,6 +71,7 @@ def _bench_iiwa(args: argparse.Namespace) -> int:
         workers=args.workers,
         scheduler=args.scheduler,
         warm_start=args.warm_start,
+        constraint=args.constraint,
     )
     print((Path(args.out) / "results.md").read_text())
     return 0
@@ -84,12 +85,15 @@ def _plan(args: argparse.Namespace) -> int:
 
     if args.task != "obstacle":
         raise InputError(f"unknown task {args.task!r}; available: obstacle")
+    fields = {
+        "N": args.horizon,
+        "warm_start": args.warm_start,
+        "obstacle_constraint": args.constraint,
+    }
     if args.seed is None:
-        task = ObstacleTask(robot=args.robot, N=args.horizon, warm_start=args.warm_start)
+        task = ObstacleTask(robot=args.robot, **fields)
     else:
-        task = sample_obstacle_cases(
-            args.robot, 1, args.seed, N=args.horizon, warm_start=args.warm_start
-        )[0]
+        task = sample_obstacle_cases(args.robot, 1, args.seed, **fields)[0]
     result = plan(task, args.method, tol=args.tol, max_iter=args.max_iter)
     check = verify(task, result)
     print(
@@ -164,6 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("linear", "via"),
         help="initial guess: linear joint interpolation (paper) or a collision-free via point",
     )
+    _add_constraint_option(plan)
     plan.add_argument(
         "--viz", action="store_true", help="replay the result in meshcat (127.0.0.1) at the end"
     )
@@ -258,9 +263,20 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("linear", "via"),
         help="initial guess of every method: linear joint interpolation (paper) or a collision-free via point",
     )
+    _add_constraint_option(iiwa)
     _add_pool_options(iiwa)
     iiwa.set_defaults(func=_bench_iiwa)
     return parser
+
+
+def _add_constraint_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--constraint",
+        default="com",
+        choices=("com", "distance"),
+        help="obstacle constraint: link COMs outside the cylinder (paper eq. 62) or coal "
+        "distances between link collision geometry and obstacles >= margin",
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -34,7 +34,8 @@ Thresholds (all documented values are checked by ``tests/test_verification.py``)
 * ``min_obstacle_distance_m`` ≥ 0 — the smallest clearance over all RK4 substeps of the
   replayed intervals: eq. (62) COM-to-axis distance minus the radius (without the task's margin,
   which exists to absorb the inter-knot motion), and, for general :class:`Obstacle` s, the coal
-  distance between the robot's collision geometry and the obstacle.
+  distance between the robot's collision geometry and the obstacle (for
+  ``obstacle_constraint = "distance"`` tasks: of every obstacle, cylinders as finite solids).
 * ``final_goal_error_rad`` ≤ ``task.goal_tolerance`` — ``‖q(T) - q_target‖_∞`` at the end of
   the replayed last interval (the tracking cost is soft, so a plan that converged to a local
   minimum blocked by the obstacle fails here).
@@ -124,7 +125,10 @@ def _min_clearance(task: ObstacleTask, configurations: np.ndarray) -> float:
     desc = robot_description(task.robot)
     data = desc.model.createData()
     clearance = np.inf
-    solids = tuple(o for o in task.obstacles if isinstance(o, Obstacle))
+    if task.obstacle_constraint == "distance":
+        solids = task.solids  # cylinders too, as finite solids
+    else:
+        solids = tuple(o for o in task.obstacles if isinstance(o, Obstacle))
     for q in configurations:
         if task.cylinders:
             clearance = min(clearance, com_clearances(task, link_coms(desc.model, data, q)).min())

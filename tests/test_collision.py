@@ -203,3 +203,17 @@ def test_distance_task_validation_names_the_geometry() -> None:
         plan_maximal(
             ObstacleTask(obstacles=(Obstacle("sphere", _pose((2, 0, 0), (0, 0, 0)), (0.1,)),))
         )
+
+
+def test_verification_measures_coal_distances_of_distance_tasks() -> None:
+    """For a "distance" task the verifier's clearance is the coal distance to every obstacle
+    (the cylinder as a finite solid), here negative along the straight path of case 0."""
+    from mbplan.tasks.obstacle import joint_interpolation, sample_obstacle_cases
+    from mbplan.verification import _min_clearance
+
+    task = sample_obstacle_cases(n=1, seed=0, obstacle_constraint="distance")[0]
+    path = joint_interpolation(task)
+    clearance = _min_clearance(task, path)
+    assert clearance < 0.0
+    # (penetration depths from EPA agree to its tolerance)
+    assert clearance == pytest.approx(pair_distances(task, path).min(), abs=1e-5)

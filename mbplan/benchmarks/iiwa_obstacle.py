@@ -22,10 +22,18 @@ from mbplan.verification import verify
 
 
 def solve_case(
-    method: str, n: int, seed: int, index: int, N: int, tol: float, max_iter: int, warm_start: str
+    method: str,
+    n: int,
+    seed: int,
+    index: int,
+    N: int,
+    tol: float,
+    max_iter: int,
+    warm_start: str,
+    constraint: str = "com",
 ) -> dict:
     """One (case, method) solve and its verification as a JSON-serialisable row."""
-    task = sample_obstacle_cases("iiwa", n, seed, N=N, warm_start=warm_start)[index]
+    task = _cases(n, seed, N, warm_start, constraint)[index]
     t0 = time.perf_counter()
     result = plan(task, method, tol=tol, max_iter=max_iter)
     wall = time.perf_counter() - t0
@@ -46,6 +54,12 @@ def solve_case(
     }
 
 
+def _cases(n: int, seed: int, N: int, warm_start: str, constraint: str) -> list:
+    return sample_obstacle_cases(
+        "iiwa", n, seed, N=N, warm_start=warm_start, obstacle_constraint=constraint
+    )
+
+
 def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
@@ -61,15 +75,17 @@ def run(
     workers: int = 1,
     scheduler: str | None = None,
     warm_start: str = "linear",
+    constraint: str = "com",
 ) -> dict:
-    """Run (resumably), then write summary.json, results.md and plots."""
+    """Run (resumably), then write summary.json, results.md and plots. ``constraint``: the
+    obstacle constraint of every case, ``"com"`` (eq. 62) or ``"distance"`` (coal)."""
     unknown = sorted(set(methods) - set(METHODS))
     if unknown:
         raise InputError(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
-    sample_obstacle_cases("iiwa", n, seed, N=N, warm_start=warm_start)  # fail fast on bad input
+    _cases(n, seed, N, warm_start, constraint)  # fail fast on bad input
     args = (n, seed)
     jobs = [
-        Job(i, m, solve_case, (m, *args, i, N, tol, max_iter, warm_start))
+        Job(i, m, solve_case, (m, *args, i, N, tol, max_iter, warm_start, constraint))
         for i in range(n)
         for m in methods
     ]
@@ -92,9 +108,10 @@ def run(
             s: sum(r["status"] == s for r in rs) for s in sorted({r["status"] for r in rs})
         }
     summary["warm_start"] = warm_start
+    summary["obstacle_constraint"] = constraint
     summary["command"] = (
         f"mbplan bench iiwa-obstacle --n {n} --seed {seed} --methods {','.join(methods)} "
-        f"--warm-start {warm_start} --out {out}"
+        f"--warm-start {warm_start} --constraint {constraint} --out {out}"
     )
     summary["machine"] = machine_info()
     write_json(out / "summary.json", summary)
@@ -111,7 +128,8 @@ def _markdown(s: dict) -> str:
         "# iiwa around an obstacle: maximal (RIPM) vs generalized (IPOPT) coordinates",
         "",
         f"Command: `{s['command']}`  ",
-        f"Warm start of every method: {s.get('warm_start', 'linear')} (see `mbplan.tasks.obstacle.joint_interpolation`).",
+        f"Warm start of every method: {s.get('warm_start', 'linear')} (see `mbplan.tasks.obstacle.joint_interpolation`).  ",
+        f"Obstacle constraint: {s.get('obstacle_constraint', 'com')} (`com`: link COMs outside the cylinder, eq. 62; `distance`: coal distance of every link geometry ≥ margin).",
         "",
         "| method | solved & verified | converged | iters median / mean / max | time/iter [ms] "
         "| total time [s] (median) | entered restoration |",
