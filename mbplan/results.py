@@ -12,8 +12,8 @@ import numpy as np
 
 from mbplan.errors import InputError
 
-_ARRAYS = ("q", "v", "tau", "kkt_history", "R", "p")
-_OPTIONAL = ("R", "p", "body_names")
+_ARRAYS = ("q", "v", "tau", "kkt_history", "R", "p", "tau_knots")
+_OPTIONAL = ("R", "p", "body_names", "tau_knots")
 
 
 @dataclass(frozen=True, eq=False)
@@ -28,7 +28,10 @@ class PlanResult:
     holds the primal and dual infeasibility ``(inf_pr, inf_du)`` per iteration, iteration 0 first.
     ``entered_restoration`` is None when the solver has no restoration phase. Maximal-coordinate
     solutions add body orientations ``R (N+1, nb, 3, 3)``, COM positions ``p (N+1, nb, 3)`` and
-    ``body_names``. ``extra`` holds method-specific numbers (JSON-serialisable).
+    ``body_names``. A method whose forces act at the knots (the LGVI) adds the knot torques
+    ``tau_knots (N+1, nv)``: the torque then ramps linearly from ``tau_knots[k]`` to
+    ``tau_knots[k+1]`` over ``[t_k, t_{k+1}]`` (first-order hold) and ``tau`` must be its interval
+    mean. ``extra`` holds method-specific numbers (JSON-serialisable).
     """
 
     method: str
@@ -49,6 +52,7 @@ class PlanResult:
     R: np.ndarray | None = None
     p: np.ndarray | None = None
     body_names: tuple[str, ...] | None = None
+    tau_knots: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for name in _ARRAYS:
@@ -71,6 +75,15 @@ class PlanResult:
             raise InputError(
                 f"PlanResult.kkt_history: expected (n, 2), got {self.kkt_history.shape}"
             )
+        knots = self.tau_knots
+        if knots is not None:
+            if knots.shape != (len(q), tau.shape[1]):
+                raise InputError(
+                    f"PlanResult.tau_knots: expected {(len(q), tau.shape[1])}, got {knots.shape}"
+                )
+            mean = 0.5 * (knots[:-1] + knots[1:])
+            if not np.allclose(tau, mean, rtol=1e-12, atol=1e-12, equal_nan=True):
+                raise InputError("PlanResult: tau is not the interval mean of tau_knots")
         finite = all(np.all(np.isfinite(a)) for a in (q, v, tau))
         if self.success and not finite:
             raise InputError("PlanResult: success=True with non-finite q, v or tau")

@@ -41,6 +41,38 @@ def euler_rollout(task: ObstacleTask, gain: float = 4.0) -> PlanResult:
     )
 
 
+def verlet_rollout(task: ObstacleTask, acc: np.ndarray) -> PlanResult:
+    """The LGVI's scheme in joint space (velocity Verlet: forces at the knots, trapezoidal
+    weights): ``q_{k+1} = q_k + Δt v_k + ½Δt² a_k``, ``v_{k+1} = v_k + ½Δt (a_k + a_{k+1})`` for
+    prescribed knot accelerations ``acc (N+1, nv)``, knot torques by RNEA."""
+    data = MODEL.createData()
+    q, v = np.array(task.q0), np.zeros(7)
+    qs, vs, knots = [q], [v], [pin.rnea(MODEL, data, q, v, acc[0])]
+    for k in range(task.N):
+        q = q + task.dt * v + 0.5 * task.dt**2 * acc[k]
+        v = v + 0.5 * task.dt * (acc[k] + acc[k + 1])
+        qs.append(q)
+        vs.append(v)
+        knots.append(pin.rnea(MODEL, data, q, v, acc[k + 1]))
+    tau_knots = np.array(knots)
+    tau = 0.5 * (tau_knots[:-1] + tau_knots[1:])
+    return PlanResult(
+        "verlet",
+        "simulated",
+        False,
+        "",
+        0,
+        0.0,
+        0.0,
+        0.0,
+        qs,
+        vs,
+        tau,
+        task.dt,
+        tau_knots=tau_knots,
+    )
+
+
 @pytest.fixture(scope="module")
 def free_task() -> ObstacleTask:
     return ObstacleTask(obstacles=())
@@ -83,6 +115,65 @@ def test_torques_inconsistent_with_the_dynamics_fail(
         deviation = max(deviation, np.max(np.abs(v_replay - rollout.v[k + 1])))
         euler_error = max(euler_error, np.max(np.abs(v_replay - v_euler)))
     assert deviation / (2.0 * euler_error) == pytest.approx(0.78, abs=0.01)
+
+
+def test_knot_torques_are_replayed_with_a_first_order_hold(free_task: ObstacleTask) -> None:
+    """Where the knot accelerations turn (``a_{k+1} = -0.6 a_k``), the interval mean held adds
+    ``¼Δt²|a_k - a_{k+1}|`` to the LGVI's ``q`` step (ratio ``|1-r|/(2|1+r|) = 2``), linear
+    interpolation leaves its own ``⅙Δt²|a_k - a_{k+1}|`` (ratio ``|1-r|/(2|2+r|) ≈ 0.57``)."""
+    acc = np.zeros((free_task.N + 1, 7))
+    acc[:, 0] = np.where(np.arange(free_task.N + 1) <= 10, 1.0, -0.6)  # base joint, rad/s²
+    plan = verlet_rollout(free_task, acc)
+    check = verify(free_task, plan)
+    assert check.joint_deviation_ratio == pytest.approx(0.57, abs=0.03)
+    assert check.velocity_deviation_ratio < 0.5
+    assert not any("deviation" in r for r in check.reasons)
+    held = verify(free_task, dataclasses.replace(plan, tau_knots=None))
+    assert held.joint_deviation_ratio == pytest.approx(2.0, abs=0.03)
+    assert any("joint deviation" in r for r in held.reasons)
+    # the torque limits apply to the knot torques, the extremes of the ramp
+    knots = plan.tau_knots.copy()
+    knots[5, 0] += 50.0
+    spiked = dataclasses.replace(plan, tau=0.5 * (knots[:-1] + knots[1:]), tau_knots=knots)
+    limit = np.max(np.abs(spiked.tau), axis=0) + 1.0
+    check = verify(dataclasses.replace(free_task, torque_limit=limit), spiked)
+    assert check.torque_limit_violation == pytest.approx(np.abs(knots[5, 0]) - limit[0])
+    assert any("exceed the limits" in r for r in check.reasons)
+
+
+def test_an_lgvi_solution_verifies(free_task: ObstacleTask) -> None:
+    """A RIPM (maximal-coordinate LGVI) plan passes with its knot torques; held at their interval
+    means, its launch at knot 1 fails the joint row (the benchmark's former failure mode)."""
+    from mbplan.planning.manipulator import plan_maximal
+
+    plan = plan_maximal(free_task)
+    assert plan.success and plan.tau_knots is not None
+    np.testing.assert_allclose(plan.tau, 0.5 * (plan.tau_knots[:-1] + plan.tau_knots[1:]))
+    check = verify(free_task, plan)
+    assert check.passed, check.reasons
+    assert max(check.joint_deviation_ratio, check.velocity_deviation_ratio) < 0.75
+    held = verify(free_task, dataclasses.replace(plan, tau_knots=None))
+    assert held.joint_deviation_ratio > 1.0
+
+
+def test_linear_torque_ramp_integration() -> None:
+    q0, v0 = sample_obstacle_cases(n=1, seed=0)[0].q0, np.full(7, 0.3)
+    data = MODEL.createData()
+    tau0 = pin.computeGeneralizedGravity(MODEL, data, q0)
+    tau1 = tau0 + np.linspace(-0.2, 0.2, 7)  # N m: the wrist has 1e-3 kg m²
+    T = 0.075
+    const = integrate_aba(MODEL, q0, v0, tau0, T, SUBSTEPS)
+    same = integrate_aba(MODEL, q0, v0, tau0, T, SUBSTEPS, tau_end=tau0)
+    np.testing.assert_array_equal(const[0], same[0])
+    np.testing.assert_array_equal(const[1], same[1])
+    ramp = integrate_aba(MODEL, q0, v0, tau0, T, SUBSTEPS, tau_end=tau1)
+    fine = integrate_aba(MODEL, q0, v0, tau0, T, 4 * SUBSTEPS, tau_end=tau1)
+    assert np.max(np.abs(ramp[0] - fine[0])) < 1e-8 and np.max(np.abs(ramp[1] - fine[1])) < 1e-7
+    q, v, n = q0, v0, 400  # a fine zero-order hold of the ramp converges to it (second order)
+    for i in range(n):
+        q, v = integrate_aba(MODEL, q, v, tau0 + (i + 0.5) / n * (tau1 - tau0), T / n, 1)
+    assert np.max(np.abs(fine[0] - q)) < 1e-6 and np.max(np.abs(fine[1] - v)) < 1e-7
+    assert np.max(np.abs(ramp[1] - const[1])) > 1.0
 
 
 def test_obstacle_goal_torque_and_nan_failures(
@@ -138,6 +229,7 @@ def test_documented_replay_numbers() -> None:
 
 def _result(**changes: object) -> PlanResult:
     rng = np.random.default_rng(0)
+    tau_knots = rng.standard_normal((5, 7))
     fields = {
         "method": "maximal_ripm",
         "status": "Solve_Succeeded",
@@ -149,7 +241,7 @@ def _result(**changes: object) -> PlanResult:
         "time_per_iter_s": 0.5 / 12,
         "q": rng.standard_normal((5, 7)),
         "v": rng.standard_normal((5, 7)),
-        "tau": rng.standard_normal((4, 7)),
+        "tau": 0.5 * (tau_knots[:-1] + tau_knots[1:]),
         "dt": 0.075,
         "kkt_history": rng.random((13, 2)),
         "entered_restoration": False,
@@ -157,6 +249,7 @@ def _result(**changes: object) -> PlanResult:
         "R": np.broadcast_to(np.eye(3), (5, 7, 3, 3)).copy(),
         "p": rng.standard_normal((5, 7, 3)),
         "body_names": [f"link_{i}" for i in range(7)],
+        "tau_knots": tau_knots,
     }
     fields.update(changes)
     return PlanResult(**fields)  # type: ignore[arg-type]
@@ -176,10 +269,13 @@ def test_npz_round_trip(tmp_path: Path) -> None:
         else:
             assert a == b and type(a) is type(b), f.name
     # generalized results have no R, p, body_names; a failed run may hold NaN; overwrite works
-    failed = _result(success=False, R=None, p=None, body_names=None, entered_restoration=None)
+    failed = _result(
+        success=False, R=None, p=None, body_names=None, entered_restoration=None, tau_knots=None
+    )
     failed.q[2, 3] = np.nan
     loaded = load_npz(save_npz(failed, path))
     assert loaded.R is None and loaded.body_names is None and loaded.entered_restoration is None
+    assert loaded.tau_knots is None
     assert np.isnan(loaded.q[2, 3]) and not loaded.success
     with np.load(path) as data:
         assert {"q", "v", "tau", "dt", "method", "status", "iterations", "solve_time_s"} <= set(
@@ -194,6 +290,10 @@ def test_plan_result_checks(tmp_path: Path) -> None:
         _result(q=q)
     with pytest.raises(InputError, match="expected q"):
         _result(tau=np.zeros((5, 7)))
+    with pytest.raises(InputError, match="tau_knots: expected"):
+        _result(tau_knots=np.zeros((4, 7)))
+    with pytest.raises(InputError, match="interval mean of tau_knots"):
+        _result(tau_knots=np.zeros((5, 7)))
     with pytest.raises(InputError, match="kkt_history"):
         _result(kkt_history=np.zeros(3))
     with pytest.raises(InputError, match=r"\.npz"):

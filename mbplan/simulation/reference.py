@@ -7,24 +7,35 @@ import pinocchio as pin
 
 
 def integrate_aba(
-    model: pin.Model, q0: np.ndarray, v0: np.ndarray, tau: np.ndarray, T: float, substeps: int
+    model: pin.Model,
+    q0: np.ndarray,
+    v0: np.ndarray,
+    tau: np.ndarray,
+    T: float,
+    substeps: int,
+    tau_end: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(q(T), v(T))`` for constant ``tau`` by RK4 on the configuration manifold (no damping)."""
+    """``(q(T), v(T))`` by RK4 on the configuration manifold (no damping) for constant ``tau``,
+    or, with ``tau_end``, the torque ramping linearly from ``tau`` at 0 to ``tau_end`` at ``T``
+    (first-order hold; RK4 samples it at each stage's time, so it stays fourth order)."""
     data = model.createData()
     h = T / substeps
     q, v = np.array(q0, dtype=float), np.array(v0, dtype=float)
+    tau0 = np.asarray(tau, dtype=float)
+    slope = None if tau_end is None else (np.asarray(tau_end, dtype=float) - tau0) / T
 
-    def acc(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
-        return pin.aba(model, data, qq, vv, tau)
+    def acc(qq: np.ndarray, vv: np.ndarray, t: float) -> np.ndarray:
+        return pin.aba(model, data, qq, vv, tau0 if slope is None else tau0 + t * slope)
 
-    for _ in range(substeps):
-        k1v, k1a = v, acc(q, v)
+    for i in range(substeps):
+        t = i * h
+        k1v, k1a = v, acc(q, v, t)
         q2 = pin.integrate(model, q, 0.5 * h * k1v)
-        k2v, k2a = v + 0.5 * h * k1a, acc(q2, v + 0.5 * h * k1a)
+        k2v, k2a = v + 0.5 * h * k1a, acc(q2, v + 0.5 * h * k1a, t + 0.5 * h)
         q3 = pin.integrate(model, q, 0.5 * h * k2v)
-        k3v, k3a = v + 0.5 * h * k2a, acc(q3, v + 0.5 * h * k2a)
+        k3v, k3a = v + 0.5 * h * k2a, acc(q3, v + 0.5 * h * k2a, t + 0.5 * h)
         q4 = pin.integrate(model, q, h * k3v)
-        k4v, k4a = v + h * k3a, acc(q4, v + h * k3a)
+        k4v, k4a = v + h * k3a, acc(q4, v + h * k3a, t + h)
         q = pin.integrate(model, q, h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v))
         v = v + h / 6 * (k1a + 2 * k2a + 2 * k3a + k4a)
     return q, v
