@@ -258,11 +258,16 @@ def test_distance_rows_hessian_is_the_fixed_witness_point_model(
 
 
 def test_small_distance_runs_converge_and_pass_verification() -> None:
-    """N = 10 with coal distances: IPOPT converges and the replay keeps clear of the obstacle."""
+    """N = 10 with coal distances: the straight path of the small cases crosses a thinner
+    cylinder with the links' geometry; IPOPT converges onto the margin and the replay keeps clear
+    of the solid."""
+    cylinder = Cylinder((0.68 * np.cos(0.6), 0.68 * np.sin(0.6)), 0.05)
     for task in small_cases(2):
-        task = dataclasses.replace(task, obstacle_constraint="distance", margin=0.01)
+        task = dataclasses.replace(task, obstacle_constraint="distance", obstacles=(cylinder,))
+        assert pair_distances(task, joint_interpolation(task)).min() < 0.0
         result = solve_generalized_ipopt(task)
         assert result.success, result.message
         check = verify(task, result)
         assert check.passed, check.reasons
-        assert pair_distances(task, result.q[1:]).min() >= task.margin - 1e-6
+        d = pair_distances(task, result.q[1:]).min()
+        assert d == pytest.approx(task.margin, abs=1e-6)  # active constraint

@@ -100,7 +100,7 @@ class RIPMOptions:
     large δ_w damps ds as well as dx."""
     static_regularization: float = 1e-9
     """±ε on the diagonal of the factorized KKT matrix only (removed by iterative refinement),
-    so that qdldl, which does not pivot, never meets an exact zero pivot."""
+    so that the LDLᵀ factorization, which does not pivot, never meets an exact zero pivot."""
     max_refinement_steps: int = 10
     residual_ratio_max: float = 1e-10
     residual_ratio_singular: float = 1e-5
