@@ -22,7 +22,9 @@ from mbplan.tasks.obstacle import (
     ObstacleTask,
     com_clearances,
     link_coms,
+    pair_distances,
     robot_description,
+    task_collision_pairs,
 )
 from mbplan.verification import verify
 
@@ -131,3 +133,22 @@ def test_general_obstacles_are_rejected() -> None:
     for solve in SOLVERS.values():
         with pytest.raises(InputError, match="Cylinder obstacles"):
             solve(task)
+
+
+def test_coal_distance_residual_values_and_jacobian() -> None:
+    task = ObstacleTask(obstacle_constraint="distance")
+    state = crocoddyl.StateMultibody(MODEL)
+    residual = cs.ResidualModelCoalDistance(state, MODEL.nv, task_collision_pairs(task))
+    data = residual.createData(crocoddyl.DataCollectorMultibody(MODEL.createData()))
+    x = np.concatenate([np.array(IIWA_TARGET), np.ones(7)])
+
+    def r(x: np.ndarray) -> np.ndarray:
+        residual.calc(data, x)
+        return data.r.copy()
+
+    np.testing.assert_allclose(r(x), pair_distances(task, x[None, :7])[0], atol=1e-12)
+    residual.calcDiff(data, x)
+    h = 1e-5
+    fd = np.column_stack([(r(x + h * e) - r(x - h * e)) / (2.0 * h) for e in np.eye(14)])
+    np.testing.assert_allclose(data.Rx, fd, atol=1e-6)
+    assert not np.any(data.Rx[:, 7:])  # no velocity dependence

@@ -65,7 +65,7 @@ from mbplan.multibody.collision import (
     CollisionPairs,
     chain_kinematics,
     joint_space_contacts,
-    joint_support,
+    point_jacobians,
 )
 from mbplan.results import PlanResult
 from mbplan.tasks.obstacle import (
@@ -163,7 +163,6 @@ class ResidualModelCylinderClearance(crocoddyl.ResidualModelAbstract):
             self, state, len(self.links) * len(self.radii), nu, True, False, False
         )
         self.levers = [model.inertias[j].lever for j in self.links]
-        self.support = joint_support(model)[1:]  # [i, j]: velocity j moves link i
 
     def _offsets(self, data: pin.Data) -> tuple[np.ndarray, np.ndarray]:
         """COMs ``p (nl, 3)`` and horizontal offsets ``(x_i, y_i) - c`` ``(nl, nc, 2)``."""
@@ -184,11 +183,10 @@ class ResidualModelCylinderClearance(crocoddyl.ResidualModelAbstract):
         self, data: ResidualDataCylinderClearance, x: np.ndarray, u: np.ndarray | None = None
     ) -> None:
         model = self.state.pinocchio
-        twists = pin.computeJointJacobians(model, data.pinocchio, x[: model.nq])
+        kin = chain_kinematics(model, data.pinocchio, x[None, : model.nq])
         p, d = self._offsets(data.pinocchio)
         n = d / np.linalg.norm(d, axis=-1, keepdims=True)
-        J = twists[:3].T[None] + np.cross(twists[3:].T[None], p[:, None, :])  # (nl, nv, 3)
-        J *= self.support[..., None]
+        J = point_jacobians(kin, np.asarray(self.links), p[None])[0]  # (nl, nv, 3)
         data.Rx[:, : model.nv] = np.einsum("ica,ija->icj", n, J[..., :2]).reshape(-1, model.nv)
 
     def createData(self, collector: Any) -> ResidualDataCylinderClearance:
