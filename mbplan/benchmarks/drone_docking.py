@@ -101,9 +101,11 @@ def run(
         raise InputError(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
     jobs = [Job(i, m, solve_case, (m, n, seed, i, tol)) for m in methods for i in range(n)]
     t0 = time.perf_counter()
+    config = {"benchmark": "drone-docking", "seed": seed, "tol": tol, "max_iter": MAX_ITER}
     rows = run_jobs(
         jobs,
         out / "results.jsonl",
+        config=config,
         workers=workers,
         scheduler=scheduler,
         description="drone docking",

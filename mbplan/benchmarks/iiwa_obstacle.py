@@ -89,9 +89,20 @@ def run(
         for i in range(n)
         for m in methods
     ]
+    config = {
+        "benchmark": "iiwa-obstacle",
+        "robot": "iiwa",
+        "seed": seed,
+        "N": N,
+        "tol": tol,
+        "max_iter": max_iter,
+        "warm_start": warm_start,
+        "constraint": constraint,
+    }
     rows = run_jobs(
         jobs,
         out / "results.jsonl",
+        config=config,
         workers=workers,
         scheduler=scheduler,
         description="iiwa obstacle",
@@ -111,7 +122,7 @@ def run(
     summary["obstacle_constraint"] = constraint
     summary["command"] = (
         f"mbplan bench iiwa-obstacle --n {n} --seed {seed} --methods {','.join(methods)} "
-        f"--warm-start {warm_start} --constraint {constraint} --out {out}"
+        f"--horizon {N} --warm-start {warm_start} --constraint {constraint} --out {out}"
     )
     summary["machine"] = machine_info()
     write_json(out / "summary.json", summary)

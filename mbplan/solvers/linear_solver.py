@@ -47,6 +47,7 @@ import numpy as np
 import qdldl
 import scipy.sparse as sp
 
+from mbplan.engine.jit import announce_uncached_numba
 from mbplan.errors import InputError
 
 
@@ -613,6 +614,7 @@ def _analysis(indptr: np.ndarray, indices: np.ndarray) -> _Analysis:
         if hit is not None:
             _ANALYSES.move_to_end(key)
             return hit
+    announce_uncached_numba(_factor, _solve, _supernodes, _assembly_maps)  # first run only
     n = key[0]
     rows = np.repeat(np.arange(n), np.diff(indptr))
     hit = _Analysis(n, rows, indices, _amd_order(indptr, indices))
