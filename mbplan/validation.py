@@ -101,6 +101,8 @@ def _writable_folder(folder: Path, name: str) -> None:
     while not probe.exists():
         probe = probe.parent
     if not probe.is_dir():
+        if probe == folder.absolute():
+            raise InputError(f"{name}: {probe} is a file, not a directory")
         raise InputError(f"{name}: {probe} is a file, so {folder} cannot be created under it")
     if not os.access(probe, os.W_OK | os.X_OK):
         raise InputError(f"{name}: cannot write in {probe} (permission denied)")

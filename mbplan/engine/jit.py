@@ -106,13 +106,15 @@ def _announce_compilation() -> None:
 def announce_uncached_numba(*dispatchers: object) -> None:
     """Print the first-run line if a numba ``cache=True`` dispatcher has no cache index yet
     (numba then compiles it at its first call)."""
-    for dispatcher in dispatchers:
-        index = getattr(
-            getattr(getattr(dispatcher, "_cache", None), "_cache_file", None), "_index_path", None
-        )
-        if index is not None and not Path(index).exists():
-            _announce_compilation()
-            return
+    if not all(numba_cached(d) for d in dispatchers):
+        _announce_compilation()
+
+
+def numba_cached(dispatcher: object) -> bool:
+    """False if ``dispatcher`` (numba, ``cache=True``) has no on-disk cache index yet."""
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    index = getattr(cache_file, "_index_path", None)
+    return index is None or Path(index).exists()
 
 
 def jit_available() -> bool:

@@ -23,6 +23,9 @@ def plan(
     check_plan_request(task, method, tol, max_iter)
     if method == "ripm":
         from mbplan.planning.manipulator import plan_maximal
+        from mbplan.solvers.linear_solver import compile_kernels_in_background
+
+        compile_kernels_in_background()  # first run: numba compiles while the C compiler runs
 
         return plan_maximal(task, RIPMOptions(tol=tol, max_iter=max_iter))
     if method in ("ipopt", "ipopt-no-restoration"):
