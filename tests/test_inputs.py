@@ -61,7 +61,8 @@ def _setup(tmp: Path) -> None:
     np.savez(tmp / "partial.npz", q=np.zeros((2, 7)))
     other = tmp / "other-config"
     other.mkdir()
-    (other / "config.json").write_text(json.dumps({"hash": "0", "config": {"seed": 5}}))
+    (other / "results.config.json").write_text(json.dumps({"hash": "0", "config": {"seed": 5}}))
+    (other / "results.jsonl").write_text('{"case": 0, "method": "ripm", "config": "0"}\n')
 
 
 USAGE = 2  # exit code of a usage error

@@ -39,7 +39,7 @@ class Job:
 
 def read_results(path: Path, config: Mapping[str, Any] | None = None) -> list[dict]:
     """The valid rows of a results file made with ``config`` (see :func:`store.repair`)."""
-    return repair(path, check_config(path.parent, config or {})) if path.exists() else []
+    return repair(path, check_config(path, config or {})) if path.exists() else []
 
 
 def run_jobs(
@@ -62,7 +62,7 @@ def run_jobs(
         raise InputError("run_jobs: a (case, method) job is given twice")
     results_path.parent.mkdir(parents=True, exist_ok=True)
     with locked(results_path):
-        key = check_config(results_path.parent, config or {})
+        key = check_config(results_path, config or {})
         rows = repair(results_path, key)
         done = {(r["case"], r["method"]) for r in rows}
         todo = [j for j in jobs if j.key not in done]

@@ -2,10 +2,10 @@
 
 ``results.jsonl`` holds one JSON row per finished (case, method) job, each tagged with the hash
 of the run's configuration (:func:`config_hash`: everything that changes a row — task, seed,
-warm start, constraint, tolerances, method options — and the mbplan version). ``config.json``
-beside it records that configuration. A run into a folder made with another configuration is
-refused with the fields that differ (choose another ``--out``, or delete the folder); rows are
-resumed by (configuration, case, method). An ``flock`` on the folder (released by the kernel when
+warm start, constraint, tolerances, method options — and the mbplan version).
+``results.config.json`` beside it records that configuration. A run into a folder holding rows
+of another configuration is refused with the fields that differ (choose another ``--out``, or
+delete the folder); rows are resumed by (configuration, case, method). An ``flock`` on the folder (released by the kernel when
 its process dies, even by SIGKILL) keeps a second run from writing the same folder.
 
 Every row is one ``write`` of a complete line to a file opened in append mode, flushed and
@@ -28,8 +28,6 @@ from typing import Any
 
 from mbplan.benchmarks.common import write_atomic, write_json
 from mbplan.errors import InputError
-
-CONFIG_FILE = "config.json"
 
 
 def config_hash(config: Mapping[str, Any]) -> str:
@@ -63,22 +61,20 @@ def locked(results: Path) -> Iterator[None]:
         os.close(fd)  # releases the lock
 
 
-def check_config(folder: Path, config: Mapping[str, Any]) -> str:
-    """Record ``config`` in ``folder/config.json`` or check it equals the recorded one; return
-    its hash. :class:`InputError` naming the differing fields if the folder was made with
-    another configuration (or holds results without a recorded one)."""
+def check_config(results: Path, config: Mapping[str, Any]) -> str:
+    """Record ``config`` beside ``results`` (``results.config.json``) or check it equals the
+    recorded one; return its hash. :class:`InputError` naming the differing fields if the rows
+    were made with another configuration (or without a recorded one)."""
     key = config_hash(config)
-    record = {"hash": key, "config": dict(config)}
-    path = folder / CONFIG_FILE
-    if not path.exists():
-        results = folder / "results.jsonl"
-        if results.exists() and results.stat().st_size > 0:
-            raise InputError(
-                f"{folder} holds results without a recorded configuration ({CONFIG_FILE}, "
-                "older mbplan?): they cannot be resumed safely; choose another --out or delete it"
-            )
-        write_json(path, record)
+    path = config_path(results)
+    if not results.exists() or results.stat().st_size == 0:
+        write_json(path, {"hash": key, "config": dict(config)})  # no rows yet: nothing to mix
         return key
+    if not path.exists():
+        raise InputError(
+            f"{results} holds results without a recorded configuration ({path.name}, older "
+            "mbplan?): they cannot be resumed safely; choose another --out or delete them"
+        )
     try:
         old = json.loads(path.read_text())
         old_key, old_config = old["hash"], old["config"]
@@ -93,10 +89,15 @@ def check_config(folder: Path, config: Mapping[str, Any]) -> str:
             if old_config.get(k) != config.get(k)
         ] or ["the mbplan version"]
         raise InputError(
-            f"{folder} holds results of another configuration ({'; '.join(diff)}); choose "
-            "another --out or delete it"
+            f"{results.parent} holds results of another configuration ({'; '.join(diff)}); "
+            "choose another --out or delete it"
         )
     return key
+
+
+def config_path(results: Path) -> Path:
+    """Where the configuration of ``results`` (``NAME.jsonl``) is recorded: ``NAME.config.json``."""
+    return results.with_suffix(".config.json")
 
 
 def repair(results: Path, key: str) -> list[dict]:

@@ -97,7 +97,7 @@ def _announce_compilation() -> None:
     if not _announced:
         _announced.append(True)
         print(
-            "mbplan: compiling kernels, first run only (cached on disk; about half a minute) ...",
+            "mbplan: compiling kernels, first run only (cached on disk; up to a minute) ...",
             file=sys.stderr,
             flush=True,
         )
