@@ -113,12 +113,14 @@ def save_npz(result: PlanResult, path: str | os.PathLike[str]) -> Path:
                     f"save_npz: PlanResult.extra is not JSON-serialisable: {err}"
                 ) from None
         arrays[f.name] = np.asarray(value)
-    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         with open(tmp, "wb") as fh:
             np.savez(fh, **arrays)
         os.replace(tmp, path)
+    except OSError as err:  # a full disk, a folder removed meanwhile, ...
+        raise InputError(f"save_npz: cannot write {path}: {err.strerror or err}") from None
     finally:
         tmp.unlink(missing_ok=True)
     return path

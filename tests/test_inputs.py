@@ -348,3 +348,13 @@ def test_unwritable_output_folder(tmp_path, capsys):
     locked.mkdir(mode=0o555)
     assert main(["plan", "--out", str(locked / "p.npz")]) == USAGE
     assert "permission denied" in capsys.readouterr().err
+
+
+def test_save_npz_write_failure_is_an_mbplan_error_and_leaves_no_file(tmp_path, monkeypatch):
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "savez", full_disk)
+    with pytest.raises(InputError, match=r"cannot write .*r\.npz: No space left on device"):
+        save_npz(_result(), tmp_path / "r.npz")
+    assert not list(tmp_path.iterdir())

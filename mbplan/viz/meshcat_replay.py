@@ -269,13 +269,13 @@ def serve(
 
 
 def _serve_until_interrupted(scene: _Scene, open_browser: bool) -> None:
-    with MeshcatServer() as server:
+    # Ctrl-C from the moment the URL can be printed ends serving quietly.
+    with MeshcatServer() as server, contextlib.suppress(KeyboardInterrupt):
         scene(server.viewer)
         print(f"MeshCat viewer at {server.url} (Ctrl-C stops the server)", flush=True)
         if open_browser:
             webbrowser.open(server.url)
-        with contextlib.suppress(KeyboardInterrupt):
-            server.wait()
+        server.wait()
 
 
 @functools.cache
