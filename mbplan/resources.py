@@ -1,8 +1,9 @@
 """Memory a planning request will need, checked against the memory available before allocating.
 
-The per-knot costs are measured peaks (``ru_maxrss``) of ``plan(ObstacleTask(N=...), method)``
-for the iiwa (7 bodies) at N = 40, 320 and 1280: the RIPM's sparse KKT systems and CasADi
-evaluations grow by about 1.4 MB per knot, IPOPT's (generalized coordinates) by about 0.1 MB.
+The per-knot costs are measured peaks (``ru_maxrss``) of ``plan(ObstacleTask(N=...), method,
+max_iter=2)`` for the iiwa (7 bodies) at N = 40, 320 and 1280 (RIPM 307, 722, 2032 MB; IPOPT
+203, 232, 329 MB): the RIPM's sparse KKT systems and CasADi evaluations grow by about 1.4 MB per
+knot, IPOPT's (generalized coordinates) by about 0.1 MB.
 The RIPM's cost per knot is scaled by ``(bodies / 7)²`` (the coupling blocks of a chain), so the
 estimate errs high for long chains. ``MBPLAN_MEMORY_LIMIT_GB`` overrides the available memory.
 """
@@ -13,7 +14,7 @@ import os
 
 from mbplan.errors import InputError
 
-_BASE_BYTES = 200e6  # interpreter, Pinocchio, CasADi, numba
+_BASE_BYTES = 250e6  # interpreter, Pinocchio, CasADi, numba (251 MB extrapolated to N = 0)
 _PER_KNOT_BYTES = {"maximal": 1.4e6 / 49, "generalized": 0.1e6 / 7}
 
 
