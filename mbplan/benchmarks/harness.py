@@ -9,8 +9,9 @@ second concurrent run into the same folder is refused.
 
 from __future__ import annotations
 
+import contextlib
 import signal
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -103,7 +104,10 @@ def _execute(
         return
     pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_signals)
     try:
-        futures = {pool.submit(j.fn, *j.args): j for j in jobs}
+        # The workers are forked by the first submit: an interrupt then would be lost in the
+        # fork handlers, so it waits (blocked) until the pool stands.
+        with _signals_blocked():
+            futures = {pool.submit(j.fn, *j.args): j for j in jobs}
         for fut in as_completed(futures):
             yield futures[fut], fut.result()
     except BaseException:
@@ -116,12 +120,27 @@ def _execute(
     pool.shutdown()
 
 
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+@contextlib.contextmanager
+def _signals_blocked() -> Iterator[None]:
+    """Hold SIGINT, SIGTERM and SIGHUP pending for the block; they are delivered after it."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def _worker_signals() -> None:
     """Workers leave Ctrl-C (sent to the whole process group) to the parent, which stops them
-    (SIGTERM: the default, quiet exit, not a handler inherited from the parent)."""
+    (SIGTERM: the default, quiet exit, not a handler inherited from the parent); they are
+    forked with these signals blocked (:func:`_signals_blocked`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     for signum in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(signum, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
 def summarize(rows: Sequence[dict], task: str, tol: float) -> dict[str, Any]:
