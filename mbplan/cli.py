@@ -4,17 +4,19 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from mbplan.errors import InputError, MbplanError
+from mbplan.cli_support import Parser, integer, integer_list, names, parse, real, run_command
+from mbplan.errors import InputError, WarmStartWarning
+from mbplan.validation import output_dir, output_file
 
 
 def _bench_engine(args: argparse.Namespace) -> int:
     from mbplan.benchmarks.engine_scaling import run
 
-    knots = tuple(int(k) for k in args.knots.split(","))
-    summary = run(Path(args.out), knots=knots, seed=args.seed)
+    summary = run(output_dir(args.out, "--out"), knots=args.knots, seed=args.seed)
     print((Path(args.out) / "results.md").read_text())
     return 0 if summary["rows"] else 1
 
@@ -22,13 +24,12 @@ def _bench_engine(args: argparse.Namespace) -> int:
 def _bench_drone(args: argparse.Namespace) -> int:
     from mbplan.benchmarks.drone_docking import run
 
-    methods = tuple(m.strip() for m in args.methods.split(","))
     run(
-        Path(args.out),
+        output_dir(args.out, "--out"),
         n=args.n,
         seed=args.seed,
         tol=args.tol,
-        methods=methods,
+        methods=args.methods,
         workers=args.workers,
         scheduler=args.scheduler,
         scaling=not args.no_scaling,
@@ -38,14 +39,16 @@ def _bench_drone(args: argparse.Namespace) -> int:
 
 
 def _add_pool_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
+    p.add_argument(
+        "--workers", type=integer(1), default=1, help="local worker processes (default 1)"
+    )
     p.add_argument("--scheduler", default=None, help="Dask scheduler address (runs on the cluster)")
 
 
 def _bench_chain(args: argparse.Namespace) -> int:
     from mbplan.benchmarks.chain_scaling import run
 
-    run(Path(args.out), N=args.horizon)
+    run(output_dir(args.out, "--out"), N=args.horizon)
     print((Path(args.out) / "results.md").read_text())
     return 0
 
@@ -53,7 +56,8 @@ def _bench_chain(args: argparse.Namespace) -> int:
 def _validate_dynamics(args: argparse.Namespace) -> int:
     from mbplan.benchmarks.validate_dynamics import run
 
-    run(args.robot, args.seed, Path(args.out), T=args.duration, long_steps=args.long_steps)
+    out = output_dir(args.out, "--out")
+    run(args.robot, args.seed, out, T=args.duration, long_steps=args.long_steps)
     print((Path(args.out) / "results.md").read_text())
     return 0
 
@@ -61,12 +65,11 @@ def _validate_dynamics(args: argparse.Namespace) -> int:
 def _bench_iiwa(args: argparse.Namespace) -> int:
     from mbplan.benchmarks.iiwa_obstacle import run
 
-    methods = tuple(m.strip() for m in args.methods.split(","))
     run(
-        Path(args.out),
+        output_dir(args.out, "--out"),
         n=args.n,
         seed=args.seed,
-        methods=methods,
+        methods=args.methods,
         N=args.horizon,
         workers=args.workers,
         scheduler=args.scheduler,
@@ -78,18 +81,24 @@ def _bench_iiwa(args: argparse.Namespace) -> int:
 
 
 def _plan(args: argparse.Namespace) -> int:
-    from mbplan.planning.solve import plan
+    from mbplan.planning.solve import METHODS, plan
     from mbplan.results import save_npz
     from mbplan.tasks.obstacle import ObstacleTask, sample_obstacle_cases
     from mbplan.verification import verify
 
     if args.task != "obstacle":
         raise InputError(f"unknown task {args.task!r}; available: obstacle")
+    if args.method not in METHODS:
+        raise InputError(f"unknown method {args.method!r}; choose from {', '.join(METHODS)}")
+    out = output_file(args.out, (".npz",), "--out") if args.out else None
+    html = output_file(args.html, (".html", ".htm"), "--html") if args.html else None
     fields = {
         "N": args.horizon,
         "warm_start": args.warm_start,
         "obstacle_constraint": args.constraint,
     }
+    if args.strict_warm_start:
+        warnings.simplefilter("error", WarmStartWarning)
     if args.seed is None:
         task = ObstacleTask(robot=args.robot, **fields)
     else:
@@ -105,24 +114,31 @@ def _plan(args: argparse.Namespace) -> int:
         f"{check.min_obstacle_distance_m:.3f} m, final goal error {check.final_goal_error_rad:.3f} rad"
         + "".join(f"\n  - {r}" for r in check.reasons)
     )
-    if args.out:
-        print(f"saved {save_npz(result, args.out)}")
-    if args.viz or args.html:
-        from mbplan.viz import replay
+    code = 0 if result.success and check.passed else 1
+    if out:
+        print(f"saved {save_npz(result, out)}")
+    if html:
+        from mbplan.viz import static_html
 
-        print(replay([result], task, html=args.html, open_browser=args.viz))
-    return 0 if result.success and check.passed else 1
+        print(f"wrote {static_html([result], html, task)}")
+    if args.viz:
+        from mbplan.viz import serve
+
+        serve([result], task)
+    return code
 
 
 def _replay(args: argparse.Namespace) -> int:
     from mbplan.viz import replay_main
 
-    return replay_main(args.results, args.html, args.no_browser, robot=args.robot)
+    html = output_file(args.html, (".html", ".htm"), "--html") if args.html else None
+    return replay_main(args.results, html, args.no_browser, robot=args.robot)
 
 
 def _plot(args: argparse.Namespace) -> int:
     from mbplan.viz import plot_convergence, plot_trajectories, read_result
 
+    output_file(args.out, (".png", ".svg", ".pdf"), "--out")
     results = [read_result(p) for p in args.results]
     labels = [f"{r.method} ({Path(p).name})" for r, p in zip(results, args.results, strict=True)]
     plot = {"convergence": plot_convergence, "trajectories": plot_trajectories}[args.kind]
@@ -139,7 +155,7 @@ def _robots(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="mbplan",
         description="Trajectory optimization of multi-body robots on matrix Lie groups "
         "(maximal coordinates on SO(3)×R³, LGVI dynamics, Riemannian interior point).",
@@ -151,16 +167,16 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--task", default="obstacle", help="task family (obstacle)")
     plan.add_argument(
         "--seed",
-        type=int,
+        type=integer(0),
         default=None,
         help="random start of the task sampler (default: the fixed demo start)",
     )
     plan.add_argument(
         "--method", default="ripm", help="ripm | ipopt | ipopt-no-restoration | fddp | csqp"
     )
-    plan.add_argument("--horizon", type=int, default=40, help="number of steps N")
-    plan.add_argument("--tol", type=float, default=1e-6, help="convergence tolerance")
-    plan.add_argument("--max-iter", type=int, default=500, help="iteration limit")
+    plan.add_argument("--horizon", type=integer(2), default=40, help="number of steps N")
+    plan.add_argument("--tol", type=real(), default=1e-6, help="convergence tolerance")
+    plan.add_argument("--max-iter", type=integer(0), default=500, help="iteration limit")
     plan.add_argument("--out", default=None, help="write the result to this .npz file")
     plan.add_argument(
         "--warm-start",
@@ -168,9 +184,16 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("linear", "via"),
         help="initial guess: linear joint interpolation (paper) or a collision-free via point",
     )
+    plan.add_argument(
+        "--strict-warm-start",
+        action="store_true",
+        help='fail (exit 2) instead of warning when "via" finds no collision-free via point',
+    )
     _add_constraint_option(plan)
     plan.add_argument(
-        "--viz", action="store_true", help="replay the result in meshcat (127.0.0.1) at the end"
+        "--viz",
+        action="store_true",
+        help="replay the result in meshcat (127.0.0.1) at the end, serving until Ctrl-C",
     )
     plan.add_argument("--html", default=None, help="also write a self-contained replay page")
     plan.set_defaults(func=_plan)
@@ -198,11 +221,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--robot", default="iiwa", help="robot name (see `mbplan robots`) or URDF path"
     )
     validate.add_argument(
-        "--seed", type=int, default=0, help="seed of the initial state and torques"
+        "--seed", type=integer(0), default=0, help="seed of the initial state and torques"
     )
-    validate.add_argument("--duration", type=float, default=1.0, help="simulated time [s]")
+    validate.add_argument("--duration", type=real(), default=1.0, help="simulated time [s]")
     validate.add_argument(
-        "--long-steps", type=int, default=10_000, help="steps of the long energy run"
+        "--long-steps", type=integer(1), default=10_000, help="steps of the long energy run"
     )
     validate.add_argument("--out", default="out/validate-dynamics", help="output directory")
     validate.set_defaults(func=_validate_dynamics)
@@ -218,31 +241,49 @@ def build_parser() -> argparse.ArgumentParser:
         "engine",
         help="value/Jacobian/Hessian of the rigid-body LGVI step for 1..10⁴ knots, interpreted vs JIT",
     )
-    engine.add_argument("--out", default="benchmarks/results/engine", help="output directory")
     engine.add_argument(
-        "--knots", default="1,10,100,1000,10000", help="comma-separated knot counts"
+        "--out", default="out/bench/engine", help="output directory (default out/bench/engine)"
     )
-    engine.add_argument("--seed", type=int, default=0, help="random seed of the evaluation points")
+    engine.add_argument(
+        "--knots",
+        type=integer_list(1),
+        default=(1, 10, 100, 1000, 10000),
+        help="comma-separated knot counts",
+    )
+    engine.add_argument(
+        "--seed", type=integer(0), default=0, help="random seed of the evaluation points"
+    )
     engine.set_defaults(func=_bench_engine)
     chain = bench_sub.add_parser(
         "chain", help="0th/1st/2nd-order evaluation time of a serial chain of 1..64 bodies (Fig. 6)"
     )
-    chain.add_argument("--out", default="benchmarks/results/chain-scaling", help="output directory")
-    chain.add_argument("--horizon", type=int, default=40, help="number of knots N")
+    chain.add_argument(
+        "--out",
+        default="out/bench/chain-scaling",
+        help="output directory (default out/bench/chain-scaling)",
+    )
+    chain.add_argument("--horizon", type=integer(1), default=40, help="number of knots N")
     chain.set_defaults(func=_bench_chain)
     drone = bench_sub.add_parser(
         "drone-docking",
         help="RIPM vs quaternion IPOPT on seeded drone docking cases (Table II, Fig. 4)",
     )
-    drone.add_argument("--n", type=int, default=100, help="number of cases")
-    drone.add_argument("--seed", type=int, default=0, help="seed of the case sampler")
+    drone.add_argument("--n", type=integer(1), default=100, help="number of cases")
+    drone.add_argument("--seed", type=integer(0), default=0, help="seed of the case sampler")
     drone.add_argument(
-        "--tol", type=float, default=1e-6, help="convergence tolerance of every method"
+        "--tol", type=real(), default=1e-6, help="convergence tolerance of every method"
     )
     drone.add_argument(
-        "--methods", default="ripm,ripm-input-limits,ipopt-quaternion", help="comma-separated"
+        "--methods",
+        type=names,
+        default=("ripm", "ripm-input-limits", "ipopt-quaternion"),
+        help="comma-separated",
     )
-    drone.add_argument("--out", default="benchmarks/results/drone-docking", help="output directory")
+    drone.add_argument(
+        "--out",
+        default="out/bench/drone-docking",
+        help="output directory (default out/bench/drone-docking)",
+    )
     drone.add_argument("--no-scaling", action="store_true", help="skip the N=40 vs N=160 timing")
     _add_pool_options(drone)
     drone.set_defaults(func=_bench_drone)
@@ -250,13 +291,20 @@ def build_parser() -> argparse.ArgumentParser:
         "iiwa-obstacle",
         help="maximal (RIPM) vs generalized (IPOPT) coordinates on seeded iiwa cases (Table III)",
     )
-    iiwa.add_argument("--n", type=int, default=100, help="number of cases")
-    iiwa.add_argument("--seed", type=int, default=0, help="seed of the case sampler")
+    iiwa.add_argument("--n", type=integer(1), default=100, help="number of cases")
+    iiwa.add_argument("--seed", type=integer(0), default=0, help="seed of the case sampler")
     iiwa.add_argument(
-        "--methods", default="ripm,ipopt,ipopt-no-restoration", help="comma-separated"
+        "--methods",
+        type=names,
+        default=("ripm", "ipopt", "ipopt-no-restoration"),
+        help="comma-separated: ripm, ipopt, ipopt-no-restoration, fddp, csqp",
     )
-    iiwa.add_argument("--horizon", type=int, default=40, help="number of steps N")
-    iiwa.add_argument("--out", default="benchmarks/results/iiwa-obstacle", help="output directory")
+    iiwa.add_argument("--horizon", type=integer(2), default=40, help="number of steps N")
+    iiwa.add_argument(
+        "--out",
+        default="out/bench/iiwa-obstacle",
+        help="output directory (default out/bench/iiwa-obstacle)",
+    )
     iiwa.add_argument(
         "--warm-start",
         default="linear",
@@ -281,15 +329,13 @@ def _add_constraint_option(parser: argparse.ArgumentParser) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse(parser, argv)
+    if isinstance(args, int):
+        return args
     if not hasattr(args, "func"):
         parser.print_help()
         return 2
-    try:
-        return int(args.func(args))
-    except MbplanError as exc:
-        print(f"mbplan: error: {exc}", file=sys.stderr)
-        return 2
+    return run_command(lambda: args.func(args))
 
 
 if __name__ == "__main__":

@@ -15,3 +15,7 @@ class RobotModelError(MbplanError, ValueError):
 
 class InfeasibleRequestError(MbplanError, ValueError):
     """A planning request that cannot be satisfied (start in collision, target out of reach, ...)."""
+
+
+class WarmStartWarning(UserWarning):
+    """A warm start that could not be built as asked and fell back to a simpler one."""

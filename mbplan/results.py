@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from mbplan.errors import InputError
+from mbplan.errors import InputError, MbplanError
+from mbplan.validation import output_file
 
 _ARRAYS = ("q", "v", "tau", "kkt_history", "R", "p", "tau_knots")
 _OPTIONAL = ("R", "p", "body_names", "tau_knots")
@@ -95,9 +97,9 @@ def save_npz(result: PlanResult, path: str | os.PathLike[str]) -> Path:
     """Write ``result`` to ``path`` (``.npz``) atomically: a temporary file in the same folder,
     then :func:`os.replace`. Every field is stored (``extra`` as JSON; None fields are left out);
     returns the path written."""
-    path = Path(path)
-    if path.suffix != ".npz":
-        raise InputError(f"save_npz: {path} must end in .npz")
+    path = output_file(path, (".npz",), "save_npz")
+    if not isinstance(result, PlanResult):
+        raise InputError(f"save_npz: expected a PlanResult, got {type(result).__name__}")
     arrays: dict[str, np.ndarray] = {}
     for f in fields(PlanResult):
         value = getattr(result, f.name)
@@ -111,23 +113,38 @@ def save_npz(result: PlanResult, path: str | os.PathLike[str]) -> Path:
                     f"save_npz: PlanResult.extra is not JSON-serialisable: {err}"
                 ) from None
         arrays[f.name] = np.asarray(value)
-    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         with open(tmp, "wb") as fh:
             np.savez(fh, **arrays)
         os.replace(tmp, path)
+    except OSError as err:  # a full disk, a folder removed meanwhile, ...
+        raise InputError(f"save_npz: cannot write {path}: {err.strerror or err}") from None
     finally:
         tmp.unlink(missing_ok=True)
     return path
 
 
 def load_npz(path: str | os.PathLike[str]) -> PlanResult:
-    """Read a :class:`PlanResult` written by :func:`save_npz`."""
-    with np.load(Path(path), allow_pickle=False) as data:
+    """Read a :class:`PlanResult` written by :func:`save_npz`; :class:`InputError` naming the
+    file if it is missing, unreadable or not such a result."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"load_npz: {path}: no such result file")
+    try:
+        return _load(path)
+    except MbplanError as err:
+        raise InputError(f"load_npz: {path}: {err}") from None
+    except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as err:
+        raise InputError(f"load_npz: {path} is not a PlanResult .npz file ({err})") from None
+
+
+def _load(path: Path) -> PlanResult:
+    with np.load(path, allow_pickle=False) as data:
         missing = [f.name for f in fields(PlanResult) if f.name not in data and _required(f.name)]
         if missing:
-            raise InputError(f"load_npz: {path} lacks the fields {missing}")
+            raise InputError(f"lacks the fields {missing}")
         kwargs: dict[str, Any] = {}
         for f in fields(PlanResult):
             if f.name not in data:

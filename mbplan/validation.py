@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Mapping
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -65,3 +67,42 @@ def as_rotation(value: ArrayLike, name: str) -> np.ndarray:
     if np.linalg.det(R) <= 0.0:
         raise InputError(f"{name}: determinant is not +1 (a reflection)")
     return R
+
+
+def output_file(path: str | os.PathLike[str], suffixes: tuple[str, ...], name: str) -> Path:
+    """``path`` as a :class:`Path` to a file that can be written (checked before any work):
+    one of ``suffixes``, not a directory, every existing ancestor a writable directory."""
+    path = Path(path)
+    if path.suffix.lower() not in suffixes:
+        raise InputError(
+            f"{name}: {str(path)!r} must end in {' or '.join(suffixes)}, got "
+            f"{path.suffix or 'no suffix'!r}"
+        )
+    if path.is_dir():
+        raise InputError(f"{name}: {path} is a directory, expected a {suffixes[0]} file")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise InputError(f"{name}: {path} exists and is not writable")
+    _writable_folder(path.parent, name)
+    return path
+
+
+def output_dir(path: str | os.PathLike[str], name: str) -> Path:
+    """``path`` as a :class:`Path` to a folder that exists or can be created and written."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{name}: {path} is a file, expected a directory")
+    _writable_folder(path, name)
+    return path
+
+
+def _writable_folder(folder: Path, name: str) -> None:
+    """The nearest existing ancestor of ``folder`` (itself included) is a writable directory."""
+    probe = folder.absolute()
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        if probe == folder.absolute():
+            raise InputError(f"{name}: {probe} is a file, not a directory")
+        raise InputError(f"{name}: {probe} is a file, so {folder} cannot be created under it")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise InputError(f"{name}: cannot write in {probe} (permission denied)")

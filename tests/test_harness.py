@@ -28,7 +28,8 @@ def test_resume_after_interrupted_run(tmp_path):
     # A kill mid-write leaves a truncated last line.
     with path.open("a") as f:
         f.write('{"case": 3, "method": "a", "succ')
-    rows = run_jobs(_jobs(5), path)
+    with pytest.warns(UserWarning, match="line 7: not valid JSON"):
+        rows = run_jobs(_jobs(5), path)
     lines = [json.loads(line) for line in path.read_text().splitlines()]
     keys = [(r["case"], r["method"]) for r in lines]
     assert len(keys) == len(set(keys)) == 10  # nothing lost, nothing twice

@@ -24,6 +24,7 @@ from mbplan.errors import InputError
 from mbplan.planning.drone import plan_docking
 from mbplan.solvers import RIPMOptions
 from mbplan.tasks.drone import DockingTask, rotation_angles, sample_docking_cases, simulate
+from mbplan.validation import as_int, as_real
 
 METHODS = ("ripm", "ripm-input-limits", "ipopt-quaternion")
 MAX_ITER = {"ripm": 100, "ripm-input-limits": 100, "ipopt-quaternion": 1000}  # as in Table II
@@ -99,11 +100,16 @@ def run(
     unknown = sorted(set(methods) - set(METHODS))
     if unknown:
         raise InputError(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
+    as_int(n, "n", minimum=1, what="number of cases")
+    as_int(seed, "seed", minimum=0, what="random seed")
+    as_real(tol, "tol", positive=True)
     jobs = [Job(i, m, solve_case, (m, n, seed, i, tol)) for m in methods for i in range(n)]
     t0 = time.perf_counter()
+    config = {"benchmark": "drone-docking", "seed": seed, "tol": tol, "max_iter": MAX_ITER}
     rows = run_jobs(
         jobs,
         out / "results.jsonl",
+        config=config,
         workers=workers,
         scheduler=scheduler,
         description="drone docking",

@@ -1,16 +1,17 @@
 """Benchmark harness: run (case, method) jobs, append one JSON line per job, resume, summarise.
 
 Jobs run in a local process pool by default, or on a Dask cluster when a scheduler address is
-given (``distributed`` extra). ``results.jsonl`` is appended and flushed per finished job, so a
-killed run resumes without redoing or losing cases: jobs already in the file are skipped, and a
-partially written last line (a kill mid-write) is dropped before appending.
+given (``distributed`` extra). Rows go to a :mod:`mbplan.benchmarks.store`: tagged with the hash
+of the run's configuration, appended and fsynced per finished job under a lock, so a killed run
+resumes without redoing, losing or mislabelling cases, and a run with another configuration or a
+second concurrent run into the same folder is refused.
 """
 
 from __future__ import annotations
 
-import json
-import os
-from collections.abc import Callable, Iterable, Sequence
+import contextlib
+import signal
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from mbplan.benchmarks.store import Appender, check_config, locked, repair
 from mbplan.errors import InputError
 
 
@@ -36,56 +38,45 @@ class Job:
         return (self.case, self.method)
 
 
-def read_results(path: Path) -> list[dict]:
-    """Complete lines of a results file; a truncated last line is removed from the file."""
-    if not path.exists():
-        return []
-    text = path.read_text()
-    lines = text.split("\n")
-    complete, rows = [], []
-    for line in lines:
-        if not line.strip():
-            continue
-        try:
-            rows.append(json.loads(line))
-            complete.append(line)
-        except json.JSONDecodeError:
-            break  # a line cut by a kill: everything after it is dropped
-    if len(complete) != len([ln for ln in lines if ln.strip()]):
-        path.write_text("".join(f"{ln}\n" for ln in complete))
-    return rows
+def read_results(path: Path, config: Mapping[str, Any] | None = None) -> list[dict]:
+    """The valid rows of a results file made with ``config`` (see :func:`store.repair`)."""
+    return repair(path, check_config(path, config or {})) if path.exists() else []
 
 
 def run_jobs(
     jobs: Sequence[Job],
     results_path: Path,
     *,
+    config: Mapping[str, Any] | None = None,
     workers: int = 1,
     scheduler: str | None = None,
     description: str = "benchmark",
 ) -> list[dict]:
-    """Run the jobs not yet in ``results_path``; return all rows (old and new)."""
-    results_path.parent.mkdir(parents=True, exist_ok=True)
-    rows = read_results(results_path)
-    done = {(r["case"], r["method"]) for r in rows}
-    todo = [j for j in jobs if j.key not in done]
+    """Run the jobs not yet in ``results_path``; return all rows (old and new).
+
+    ``config`` (JSON-serialisable) is everything besides (case, method) that changes a row; a
+    folder holding rows of another configuration is refused (:func:`store.check_config`)."""
     if workers < 1:
         raise InputError(f"workers must be >= 1, got {workers}")
-    with (
-        results_path.open("a") as sink,
-        tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc=description) as bar,
-    ):
-
-        def record(job: Job, row: dict) -> None:
-            row = {"case": job.case, "method": job.method, **row}
-            sink.write(json.dumps(row) + "\n")
-            sink.flush()
-            os.fsync(sink.fileno())
-            rows.append(row)
-            bar.update()
-
-        for job, row in _execute(todo, workers, scheduler):
-            record(job, row)
+    keys = [j.key for j in jobs]
+    if len(set(keys)) != len(keys):
+        raise InputError("run_jobs: a (case, method) job is given twice")
+    results_path.parent.mkdir(parents=True, exist_ok=True)
+    with locked(results_path):
+        key = check_config(results_path, config or {})
+        rows = repair(results_path, key)
+        done = {(r["case"], r["method"]) for r in rows}
+        todo = [j for j in jobs if j.key not in done]
+        sink = Appender(results_path)
+        try:
+            with tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc=description) as bar:
+                for job, row in _execute(todo, workers, scheduler):
+                    row = {"case": job.case, "method": job.method, **row, "config": key}
+                    sink.append(row)
+                    rows.append(row)
+                    bar.update()
+        finally:
+            sink.close()
     return rows
 
 
@@ -111,10 +102,45 @@ def _execute(
         for j in jobs:
             yield j, j.fn(*j.args)
         return
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(j.fn, *j.args): j for j in jobs}
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_signals)
+    try:
+        # The workers are forked by the first submit: an interrupt then would be lost in the
+        # fork handlers, so it waits (blocked) until the pool stands.
+        with _signals_blocked():
+            futures = {pool.submit(j.fn, *j.args): j for j in jobs}
         for fut in as_completed(futures):
             yield futures[fut], fut.result()
+    except BaseException:
+        # Interrupted (Ctrl-C, SIGTERM) or a job failed: stop the workers now instead of
+        # waiting for the running jobs; their rows are simply not written.
+        for process in list((getattr(pool, "_processes", None) or {}).values()):
+            process.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)  # joins the pool's thread: a quiet exit
+        raise
+    pool.shutdown()
+
+
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+@contextlib.contextmanager
+def _signals_blocked() -> Iterator[None]:
+    """Hold SIGINT, SIGTERM and SIGHUP pending for the block; they are delivered after it."""
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def _worker_signals() -> None:
+    """Workers leave Ctrl-C (sent to the whole process group) to the parent, which stops them
+    (SIGTERM: the default, quiet exit, not a handler inherited from the parent); they are
+    forked with these signals blocked (:func:`_signals_blocked`)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
 def summarize(rows: Sequence[dict], task: str, tol: float) -> dict[str, Any]:

@@ -16,7 +16,7 @@ import numpy as np
 from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, write_json
 from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
-from mbplan.planning.solve import METHODS, plan
+from mbplan.planning.solve import METHODS, check_plan_request, plan
 from mbplan.tasks.obstacle import sample_obstacle_cases
 from mbplan.verification import verify
 
@@ -82,16 +82,29 @@ def run(
     unknown = sorted(set(methods) - set(METHODS))
     if unknown:
         raise InputError(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
-    _cases(n, seed, N, warm_start, constraint)  # fail fast on bad input
+    first = _cases(n, seed, N, warm_start, constraint)[0]  # fail fast on bad input
+    for m in methods:
+        check_plan_request(first, m, tol, max_iter)  # tolerances, memory of the horizon
     args = (n, seed)
     jobs = [
         Job(i, m, solve_case, (m, *args, i, N, tol, max_iter, warm_start, constraint))
         for i in range(n)
         for m in methods
     ]
+    config = {
+        "benchmark": "iiwa-obstacle",
+        "robot": "iiwa",
+        "seed": seed,
+        "N": N,
+        "tol": tol,
+        "max_iter": max_iter,
+        "warm_start": warm_start,
+        "constraint": constraint,
+    }
     rows = run_jobs(
         jobs,
         out / "results.jsonl",
+        config=config,
         workers=workers,
         scheduler=scheduler,
         description="iiwa obstacle",
@@ -111,7 +124,7 @@ def run(
     summary["obstacle_constraint"] = constraint
     summary["command"] = (
         f"mbplan bench iiwa-obstacle --n {n} --seed {seed} --methods {','.join(methods)} "
-        f"--warm-start {warm_start} --constraint {constraint} --out {out}"
+        f"--horizon {N} --warm-start {warm_start} --constraint {constraint} --out {out}"
     )
     summary["machine"] = machine_info()
     write_json(out / "summary.json", summary)

@@ -26,7 +26,7 @@ from typing import Any
 import casadi as cs
 import numpy as np
 
-from mbplan.engine.jit import compile_function
+from mbplan.engine.jit import compile_functions
 from mbplan.engine.site_function import SiteFunction, Slot
 
 
@@ -101,7 +101,7 @@ class RiemannianFunction(SiteFunction):
             "hessian": cs.Function(f"{name}_hessian", [z, p, lam], [r0, jac_nz, hess_nz]),
         }
         if jit:
-            self._functions = {k: compile_function(f) for k, f in self._functions.items()}
+            self._functions = compile_functions(self._functions)
         self._mapped: dict[tuple[str, int], tuple] = {}
 
     def __repr__(self) -> str:

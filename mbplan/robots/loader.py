@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -161,7 +162,9 @@ def validate_urdf(path: str | os.PathLike[str]) -> None:
     types; a ``<limit>`` with effort and velocity on revolute and prismatic joints; a non-zero
     axis; every joint's parent and child links defined; one root link, every other link the
     child of exactly one joint, no loop; masses finite and non-negative; inertia matrices
-    positive semi-definite; the child link of a non-fixed joint has an ``<inertial>`` with
+    positive semi-definite with principal moments obeying the triangle inequality; finite
+    ``<origin>`` s; ``<limit>`` s with lower <= upper and non-negative effort and velocity; a
+    ``<mimic>`` naming a defined joint (warned about: it is planned as independent); the child link of a non-fixed joint has an ``<inertial>`` with
     positive mass.  (Positive definiteness of each moving body's inertia, after Pinocchio merges
     the links fixed to it, is checked by :func:`mbplan.multibody.maximal_model`.)
     """
@@ -183,6 +186,7 @@ def validate_urdf(path: str | os.PathLike[str]) -> None:
         links[name] = link
 
     parent_joint: dict[str, str] = {}  # child link -> joint
+    mimics: dict[str, ET.Element] = {}  # joint -> its <mimic>
     children: dict[str, list[str]] = {}  # parent link -> child links
     joint_names: set[str] = set()
     for joint in root.findall("joint"):
@@ -213,10 +217,26 @@ def validate_urdf(path: str | os.PathLike[str]) -> None:
             )
         parent_joint[child] = jname
         children.setdefault(parent, []).append(child)
+        _check_origin(joint, where)
         if jtype in ("revolute", "prismatic"):
             limit = _required_child(joint, "limit", where)
             for attr in ("effort", "velocity"):
-                _number(limit, attr, where)
+                if _number(limit, attr, where) < 0.0:
+                    raise RobotModelError(
+                        f"{where}: <limit {attr}={limit.get(attr)!r}> is negative"
+                    )
+            lower, upper = (
+                _number(limit, a, where) if limit.get(a) is not None else 0.0
+                for a in ("lower", "upper")
+            )
+            if lower > upper:
+                raise RobotModelError(
+                    f"{where}: <limit lower={limit.get('lower')!r} upper={limit.get('upper')!r}> "
+                    "is inverted (lower > upper)"
+                )
+        mimic = joint.find("mimic")
+        if mimic is not None:
+            mimics[jname] = mimic
         axis = joint.find("axis")
         if jtype != "fixed" and axis is not None:
             _check_axis(axis.get("xyz", "1 0 0"), where)
@@ -240,9 +260,44 @@ def validate_urdf(path: str | os.PathLike[str]) -> None:
         raise RobotModelError(f"URDF {path}: links {', '.join(loop)} form a kinematic loop")
 
     for name, link in links.items():
+        where = f"URDF {path}: link {name!r}"
         inertial = link.find("inertial")
         if inertial is not None:
-            _mass_and_inertia(inertial, f"URDF {path}: link {name!r}")
+            _mass_and_inertia(inertial, where)
+        for tag in ("inertial", "visual", "collision"):
+            for element in link.findall(tag):
+                _check_origin(element, f"{where} <{tag}>")
+    for jname, mimic in mimics.items():
+        where = f"URDF {path}: joint {jname!r} <mimic>"
+        leader = _required_attr(mimic, "joint", where)
+        if leader not in joint_names:
+            raise RobotModelError(f"{where} follows joint {leader!r}, which is not defined")
+        for attr in ("multiplier", "offset"):
+            if mimic.get(attr) is not None:
+                _number(mimic, attr, where)
+        warnings.warn(
+            f"{where}: mbplan plans mimic joints as independent joints (Pinocchio's default); "
+            f"{jname!r} will not follow {leader!r}",
+            stacklevel=4,
+        )
+
+
+def _check_origin(element: ET.Element, where: str) -> None:
+    origin = element.find("origin")
+    if origin is None:
+        return
+    for attr in ("xyz", "rpy"):
+        text = origin.get(attr)
+        if text is None:
+            continue
+        try:
+            values = [float(x) for x in text.split()]
+        except ValueError:
+            values = []
+        if len(values) != 3 or not all(math.isfinite(v) for v in values):
+            raise RobotModelError(
+                f"{where} <origin {attr}={text!r}>: expected three finite numbers"
+            )
 
 
 def _check_axis(text: str, where: str) -> None:
@@ -274,9 +329,15 @@ def _mass_and_inertia(inertial: ET.Element, where: str) -> tuple[float, np.ndarr
     )
     inertia = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
     moments = np.linalg.eigvalsh(inertia)
-    if moments[0] < -1e-12 * max(1.0, abs(moments[-1])):
+    tol = 1e-12 * max(1.0, abs(moments[-1]))
+    if moments[0] < -tol:
         raise RobotModelError(
             f"{where} has a non-positive-definite inertia (principal moments {moments})"
+        )
+    if moments[0] + moments[1] < moments[2] - max(tol, 1e-9 * moments[2]):
+        raise RobotModelError(
+            f"{where}: <inertia> principal moments {moments} violate the triangle inequality "
+            "(I1 + I2 >= I3 holds for every rigid body)"
         )
     return mass, inertia
 

@@ -47,6 +47,7 @@ import numpy as np
 import qdldl
 import scipy.sparse as sp
 
+from mbplan.engine.jit import announce_uncached_numba, numba_cached
 from mbplan.errors import InputError
 
 
@@ -613,6 +614,7 @@ def _analysis(indptr: np.ndarray, indices: np.ndarray) -> _Analysis:
         if hit is not None:
             _ANALYSES.move_to_end(key)
             return hit
+    announce_uncached_numba(*_ENTRY_KERNELS)  # first run only
     n = key[0]
     rows = np.repeat(np.arange(n), np.diff(indptr))
     hit = _Analysis(n, rows, indices, _amd_order(indptr, indices))
@@ -798,3 +800,26 @@ class KKTSystem:
         nrm_r = np.max(np.abs(resid), initial=0.0)
         ratio = nrm_r / denom if denom > 0 else nrm_r
         return resid, float(ratio) if np.isfinite(ratio) else np.inf
+
+
+_ENTRY_KERNELS = (_upper_csc, _etree, _postorder, _supernodes, _front_rows, _assembly_maps)
+_ENTRY_KERNELS += (_factor, _solve)
+
+
+def compile_kernels_in_background() -> threading.Thread | None:
+    """If the numba kernels are not cached yet, compile them in a daemon thread (a tiny KKT
+    system through the public path, so with the dtypes of real use) and return it: a caller
+    that then spends its time in a C compiler (the CasADi JIT) gets them for free."""
+    if all(numba_cached(k) for k in _ENTRY_KERNELS):
+        return None
+
+    def tiny_solve() -> None:
+        kkt = KKTSystem(2, 1, 1)
+        one = sp.csr_matrix(np.ones((1, 2)))
+        kkt.set_matrices(sp.eye(2, format="csr"), one, one)
+        kkt.factorize(np.array([0.0, 0.0, -1.0, -1.0]), 1e-9)
+        kkt.solve(np.ones(4))
+
+    thread = threading.Thread(target=tiny_solve, name="mbplan-numba-compile", daemon=True)
+    thread.start()
+    return thread

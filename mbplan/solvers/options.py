@@ -139,6 +139,20 @@ class RIPMOptions:
     """0: silent; 1: an IPOPT-like line per iteration and a summary."""
 
     def __post_init__(self) -> None:
+        kinds = {
+            "int": (int, np.integer),
+            "float": (int, float, np.integer, np.floating),
+            "bool": (bool, np.bool_),
+            "str": str,
+        }
+        wrong = [
+            f"{f.name}={getattr(self, f.name)!r} (expected {f.type})"
+            for f in dataclasses.fields(self)
+            if not isinstance(getattr(self, f.name), kinds[f.type])
+            or (f.type != "bool" and isinstance(getattr(self, f.name), bool))
+        ]
+        if wrong:
+            raise InputError(f"RIPM option(s) of the wrong type: {', '.join(wrong)}")
         checks = {
             "max_iter": self.max_iter >= 0,
             "max_ls_trials": self.max_ls_trials >= 1,

@@ -22,6 +22,7 @@ with ``s_k = 1`` and ``s_N = terminal_factor``; knot 0 is fixed at ``(q0, v0 = 0
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field, replace
 from functools import cache, lru_cache
 from typing import Literal
@@ -30,7 +31,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from mbplan.errors import InfeasibleRequestError, InputError, RobotModelError
+from mbplan.errors import InfeasibleRequestError, InputError, RobotModelError, WarmStartWarning
 from mbplan.multibody.collision import (
     CollisionPairs,
     chain_kinematics,
@@ -434,6 +435,7 @@ def sample_obstacle_cases(
     penetrating an obstacle). Target and obstacles are fixed (``task_fields`` are passed on to
     :class:`ObstacleTask`, e.g. ``dt``, ``q_target``, ``obstacles``, ``margin``)."""
     as_int(n, "n", minimum=1, what="number of cases")
+    as_int(seed, "seed", minimum=0, what="random seed")
     if "q0" in task_fields:
         raise InputError("q0 is sampled; do not pass it")
     model = robot_description(robot).model
@@ -488,7 +490,16 @@ def joint_interpolation(task: ObstacleTask) -> np.ndarray:
         path = task.q0 + first * (via - task.q0) + second * (task.q_target - via)
         if _path_clearance(task, path) >= 0:
             best, best_length = path, length
+    if best is linear:
+        warnings.warn(WarmStartWarning(VIA_FALLBACK), stacklevel=2)
     return best
+
+
+VIA_FALLBACK = (
+    f'warm start "via": none of {VIA_CANDIDATES} via points gives a collision-free path at the '
+    "knots; using the linear warm start (make this an error with "
+    'warnings.simplefilter("error", mbplan.errors.WarmStartWarning) or --strict-warm-start)'
+)
 
 
 def _path_clearance(task: ObstacleTask, path: np.ndarray) -> float:

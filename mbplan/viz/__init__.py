@@ -12,6 +12,7 @@ from mbplan.viz.meshcat_replay import (
     read_result,
     replay,
     replay_main,
+    serve,
     static_html,
 )
 from mbplan.viz.plots import plot_convergence, plot_sparsity, plot_trajectories, result_label
@@ -31,5 +32,6 @@ __all__ = [
     "replay",
     "replay_main",
     "result_label",
+    "serve",
     "static_html",
 ]

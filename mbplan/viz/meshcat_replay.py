@@ -35,7 +35,6 @@ import subprocess
 import sys
 import threading
 import webbrowser
-import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,6 +56,7 @@ from mbplan.multibody import MaximalModel, maximal_model
 from mbplan.results import PlanResult, load_npz
 from mbplan.robots import RobotDescription, available_robots
 from mbplan.tasks.obstacle import Cylinder, Obstacle, ObstacleTask, robot_description
+from mbplan.validation import output_file
 from mbplan.viz.plots import result_label, write_atomic
 
 HOST = "127.0.0.1"  # the only interface the live server listens on
@@ -223,17 +223,9 @@ def infer_robot(results: Sequence[PlanResult], default: str = "iiwa") -> str:
 
 
 def read_result(path: str | os.PathLike[str]) -> PlanResult:
-    """:func:`mbplan.results.load_npz` with an :class:`InputError` naming the file for a
-    missing, unreadable or incomplete one."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such result file")
-    try:
-        return load_npz(path)
-    except MbplanError:
-        raise
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as err:
-        raise InputError(f"{path}: not a PlanResult .npz file ({err})") from None
+    """:func:`mbplan.results.load_npz` (an :class:`InputError` naming the file for a missing,
+    unreadable or incomplete one)."""
+    return load_npz(path)
 
 
 def replay_main(
@@ -260,14 +252,30 @@ def replay_main(
     if html is not None:
         print(f"wrote {_write_page(build, html)}")
         return 0
-    with MeshcatServer() as server:
-        build(server.viewer)
-        print(f"MeshCat viewer at {server.url} (Ctrl-C stops the server)", flush=True)
-        if not no_browser:
-            webbrowser.open(server.url)
-        with contextlib.suppress(KeyboardInterrupt):
-            server.wait()
+    _serve_until_interrupted(build, open_browser=not no_browser)
     return 0
+
+
+def serve(
+    results: Sequence[PlanResult],
+    task: ObstacleTask | None = None,
+    *,
+    robot: str | None = None,
+    open_browser: bool = True,
+) -> None:
+    """The :func:`replay` scene served live on 127.0.0.1 until Ctrl-C (the URL printed once the
+    scene is loaded): what ``mbplan plan --viz`` and ``mbplan replay`` do."""
+    _serve_until_interrupted(_robot_scene(results, task, robot, None), open_browser=open_browser)
+
+
+def _serve_until_interrupted(scene: _Scene, open_browser: bool) -> None:
+    # Ctrl-C from the moment the URL can be printed ends serving quietly.
+    with MeshcatServer() as server, contextlib.suppress(KeyboardInterrupt):
+        scene(server.viewer)
+        print(f"MeshCat viewer at {server.url} (Ctrl-C stops the server)", flush=True)
+        if open_browser:
+            webbrowser.open(server.url)
+        server.wait()
 
 
 @functools.cache
@@ -699,9 +707,7 @@ for (const command of [{commands}]) {{
 
 def _write_page(scene: _Scene, path: str | os.PathLike[str]) -> Path:
     """Draw ``scene`` into a recorder and write the static page atomically."""
-    path = Path(path)
-    if path.suffix.lower() not in (".html", ".htm"):
-        raise InputError(f"{path}: a static page must end in .html")
+    path = output_file(path, (".html", ".htm"), "static page")
     recorder = _Recorder()
     scene(meshcat.Visualizer(window=recorder))
     legend = "<br>".join(
