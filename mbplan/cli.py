@@ -78,24 +78,28 @@ def _bench_iiwa(args: argparse.Namespace) -> int:
 
 
 def _plan(args: argparse.Namespace) -> int:
-    from mbplan.planning.solve import plan
+    from mbplan.paper import iiwa_obstacle, iiwa_obstacle_cases
+    from mbplan.planning.solve import METHODS, plan
     from mbplan.results import save_npz
-    from mbplan.tasks.obstacle import ObstacleTask, sample_obstacle_cases
     from mbplan.verification import verify
 
     if args.task != "obstacle":
         raise InputError(f"unknown task {args.task!r}; available: obstacle")
-    fields = {
-        "N": args.horizon,
-        "warm_start": args.warm_start,
-        "obstacle_constraint": args.constraint,
-    }
+    if args.method not in METHODS:
+        raise InputError(f"unknown method {args.method!r}; choose from {', '.join(METHODS)}")
+    if args.robot != "iiwa":
+        raise InputError(
+            f"the obstacle task is defined for the iiwa; for {args.robot!r} build an "
+            "mbplan.OCP (README, Python API)"
+        )
     if args.seed is None:
-        task = ObstacleTask(robot=args.robot, **fields)
+        problem = iiwa_obstacle(N=args.horizon, constraint=args.constraint)
     else:
-        task = sample_obstacle_cases(args.robot, 1, args.seed, **fields)[0]
-    result = plan(task, args.method, tol=args.tol, max_iter=args.max_iter)
-    check = verify(task, result)
+        problem = iiwa_obstacle_cases(1, args.seed, N=args.horizon, constraint=args.constraint)[0]
+    result = plan(
+        problem, args.method, warm_start=args.warm_start, tol=args.tol, max_iter=args.max_iter
+    )
+    check = verify(problem, result)
     print(
         f"{result.method}: {result.status} after {result.iterations} iterations, "
         f"{result.solve_time_s:.2f} s ({1e3 * result.time_per_iter_s:.1f} ms/iteration)"
@@ -110,7 +114,7 @@ def _plan(args: argparse.Namespace) -> int:
     if args.viz or args.html:
         from mbplan.viz import replay
 
-        print(replay([result], task, html=args.html, open_browser=args.viz))
+        print(replay([result], html=args.html, open_browser=args.viz))
     return 0 if result.success and check.passed else 1
 
 

@@ -10,10 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from mbplan.errors import InputError
+from mbplan.errors import InputError, MbplanError
 
 _ARRAYS = ("q", "v", "tau", "kkt_history", "R", "p", "tau_knots")
-_OPTIONAL = ("R", "p", "body_names", "tau_knots")
+_OPTIONAL = ("R", "p", "body_names", "tau_knots", "formulation", "violations", "goal_errors")
+_JSON = ("extra", "violations", "goal_errors")
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,6 +33,12 @@ class PlanResult:
     ``tau_knots (N+1, nv)``: the torque then ramps linearly from ``tau_knots[k]`` to
     ``tau_knots[k+1]`` over ``[t_k, t_{k+1}]`` (first-order hold) and ``tau`` must be its interval
     mean. ``extra`` holds method-specific numbers (JSON-serialisable).
+
+    One meaning of ``success`` for every method (:func:`mbplan.plan`): the solver converged to
+    its tolerance, the trajectory is finite, and every hard constraint of the OCP holds at the
+    planned knots (``violations``: largest violation per constraint name). ``goal_errors``: the
+    error of each soft goal (a cost with a tolerance) at its last knot. ``ocp`` is the problem
+    the plan solves (saved in the ``.npz``), ``formulation`` ``"maximal"``/``"generalized"``/…
     """
 
     method: str
@@ -53,6 +60,10 @@ class PlanResult:
     p: np.ndarray | None = None
     body_names: tuple[str, ...] | None = None
     tau_knots: np.ndarray | None = None
+    formulation: str | None = None
+    violations: dict[str, float] | None = None
+    goal_errors: dict[str, float] | None = None
+    ocp: Any = None
 
     def __post_init__(self) -> None:
         for name in _ARRAYS:
@@ -90,6 +101,10 @@ class PlanResult:
         if self.body_names is not None:
             object.__setattr__(self, "body_names", tuple(str(n) for n in self.body_names))
 
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """:func:`save_npz` of this result (with its OCP); returns the path written."""
+        return save_npz(self, path)
+
 
 def save_npz(result: PlanResult, path: str | os.PathLike[str]) -> Path:
     """Write ``result`` to ``path`` (``.npz``) atomically: a temporary file in the same folder,
@@ -103,7 +118,10 @@ def save_npz(result: PlanResult, path: str | os.PathLike[str]) -> Path:
         value = getattr(result, f.name)
         if value is None:
             continue
-        if f.name == "extra":
+        if f.name == "ocp":
+            arrays["ocp"] = np.asarray(json.dumps(value.to_dict()))
+            continue
+        if f.name in _JSON:
             try:
                 value = json.dumps(value, default=_to_json)
             except (TypeError, ValueError) as err:
@@ -122,9 +140,12 @@ def save_npz(result: PlanResult, path: str | os.PathLike[str]) -> Path:
     return path
 
 
-def load_npz(path: str | os.PathLike[str]) -> PlanResult:
-    """Read a :class:`PlanResult` written by :func:`save_npz`."""
+def load_npz(path: str | os.PathLike[str], robot: Any = None) -> PlanResult:
+    """Read a :class:`PlanResult` written by :func:`save_npz`, with its OCP when the file has
+    one (files from before the OCP API have none: ``ocp`` is then None). The OCP's robot is
+    loaded from its source, or is ``robot`` (needed when it was an in-memory model)."""
     with np.load(Path(path), allow_pickle=False) as data:
+        data_keys = set(data.files)
         missing = [f.name for f in fields(PlanResult) if f.name not in data and _required(f.name)]
         if missing:
             raise InputError(f"load_npz: {path} lacks the fields {missing}")
@@ -133,7 +154,9 @@ def load_npz(path: str | os.PathLike[str]) -> PlanResult:
             if f.name not in data:
                 continue
             value = data[f.name]
-            if f.name == "extra":
+            if f.name == "ocp":
+                kwargs["ocp"], unavailable = _load_ocp(str(value), robot, path)
+            elif f.name in _JSON:
                 kwargs[f.name] = json.loads(str(value))
             elif f.name == "body_names":
                 kwargs[f.name] = tuple(str(n) for n in value)
@@ -141,11 +164,28 @@ def load_npz(path: str | os.PathLike[str]) -> PlanResult:
                 kwargs[f.name] = np.array(value)
             else:
                 kwargs[f.name] = value.item()
+    if "ocp" in data_keys and kwargs["ocp"] is None:
+        kwargs["extra"] = {**kwargs.get("extra", {}), "ocp_unavailable": unavailable}
     return PlanResult(**kwargs)
 
 
+def _load_ocp(text: str, robot: Any, path: Any) -> tuple[Any, str]:
+    """The saved OCP, or None and why not (e.g. its robot was an in-memory model)."""
+    from mbplan.ocp.problem import OCP
+
+    try:
+        return OCP.from_dict(json.loads(text), robot), ""
+    except MbplanError as err:
+        return None, f"{path}: cannot rebuild the plan's OCP: {err}"
+
+
 def _required(name: str) -> bool:
-    return name not in _OPTIONAL and name not in ("kkt_history", "entered_restoration", "extra")
+    return name not in _OPTIONAL and name not in (
+        "kkt_history",
+        "entered_restoration",
+        "extra",
+        "ocp",
+    )
 
 
 def _to_json(value: Any) -> Any:
