@@ -1,8 +1,10 @@
 """Plan for another example-robot-data arm (UR5 by default) in both formulations.
 
     python examples/other_arm.py --robot ur5 --out out/ur5
-Any fixed-base arm whose joints are all revolute works in maximal coordinates (the panda's finger
-joints are prismatic: its generalized plan works, the maximal one raises a clear error).
+A joint-space point-to-point :class:`mbplan.OCP` (:func:`mbplan.paper.tracking_ocp`) with an
+obstacle out of the way. Any fixed-base arm whose joints are all revolute works in maximal
+coordinates; prismatic joints (the panda's fingers) must be locked (``load_robot(..., lock=)``).
+Exits with status 1 unless both plans are solved and verified.
 """
 
 from __future__ import annotations
@@ -12,41 +14,31 @@ from pathlib import Path
 
 import numpy as np
 
-from mbplan.errors import MbplanError
-from mbplan.planning.solve import plan
-from mbplan.results import save_npz
-from mbplan.tasks.obstacle import Cylinder, ObstacleTask
-from mbplan.verification import verify
+import mbplan as mb
+from mbplan.paper import add_obstacle_constraint, tracking_ocp
 
 
 def main(robot: str, out: Path, N: int, max_iter: int) -> int:
-    from mbplan.robots import load
-
-    model = load(robot).model
-    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
-    mid = 0.5 * (np.maximum(lo, -np.pi) + np.minimum(hi, np.pi))
-    q0 = mid + 0.15 * (np.minimum(hi, np.pi) - np.maximum(lo, -np.pi))
-    q_target = mid - 0.15 * (np.minimum(hi, np.pi) - np.maximum(lo, -np.pi))
-    task = ObstacleTask(
-        robot=robot,
-        N=N,
-        dt=3.0 / N,
-        q0=q0,
-        q_target=q_target,
-        obstacles=(Cylinder((2.0, 2.0), 0.05),),
+    model = mb.load_robot(robot).model
+    lo, hi = (
+        np.maximum(model.lowerPositionLimit, -np.pi),
+        np.minimum(model.upperPositionLimit, np.pi),
     )
+    mid = 0.5 * (lo + hi)
+    q0, q_target = mid + 0.15 * (hi - lo), mid - 0.15 * (hi - lo)
+    scene = mb.Scene().add_cylinder("post", 0.05, 1.5, (2.0, 2.0, 0.75))
+    ocp = add_obstacle_constraint(tracking_ocp(robot, q0, q_target, scene, N=N, dt=3.0 / N), "com")
+    ok = True
     for method in ("ripm", "ipopt"):
-        try:
-            r = plan(task, method, max_iter=max_iter)
-        except MbplanError as exc:
-            print(f"{method}: {exc}")
-            continue
-        check = verify(task, r)
+        r = mb.plan(ocp, method, warm_start="linear", max_iter=max_iter)
+        check = mb.verify(r)
         print(
-            f"{r.method}: {r.status}, {r.iterations} iterations, {r.total_time_s:.2f} s, verified: {check.passed}"
+            f"{r.method}: {r.status}, {r.iterations} iterations, {r.total_time_s:.2f} s, "
+            f"verified: {check.passed}" + "".join(f"\n  - {x}" for x in check.reasons)
         )
-        print(f"wrote {save_npz(r, out / f'{robot}_{method}.npz')}")
-    return 0
+        print(f"wrote {r.save(out / f'{robot}_{method}.npz')}")
+        ok &= r.success and check.passed
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

@@ -1,6 +1,32 @@
-"""mbplan: trajectory optimization of multi-body robots on matrix Lie groups."""
+"""mbplan: trajectory optimization of multi-body robots on matrix Lie groups.
 
-from mbplan.errors import MbplanError
+The user API: describe the problem once (:class:`OCP` with a :class:`Scene` and residuals from
+:mod:`mbplan.residuals`), :func:`plan` it with any method, :func:`verify` the result, save it.
+"""
 
-__all__ = ["MbplanError"]
+from mbplan import residuals
+from mbplan.errors import InfeasibleRequestError, InputError, MbplanError, RobotModelError
+from mbplan.ocp import OCP, Robot, Scene, load_robot
+from mbplan.planning.solve import METHODS, plan
+from mbplan.results import PlanResult, load_npz, save_npz
+from mbplan.verification import Verification, verify
+
+__all__ = [
+    "METHODS",
+    "OCP",
+    "InfeasibleRequestError",
+    "InputError",
+    "MbplanError",
+    "PlanResult",
+    "Robot",
+    "RobotModelError",
+    "Scene",
+    "Verification",
+    "load_npz",
+    "load_robot",
+    "plan",
+    "residuals",
+    "save_npz",
+    "verify",
+]
 __version__ = "0.1.0"

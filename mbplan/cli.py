@@ -81,30 +81,32 @@ def _bench_iiwa(args: argparse.Namespace) -> int:
 
 
 def _plan(args: argparse.Namespace) -> int:
+    from mbplan.paper import iiwa_obstacle, iiwa_obstacle_cases
     from mbplan.planning.solve import METHODS, plan
     from mbplan.results import save_npz
-    from mbplan.tasks.obstacle import ObstacleTask, sample_obstacle_cases
     from mbplan.verification import verify
 
     if args.task != "obstacle":
         raise InputError(f"unknown task {args.task!r}; available: obstacle")
     if args.method not in METHODS:
         raise InputError(f"unknown method {args.method!r}; choose from {', '.join(METHODS)}")
+    if args.robot != "iiwa":
+        raise InputError(
+            f"the obstacle task is defined for the iiwa; for {args.robot!r} build an "
+            "mbplan.OCP (README, Python API)"
+        )
     out = output_file(args.out, (".npz",), "--out") if args.out else None
     html = output_file(args.html, (".html", ".htm"), "--html") if args.html else None
-    fields = {
-        "N": args.horizon,
-        "warm_start": args.warm_start,
-        "obstacle_constraint": args.constraint,
-    }
     if args.strict_warm_start:
         warnings.simplefilter("error", WarmStartWarning)
     if args.seed is None:
-        task = ObstacleTask(robot=args.robot, **fields)
+        problem = iiwa_obstacle(N=args.horizon, constraint=args.constraint)
     else:
-        task = sample_obstacle_cases(args.robot, 1, args.seed, **fields)[0]
-    result = plan(task, args.method, tol=args.tol, max_iter=args.max_iter)
-    check = verify(task, result)
+        problem = iiwa_obstacle_cases(1, args.seed, N=args.horizon, constraint=args.constraint)[0]
+    result = plan(
+        problem, args.method, warm_start=args.warm_start, tol=args.tol, max_iter=args.max_iter
+    )
+    check = verify(problem, result)
     print(
         f"{result.method}: {result.status} after {result.iterations} iterations, "
         f"{result.solve_time_s:.2f} s ({1e3 * result.time_per_iter_s:.1f} ms/iteration)"
@@ -120,11 +122,11 @@ def _plan(args: argparse.Namespace) -> int:
     if html:
         from mbplan.viz import static_html
 
-        print(f"wrote {static_html([result], html, task)}")
+        print(f"wrote {static_html([result], html, problem)}")
     if args.viz:
         from mbplan.viz import serve
 
-        serve([result], task)
+        serve([result], problem)
     return code
 
 

@@ -15,7 +15,8 @@ from mbplan.errors import InputError, MbplanError
 from mbplan.validation import output_file
 
 _ARRAYS = ("q", "v", "tau", "kkt_history", "R", "p", "tau_knots")
-_OPTIONAL = ("R", "p", "body_names", "tau_knots")
+_OPTIONAL = ("R", "p", "body_names", "tau_knots", "formulation", "violations", "goal_errors")
+_JSON = ("extra", "violations", "goal_errors")
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,6 +35,12 @@ class PlanResult:
     ``tau_knots (N+1, nv)``: the torque then ramps linearly from ``tau_knots[k]`` to
     ``tau_knots[k+1]`` over ``[t_k, t_{k+1}]`` (first-order hold) and ``tau`` must be its interval
     mean. ``extra`` holds method-specific numbers (JSON-serialisable).
+
+    One meaning of ``success`` for every method (:func:`mbplan.plan`): the solver converged to
+    its tolerance, the trajectory is finite, and every hard constraint of the OCP holds at the
+    planned knots (``violations``: largest violation per constraint name). ``goal_errors``: the
+    error of each soft goal (a cost with a tolerance) at its last knot. ``ocp`` is the problem
+    the plan solves (saved in the ``.npz``), ``formulation`` ``"maximal"``/``"generalized"``/…
     """
 
     method: str
@@ -55,6 +62,10 @@ class PlanResult:
     p: np.ndarray | None = None
     body_names: tuple[str, ...] | None = None
     tau_knots: np.ndarray | None = None
+    formulation: str | None = None
+    violations: dict[str, float] | None = None
+    goal_errors: dict[str, float] | None = None
+    ocp: Any = None
 
     def __post_init__(self) -> None:
         for name in _ARRAYS:
@@ -92,6 +103,10 @@ class PlanResult:
         if self.body_names is not None:
             object.__setattr__(self, "body_names", tuple(str(n) for n in self.body_names))
 
+    def save(self, path: str | os.PathLike[str]) -> Path:
+        """:func:`save_npz` of this result (with its OCP); returns the path written."""
+        return save_npz(self, path)
+
 
 def save_npz(result: PlanResult, path: str | os.PathLike[str]) -> Path:
     """Write ``result`` to ``path`` (``.npz``) atomically: a temporary file in the same folder,
@@ -105,7 +120,10 @@ def save_npz(result: PlanResult, path: str | os.PathLike[str]) -> Path:
         value = getattr(result, f.name)
         if value is None:
             continue
-        if f.name == "extra":
+        if f.name == "ocp":
+            arrays["ocp"] = np.asarray(json.dumps(value.to_dict()))
+            continue
+        if f.name in _JSON:
             try:
                 value = json.dumps(value, default=_to_json)
             except (TypeError, ValueError) as err:
@@ -126,22 +144,25 @@ def save_npz(result: PlanResult, path: str | os.PathLike[str]) -> Path:
     return path
 
 
-def load_npz(path: str | os.PathLike[str]) -> PlanResult:
-    """Read a :class:`PlanResult` written by :func:`save_npz`; :class:`InputError` naming the
-    file if it is missing, unreadable or not such a result."""
+def load_npz(path: str | os.PathLike[str], robot: Any = None) -> PlanResult:
+    """Read a :class:`PlanResult` written by :func:`save_npz`, with its OCP when the file has
+    one (files from before the OCP API have none: ``ocp`` is then None). The OCP's robot is
+    loaded from its source, or is ``robot`` (needed when it was an in-memory model).
+    :class:`InputError` naming the file if it is missing, unreadable or not such a result."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"load_npz: {path}: no such result file")
     try:
-        return _load(path)
+        return _load(path, robot)
     except MbplanError as err:
         raise InputError(f"load_npz: {path}: {err}") from None
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as err:
         raise InputError(f"load_npz: {path} is not a PlanResult .npz file ({err})") from None
 
 
-def _load(path: Path) -> PlanResult:
+def _load(path: Path, robot: Any) -> PlanResult:
     with np.load(path, allow_pickle=False) as data:
+        data_keys = set(data.files)
         missing = [f.name for f in fields(PlanResult) if f.name not in data and _required(f.name)]
         if missing:
             raise InputError(f"lacks the fields {missing}")
@@ -150,7 +171,9 @@ def _load(path: Path) -> PlanResult:
             if f.name not in data:
                 continue
             value = data[f.name]
-            if f.name == "extra":
+            if f.name == "ocp":
+                kwargs["ocp"], unavailable = _load_ocp(str(value), robot, path)
+            elif f.name in _JSON:
                 kwargs[f.name] = json.loads(str(value))
             elif f.name == "body_names":
                 kwargs[f.name] = tuple(str(n) for n in value)
@@ -158,11 +181,28 @@ def _load(path: Path) -> PlanResult:
                 kwargs[f.name] = np.array(value)
             else:
                 kwargs[f.name] = value.item()
+    if "ocp" in data_keys and kwargs["ocp"] is None:
+        kwargs["extra"] = {**kwargs.get("extra", {}), "ocp_unavailable": unavailable}
     return PlanResult(**kwargs)
 
 
+def _load_ocp(text: str, robot: Any, path: Any) -> tuple[Any, str]:
+    """The saved OCP, or None and why not (e.g. its robot was an in-memory model)."""
+    from mbplan.ocp.problem import OCP
+
+    try:
+        return OCP.from_dict(json.loads(text), robot), ""
+    except MbplanError as err:
+        return None, f"{path}: cannot rebuild the plan's OCP: {err}"
+
+
 def _required(name: str) -> bool:
-    return name not in _OPTIONAL and name not in ("kkt_history", "entered_restoration", "extra")
+    return name not in _OPTIONAL and name not in (
+        "kkt_history",
+        "entered_restoration",
+        "extra",
+        "ocp",
+    )
 
 
 def _to_json(value: Any) -> Any:

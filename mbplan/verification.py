@@ -45,16 +45,17 @@ Thresholds (all documented values are checked by ``tests/test_verification.py``)
   torques whose gravity part is 2 % off would pass (ratio 0.78); per knot, their velocity ratio
   exceeds 4 (the ``q`` row alone cannot see torque errors: ``q_{k+1} = q_k + Δt v_k`` does not
   involve ``τ``).
-* ``min_obstacle_distance_m`` ≥ 0 — the smallest clearance over all RK4 substeps of the
-  replayed intervals: eq. (62) COM-to-axis distance minus the radius (without the task's margin,
-  which exists to absorb the inter-knot motion), and, for general :class:`Obstacle` s, the coal
-  distance between the robot's collision geometry and the obstacle (for
-  ``obstacle_constraint = "distance"`` tasks: of every obstacle, cylinders as finite solids).
-* ``final_goal_error_rad`` ≤ ``task.goal_tolerance`` — ``‖q(T) - q_target‖_∞`` at the end of
-  the replayed last interval (the tracking cost is soft, so a plan that converged to a local
-  minimum blocked by the obstacle fails here).
-* ``torque_limit_violation`` ≤ :data:`TORQUE_TOLERANCE` ``· max(1, limit)`` — the largest
-  ``|τ_k| - limit`` (N m; over ``tau_knots`` when given), relative to the solvers' tolerance 1e-6.
+* every constraint of the OCP, by name (:attr:`Verification.violations`): obstacle constraints
+  (:class:`~mbplan.ocp.residuals.Distance`, :class:`~mbplan.ocp.residuals.ComOutsideCylinder`)
+  on every RK4 substep of the replayed intervals without their margin (which exists to absorb
+  the inter-knot motion): ``min_obstacle_distance_m`` ≥ 0, coal through the planner's own path
+  (:mod:`mbplan.multibody.collision`); the others at the planned knots within
+  :data:`CONSTRAINT_TOLERANCE`; torque limits on the applied torques (``tau_knots`` when given)
+  within :data:`TORQUE_TOLERANCE` ``· max(1, limit)``.
+* soft goals (costs with a ``tolerance``): the residual's ∞-norm at the end of the replayed
+  last interval (``goal_errors``; ``final_goal_error_rad`` is the largest) ≤ the tolerance (the
+  tracking cost is soft, so a plan that converged to a local minimum blocked by the obstacle
+  fails here).
 """
 
 from __future__ import annotations
@@ -65,20 +66,16 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import InputError
+from mbplan.formulations.joint_space import evaluate
+from mbplan.ocp.problem import OCP, Item
+from mbplan.ocp.residuals import ComOutsideCylinder, Distance, JointTorqueLimits
 from mbplan.results import PlanResult
 from mbplan.simulation.reference import integrate_aba
-from mbplan.tasks.obstacle import (
-    Obstacle,
-    ObstacleTask,
-    com_clearances,
-    geometry_distances,
-    link_coms,
-    robot_description,
-)
 
 SUBSTEPS = 20  # RK4 steps per interval: at Δt = 0.075 s, 20 and 40 agree to < 1e-8 rad
 DEVIATION_FLOOR = 1e-5  # rad and rad/s: IPOPT's tolerance on the eq. (61) rows, after Δt scaling
 TORQUE_TOLERANCE = 1e-6
+CONSTRAINT_TOLERANCE = 1e-4  # residual units (m, rad, rad/s, N m): IPOPT's default constr_viol_tol
 
 
 @dataclass(frozen=True)
@@ -95,18 +92,18 @@ class Verification:
     joint_deviation_ratio: float = float("nan")
     velocity_deviation_ratio: float = float("nan")
     open_loop_deviation_rad: float = float("nan")
+    violations: dict[str, float] = field(default_factory=dict)
+    goal_errors: dict[str, float] = field(default_factory=dict)
 
 
-def _interval_replays(
-    task: ObstacleTask, result: PlanResult
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _interval_replays(ocp: OCP, result: PlanResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """RK4 replay of every interval from the planned knot: substep configurations
     ``(N, SUBSTEPS+1, nq)`` and end states ``q, v (N, nq)``."""
-    model = robot_description(task.robot).model
-    h = task.dt / SUBSTEPS
-    path = np.empty((task.N, SUBSTEPS + 1, model.nq))
-    v_end = np.empty((task.N, model.nv))
-    for k in range(task.N):
+    model = ocp.robot.model
+    h = ocp.dt / SUBSTEPS
+    path = np.empty((ocp.N, SUBSTEPS + 1, model.nq))
+    v_end = np.empty((ocp.N, model.nv))
+    for k in range(ocp.N):
         q, v = result.q[k], result.v[k]
         path[k, 0] = q
         for s in range(SUBSTEPS):
@@ -128,71 +125,141 @@ def _replay_step(
     return integrate_aba(model, q, v, a + s0 * (b - a), h, 1, tau_end=a + s1 * (b - a))
 
 
-def _euler_steps(task: ObstacleTask, result: PlanResult) -> tuple[np.ndarray, np.ndarray]:
+def _euler_steps(ocp: OCP, result: PlanResult) -> tuple[np.ndarray, np.ndarray]:
     """One explicit-Euler step of eq. (61) from each planned knot: ``q, v (N, nq)``."""
-    model = robot_description(task.robot).model
+    model = ocp.robot.model
     data = model.createData()
-    q, v, dt = result.q[:-1], result.v[:-1], task.dt
-    acc = np.array([pin.aba(model, data, q[k], v[k], result.tau[k]) for k in range(task.N)])
+    q, v, dt = result.q[:-1], result.v[:-1], ocp.dt
+    acc = np.array([pin.aba(model, data, q[k], v[k], result.tau[k]) for k in range(ocp.N)])
     return q + dt * v, v + dt * acc
 
 
-def _open_loop_deviation(task: ObstacleTask, result: PlanResult) -> float:
-    model = robot_description(task.robot).model
-    q, v = task.q0, np.zeros(model.nv)
+def _open_loop_deviation(ocp: OCP, result: PlanResult) -> float:
+    model = ocp.robot.model
+    q, v = ocp.q0, ocp.v0
     deviation = 0.0
-    h = task.dt / SUBSTEPS
-    for k in range(task.N):
+    h = ocp.dt / SUBSTEPS
+    for k in range(ocp.N):
         for s in range(SUBSTEPS):
             q, v = _replay_step(model, q, v, result, k, s * h, h)
         deviation = max(deviation, float(np.max(np.abs(q - result.q[k + 1]))))
     return deviation
 
 
-def _min_clearance(task: ObstacleTask, configurations: np.ndarray) -> float:
-    desc = robot_description(task.robot)
-    data = desc.model.createData()
-    clearance = np.inf
-    if task.obstacle_constraint == "distance":
-        solids = task.solids  # cylinders too, as finite solids
-    else:
-        solids = tuple(o for o in task.obstacles if isinstance(o, Obstacle))
-    for q in configurations:
-        if task.cylinders:
-            clearance = min(clearance, com_clearances(task, link_coms(desc.model, data, q)).min())
-        if solids and desc.collision_model is not None:
-            clearance = min(clearance, geometry_distances(desc, q, solids).min())
-    return float(clearance)
-
-
-def _check_shapes(task: ObstacleTask, result: PlanResult) -> None:
-    nq = robot_description(task.robot).model.nq
-    expected = {"q": (task.N + 1, nq), "v": (task.N + 1, nq), "tau": (task.N, nq)}
+def _check_shapes(ocp: OCP, result: PlanResult) -> None:
+    nq = ocp.robot.nq
+    expected = {"q": (ocp.N + 1, nq), "v": (ocp.N + 1, nq), "tau": (ocp.N, nq)}
     for name, shape in expected.items():
         if getattr(result, name).shape != shape:
             raise InputError(
-                f"result.{name}: shape {getattr(result, name).shape} does not match the task "
+                f"result.{name}: shape {getattr(result, name).shape} does not match the OCP "
                 f"(expected {shape})"
             )
-    if not np.isclose(result.dt, task.dt, rtol=1e-12, atol=0.0):
-        raise InputError(f"result.dt = {result.dt} differs from task.dt = {task.dt}")
-    if not np.allclose(result.q[0], task.q0, rtol=0.0, atol=1e-9) or np.any(result.v[0] != 0.0):
-        raise InputError("result: knot 0 is not the task's initial state (q0, v0 = 0)")
+    if not np.isclose(result.dt, ocp.dt, rtol=1e-12, atol=0.0):
+        raise InputError(f"result.dt = {result.dt} differs from the OCP's dt = {ocp.dt}")
+    if not np.allclose(result.q[0], ocp.q0, rtol=0.0, atol=1e-9) or not np.allclose(
+        result.v[0], ocp.v0, rtol=0.0, atol=1e-9
+    ):
+        raise InputError("result: knot 0 is not the OCP's initial state (q0, v0)")
 
 
-def verify(task: ObstacleTask, result: PlanResult) -> Verification:
-    """Check ``result`` against ``task`` with Pinocchio's continuous-time dynamics.
+def _is_obstacle(item: Item) -> bool:
+    return isinstance(item.residual, (Distance, ComOutsideCylinder))
 
-    Raises :class:`InputError` if the result does not belong to the task (shapes, ``dt``, knot 0).
+
+def _at_knots(ocp: OCP, item: Item, q, v, tau) -> np.ndarray:
+    """The residual of ``item`` at its knots of the trajectory ``q, v (N+1, ·)``, ``tau``."""
+    k = item.knots
+    if item.residual.space == "control":
+        return evaluate(ocp.robot, ocp.scene, item.residual, None, None, tau[k])
+    return evaluate(ocp.robot, ocp.scene, item.residual, q[k], v[k], None)
+
+
+def constraint_violations(
+    ocp: OCP, q: np.ndarray, v: np.ndarray, tau: np.ndarray, tau_knots: np.ndarray | None = None
+) -> dict[str, float]:
+    """Largest violation of every constraint of ``ocp`` at the planned knots (``|r|`` for an
+    equality, ``max(r, 0)`` for an inequality; torque limits also at ``tau_knots``)."""
+    out = {}
+    for item in ocp.constraints:
+        r = _at_knots(ocp, item, q, v, tau)
+        if isinstance(item.residual, JointTorqueLimits) and tau_knots is not None:
+            r = np.concatenate(
+                [r, evaluate(ocp.robot, ocp.scene, item.residual, None, None, tau_knots)]
+            )
+        viol = np.abs(r) if item.residual.sense == "eq" else np.maximum(r, 0.0)
+        out[item.name] = float(np.max(viol)) if viol.size else 0.0
+    return out
+
+
+def goal_errors(ocp: OCP, q: np.ndarray, v: np.ndarray) -> dict[str, float]:
+    """∞-norm of every soft goal (cost with a tolerance) at its last knot of ``q, v``."""
+    out = {}
+    for item in ocp.costs:
+        if item.tolerance is None or item.residual.space != "state":
+            continue
+        k = int(item.knots[-1])
+        r = evaluate(ocp.robot, ocp.scene, item.residual, q[k : k + 1], v[k : k + 1], None)
+        out[item.name] = float(np.max(np.abs(r)))
+    return out
+
+
+def hard_constraints_met(ocp: OCP, violations: dict[str, float]) -> list[str]:
+    """Reasons the planned knots violate a hard constraint (empty: all met)."""
+    reasons = []
+    for item in ocp.constraints:
+        tol = CONSTRAINT_TOLERANCE
+        if isinstance(item.residual, JointTorqueLimits):
+            tol = TORQUE_TOLERANCE * max(1.0, float(np.max(np.abs(item.residual.upper))))
+        if violations[item.name] > tol and isinstance(item.residual, JointTorqueLimits):
+            reasons.append(
+                f"torques exceed the limits ({item.name!r}) by up to "
+                f"{violations[item.name]:.3g} N m"
+            )
+        elif violations[item.name] > tol:
+            reasons.append(
+                f"constraint {item.name!r} is violated by {violations[item.name]:.3g} at the "
+                f"planned knots (tolerance {tol:g})"
+            )
+    return reasons
+
+
+def _clearance(ocp: OCP, item: Item, q: np.ndarray) -> float:
+    """Smallest clearance (m) without the margin of an obstacle constraint along ``q (K, nq)``."""
+    r = item.residual
+    value = evaluate(ocp.robot, ocp.scene, r, q, q, None)
+    if isinstance(r, Distance):
+        return float(np.min(r.margin - value))
+    radius = r.circle(ocp.scene)[2]
+    base = radius - r.margin
+    dist2 = radius**2 - value  # squared horizontal distance to the axis
+    return float(np.min(np.sqrt(np.maximum(dist2, 0.0)) - base))
+
+
+def verify(ocp: OCP | PlanResult, result: PlanResult | None = None) -> Verification:
+    """Check ``result`` against ``ocp`` with Pinocchio's continuous-time dynamics and every
+    constraint of the OCP by name; ``verify(result)`` uses the OCP the result carries.
+
+    Raises :class:`InputError` if the result does not belong to the OCP (shapes, ``dt``, knot 0).
     A result with NaN or inf fails with that reason and NaN metrics.
     """
-    _check_shapes(task, result)
-    applied = result.tau if result.tau_knots is None else result.tau_knots  # torque extremes
+    if result is None and isinstance(ocp, PlanResult):
+        result = ocp
+        ocp = result.ocp
+        if ocp is None:
+            why = result.extra.get("ocp_unavailable", "the result carries no OCP (an old file)")
+            raise InputError(f"verify: {why}; pass the OCP: verify(ocp, result)")
+    if not isinstance(ocp, OCP):
+        raise InputError(f"verify: expected an OCP, got {type(ocp).__name__}")
+    if not isinstance(result, PlanResult):
+        raise InputError(f"verify: expected a PlanResult, got {type(result).__name__}")
+    _check_shapes(ocp, result)
+    applied = result.tau if result.tau_knots is None else result.tau_knots
     if not all(np.all(np.isfinite(a)) for a in (result.q, result.v, result.tau, applied)):
         nan = float("nan")
         return Verification(nan, nan, nan, nan, False, ["the trajectory contains NaN or inf"])
-    path, q_end, v_end = _interval_replays(task, result)
-    q_euler, v_euler = _euler_steps(task, result)
+    path, q_end, v_end = _interval_replays(ocp, result)
+    q_euler, v_euler = _euler_steps(ocp, result)
     dev_q = np.max(np.abs(q_end - result.q[1:]), axis=1)
     dev_v = np.max(np.abs(v_end - result.v[1:]), axis=1)
     ratio_q = float(
@@ -201,10 +268,6 @@ def verify(task: ObstacleTask, result: PlanResult) -> Verification:
     ratio_v = float(
         np.max(dev_v / (2.0 * np.max(np.abs(v_end - v_euler), axis=1) + DEVIATION_FLOOR))
     )
-    clearance = _min_clearance(task, path.reshape(-1, path.shape[-1]))
-    goal = float(np.max(np.abs(q_end[-1] - task.q_target)))
-    excess = np.max(np.abs(applied), axis=0) - task.torque_limit  # per joint, N m
-    violation = max(float(excess.max()), 0.0)
     reasons = []
     for name, ratio in (("joint", ratio_q), ("velocity", ratio_v)):
         if ratio > 1.0:
@@ -212,23 +275,37 @@ def verify(task: ObstacleTask, result: PlanResult) -> Verification:
                 f"{name} deviation from the replay is {ratio:.3g} times its threshold "
                 "(twice the explicit-Euler error at that knot)"
             )
+    violations = constraint_violations(ocp, result.q, result.v, result.tau, result.tau_knots)
+    obstacles = [i for i in ocp.constraints if _is_obstacle(i)]
+    substeps = path.reshape(-1, path.shape[-1])
+    clearance = min((_clearance(ocp, i, substeps) for i in obstacles), default=np.inf)
     if clearance < 0.0:
         reasons.append(f"the replayed motion enters an obstacle ({clearance:.3g} m)")
-    if goal > task.goal_tolerance:
-        reasons.append(
-            f"final goal error {goal:.3g} rad exceeds the tolerance {task.goal_tolerance:g} rad"
-        )
-    if np.any(excess > TORQUE_TOLERANCE * np.maximum(1.0, task.torque_limit)):
-        reasons.append(f"torques exceed the limits by up to {violation:.3g} N m")
+    reasons += hard_constraints_met(
+        ocp, {n: (0.0 if _is_obstacle(ocp[n]) else x) for n, x in violations.items()}
+    )
+    q_final = np.vstack([result.q[:-1], q_end[-1:]])
+    v_final = np.vstack([result.v[:-1], v_end[-1:]])
+    goals = goal_errors(ocp, q_final, v_final)
+    for item in ocp.costs:
+        if item.name in goals and goals[item.name] > item.tolerance:
+            reasons.append(
+                f"goal {item.name!r}: final error {goals[item.name]:.3g} exceeds the tolerance "
+                f"{item.tolerance:g}"
+            )
+    torque = [i for i in ocp.constraints if isinstance(i.residual, JointTorqueLimits)]
+    violation = max((violations[i.name] for i in torque), default=0.0)
     return Verification(
         max_joint_deviation_rad=float(dev_q.max()),
-        min_obstacle_distance_m=clearance,
-        final_goal_error_rad=goal,
+        min_obstacle_distance_m=float(clearance),
+        final_goal_error_rad=max(goals.values(), default=float("nan")),
         torque_limit_violation=violation,
         passed=not reasons,
         reasons=reasons,
         max_velocity_deviation=float(dev_v.max()),
         joint_deviation_ratio=ratio_q,
         velocity_deviation_ratio=ratio_v,
-        open_loop_deviation_rad=_open_loop_deviation(task, result),
+        open_loop_deviation_rad=_open_loop_deviation(ocp, result),
+        violations=violations,
+        goal_errors=goals,
     )

@@ -21,7 +21,6 @@ from mbplan.multibody.collision import (
     signed_distances,
 )
 from mbplan.robots import load
-from mbplan.tasks.obstacle import Obstacle, ObstacleTask, pair_distances, validate
 from mbplan.transcription.distance import distance_constraint_function, pair_bodies
 
 DESC = load("iiwa")
@@ -180,40 +179,45 @@ def test_maximal_hessian_is_the_fixed_witness_point_model() -> None:
 
 
 def test_distance_task_validation_names_the_geometry() -> None:
-    with pytest.raises(InputError, match="obstacle_constraint"):
-        ObstacleTask(obstacle_constraint="mesh")  # type: ignore[arg-type]
-    q0 = np.array([-0.8, 0.2, 0.5, -1.6, 0.0, 1.0, 0.0])
+    import mbplan as mb
+    from mbplan.ocp.residuals import Distance
+    from mbplan.paper import IIWA_START, IIWA_TARGET, iiwa_obstacle
+
+    with pytest.raises(InputError, match="constraint"):
+        iiwa_obstacle(constraint="mesh")
+    q0 = np.array(IIWA_START)
     kin = chain_kinematics(MODEL, MODEL.createData(), q0[None])
     wrist = kin.translation[0, 6]
-    blocked = ObstacleTask(
-        obstacles=(
-            Obstacle("sphere", _pose(wrist + np.array([0.0, 0.0, 0.12]), (0, 0, 0)), (0.05,)),
-        ),
-        obstacle_constraint="distance",
-    )
-    with pytest.raises(InfeasibleRequestError, match=r"q0 overlaps.*geometry 'iiwa_link_\d_0'"):
-        validate(blocked)
-    task = ObstacleTask(obstacle_constraint="distance")
-    validate(task)
-    assert pair_distances(task, np.vstack([task.q0, task.q_target])).min() >= task.margin
-    # eq.-62 planners refuse general shapes instead of ignoring them
-    from mbplan.planning.manipulator import plan_maximal
+    scene = mb.Scene().add_sphere("ball", 0.05, wrist + np.array([0.0, 0.0, 0.12]))
+    blocked = mb.OCP("iiwa", scene, q0=q0).add_constraint("clearance", Distance(0.03))
+    with pytest.raises(
+        InfeasibleRequestError,
+        match=r"q0 violates.*geometry 'iiwa_link_\d_0' and scene object 'ball'",
+    ):
+        mb.plan(blocked, "ripm")
+    task = iiwa_obstacle(constraint="distance")
+    task.check()
+    from mbplan.formulations.joint_space import evaluate
 
-    with pytest.raises(InputError, match="obstacle_constraint='distance'"):
-        plan_maximal(
-            ObstacleTask(obstacles=(Obstacle("sphere", _pose((2, 0, 0), (0, 0, 0)), (0.1,)),))
-        )
+    r = task["clearance"].residual
+    both = np.vstack([task.q0, IIWA_TARGET])
+    assert evaluate(task.robot, task.scene, r, both, both, None).max() <= 0.0  # d >= margin
 
 
 def test_verification_measures_coal_distances_of_distance_tasks() -> None:
     """For a "distance" task the verifier's clearance is the coal distance to every obstacle
     (the cylinder as a finite solid), here negative along the straight path of case 0."""
-    from mbplan.tasks.obstacle import joint_interpolation, sample_obstacle_cases
-    from mbplan.verification import _min_clearance
+    from mbplan.paper import iiwa_obstacle_cases
+    from mbplan.planning.initial_guess import initial_path
+    from mbplan.verification import _clearance
 
-    task = sample_obstacle_cases(n=1, seed=0, obstacle_constraint="distance")[0]
-    path = joint_interpolation(task)
-    clearance = _min_clearance(task, path)
+    ocp = iiwa_obstacle_cases(1, 0, constraint="distance")[0]
+    path = initial_path(ocp, "linear")
+    clearance = _clearance(ocp, ocp["clearance"], path)
     assert clearance < 0.0
     # (penetration depths from EPA agree to its tolerance)
-    assert clearance == pytest.approx(pair_distances(task, path).min(), abs=1e-5)
+    from mbplan.formulations.joint_space import evaluate
+
+    r = ocp["clearance"].residual
+    d = r.margin - evaluate(ocp.robot, ocp.scene, r, path, path, None)
+    assert clearance == pytest.approx(d.min(), abs=1e-12)

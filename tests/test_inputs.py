@@ -8,12 +8,18 @@ import re
 import warnings
 from pathlib import Path
 
+import mbplan.baselines.generalized_ipopt as generalized_ipopt
+import mbplan.planning.manipulator as manipulator
 import numpy as np
 import pytest
+from mbplan.tasks.obstacle import (
+    Cylinder,
+    ObstacleTask,
+    joint_interpolation,
+    sample_obstacle_cases,
+)
 
-import mbplan.baselines.generalized_ipopt as generalized_ipopt
 import mbplan.benchmarks.harness as harness
-import mbplan.planning.manipulator as manipulator
 from mbplan.benchmarks.harness import Job, run_jobs
 from mbplan.cli import main
 from mbplan.cli_support import run_command
@@ -22,12 +28,6 @@ from mbplan.planning.solve import plan
 from mbplan.results import PlanResult, load_npz, save_npz
 from mbplan.robots import load
 from mbplan.solvers import RIPMOptions
-from mbplan.tasks.obstacle import (
-    Cylinder,
-    ObstacleTask,
-    joint_interpolation,
-    sample_obstacle_cases,
-)
 
 
 def _no_solve(*args, **kwargs):

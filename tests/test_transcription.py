@@ -5,10 +5,8 @@ import numpy as np
 import pytest
 
 from mbplan.errors import InputError
-from mbplan.multibody import body_poses, maximal_model
 from mbplan.tasks.drone import cluttered_task, geodesic_initial_guess
 from mbplan.transcription import Block, Term, TrajectoryProblem, TrajectoryVariables
-from mbplan.transcription.manipulator import ManipulatorOCP, manipulator_problem
 from mbplan.transcription.quadrotor import _input_cost_function, quadrotor_problem
 
 
@@ -50,37 +48,6 @@ def test_quadrotor_problem_derivatives_match_finite_differences():
     prob = quadrotor_problem(task, jit=False)
     assert (prob.n, prob.n_eq) == (16 * task.N, 12 * task.N)
     _lagrangian_checks(prob, geodesic_initial_guess(task), np.random.default_rng(0))
-
-
-def test_manipulator_problem_derivatives_and_sparsity():
-    mm = maximal_model("iiwa")
-    N = 3
-    ocp = ManipulatorOCP(
-        N=N,
-        dt=0.05,
-        q_target=np.full(7, 0.3),
-        torque_limit=mm.effort_limit,
-        cylinders=((0.5, 0.0, 0.1),),
-    )
-    prob = manipulator_problem(mm, ocp, jit=False)
-    rng = np.random.default_rng(1)
-    R, p = body_poses(mm, np.zeros(7))
-    x = {
-        "R": np.repeat(R[None], N + 1, 0),
-        "p": np.repeat(p[None], N + 1, 0),
-        "F": np.repeat(np.eye(3)[None, None], N + 1, 0).repeat(mm.nb, 1),
-        "v": np.zeros((N + 1, mm.nb, 3)),
-        "lam": rng.standard_normal((N + 1, mm.nb, 5)),
-        "tau": rng.standard_normal((N + 1, mm.nb, 1)),
-    }
-    x = prob.retract(prob.check_point(x), 0.1 * rng.standard_normal(prob.n))
-    # Per step: 12 body rows per body, 5 joint rows per joint.
-    assert prob.n_eq == N * (12 * mm.nb + 5 * mm.nb)
-    _lagrangian_checks(prob, x, rng)
-    # The pattern does not depend on the point: two evaluations give identical structures.
-    a = prob.evaluate(x).eq_jacobian
-    b = prob.evaluate(prob.retract(x, rng.standard_normal(prob.n))).eq_jacobian
-    assert np.array_equal(a.indices, b.indices) and np.array_equal(a.indptr, b.indptr)
 
 
 def test_additive_rows_sum_contributions():

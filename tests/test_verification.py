@@ -10,28 +10,45 @@ import pinocchio as pin
 import pytest
 
 from mbplan.errors import InputError
+from mbplan.ocp import OCP, Scene, load_robot
+from mbplan.paper import (
+    IIWA_GOAL_TOLERANCE,
+    IIWA_START,
+    IIWA_TARGET,
+    add_obstacle_constraint,
+    iiwa_obstacle_starts,
+    tracking_ocp,
+)
 from mbplan.results import PlanResult, load_npz, save_npz
 from mbplan.simulation.reference import integrate_aba
-from mbplan.tasks.obstacle import (
-    Cylinder,
-    ObstacleTask,
-    link_coms,
-    robot_description,
-    sample_obstacle_cases,
-)
 from mbplan.verification import SUBSTEPS, verify
 
-MODEL = robot_description("iiwa").model
+MODEL = load_robot("iiwa").model
 
 
-def euler_rollout(task: ObstacleTask, gain: float = 4.0) -> PlanResult:
+def make_task(q0=IIWA_START, q_target=IIWA_TARGET, cylinder=None, **fields) -> OCP:
+    """The iiwa tracking OCP, with an optional eq.-62 cylinder ``((x, y), r)``."""
+    scene = Scene()
+    if cylinder is not None:
+        scene.add_cylinder("cylinder", cylinder[1], 1.5, (*cylinder[0], 0.75))
+    ocp = tracking_ocp("iiwa", q0, q_target, scene, **fields)
+    return add_obstacle_constraint(ocp, "com")
+
+
+def link_coms(q: np.ndarray) -> np.ndarray:
+    data = MODEL.createData()
+    pin.forwardKinematics(MODEL, data, q)
+    return np.array([data.oMi[j].act(MODEL.inertias[j].lever) for j in range(1, MODEL.njoints)])
+
+
+def euler_rollout(task: OCP, gain: float = 4.0, q_target=IIWA_TARGET) -> PlanResult:
     """A known solution of eq. (61): explicit Euler under computed-torque PD control towards
     ``q_target`` (``q̈ = ω² e - 2ω q̇`` with ``ω = 2 rad/s``), torques by RNEA."""
     data = MODEL.createData()
     q, v = np.array(task.q0), np.zeros(7)
     qs, vs, taus = [q], [v], []
     for _ in range(task.N):
-        tau = pin.rnea(MODEL, data, q, v, gain * (task.q_target - q) - gain * v)
+        tau = pin.rnea(MODEL, data, q, v, gain * (np.asarray(q_target) - q) - gain * v)
         q, v = q + task.dt * v, v + task.dt * pin.aba(MODEL, data, q, v, tau)
         qs.append(q)
         vs.append(v)
@@ -41,7 +58,7 @@ def euler_rollout(task: ObstacleTask, gain: float = 4.0) -> PlanResult:
     )
 
 
-def verlet_rollout(task: ObstacleTask, acc: np.ndarray) -> PlanResult:
+def verlet_rollout(task: OCP, acc: np.ndarray) -> PlanResult:
     """The LGVI's scheme in joint space (velocity Verlet: forces at the knots, trapezoidal
     weights): ``q_{k+1} = q_k + Δt v_k + ½Δt² a_k``, ``v_{k+1} = v_k + ½Δt (a_k + a_{k+1})`` for
     prescribed knot accelerations ``acc (N+1, nv)``, knot torques by RNEA."""
@@ -74,29 +91,27 @@ def verlet_rollout(task: ObstacleTask, acc: np.ndarray) -> PlanResult:
 
 
 @pytest.fixture(scope="module")
-def free_task() -> ObstacleTask:
-    return ObstacleTask(obstacles=())
+def free_task() -> OCP:
+    return make_task()
 
 
 @pytest.fixture(scope="module")
-def rollout(free_task: ObstacleTask) -> PlanResult:
+def rollout(free_task: OCP) -> PlanResult:
     return euler_rollout(free_task)
 
 
-def test_a_known_solution_of_eq61_passes(free_task: ObstacleTask, rollout: PlanResult) -> None:
+def test_a_known_solution_of_eq61_passes(free_task: OCP, rollout: PlanResult) -> None:
     check = verify(free_task, rollout)
     assert check.passed, check.reasons
     # exact eq.-(61) plans deviate from the replay by exactly the Euler error: ratio 1/2
     assert check.joint_deviation_ratio == pytest.approx(0.5, abs=1e-3)
     assert check.velocity_deviation_ratio == pytest.approx(0.5, abs=1e-3)
     assert 1e-3 < check.max_joint_deviation_rad < 0.1  # first order: visible at Δt = 0.075 s
-    assert check.final_goal_error_rad < free_task.goal_tolerance
+    assert check.final_goal_error_rad < IIWA_GOAL_TOLERANCE
     assert check.torque_limit_violation == 0.0 and check.min_obstacle_distance_m == np.inf
 
 
-def test_torques_inconsistent_with_the_dynamics_fail(
-    free_task: ObstacleTask, rollout: PlanResult
-) -> None:
+def test_torques_inconsistent_with_the_dynamics_fail(free_task: OCP, rollout: PlanResult) -> None:
     data = MODEL.createData()
     gravity = np.array([pin.computeGeneralizedGravity(MODEL, data, q) for q in rollout.q[:-1]])
     for error in (0.02, 0.1):  # gravity compensation 2 % / 10 % off
@@ -117,7 +132,7 @@ def test_torques_inconsistent_with_the_dynamics_fail(
     assert deviation / (2.0 * euler_error) == pytest.approx(0.78, abs=0.01)
 
 
-def test_knot_torques_are_replayed_with_a_first_order_hold(free_task: ObstacleTask) -> None:
+def test_knot_torques_are_replayed_with_a_first_order_hold(free_task: OCP) -> None:
     """Where the knot accelerations turn (``a_{k+1} = -0.6 a_k``), the interval mean held adds
     ``¼Δt²|a_k - a_{k+1}|`` to the LGVI's ``q`` step (ratio ``|1-r|/(2|1+r|) = 2``), linear
     interpolation leaves its own ``⅙Δt²|a_k - a_{k+1}|`` (ratio ``|1-r|/(2|2+r|) ≈ 0.57``)."""
@@ -136,17 +151,17 @@ def test_knot_torques_are_replayed_with_a_first_order_hold(free_task: ObstacleTa
     knots[5, 0] += 50.0
     spiked = dataclasses.replace(plan, tau=0.5 * (knots[:-1] + knots[1:]), tau_knots=knots)
     limit = np.max(np.abs(spiked.tau), axis=0) + 1.0
-    check = verify(dataclasses.replace(free_task, torque_limit=limit), spiked)
+    check = verify(make_task(torque_limit=limit), spiked)
     assert check.torque_limit_violation == pytest.approx(np.abs(knots[5, 0]) - limit[0])
     assert any("exceed the limits" in r for r in check.reasons)
 
 
-def test_an_lgvi_solution_verifies(free_task: ObstacleTask) -> None:
+def test_an_lgvi_solution_verifies(free_task: OCP) -> None:
     """A RIPM (maximal-coordinate LGVI) plan passes with its knot torques; held at their interval
     means, its launch at knot 1 fails the joint row (the benchmark's former failure mode)."""
-    from mbplan.planning.manipulator import plan_maximal
+    from mbplan.planning.solve import plan as plan_ocp
 
-    plan = plan_maximal(free_task)
+    plan = plan_ocp(free_task, "ripm", warm_start="linear")
     assert plan.success and plan.tau_knots is not None
     np.testing.assert_allclose(plan.tau, 0.5 * (plan.tau_knots[:-1] + plan.tau_knots[1:]))
     check = verify(free_task, plan)
@@ -157,7 +172,7 @@ def test_an_lgvi_solution_verifies(free_task: ObstacleTask) -> None:
 
 
 def test_linear_torque_ramp_integration() -> None:
-    q0, v0 = sample_obstacle_cases(n=1, seed=0)[0].q0, np.full(7, 0.3)
+    q0, v0 = np.array(iiwa_obstacle_starts(1, 0)[0]), np.full(7, 0.3)
     data = MODEL.createData()
     tau0 = pin.computeGeneralizedGravity(MODEL, data, q0)
     tau1 = tau0 + np.linspace(-0.2, 0.2, 7)  # N m: the wrist has 1e-3 kg m²
@@ -176,17 +191,15 @@ def test_linear_torque_ramp_integration() -> None:
     assert np.max(np.abs(ramp[1] - const[1])) > 1.0
 
 
-def test_obstacle_goal_torque_and_nan_failures(
-    free_task: ObstacleTask, rollout: PlanResult
-) -> None:
-    wrist = link_coms(MODEL, MODEL.createData(), rollout.q[20])[-1]
-    blocked = dataclasses.replace(free_task, obstacles=(Cylinder(tuple(wrist[:2]), 0.05),))
+def test_obstacle_goal_torque_and_nan_failures(free_task: OCP, rollout: PlanResult) -> None:
+    wrist = link_coms(rollout.q[20])[-1]
+    blocked = make_task(cylinder=(tuple(wrist[:2]), 0.05))
     check = verify(blocked, rollout)
     assert check.min_obstacle_distance_m <= -0.05 + 1e-9
     assert any("enters an obstacle" in r for r in check.reasons)
-    far = dataclasses.replace(free_task, q_target=free_task.q_target + 0.2)
-    assert any("goal error" in r for r in verify(far, rollout).reasons)
-    tight = dataclasses.replace(free_task, torque_limit=0.5 * np.max(np.abs(rollout.tau), axis=0))
+    far = make_task(q_target=np.array(IIWA_TARGET) + 0.2)
+    assert any("goal 'joint_position_terminal'" in r for r in verify(far, rollout).reasons)
+    tight = make_task(torque_limit=0.5 * np.max(np.abs(rollout.tau), axis=0))
     check = verify(tight, rollout)
     assert check.torque_limit_violation == pytest.approx(np.max(np.abs(rollout.tau)) / 2)
     assert any("exceed the limits" in r for r in check.reasons)
@@ -197,11 +210,11 @@ def test_obstacle_goal_torque_and_nan_failures(
     assert np.isnan(check.max_joint_deviation_rad)
 
 
-def test_mismatched_result_is_an_input_error(free_task: ObstacleTask, rollout: PlanResult) -> None:
-    with pytest.raises(InputError, match="does not match the task"):
-        verify(dataclasses.replace(free_task, N=20), rollout)
+def test_mismatched_result_is_an_input_error(free_task: OCP, rollout: PlanResult) -> None:
+    with pytest.raises(InputError, match="does not match the OCP"):
+        verify(make_task(N=20), rollout)
     with pytest.raises(InputError, match="dt"):
-        verify(dataclasses.replace(free_task, dt=0.05), rollout)
+        verify(make_task(dt=0.05), rollout)
     q = rollout.q.copy()
     q[0] += 0.1
     with pytest.raises(InputError, match="knot 0"):
@@ -210,8 +223,8 @@ def test_mismatched_result_is_an_input_error(free_task: ObstacleTask, rollout: P
 
 def test_documented_replay_numbers() -> None:
     """SUBSTEPS is fine enough per interval, and an open-loop replay is hopeless (docstring)."""
-    task = sample_obstacle_cases(n=1, seed=0)[0]
-    plan = euler_rollout(dataclasses.replace(task, obstacles=()))
+    task = make_task(q0=iiwa_obstacle_starts(1, 0)[0])
+    plan = euler_rollout(task)
     k = 20
     q20, _ = integrate_aba(MODEL, plan.q[k], plan.v[k], plan.tau[k], task.dt, SUBSTEPS)
     q40, _ = integrate_aba(MODEL, plan.q[k], plan.v[k], plan.tau[k], task.dt, 2 * SUBSTEPS)
@@ -224,7 +237,7 @@ def test_documented_replay_numbers() -> None:
         return q
 
     assert np.max(np.abs(open_loop(10) - open_loop(40))) > 1.0
-    assert verify(dataclasses.replace(task, obstacles=()), plan).open_loop_deviation_rad > 10.0
+    assert verify(task, plan).open_loop_deviation_rad > 10.0
 
 
 def _result(**changes: object) -> PlanResult:
@@ -304,3 +317,23 @@ def test_plan_result_checks(tmp_path: Path) -> None:
     np.savez(tmp_path / "partial.npz", q=np.zeros((2, 7)))
     with pytest.raises(InputError, match="lacks the fields"):
         load_npz(tmp_path / "partial.npz")
+
+
+def test_npz_carries_the_ocp_and_old_files_still_load(tmp_path: Path, rollout: PlanResult) -> None:
+    task = make_task(cylinder=((2.0, 2.0), 0.1))
+    with_ocp = dataclasses.replace(rollout, ocp=task, formulation="generalized")
+    loaded = load_npz(save_npz(with_ocp, tmp_path / "plan.npz"))
+    assert loaded.ocp is not None and loaded.ocp.names == task.names
+    assert loaded.ocp.scene.names == ["cylinder"] and loaded.formulation == "generalized"
+    assert verify(loaded).passed == verify(task, rollout).passed
+    old = load_npz(save_npz(rollout, tmp_path / "old.npz"))  # written as before the OCP API
+    assert old.ocp is None
+    with pytest.raises(InputError, match=r"carries no OCP.*verify\(ocp, result\)"):
+        verify(old)
+    assert verify(task, old).passed == verify(task, rollout).passed
+    model_ocp = dataclasses.replace(rollout, ocp=OCP(MODEL, N=task.N))  # an in-memory model
+    unavailable = load_npz(save_npz(model_ocp, tmp_path / "model.npz"))
+    assert unavailable.ocp is None and "in-memory" in unavailable.extra["ocp_unavailable"]
+    with pytest.raises(InputError, match=r"in-memory pinocchio\.Model"):
+        verify(unavailable)
+    assert load_npz(tmp_path / "model.npz", robot=MODEL).ocp is not None

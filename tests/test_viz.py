@@ -17,8 +17,10 @@ import umsgpack
 
 from mbplan.errors import InputError
 from mbplan.multibody import body_poses, maximal_model
+from mbplan.ocp import OCP, Scene, load_robot
+from mbplan.paper import iiwa_obstacle
+from mbplan.planning.initial_guess import initial_path
 from mbplan.results import PlanResult, save_npz
-from mbplan.tasks.obstacle import ObstacleTask, joint_interpolation, robot_description
 from mbplan.viz import (
     MeshcatServer,
     draw_results,
@@ -34,14 +36,14 @@ from mbplan.viz import (
     static_html,
 )
 
-TASK = ObstacleTask(N=6)
-DESC = robot_description("iiwa")
-MM = maximal_model(DESC)
+TASK = iiwa_obstacle(N=6)
+DESC = load_robot("iiwa")
+MM = maximal_model(DESC.model)
 
 
-def make_results(task: ObstacleTask = TASK) -> tuple[PlanResult, PlanResult]:
+def make_results(task: OCP = TASK) -> tuple[PlanResult, PlanResult]:
     """A maximal and a generalized result along the joint-space interpolation of ``task``."""
-    q = joint_interpolation(task)
+    q = initial_path(task, "linear")
     poses = [body_poses(MM, qk) for qk in q]
     common = dict(
         status="Test",
@@ -124,7 +126,7 @@ def test_static_page_is_self_contained_and_animated(tmp_path: Path) -> None:
     objects = {c["path"] for c in commands if c["type"] == "set_object"}
     assert {
         "/meshcat/mbplan/goal0/visuals/iiwa_link_7_0",
-        "/meshcat/mbplan/obstacles1/visuals/obstacle0",
+        "/meshcat/mbplan/obstacles1/visuals/cylinder",
     } <= objects
 
 
@@ -161,6 +163,41 @@ def test_replay_main_writes_a_page_from_npz_files(tmp_path: Path, capsys) -> Non
     assert replay_main(paths, tmp_path / "out.html", no_browser=True) == 0
     assert "wrote" in capsys.readouterr().out
     assert "ripm (maximal)" in (tmp_path / "out.html").read_text()
+
+
+def test_replay_draws_the_scene_the_plan_was_made_with(tmp_path: Path) -> None:
+    """A result carrying its OCP is replayed with that OCP's robot and scene (here a custom box
+    and sphere, and the UR5): no robot argument, nothing guessed."""
+    scene = Scene().add_box("crate_4711", (0.2, 0.2, 0.2), (0.6, 0.0, 0.1))
+    scene.add_sphere("ball_0815", 0.1, (0.0, 0.5, 0.8))
+    ocp = OCP("ur5", scene, N=4, dt=0.1)
+    q = np.repeat(ocp.q0[None], 5, axis=0)
+    result = PlanResult(
+        method="ipopt",
+        status="Test",
+        success=True,
+        message="",
+        iterations=1,
+        solve_time_s=0.1,
+        total_time_s=0.1,
+        time_per_iter_s=0.1,
+        q=q,
+        v=np.zeros_like(q),
+        tau=np.zeros((4, 6)),
+        dt=0.1,
+        ocp=ocp,
+    )
+    path = save_npz(result, tmp_path / "ur5.npz")
+    assert replay_main([path], tmp_path / "page.html", no_browser=True) == 0
+    objects = {
+        c["path"] for c in page_commands(tmp_path / "page.html") if c["type"] == "set_object"
+    }
+    assert {
+        "/meshcat/mbplan/obstacles0/visuals/crate_4711",
+        "/meshcat/mbplan/obstacles0/visuals/ball_0815",
+    } <= objects
+    assert not any("cylinder" in o for o in objects)
+    assert any("robot0/visuals/wrist_3_link" in o for o in objects)  # the UR5, not the iiwa
 
 
 def test_bad_input_raises_clear_errors(tmp_path: Path) -> None:

@@ -16,8 +16,8 @@ import numpy as np
 from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, write_json
 from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
+from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
 from mbplan.planning.solve import METHODS, check_plan_request, plan
-from mbplan.tasks.obstacle import sample_obstacle_cases
 from mbplan.verification import verify
 
 
@@ -32,12 +32,14 @@ def solve_case(
     warm_start: str,
     constraint: str = "com",
 ) -> dict:
-    """One (case, method) solve and its verification as a JSON-serialisable row."""
-    task = _cases(n, seed, N, warm_start, constraint)[index]
+    """One (case, method) solve and its verification as a JSON-serialisable row: the case's
+    OCP (:func:`mbplan.paper.iiwa_obstacle`) planned with :func:`mbplan.plan`."""
+    q0 = iiwa_obstacle_starts(n, seed, constraint)[index]
+    problem = iiwa_obstacle(q0, N=N, constraint=constraint)
     t0 = time.perf_counter()
-    result = plan(task, method, tol=tol, max_iter=max_iter)
+    result = plan(problem, method, warm_start=warm_start, tol=tol, max_iter=max_iter)
     wall = time.perf_counter() - t0
-    check = verify(task, result)
+    check = verify(problem, result)
     return {
         "success": bool(result.success),
         "status": result.status,
@@ -54,12 +56,6 @@ def solve_case(
     }
 
 
-def _cases(n: int, seed: int, N: int, warm_start: str, constraint: str) -> list:
-    return sample_obstacle_cases(
-        "iiwa", n, seed, N=N, warm_start=warm_start, obstacle_constraint=constraint
-    )
-
-
 def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
@@ -68,7 +64,7 @@ def run(
     out: Path,
     n: int = 100,
     seed: int = 0,
-    methods: tuple[str, ...] = METHODS,
+    methods: tuple[str, ...] = tuple(METHODS),
     N: int = 40,
     tol: float = 1e-6,
     max_iter: int = 500,
@@ -79,10 +75,12 @@ def run(
 ) -> dict:
     """Run (resumably), then write summary.json, results.md and plots. ``constraint``: the
     obstacle constraint of every case, ``"com"`` (eq. 62) or ``"distance"`` (coal)."""
-    unknown = sorted(set(methods) - set(METHODS))
+    known = tuple(METHODS)
+    unknown = sorted(set(methods) - set(known))
     if unknown:
-        raise InputError(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
-    first = _cases(n, seed, N, warm_start, constraint)[0]  # fail fast on bad input
+        raise InputError(f"unknown methods {unknown}; choose from {', '.join(known)}")
+    q0 = iiwa_obstacle_starts(n, seed, constraint)[0]  # fail fast on bad input
+    first = iiwa_obstacle(q0, N=N, constraint=constraint)
     for m in methods:
         check_plan_request(first, m, tol, max_iter)  # tolerances, memory of the horizon
     args = (n, seed)
@@ -141,7 +139,7 @@ def _markdown(s: dict) -> str:
         "# iiwa around an obstacle: maximal (RIPM) vs generalized (IPOPT) coordinates",
         "",
         f"Command: `{s['command']}`  ",
-        f"Warm start of every method: {s.get('warm_start', 'linear')} (see `mbplan.tasks.obstacle.joint_interpolation`).  ",
+        f"Warm start of every method: {s.get('warm_start', 'linear')} (see `mbplan.planning.initial_guess`).  ",
         f"Obstacle constraint: {s.get('obstacle_constraint', 'com')} (`com`: link COMs outside the cylinder, eq. 62; `distance`: coal distance of every link geometry ≥ margin).",
         "",
         "| method | solved & verified | converged | iters median / mean / max | time/iter [ms] "

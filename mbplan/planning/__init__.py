@@ -1,1 +1,3 @@
-"""Planning: a task → transcription → solver → a result record."""
+"""Planning: an OCP → a formulation's NLP → a solver (a method of :data:`solve.METHODS`) → one
+result type; warm starts in :mod:`.initial_guess`. The drone docking task keeps its own path
+(:mod:`.drone`)."""

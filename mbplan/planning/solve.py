@@ -1,56 +1,145 @@
-"""One entry point for every planning method on an :class:`ObstacleTask`."""
+"""One entry point for every planning method: :func:`plan` (``mbplan.plan``).
+
+A method is a registry entry (:data:`METHODS`): its formulation and an adapter
+``solve(ocp, q_guess, settings) -> PlanResult`` (:mod:`mbplan.planning.methods`). Adding a
+method is one line, e.g. ``METHODS["mlg-ipm"] = Method("maximal", solve_mlg_ipm)``.
+"""
 
 from __future__ import annotations
 
+import dataclasses
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
 from mbplan.errors import InputError
+from mbplan.ocp.problem import OCP
+from mbplan.planning import methods as m
+from mbplan.planning.initial_guess import initial_path
 from mbplan.resources import check_plan_memory
 from mbplan.results import PlanResult
-from mbplan.solvers import RIPMOptions
-from mbplan.tasks.obstacle import ObstacleTask, robot_description
-from mbplan.validation import as_int, as_real
+from mbplan.validation import as_array, as_int, as_real
 
-METHODS = ("ripm", "ipopt", "ipopt-no-restoration", "fddp", "csqp")
+
+@dataclass(frozen=True)
+class Method:
+    """A planning method: the formulation it solves and its adapter."""
+
+    formulation: str
+    solve: Callable[[OCP, np.ndarray, m.Settings], PlanResult]
+
+
+METHODS: dict[str, Method] = {
+    "ripm": Method("maximal", m.solve_ripm_maximal),
+    "ipopt": Method("generalized", m.solve_ipopt_generalized),
+    "ipopt-no-restoration": Method("generalized", m.solve_ipopt_no_restoration),
+}
+
+
+def _shooting(name: str) -> Callable[[OCP, np.ndarray, m.Settings], PlanResult]:
+    """The adapter ``name`` of :mod:`mbplan.planning.shooting_methods`, imported when called
+    (Crocoddyl and mim-solvers are the optional ``baselines`` extra)."""
+
+    def solve(ocp: OCP, q_guess: np.ndarray, settings: m.Settings) -> PlanResult:
+        from mbplan.planning import shooting_methods
+
+        return getattr(shooting_methods, name)(ocp, q_guess, settings)
+
+    return solve
+
+
+METHODS["fddp"] = Method("shooting", _shooting("solve_fddp"))
+METHODS["csqp"] = Method("shooting", _shooting("solve_csqp"))
 
 
 def plan(
-    task: ObstacleTask, method: str = "ripm", tol: float = 1e-6, max_iter: int = 500
+    ocp: Any,
+    method: str = "ripm",
+    *,
+    warm_start: str | ArrayLike = "via",
+    tol: float = 1e-6,
+    max_iter: int = 500,
+    options: Mapping[str, Any] | None = None,
+    jit: bool | None = None,
 ) -> PlanResult:
-    """Plan ``task`` with ``method``: ``ripm`` (maximal coordinates, RIPM), ``ipopt``
-    (generalized coordinates, IPOPT with restoration), ``ipopt-no-restoration``, ``fddp``
-    (Crocoddyl BoxFDDP, obstacle as a penalty) or ``csqp`` (mim-solvers, obstacle as a hard
-    constraint); the last two need the ``baselines`` extra. Arguments and the memory the
-    horizon needs are checked before anything is built."""
-    check_plan_request(task, method, tol, max_iter)
-    if method == "ripm":
-        from mbplan.planning.manipulator import plan_maximal
+    """Plan ``ocp`` with ``method`` (:data:`METHODS`) from ``warm_start`` (``"linear"``,
+    ``"via"`` or a joint path ``(N+1, nq)``, :mod:`mbplan.planning.initial_guess`).
+
+    Every input is checked and the start checked against the constraints before any solve.
+    ``success`` means: the solver converged, the trajectory is finite and every hard constraint
+    holds at the planned knots (``result.violations``); soft goals report ``goal_errors``.
+    """
+    settings = check_plan_request(ocp, method, tol, max_iter, options, jit)
+    formulation = METHODS[method].formulation
+    ocp.check()
+    if formulation == "maximal":
         from mbplan.solvers.linear_solver import compile_kernels_in_background
 
         compile_kernels_in_background()  # first run: numba compiles while the C compiler runs
-
-        return plan_maximal(task, RIPMOptions(tol=tol, max_iter=max_iter))
-    if method in ("ipopt", "ipopt-no-restoration"):
-        from mbplan.baselines.generalized_ipopt import solve_generalized_ipopt
-
-        return solve_generalized_ipopt(
-            task, max_iter=max_iter, tol=tol, restoration=method == "ipopt"
-        )
-    if method in ("fddp", "csqp"):
-        from mbplan.baselines.crocoddyl_solvers import solve_csqp, solve_fddp
-
-        # Solver-native tolerances (Crocoddyl's stopping criterion, CSQP's KKT 1e-3): CSQP's KKT
-        # stalls near 1e-3 where the obstacle is active, so IPOPT's 1e-6 is not passed on.
-        return (solve_fddp if method == "fddp" else solve_csqp)(task, max_iter=max_iter)
-    raise AssertionError(method)  # unreachable: check_plan_request knows METHODS
+    t0 = time.perf_counter()
+    if isinstance(warm_start, str):
+        q_guess = initial_path(ocp, warm_start)
+    else:
+        q_guess = as_array(warm_start, (ocp.N + 1, ocp.robot.nq), "warm_start")
+    guess_time = time.perf_counter() - t0
+    result = METHODS[method].solve(ocp, q_guess, settings)
+    return finish(ocp, result, guess_time)
 
 
-def check_plan_request(task: ObstacleTask, method: str, tol: float, max_iter: int) -> None:
-    """:class:`InputError` for an unknown method, a bad ``tol``/``max_iter`` or a horizon whose
-    estimated memory exceeds what is available (:mod:`mbplan.resources`)."""
-    if not isinstance(task, ObstacleTask):
-        raise InputError(f"plan: expected an ObstacleTask, got {type(task).__name__}")
+def check_plan_request(
+    ocp: Any,
+    method: str,
+    tol: float = 1e-6,
+    max_iter: int = 500,
+    options: Mapping[str, Any] | None = None,
+    jit: bool | None = None,
+) -> m.Settings:
+    """The :class:`~mbplan.planning.methods.Settings` of a request; :class:`InputError` for a
+    non-OCP, an unknown method, a bad ``tol``/``max_iter`` or a horizon whose estimated memory
+    exceeds what is available (:mod:`mbplan.resources`)."""
+    if not isinstance(ocp, OCP):
+        raise InputError(f"plan: expected an OCP, got {type(ocp).__name__}")
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
-    as_real(tol, "tol", positive=True)
-    as_int(max_iter, "max_iter", minimum=0, what="iteration limit")
-    bodies = robot_description(task.robot).model.nv
-    check_plan_memory("maximal" if method == "ripm" else "generalized", bodies, task.N)
+    settings = m.Settings(
+        tol=as_real(tol, "tol", positive=True),
+        max_iter=as_int(max_iter, "max_iter", minimum=0, what="iteration limit"),
+        options=dict(options or {}),
+        jit=jit,
+    )
+    formulation = "maximal" if METHODS[method].formulation == "maximal" else "generalized"
+    check_plan_memory(formulation, ocp.robot.nv, ocp.N)
+    return settings
+
+
+def finish(ocp: OCP, result: PlanResult, guess_time: float = 0.0) -> PlanResult:
+    """Attach ``ocp``, the constraint violations and goal errors; set ``success`` (one meaning)."""
+    from mbplan.verification import constraint_violations, goal_errors, hard_constraints_met
+
+    finite = all(np.all(np.isfinite(a)) for a in (result.q, result.v, result.tau))
+    violations = goal = {}
+    unmet: list[str] = []
+    if finite:
+        violations = constraint_violations(ocp, result.q, result.v, result.tau, result.tau_knots)
+        goal = goal_errors(ocp, result.q, result.v)
+        unmet = hard_constraints_met(ocp, violations)
+    message = result.message
+    if not finite:
+        message = f"{message}; the solution contains NaN or inf"
+    elif result.success and unmet:
+        message = f"{message}, but {unmet[0]}"
+    extra = {**result.extra, "warm_start_time_s": guess_time}
+    return dataclasses.replace(
+        result,
+        success=bool(result.success and finite and not unmet),
+        message=message,
+        total_time_s=result.total_time_s + guess_time,
+        violations=violations,
+        goal_errors=goal,
+        ocp=ocp,
+        extra=extra,
+    )

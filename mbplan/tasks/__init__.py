@@ -1,7 +1,7 @@
 """Benchmark tasks of the RIPM paper (§VIII) as plain data, with initial guesses and simulators.
 
 The package exports the drone docking task (:mod:`mbplan.tasks.drone`, whose ``__all__`` lists
-the names); the manipulator task is :mod:`mbplan.tasks.obstacle`.
+the names); the iiwa obstacle task is an :class:`mbplan.OCP` of :mod:`mbplan.paper`.
 """
 
 from mbplan.tasks import drone

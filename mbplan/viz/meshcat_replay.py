@@ -53,9 +53,10 @@ from pinocchio.visualize import MeshcatVisualizer
 
 from mbplan.errors import InputError, MbplanError, RobotModelError
 from mbplan.multibody import MaximalModel, maximal_model
+from mbplan.ocp.robot import load_robot
+from mbplan.ocp.scene import Scene
 from mbplan.results import PlanResult, load_npz
-from mbplan.robots import RobotDescription, available_robots
-from mbplan.tasks.obstacle import Cylinder, Obstacle, ObstacleTask, robot_description
+from mbplan.robots import available_robots
 from mbplan.validation import output_file
 from mbplan.viz.plots import result_label, write_atomic
 
@@ -159,7 +160,7 @@ def generalized_geometry_placements(
 
 def replay(
     results: Sequence[PlanResult],
-    task: ObstacleTask | None = None,
+    task: Any = None,
     *,
     html: str | os.PathLike[str] | None = None,
     open_browser: bool = True,
@@ -169,7 +170,8 @@ def replay(
     """Show ``results`` side by side (with ``task``'s obstacles and goal) in a live MeshCat
     viewer and return its URL, or with ``html`` write a static page there and return its path.
 
-    ``robot`` defaults to ``task.robot``, else to :func:`infer_robot`. ``frame`` None plays the
+    ``task`` (an OCP) defaults to the first result's OCP; ``robot`` is only needed for results
+    without one (else :func:`infer_robot`). ``frame`` None plays the
     animation once; a knot index shows that knot, with the animation loaded but paused. The
     live server lives until the Python process exits.
     """
@@ -179,7 +181,7 @@ def replay(
 def draw_results(
     viewer: meshcat.Visualizer,
     results: Sequence[PlanResult],
-    task: ObstacleTask | None = None,
+    task: Any = None,
     *,
     robot: str | None = None,
     frame: int | None = None,
@@ -192,7 +194,7 @@ def draw_results(
 def static_html(
     results: Sequence[PlanResult],
     path: str | os.PathLike[str],
-    task: ObstacleTask | None = None,
+    task: Any = None,
     *,
     robot: str | None = None,
     frame: int | None = None,
@@ -237,17 +239,21 @@ def replay_main(
     """``mbplan replay``: show the ``.npz`` results at ``paths`` side by side.
 
     The robot is ``robot`` if the results fit it, else inferred from the maximal results' body
-    names (:func:`infer_robot`). For the iiwa the scene has the obstacles and target of
-    :class:`ObstacleTask` (fixed for every iiwa task; the ``.npz`` does not store the task), for
-    other robots none. With ``html`` the static page is written there; otherwise a live viewer is
+    names (:func:`infer_robot`) for files from before the OCP API; a result that carries its OCP
+    is drawn with that OCP's robot and scene (old iiwa files: the default iiwa task's scene). With ``html`` the static page is written there; otherwise a live viewer is
     served on 127.0.0.1, its URL printed (and opened unless ``no_browser``) and the command
     serves until interrupted (Ctrl-C). Returns the exit status.
     """
     if not paths:
         raise InputError("replay: no result files given")
     results = [read_result(p) for p in paths]
-    name = infer_robot(results, robot)
-    task = ObstacleTask() if name == "iiwa" else None
+    if all(r.ocp is not None for r in results):
+        task, name = results[0].ocp, None  # the scene and robot each plan was made with
+    else:  # files from before the OCP API: guess the robot, the iiwa's default task
+        from mbplan.paper import iiwa_obstacle
+
+        name = infer_robot(results, robot)
+        task = iiwa_obstacle() if name == "iiwa" else None
     build = _robot_scene(results, task, name, None)
     if html is not None:
         print(f"wrote {_write_page(build, html)}")
@@ -258,7 +264,7 @@ def replay_main(
 
 def serve(
     results: Sequence[PlanResult],
-    task: ObstacleTask | None = None,
+    task: Any = None,
     *,
     robot: str | None = None,
     open_browser: bool = True,
@@ -295,38 +301,54 @@ def _fits(result: PlanResult, robot: str) -> bool:
     )
 
 
+def _scene_ocp(task: Any) -> Any:
+    """``task`` if it is an OCP (or None)."""
+    from mbplan.ocp.problem import OCP
+
+    if task is None or isinstance(task, OCP):
+        return task
+    raise InputError(f"task: expected an OCP, got {type(task).__name__}")
+
+
 def _robot_scene(
     results: Sequence[PlanResult],
-    task: ObstacleTask | None,
+    task: Any,
     robot: str | None,
     frame: int | None,
 ) -> _Scene:
-    """Check the inputs and return the scene builder (layers, labels, animation timing)."""
+    """Check the inputs and return the scene builder (layers, labels, animation timing).
+
+    The scene is that of ``task`` (an OCP), else of the first result's OCP."""
     results = list(results)
     if not results:
         raise InputError("replay: no results given")
     for i, result in enumerate(results):
         if not isinstance(result, PlanResult):
             raise InputError(f"results[{i}]: expected a PlanResult, got {type(result).__name__}")
-    if task is not None and not isinstance(task, ObstacleTask):
-        raise InputError(f"task: expected an ObstacleTask, got {type(task).__name__}")
-    if task is not None and robot is not None and robot != task.robot:
-        raise InputError(f"robot {robot!r} differs from the task's robot {task.robot!r}")
-    name = task.robot if task is not None else robot or infer_robot(results)
-    desc = robot_description(name)
+    ocp = _scene_ocp(task)
+    if ocp is None and robot is None and results[0].ocp is not None:
+        ocp = results[0].ocp
+    if ocp is not None and robot is not None and robot != ocp.robot.name:
+        raise InputError(f"robot {robot!r} differs from the task's robot {ocp.robot.name!r}")
+    desc = ocp.robot if ocp is not None else load_robot(robot or infer_robot(results))
     if desc.visual_model is None or desc.visual_model.ngeoms == 0:
-        raise RobotModelError(f"robot {name!r} has no visual geometry to draw")
+        raise RobotModelError(f"robot {desc.name!r} has no visual geometry to draw")
+    mm = _maximal_of(desc.model)
     dt = results[0].dt
     for result in results:
-        if not _fits(result, name):
+        fits = result.q.shape[1] == mm.nq and (
+            result.body_names is None or tuple(result.body_names) == mm.body_names
+        )
+        if not fits:
             raise InputError(
                 f"{result_label(result)}: {result.q.shape[1]} joints"
                 + (f", bodies {result.body_names}" if result.body_names else "")
-                + f" do not fit robot {name!r}"
+                + f" do not fit robot {desc.name!r}"
             )
         if not np.isclose(result.dt, dt, rtol=1e-9, atol=0.0):
             raise InputError(f"results have different time steps ({result.dt} and {dt} s)")
-    copies = [_robot_copy(i, r, task, desc) for i, r in enumerate(results)]
+    goal = _goal_configuration(ocp)
+    copies = [_robot_copy(i, r, ocp, goal, desc, mm) for i, r in enumerate(results)]
     y_lo = min(p[:, 1].min() for layers, _ in copies for p in (la.extent for la in layers))
     y_hi = max(p[:, 1].max() for layers, _ in copies for p in (la.extent for la in layers))
     spacing = y_hi - y_lo + 4 * _PAD
@@ -339,30 +361,54 @@ def _robot_scene(
         top = np.array([points[:, 0].mean(), shift[1, 3] + points[:, 1].mean(), 0.0])
         top[2] = points[:, 2].max() + 2 * _PAD
         labels.append(_Label(label.text, label.rgb, top, label.caption))
-    if task is not None:
+    if goal is not None:
         labels.append(_Label("goal: q_target", _GOAL_RGBA[:3]))
-        if task.obstacles:
-            labels.append(_Label("obstacles", _OBSTACLE_RGBA[:3]))
+    if ocp is not None and len(ocp.scene):
+        labels.append(_Label("obstacles", _OBSTACLE_RGBA[:3]))
     title = "mbplan replay: " + " | ".join(result_label(r) for r in results)
     return _Scene(title, layers, labels, dt, frame)
 
 
+def _maximal_of(model: pin.Model) -> MaximalModel:
+    from mbplan.formulations.maximal import _maximal as cached
+
+    return cached(model)
+
+
+def _goal_configuration(ocp: Any) -> np.ndarray | None:
+    """The target of a terminal full joint-position goal (drawn as a translucent robot)."""
+    if ocp is None:
+        return None
+    from mbplan.ocp.residuals import JointPosition
+
+    for item in ocp.items:
+        if isinstance(item.residual, JointPosition) and item.residual.joints is None:
+            if ocp.N in item.knots:
+                return np.asarray(item.residual.target)
+    return None
+
+
 def _robot_copy(
-    i: int, result: PlanResult, task: ObstacleTask | None, desc: RobotDescription
+    i: int,
+    result: PlanResult,
+    ocp: Any,
+    goal: np.ndarray | None,
+    desc: Any,
+    mm: MaximalModel,
 ) -> tuple[list[_Layer], _Label]:
     """Layers of result ``i`` (robot, goal, obstacles) at the origin, and its label."""
     model, visual = desc.model, desc.visual_model
     if result.R is not None and result.p is not None:
-        placements = maximal_geometry_placements(_maximal(desc.name), visual, result.R, result.p)
+        placements = maximal_geometry_placements(mm, visual, result.R, result.p)
     else:
         placements = generalized_geometry_placements(model, visual, result.q)
     rgb = _COLORS[i % len(_COLORS)]
     layers = [_Layer(f"robot{i}", model, visual, placements, (*rgb, 1.0), _origins(placements))]
-    if task is not None:
-        goal = generalized_geometry_placements(model, visual, task.q_target[None])
-        layers.append(_Layer(f"goal{i}", model, visual, goal, _GOAL_RGBA, _origins(goal)))
-        if task.obstacles:
-            layers.append(_obstacle_layer(f"obstacles{i}", task.obstacles))
+    if goal is not None:
+        at_goal = generalized_geometry_placements(model, visual, goal[None])
+        layers.append(_Layer(f"goal{i}", model, visual, at_goal, _GOAL_RGBA, _origins(at_goal)))
+    if ocp is not None and len(ocp.scene):
+        layers.append(_obstacle_layer(f"obstacles{i}", ocp.scene))
     text = f"{result_label(result)}: {result.status}, {result.iterations} iterations"
     return layers, _Label(text, rgb, caption=result_label(result))
 
@@ -382,30 +428,16 @@ def _shifted(layer: _Layer, shift: np.ndarray) -> _Layer:
     )
 
 
-def _obstacle_layer(name: str, obstacles: Sequence[Cylinder | Obstacle]) -> _Layer:
-    """Obstacles as geometry on the universe (a :class:`Cylinder` as its finite solid)."""
-    geometry = pin.GeometryModel()
+def _obstacle_layer(name: str, scene: Any) -> _Layer:
+    """The scene's objects as geometry on the universe."""
+    geometry = scene.geometry_model()
     corners = []
-    for k, obstacle in enumerate(obstacles):
-        solid = obstacle.as_obstacle() if isinstance(obstacle, Cylinder) else obstacle
-        pose = pin.SE3(solid.pose[:3, :3], solid.pose[:3, 3])
-        geometry.addGeometryObject(pin.GeometryObject(f"obstacle{k}", 0, pose, solid.geometry()))
-        half = _half_extents(solid)
+    for o in scene:
+        half = o.half_extents()
         box = np.array(np.meshgrid(*[(-h, h) for h in half])).reshape(3, -1).T
-        corners.append(box @ solid.pose[:3, :3].T + solid.pose[:3, 3])
+        corners.append(box @ o.pose[:3, :3].T + o.pose[:3, 3])
     placements = np.array([[o.placement.homogeneous for o in geometry.geometryObjects]])
     return _Layer(name, pin.Model(), geometry, placements, _OBSTACLE_RGBA, np.concatenate(corners))
-
-
-def _half_extents(solid: Obstacle) -> np.ndarray:
-    """Half sizes of the solid's bounding box in its own frame."""
-    s = solid.size
-    if solid.shape == "box":
-        return 0.5 * np.array(s)
-    if solid.shape == "sphere":
-        return np.full(3, s[0])
-    cap = s[0] if solid.shape == "capsule" else 0.0
-    return np.array([s[0], s[0], 0.5 * s[1] + cap])
 
 
 # --- drone ---------------------------------------------------------------------------------------
@@ -414,7 +446,7 @@ def _half_extents(solid: Obstacle) -> np.ndarray:
 def drone_replay(
     R: ArrayLike,
     p: ArrayLike,
-    obstacles: Sequence[tuple[float, float, float] | Cylinder] = (),
+    obstacles: Sequence[tuple[float, float, float]] = (),
     html: str | os.PathLike[str] | None = None,
     *,
     goal: tuple[ArrayLike, ArrayLike] | None = None,
@@ -428,7 +460,7 @@ def drone_replay(
     :class:`~mbplan.tasks.drone.DockingTask` default) and vertical cylinder ``obstacles``:
     ``(x_c, y_c, r)`` as in ``DockingTask.obstacles``, standing on the floor below the flight
     (``r`` includes the vehicle's radius, so the drawn vehicle may overlap one), or
-    :class:`Cylinder`. The camera looks across the start-to-goal line. Returns the live viewer's
+    ``(x_c, y_c, r)``. The camera looks across the start-to-goal line. Returns the live viewer's
     URL, or with ``html`` the static page's path (``frame`` and the server's lifetime as in
     :func:`replay`)."""
     return _show(_drone_scene(R, p, obstacles, goal, dt, frame), html, open_browser)
@@ -438,7 +470,7 @@ def draw_drone(
     viewer: meshcat.Visualizer,
     R: ArrayLike,
     p: ArrayLike,
-    obstacles: Sequence[tuple[float, float, float] | Cylinder] = (),
+    obstacles: Sequence[tuple[float, float, float]] = (),
     *,
     goal: tuple[ArrayLike, ArrayLike] | None = None,
     dt: float = 0.05,
@@ -451,7 +483,7 @@ def draw_drone(
 def _drone_scene(
     R: ArrayLike,
     p: ArrayLike,
-    obstacles: Sequence[tuple[float, float, float] | Cylinder],
+    obstacles: Sequence[tuple[float, float, float]],
     goal: tuple[ArrayLike, ArrayLike] | None,
     dt: float,
     frame: int | None,
@@ -489,8 +521,11 @@ def _drone_scene(
     ]
     if len(obstacles):
         z_lo, z_hi = extent[:, 2].min(), extent[:, 2].max() + _DRONE_HEADROOM
-        cylinders = [_drone_cylinder(o, z_lo, z_hi) for o in obstacles]
-        layers.append(_obstacle_layer("obstacles", cylinders))
+        scene = Scene()
+        for k, o in enumerate(obstacles):
+            x, y, r = _drone_cylinder(o)
+            scene.add_cylinder(f"obstacle{k}", r, z_hi - z_lo, (x, y, 0.5 * (z_lo + z_hi)))
+        layers.append(_obstacle_layer("obstacles", scene))
         labels.append(_Label("obstacles", _OBSTACLE_RGBA[:3]))
 
     def path_line(vis: meshcat.Visualizer) -> None:
@@ -505,18 +540,12 @@ def _drone_scene(
     return _Scene(title, layers, labels, dt, frame, path_line, floor, view)
 
 
-def _drone_cylinder(
-    obstacle: tuple[float, float, float] | Cylinder, z_lo: float, z_hi: float
-) -> Cylinder:
-    if isinstance(obstacle, Cylinder):
-        return obstacle
+def _drone_cylinder(obstacle: tuple[float, float, float]) -> tuple[float, float, float]:
     try:
         x, y, r = (float(v) for v in obstacle)
     except (TypeError, ValueError):
-        raise InputError(
-            f"drone obstacle {obstacle!r}: expected (x_c, y_c, r) or a Cylinder"
-        ) from None
-    return Cylinder((x, y), r, z_lo, z_hi)
+        raise InputError(f"drone obstacle {obstacle!r}: expected (x_c, y_c, r)") from None
+    return x, y, r
 
 
 def _drone_geometry() -> pin.GeometryModel:

@@ -1,0 +1,426 @@
+"""Generalized coordinates: an :class:`~mbplan.OCP` as eq. (61) with Pinocchio, for IPOPT.
+
+Decision vector ``z = (q_1..q_N, v_1..v_N, τ_0..τ_{N-1})``; knot 0 is fixed at ``(q0, v0)``.
+For ``k = 0..N-1`` (eq. 61, explicit Euler as the paper writes it)::
+
+    (q_{k+1} - q_k)/Δt - v_k = 0                          kinematics (divided by Δt: rad/s)
+    RNEA(q_k, v_k, (v_{k+1} - v_k)/Δt) - τ_k = 0           dynamics
+
+then the OCP's constraints, item by item and knot by knot (equalities ``r = 0``, inequalities
+``r ≤ 0``); joint position, velocity and torque limits become bounds on ``z``. Costs are
+``Σ w ½‖r(x_k)‖²`` (a CasADi expression of ``z``). Residuals come from
+:mod:`mbplan.formulations.joint_space`: exact first and second derivatives by CasADi, except coal
+distances (witness-point gradient, fixed-witness-point Hessian, :mod:`mbplan.multibody.collision`).
+
+Pinocchio's pip wheel has no CasADi bindings, so the constraint function, its Jacobian and the
+Lagrangian Hessian are ``casadi.Callback`` functions given to ``casadi.nlpsol`` (``g`` and the
+``jac_g``/``hess_lag`` options). Dynamics Jacobian: ``computeRNEADerivatives``. Dynamics Hessian
+``∇²(λ_kᵀ RNEA)``: central differences in ``q`` of Pinocchio's analytic first derivatives (step
+:data:`FD_STEP_Q`), a unit forward difference in ``v`` (exact: ``∂τ/∂v`` is affine in ``v``),
+``∂²τ/∂a² = ∂²τ/∂a∂v = 0``, mapped to ``(q_k, v_k, v_{k+1})`` through ``a = (v_{k+1} - v_k)/Δt``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import casadi as cs
+import numpy as np
+import pinocchio as pin
+import scipy.sparse as sp
+from numpy.typing import ArrayLike
+
+from mbplan.formulations.joint_space import distance_pairs, distance_values, knot_function
+from mbplan.multibody.collision import point_hessians
+from mbplan.ocp.problem import OCP, Item
+from mbplan.ocp.residuals import (
+    Distance,
+    JointPositionLimits,
+    JointTorqueLimits,
+    JointVelocityLimits,
+)
+
+FD_STEP_Q = 1e-5  # rad: central differences of the analytic RNEA derivatives in q
+
+
+def _block(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Triplet indices of dense blocks ``rows (..., a) × cols (..., b)`` in C order."""
+    shape = (*rows.shape, cols.shape[-1])
+    return (
+        np.broadcast_to(rows[..., None], shape).ravel(),
+        np.broadcast_to(cols[..., None, :], shape).ravel(),
+    )
+
+
+class SparsePattern:
+    """A fixed sparsity given by triplets (duplicates are summed), kept where ``keep``."""
+
+    def __init__(self, shape: tuple[int, int], rows: np.ndarray, cols: np.ndarray, keep):
+        self.shape, self.keep = shape, keep
+        linear = cols[keep] * shape[0] + rows[keep]
+        unique, self.inverse = np.unique(linear, return_inverse=True)
+        self.row, self.col = unique % shape[0], unique // shape[0]
+        self.sparsity = cs.Sparsity.triplet(*shape, self.row.tolist(), self.col.tolist())
+
+    def nonzeros(self, values: np.ndarray) -> np.ndarray:
+        """Nonzeros in column-major (CCS) order from values listed like the triplets."""
+        return np.bincount(self.inverse, weights=values[self.keep], minlength=self.row.size)
+
+    def csc(self, values: np.ndarray) -> sp.csc_matrix:
+        return sp.csc_matrix((self.nonzeros(values), (self.row, self.col)), shape=self.shape)
+
+
+@dataclass
+class _Rows:
+    """One item's per-knot CasADi functions, its columns ``(K, nx)`` in ``z`` and first row."""
+
+    item: Item
+    value: cs.Function
+    jac: cs.Function | None
+    hess: cs.Function
+    cols: np.ndarray
+    row0: int
+    m: int
+
+    @property
+    def K(self) -> int:
+        return len(self.cols)
+
+
+class GeneralizedNLP:
+    """The NLP of ``ocp`` in generalized coordinates (module docstring)."""
+
+    def __init__(self, ocp: OCP):
+        self.ocp = ocp
+        robot = ocp.robot
+        self.model, self.data = robot.model, robot.model.createData()
+        N, nv = ocp.N, robot.nv
+        self.N, self.nv, self.dt = N, nv, ocp.dt
+        self.n = 3 * N * nv
+        a_of_x = np.zeros((3 * nv, 3 * nv))  # (q, v, a) from (q_k, v_k, v_{k+1})
+        a_of_x[: 2 * nv, : 2 * nv] = np.eye(2 * nv)
+        a_of_x[2 * nv :, nv : 2 * nv] = -np.eye(nv) / self.dt
+        a_of_x[2 * nv :, 2 * nv :] = np.eye(nv) / self.dt
+        self._a_of_x = a_of_x
+        self._bounds()
+        row = 2 * N * nv
+        self.rows: list[_Rows] = []
+        self.distances: list[tuple[Item, int]] = []
+        self.costs: list[_Rows] = []
+        for item in ocp.items:
+            r = item.residual
+            if item.role == "constraint" and isinstance(r, _BOUNDS):
+                continue
+            if isinstance(r, Distance):
+                m = distance_pairs(robot, ocp.scene, r.objects).size
+                self.distances.append((item, row))
+                row += m * len(item.knots)
+                continue
+            fn = knot_function(robot, ocp.scene, r)
+            x = cs.SX.sym("x", fn.size1_in(0))
+            out = fn(x)
+            cols = self._columns(item)
+            if item.role == "cost":
+                c = 0.5 * item.weight * cs.sumsqr(out)
+                hess = cs.Function("h", [x], [cs.hessian(c, x)[0]])
+                self.costs.append(_Rows(item, fn, None, hess, cols, 0, 1))
+                continue
+            lam = cs.SX.sym("lam", out.numel())
+            jac = cs.Function("j", [x], [cs.jacobian(out, x)])
+            hess = cs.Function("h", [x, lam], [cs.hessian(cs.dot(lam, out), x)[0]])
+            self.rows.append(_Rows(item, fn, jac, hess, cols, row, out.numel()))
+            row += out.numel() * len(cols)
+        self.m = row
+        self.lbg = np.zeros(self.m)
+        self.ubg = np.zeros(self.m)
+        for r in self.rows:
+            if r.item.sense == "ineq":
+                self.lbg[r.row0 : r.row0 + r.m * r.K] = -np.inf
+        for item, row0 in self.distances:
+            size = distance_pairs(robot, ocp.scene, item.residual.objects).size * len(item.knots)
+            self.lbg[row0 : row0 + size] = -np.inf
+        self._jacobian_pattern()
+        self._hessian_pattern()
+
+    # -- layout --------------------------------------------------------------------------------
+    def iq(self, k: ArrayLike) -> np.ndarray:
+        """Indices of ``q_k`` (``k = 1..N``) in ``z``, shape ``(*k.shape, nv)``."""
+        return (np.asarray(k)[..., None] - 1) * self.nv + np.arange(self.nv)
+
+    def iv(self, k: ArrayLike) -> np.ndarray:
+        return self.iq(k) + self.N * self.nv
+
+    def itau(self, k: ArrayLike) -> np.ndarray:
+        """Indices of ``τ_k`` (``k = 0..N-1``)."""
+        return self.iq(np.asarray(k) + 1) + 2 * self.N * self.nv
+
+    def _columns(self, item: Item) -> np.ndarray:
+        k = item.knots
+        if item.residual.space == "control":
+            return self.itau(k)
+        return np.concatenate([self.iq(k), self.iv(k)], axis=1)
+
+    def pack(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        return np.concatenate([q[1:].ravel(), v[1:].ravel(), tau.ravel()])
+
+    def unpack(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        Q, V, T = np.reshape(z, (3, self.N, self.nv))
+        return np.vstack([self.ocp.q0, Q]), np.vstack([self.ocp.v0, V]), T
+
+    def _bounds(self) -> None:
+        self.lbz, self.ubz = np.full(self.n, -np.inf), np.full(self.n, np.inf)
+        for item in self.ocp.constraints:
+            r = item.residual
+            if not isinstance(r, _BOUNDS):
+                continue
+            index = {
+                JointPositionLimits: self.iq,
+                JointVelocityLimits: self.iv,
+                JointTorqueLimits: self.itau,
+            }[type(r)](item.knots)
+            self.lbz[index] = np.maximum(self.lbz[index], r.lower)
+            self.ubz[index] = np.minimum(self.ubz[index], r.upper)
+
+    def initial_guess(self, q: np.ndarray) -> np.ndarray:
+        """``z`` from a joint path ``q (N+1, nq)`` with eq. (61) met: ``v_k = (q_{k+1} -
+        q_k)/Δt``, ``v_N = 0``, ``τ_k`` by inverse dynamics (§VIII.C)."""
+        v = np.zeros_like(q)
+        v[:-1] = np.diff(q, axis=0) / self.dt
+        a = np.diff(v, axis=0) / self.dt
+        tau = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
+        return self.pack(q, v, tau)
+
+    # -- per-item evaluation -------------------------------------------------------------------
+    @staticmethod
+    def _x(r: _Rows, z: np.ndarray) -> np.ndarray:
+        return z[r.cols].T  # (nx, K)
+
+    def objective(self, z: np.ndarray) -> float:
+        total = 0.0
+        for r in self.costs:
+            out = np.asarray(r.value.map(r.K)(self._x(r, z)))
+            total += 0.5 * r.item.weight * float(np.sum(out**2))
+        return total
+
+    def objective_gradient(self, z: np.ndarray) -> np.ndarray:
+        """``∇f(z)`` (CasADi's reverse mode on :meth:`symbolic_objective`)."""
+        if not hasattr(self, "_grad_f"):
+            zs = cs.MX.sym("z", self.n)
+            self._grad_f = cs.Function(
+                "grad_f", [zs], [cs.gradient(self.symbolic_objective(zs), zs)]
+            )
+        return np.asarray(self._grad_f(z)).ravel()
+
+    def symbolic_objective(self, z: cs.MX) -> cs.MX:
+        f = cs.MX(0)
+        for r in self.costs:
+            X = cs.reshape(z[r.cols.ravel().tolist()], r.cols.shape[1], r.K)
+            f += 0.5 * r.item.weight * cs.sumsqr(r.value.map(r.K)(X))
+        return f
+
+    def constraints(self, z: np.ndarray) -> np.ndarray:
+        q, v, tau = self.unpack(z)
+        a = np.diff(v, axis=0) / self.dt
+        kin = np.diff(q, axis=0) / self.dt - v[:-1]
+        dyn = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
+        parts = [kin.ravel(), (dyn - tau).ravel()]
+        for r in self.rows:
+            parts.append(np.asarray(r.value.map(r.K)(self._x(r, z))).T.ravel())
+        for item, _ in self.distances:
+            parts.append(
+                distance_values(self.ocp.robot, self.ocp.scene, item.residual, q[item.knots])[
+                    0
+                ].ravel()
+            )
+        return np.concatenate(parts)
+
+    def _jacobian_pattern(self) -> None:
+        N, nv = self.N, self.nv
+        steps, inner = np.arange(N), np.arange(1, N)
+        kin = steps[:, None] * nv + np.arange(nv)
+        dyn = kin + N * nv
+        triplets = [
+            (kin.ravel(), self.iq(steps + 1).ravel()),
+            (kin[inner].ravel(), self.iq(inner).ravel()),
+            (kin[inner].ravel(), self.iv(inner).ravel()),
+            _block(dyn[inner], self.iq(inner)),
+            _block(dyn[inner], self.iv(inner)),
+            _block(dyn, self.iv(steps + 1)),
+            (dyn.ravel(), self.itau(steps).ravel()),
+        ]
+        for r in self.rows:
+            lr, lc = (np.array(a, dtype=np.int64) for a in r.jac.sparsity_out(0).get_triplet())
+            k = np.arange(r.K)[:, None]
+            triplets.append(((r.row0 + k * r.m + lr).ravel(), r.cols[:, lc].ravel()))
+        from mbplan.multibody.collision import joint_support
+
+        support = joint_support(self.model)
+        self._dist_masks = []
+        for item, row0 in self.distances:
+            pairs = distance_pairs(self.ocp.robot, self.ocp.scene, item.residual.objects)
+            K, P = len(item.knots), pairs.size
+            mask = np.broadcast_to(support[pairs.joint][None], (K, P, nv))
+            rows = row0 + np.arange(K * P).reshape(K, P)
+            cols = self.iq(item.knots)[:, None, :]
+            self._dist_masks.append(mask)
+            triplets.append(
+                (
+                    np.broadcast_to(rows[..., None], mask.shape)[mask],
+                    np.broadcast_to(cols, mask.shape)[mask],
+                )
+            )
+        rows = np.concatenate([r for r, _ in triplets])
+        cols = np.concatenate([c for _, c in triplets])
+        self.jac_pattern = SparsePattern((self.m, self.n), rows, cols, np.ones(rows.size, bool))
+        self._jac_constant = np.concatenate(
+            [
+                np.full(N * nv, 1.0 / self.dt),
+                np.full((N - 1) * nv, -1.0 / self.dt),
+                np.full((N - 1) * nv, -1.0),
+            ]
+        )
+
+    def _jacobian_values(self, z: np.ndarray) -> np.ndarray:
+        q, v, _ = self.unpack(z)
+        a = np.diff(v, axis=0) / self.dt
+        dq, dv, M = (np.empty((self.N, self.nv, self.nv)) for _ in range(3))
+        for k in range(self.N):
+            dq[k], dv[k], M[k] = pin.computeRNEADerivatives(self.model, self.data, q[k], v[k], a[k])
+        parts = [
+            self._jac_constant,
+            dq[1:].ravel(),
+            (dv[1:] - M[1:] / self.dt).ravel(),
+            (M / self.dt).ravel(),
+            np.full(self.N * self.nv, -1.0),
+        ]
+        for r in self.rows:
+            parts.append(np.asarray(r.jac.map(r.K)(self._x(r, z)).nonzeros()))
+        for (item, _), mask in zip(self.distances, self._dist_masks, strict=True):
+            _, grad, *_ = distance_values(
+                self.ocp.robot, self.ocp.scene, item.residual, q[item.knots], 1
+            )
+            parts.append(grad[mask])
+        return np.concatenate(parts)
+
+    def jacobian(self, z: np.ndarray) -> sp.csc_matrix:
+        return self.jac_pattern.csc(self._jacobian_values(z))
+
+    def _hessian_pattern(self) -> None:
+        N = self.N
+        inner = np.arange(1, N)
+        local = np.concatenate([self.iq(inner), self.iv(inner), self.iv(inner + 1)], axis=1)
+        triplets = [_block(local, local)]
+        self._hess_sizes = []
+        for r in (*self.rows, *self.costs):
+            lr, lc = (np.array(a, dtype=np.int64) for a in r.hess.sparsity_out(0).get_triplet())
+            triplets.append((r.cols[:, lr].ravel(), r.cols[:, lc].ravel()))
+        for item, _ in self.distances:
+            triplets.append(_block(self.iq(item.knots), self.iq(item.knots)))
+        rows = np.concatenate([r for r, _ in triplets])
+        cols = np.concatenate([c for _, c in triplets])
+        self.hess_pattern = SparsePattern((self.n, self.n), rows, cols, rows <= cols)
+
+    def _rnea_hessian(self, q, v, a, lam) -> np.ndarray:
+        """``∇²(λᵀ RNEA(q, v, a))`` over ``(q, v, a)``, ``(3nv, 3nv)`` (module docstring)."""
+        nv, model, data = self.nv, self.model, self.data
+
+        def gradient(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
+            dq, dv, M = pin.computeRNEADerivatives(model, data, qq, vv, a)
+            return np.concatenate([lam @ dq, lam @ dv, lam @ M])
+
+        H = np.zeros((3 * nv, 3 * nv))
+        step = np.eye(nv)
+        for j in range(nv):
+            hq = FD_STEP_Q * step[j]
+            H[:, j] = (gradient(q + hq, v) - gradient(q - hq, v)) / (2.0 * FD_STEP_Q)
+        base = gradient(q, v)[nv : 2 * nv]
+        for j in range(nv):
+            H[nv : 2 * nv, nv + j] = gradient(q, v + step[j])[nv : 2 * nv] - base
+        qq, vv = slice(0, nv), slice(nv, 2 * nv)
+        H[qq, qq] = 0.5 * (H[qq, qq] + H[qq, qq].T)
+        H[vv, vv] = 0.5 * (H[vv, vv] + H[vv, vv].T)
+        H[:nv, nv:] = H[nv:, :nv].T
+        return H
+
+    def _hessian_values(self, z: np.ndarray, sigma: float, lam: np.ndarray) -> np.ndarray:
+        N, nv, T = self.N, self.nv, self._a_of_x
+        q, v, _ = self.unpack(z)
+        a = np.diff(v, axis=0) / self.dt
+        lam_dyn = lam[N * nv : 2 * N * nv].reshape(N, nv)
+        dyn = np.array(
+            [T.T @ self._rnea_hessian(q[k], v[k], a[k], lam_dyn[k]) @ T for k in range(1, N)]
+        )
+        parts = [dyn.ravel()]
+        for r in self.rows:
+            L = lam[r.row0 : r.row0 + r.m * r.K].reshape(r.K, r.m).T
+            parts.append(np.asarray(r.hess.map(r.K)(self._x(r, z), L).nonzeros()))
+        for r in self.costs:
+            parts.append(sigma * np.asarray(r.hess.map(r.K)(self._x(r, z)).nonzeros()))
+        for item, row0 in self.distances:
+            _, _, kin, contacts, J = distance_values(
+                self.ocp.robot, self.ocp.scene, item.residual, q[item.knots], 1
+            )
+            pairs = distance_pairs(self.ocp.robot, self.ocp.scene, item.residual.objects)
+            mu = lam[row0 : row0 + len(item.knots) * pairs.size].reshape(
+                len(item.knots), pairs.size
+            )
+            P = point_hessians(kin, pairs.joint, J)
+            parts.append(np.einsum("kp,kpa,kpjla->kjl", mu, contacts.normal, P).ravel())
+        return np.concatenate(parts)
+
+    def lagrangian_hessian(self, z: np.ndarray, sigma: float, lam: np.ndarray) -> sp.csc_matrix:
+        """Upper triangle of ``∇²(σ f + λᵀ g)``."""
+        return self.hess_pattern.csc(self._hessian_values(z, sigma, lam))
+
+    def callbacks(self) -> tuple[_Callback, _Callback, _Callback]:
+        """``g(z)``, ``jac_g(z, p) -> (g, ∂g/∂z)`` and ``hess_lag(z, p, σ, λ) -> triu ∇²L``."""
+        dense_z, dense_g = cs.Sparsity.dense(self.n, 1), cs.Sparsity.dense(self.m, 1)
+        no_p, scalar = cs.Sparsity(0, 1), cs.Sparsity.dense(1, 1)
+        jac, hess = self.jac_pattern, self.hess_pattern
+
+        def g(z):
+            return [cs.DM(self.constraints(z))]
+
+        def jac_g(z, _p):
+            values = jac.nonzeros(self._jacobian_values(z))
+            return [cs.DM(self.constraints(z)), cs.DM(jac.sparsity, values)]
+
+        def hess_lag(z, _p, sigma, lam):
+            values = hess.nonzeros(self._hessian_values(z, float(sigma[0]), lam))
+            return [cs.DM(hess.sparsity, values)]
+
+        return (
+            _Callback("generalized_g", [dense_z], [dense_g], g),
+            _Callback("generalized_jac_g", [dense_z, no_p], [dense_g, jac.sparsity], jac_g),
+            _Callback(
+                "generalized_hess_lag", [dense_z, no_p, scalar, dense_g], [hess.sparsity], hess_lag
+            ),
+        )
+
+
+_BOUNDS = (JointPositionLimits, JointVelocityLimits, JointTorqueLimits)
+
+
+class _Callback(cs.Callback):
+    """A CasADi function evaluated by ``fn`` on NumPy vectors."""
+
+    def __init__(self, name: str, sp_in, sp_out, fn: Callable[..., list[cs.DM]]):
+        cs.Callback.__init__(self)
+        self._sp_in, self._sp_out, self._fn = sp_in, sp_out, fn
+        self.construct(name, {})
+
+    def get_n_in(self) -> int:
+        return len(self._sp_in)
+
+    def get_n_out(self) -> int:
+        return len(self._sp_out)
+
+    def get_sparsity_in(self, i: int) -> cs.Sparsity:
+        return self._sp_in[i]
+
+    def get_sparsity_out(self, i: int) -> cs.Sparsity:
+        return self._sp_out[i]
+
+    def eval(self, arg: list[cs.DM]) -> list[cs.DM]:
+        return self._fn(*(a.full().ravel() for a in arg))

@@ -1,0 +1,322 @@
+"""Maximal coordinates: an :class:`~mbplan.OCP` on SO(3)×R³ bodies with the LGVI, for the RIPM.
+
+The multi-body LGVI of :mod:`mbplan.transcription.multibody` plus one group of terms per OCP
+item, each residual kind written once on the bodies' poses:
+
+* joint position: with ``R_rel = R_pᵀR_c = R_rel0 exp(θ a)`` and ``E = R_targetᵀ R_rel =
+  exp(Δθ a)``, a cost is the chordal distance (eq. 57) ``w (1 - cos Δθ) ≈ ½ w Δθ²`` and a
+  constraint ``Δθ = atan2(aᵀ vee(E - Eᵀ)/2, (tr E - 1)/2) = 0``;
+* joint velocity, the step ``θ_{k+1} - θ_k`` over ``Δt`` from ``R_rel,k+1 = F_pᵀ R_rel,k F_c``:
+  a cost (target zero only) ``w (1 - cos(θ_{k+1} - θ_k))/Δt²``, a constraint the ``atan2`` step;
+* joint position limits ``cos(θ - θ_mid) ≥ cos(θ_half)`` and velocity limits
+  ``cos(θ_{k+1} - θ_k) ≥ cos(v_max Δt)`` (exact for ranges below 2π; symmetric velocity limits);
+* torques ``τ`` at the knots (interval ``k`` of the OCP is the LGVI's knot ``k+1``, eq. 29);
+* frame translation and placement on the pose ``(R_b R_jf, p_b + R_b c)`` of the frame's body;
+* eq. (62) on the body COMs, coal distances on the body poses (:mod:`.distance`).
+"""
+
+from __future__ import annotations
+
+import time
+from functools import cache, lru_cache
+
+import casadi as cs
+import numpy as np
+import pinocchio as pin
+
+from mbplan.engine import RiemannianFunction
+from mbplan.errors import InputError
+from mbplan.formulations.joint_space import distance_pairs, frame_error
+from mbplan.lie import SO3, R
+from mbplan.multibody import MaximalModel, joint_positions, maximal_model
+from mbplan.ocp.problem import OCP, Item
+from mbplan.ocp.residuals import (
+    ComOutsideCylinder,
+    Distance,
+    FramePlacement,
+    FrameTranslation,
+    JointPosition,
+    JointPositionLimits,
+    JointTorque,
+    JointTorqueLimits,
+    JointVelocity,
+    JointVelocityLimits,
+)
+from mbplan.simulation.warm_start import maximal_warm_start
+from mbplan.transcription.constraints import cylinder_clearance_function
+from mbplan.transcription.costs import chordal_cost
+from mbplan.transcription.distance import distance_constraint_function, pair_bodies
+from mbplan.transcription.multibody import multibody_layout
+from mbplan.transcription.problem import TrajectoryProblem
+from mbplan.transcription.terms import Term
+from mbplan.transcription.variables import Point, TrajectoryVariables
+
+
+def _relative(Rp, Fp, Rc, Fc):
+    rel = cs.mtimes(Rp.T, Rc)
+    return rel, cs.mtimes([Fp.T, rel, Fc])
+
+
+def _cos_angle(A, B):
+    return 0.5 * (cs.trace(cs.mtimes(A.T, B)) - 1.0)
+
+
+def _angle(A, B, a):
+    """Signed angle of ``AᵀB = exp(θ a)`` about ``a``."""
+    E = cs.mtimes(A.T, B)
+    s = 0.5 * cs.dot(a, cs.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]))
+    return cs.atan2(s, 0.5 * (cs.trace(E) - 1.0))
+
+
+def _position_cost(Rp, Fp, Rc, Fc, R_t, w):
+    return chordal_cost(_relative(Rp, Fp, Rc, Fc)[0], R_t, 0.5 * w * cs.DM.eye(3))
+
+
+def _position_eq(Rp, Fp, Rc, Fc, R_t, a):
+    return _angle(R_t, _relative(Rp, Fp, Rc, Fc)[0], a)
+
+
+def _velocity_cost(Rp, Fp, Rc, Fc, w):
+    rel, nxt = _relative(Rp, Fp, Rc, Fc)
+    return chordal_cost(nxt, rel, 0.5 * w * cs.DM.eye(3))
+
+
+def _velocity_eq(Rp, Fp, Rc, Fc, a, target, dt):
+    rel, nxt = _relative(Rp, Fp, Rc, Fc)
+    return _angle(rel, nxt, a) / dt - target
+
+
+def _position_limits(Rp, Fp, Rc, Fc, R_mid, cos_half):
+    return cos_half - _cos_angle(R_mid, _relative(Rp, Fp, Rc, Fc)[0])
+
+
+def _velocity_limits(Rp, Fp, Rc, Fc, cos_step):
+    rel, nxt = _relative(Rp, Fp, Rc, Fc)
+    return cos_step - _cos_angle(rel, nxt)
+
+
+_JOINT = {
+    "position_cost": (_position_cost, [("R_t", (3, 3)), ("w", 1)]),
+    "position_eq": (_position_eq, [("R_t", (3, 3)), ("a", 3)]),
+    "velocity_cost": (_velocity_cost, [("w", 1)]),
+    "velocity_eq": (_velocity_eq, [("a", 3), ("target", 1), ("dt", 1)]),
+    "position_limits": (_position_limits, [("R_mid", (3, 3)), ("cos_half", 1)]),
+    "velocity_limits": (_velocity_limits, [("cos_step", 1)]),
+}
+_JOINT_VARS = [("Rp", SO3), ("Fp", SO3), ("Rc", SO3), ("Fc", SO3)]
+
+
+@cache
+def _joint_function(kind: str, jit: bool, world: bool) -> RiemannianFunction:
+    fn, params = _JOINT[kind]
+    if world:
+
+        def world_fn(Rc, Fc, **p):
+            return fn(cs.DM.eye(3), cs.DM.eye(3), Rc, Fc, **p)
+
+        return RiemannianFunction(f"joint_{kind}_world", _JOINT_VARS[2:], world_fn, params, jit=jit)
+    return RiemannianFunction(f"joint_{kind}", _JOINT_VARS, fn, params, jit=jit)
+
+
+_TORQUE = {
+    "cost": (lambda tau, t, w: 0.5 * w * (tau - t) ** 2, [("t", 1), ("w", 1)]),
+    "eq": (lambda tau, t: tau - t, [("t", 1)]),
+    "limits": (lambda tau, lo, hi: cs.vertcat(tau - hi, lo - tau), [("lo", 1), ("hi", 1)]),
+}
+
+
+@cache
+def _torque_function(kind: str, jit: bool) -> RiemannianFunction:
+    fn, params = _TORQUE[kind]
+    return RiemannianFunction(f"torque_{kind}", [("tau", R(1))], fn, params, jit=jit)
+
+
+@cache
+def _frame_function(kind: str, cost: bool, jit: bool) -> RiemannianFunction:
+    """Frame translation ``p_f - p_g`` or placement ``(p_f - p_g, log(R_gᵀ R_f))`` of the frame
+    at ``(R_b R_jf, p_b + R_b c)`` on body ``(R_b, p_b)``; as a cost ``½ w ‖r‖²``."""
+    goal = [("R_g", (3, 3)), ("p_g", 3)] if kind == "placement" else [("p_g", 3)]
+
+    def fn(Rb, pb, R_jf, c, p_g, R_g=None, w=None):
+        Rf, pf = cs.mtimes(Rb, R_jf), pb + cs.mtimes(Rb, c)
+        r = frame_error(Rf, pf, p_g, R_g)
+        return 0.5 * w * cs.sumsqr(r) if cost else r
+
+    params = [("R_jf", (3, 3)), ("c", 3), *goal] + ([("w", 1)] if cost else [])
+    name = f"frame_{kind}_{'cost' if cost else 'eq'}"
+    return RiemannianFunction(name, [("Rb", SO3), ("pb", R(3))], fn, params, jit=jit)
+
+
+@lru_cache(maxsize=16)
+def _maximal(model: pin.Model) -> MaximalModel:
+    return maximal_model(model)
+
+
+class MaximalNLP:
+    """The TrajectoryProblem of ``ocp`` on SO(3)×R³ bodies (module docstring)."""
+
+    def __init__(self, ocp: OCP, jit: bool):
+        self.ocp, self.jit = ocp, jit
+        self.mm = mm = _maximal(ocp.robot.model)
+        self.body_of_joint = {int(j): b for b, j in enumerate(mm.pin_joint)}
+        layout = multibody_layout(mm, ocp.N, ocp.dt, jit=jit)
+        terms = list(layout.terms)
+        for item in ocp.items:
+            try:
+                terms += self._terms(item)
+            except InputError as err:
+                raise InputError(f"maximal formulation, {item.role} {item.name!r}: {err}") from None
+        self.problem = TrajectoryProblem(TrajectoryVariables(layout.blocks), terms)
+
+    # -- item translations ---------------------------------------------------------------------
+    def _bodies(self, item: Item) -> np.ndarray:
+        """Bodies of the joints a joint residual selects (in the residual's order)."""
+        idx = self.ocp.robot.joint_indices(getattr(item.residual, "joints", None))
+        where = {int(v): b for b, v in enumerate(self.mm.idx_v)}
+        return np.array([where[int(i)] for i in idx], dtype=np.int64)
+
+    def _about_axis(self, bodies: np.ndarray, angles: np.ndarray) -> np.ndarray:
+        mm = self.mm
+        return mm.R_rel0[bodies] @ SO3.exp(angles[:, None] * mm.axis_child[bodies])
+
+    def _joint_terms(self, item: Item, kind: str, bodies: np.ndarray, per_body: dict, shared: dict):
+        """Terms of a joint function at ``item.knots × bodies`` (world / non-world parents)."""
+        mm, nb = self.mm, self.mm.nb
+        kk, ii = (a.ravel() for a in np.meshgrid(item.knots, np.arange(len(bodies)), indexing="ij"))
+        b = bodies[ii]
+        out = []
+        sense = "cost" if item.role == "cost" else item.residual.sense
+        for world in (True, False):
+            mask = (mm.parent[b] < 0) == world
+            if not mask.any():
+                continue
+            k, bb = kk[mask], b[mask]
+            bind = {"Rc": ("R", k * nb + bb), "Fc": ("F", k * nb + bb)}
+            if not world:
+                par = mm.parent[bb]
+                bind |= {"Rp": ("R", k * nb + par), "Fp": ("F", k * nb + par)}
+            params = {n: v[ii[mask]] for n, v in per_body.items()} | shared
+            fn = _joint_function(kind, self.jit, world)
+            out.append(Term(f"{item.name}{'_world' if world else ''}", sense, fn, bind, params))
+        return out
+
+    def _terms(self, item: Item) -> list[Term]:
+        r, mm, nb, ocp = item.residual, self.mm, self.mm.nb, self.ocp
+        cost = item.role == "cost"
+        if isinstance(r, JointPosition):
+            b = self._bodies(item)
+            R_t = self._about_axis(b, np.asarray(r.target))
+            if cost:
+                return self._joint_terms(item, "position_cost", b, {"R_t": R_t}, {"w": item.weight})
+            return self._joint_terms(
+                item, "position_eq", b, {"R_t": R_t, "a": mm.axis_child[b]}, {}
+            )
+        if isinstance(r, JointVelocity):
+            b = self._bodies(item)
+            if cost:
+                if np.any(np.asarray(r.target) != 0.0):
+                    raise InputError("a velocity cost with a nonzero target is not expressible")
+                return self._joint_terms(
+                    item, "velocity_cost", b, {}, {"w": item.weight / ocp.dt**2}
+                )
+            per = {"a": mm.axis_child[b], "target": np.asarray(r.target)}
+            return self._joint_terms(item, "velocity_eq", b, per, {"dt": ocp.dt})
+        if isinstance(r, JointPositionLimits):
+            b = np.arange(nb)
+            lo, hi = np.asarray(r.lower)[mm.idx_v], np.asarray(r.upper)[mm.idx_v]
+            half = np.minimum(0.5 * (hi - lo), np.pi)
+            per = {"R_mid": self._about_axis(b, 0.5 * (lo + hi)), "cos_half": np.cos(half)}
+            return self._joint_terms(item, "position_limits", b, per, {})
+        if isinstance(r, JointVelocityLimits):
+            lo, hi = np.asarray(r.lower)[mm.idx_v], np.asarray(r.upper)[mm.idx_v]
+            if not np.allclose(lo, -hi):
+                raise InputError("asymmetric velocity limits are not expressible")
+            per = {"cos_step": np.cos(np.minimum(hi * ocp.dt, np.pi))}
+            return self._joint_terms(item, "velocity_limits", np.arange(nb), per, {})
+        if isinstance(r, (JointTorque, JointTorqueLimits)):
+            if isinstance(r, JointTorque):
+                b = self._bodies(item)
+                per = {"t": np.asarray(r.target)}
+                kind = "cost" if cost else "eq"
+            else:
+                b = np.arange(nb)
+                per = {"lo": np.asarray(r.lower)[mm.idx_v], "hi": np.asarray(r.upper)[mm.idx_v]}
+                kind = "limits"
+            k, i = (
+                a.ravel() for a in np.meshgrid(item.knots + 1, np.arange(len(b)), indexing="ij")
+            )
+            params = {n: v[i] for n, v in per.items()} | ({"w": item.weight} if cost else {})
+            sense = "cost" if cost else r.sense
+            fn = _torque_function(kind, self.jit)
+            return [Term(item.name, sense, fn, {"tau": ("tau", k * nb + b[i])}, params)]
+        if isinstance(r, (FramePlacement, FrameTranslation)):
+            frame = ocp.robot.model.frames[ocp.robot.frame_id(r.frame)]
+            b = self.body_of_joint[int(frame.parentJoint)]
+            params = {
+                "R_jf": frame.placement.rotation,
+                "c": frame.placement.translation - mm.com_in_joint[b],
+                "p_g": np.asarray(r.translation),
+            }
+            kind = "placement" if isinstance(r, FramePlacement) else "translation"
+            if kind == "placement":
+                params["R_g"] = r.rotation
+            if cost:
+                params["w"] = item.weight
+            sites = item.knots * nb + b
+            fn = _frame_function(kind, cost, self.jit)
+            sense = "cost" if cost else r.sense
+            return [Term(item.name, sense, fn, {"Rb": ("R", sites), "pb": ("p", sites)}, params)]
+        if isinstance(r, ComOutsideCylinder):
+            k, b = (a.ravel() for a in np.meshgrid(item.knots, np.arange(nb), indexing="ij"))
+            fn = cylinder_clearance_function(self.jit)
+            return [
+                Term(item.name, "ineq", fn, {"p": ("p", k * nb + b)}, {"c": r.circle(ocp.scene)})
+            ]
+        if isinstance(r, Distance):
+            pairs = distance_pairs(ocp.robot, ocp.scene, r.objects)
+            k, i = (
+                a.ravel() for a in np.meshgrid(item.knots, np.arange(pairs.size), indexing="ij")
+            )
+            sites = k * nb + pair_bodies(mm, pairs)[i]
+            fn = distance_constraint_function(mm, pairs)
+            bind = {"R": ("R", sites), "p": ("p", sites)}
+            return [
+                Term(item.name, "ineq", fn, bind, {"pair": i.astype(float), "margin": r.margin})
+            ]
+        raise InputError(f"{type(r).__name__} has no maximal-coordinate translation")
+
+    # -- points and results --------------------------------------------------------------------
+    def initial_point(self, q: np.ndarray) -> Point:
+        """The LGVI point of a joint path ``q (N+1, nq)`` (inverse dynamics for λ, τ)."""
+        point = maximal_warm_start(self.mm, q, self.ocp.dt, jit=self.jit)
+        return self.problem.check_point(point)
+
+    def joint_trajectory(self, x: Point) -> dict[str, np.ndarray]:
+        """Joint-space view of a maximal point: ``q, v (N+1, nq)``, ``tau (N, nv)`` (interval
+        means), ``tau_knots (N+1, nv)`` (first-order hold of the LGVI's knot torques, eq. 29).
+
+        ``q_k`` from the relative rotations and ``v_k = (q_{k+1} - q_{k-1})/(2Δt)`` (with
+        ``q_{N+1}`` from ``R_N F_N``). Knot 0's torque does not enter the LGVI, where the arm
+        rests over the first step as in eq. (61): ``tau_knots[0]`` makes the mean over
+        ``[t_0, t_1]`` the torque for which eq. (61)'s first step reaches the planned ``v_1``.
+        """
+        mm, N, dt = self.mm, self.ocp.N, self.ocp.dt
+        Rk = np.concatenate([x["R"], (x["R"][-1] @ x["F"][-1])[None]])
+        q = np.empty((N + 2, mm.nq))
+        q[0] = joint_positions(mm, Rk[0], q_ref=self.ocp.q0)
+        for k in range(1, N + 2):
+            q[k] = joint_positions(mm, Rk[k], q_ref=q[k - 1])
+        v = np.zeros((N + 1, mm.nv))
+        v[0] = self.ocp.v0
+        v[1:] = (q[2:] - q[:-2]) / (2 * dt)
+        tau_knots = np.array(x["tau"][:, :, 0])[:, np.argsort(mm.idx_v)]
+        tau_0 = pin.rnea(mm.model, mm.model.createData(), q[0], v[0], (v[1] - v[0]) / dt)
+        tau_knots[0] = 2.0 * tau_0 - tau_knots[1]
+        tau = 0.5 * (tau_knots[:-1] + tau_knots[1:])
+        return {"q": q[: N + 1], "v": v, "tau": tau, "tau_knots": tau_knots}
+
+
+def build(ocp: OCP, jit: bool) -> tuple[MaximalNLP, float]:
+    """:class:`MaximalNLP` of ``ocp`` and the build time (s)."""
+    t0 = time.perf_counter()
+    return MaximalNLP(ocp, jit), time.perf_counter() - t0

@@ -1,0 +1,332 @@
+"""Shooting: an :class:`~mbplan.OCP` as a Crocoddyl ``ShootingProblem`` (FDDP, mim-solvers CSQP).
+
+State ``x = (q, v)``, control ``u = τ`` (fully actuated), forward dynamics by ABA
+(``DifferentialActionModelFreeFwdDynamics``) and ``IntegratedActionModelEuler`` with the OCP's
+Δt, which is *semi-implicit* (``v_{k+1} = v_k + Δt aba``, ``q_{k+1} = q_k + Δt v_{k+1}``), first
+order like eq. (61). Node ``k < N`` carries the state items at knot ``k`` (``k ≥ 1``) and the
+control items of interval ``k``; the terminal node the state items at knot ``N``. Crocoddyl
+multiplies running costs by Δt, so their weights are divided by Δt.
+
+Residuals, each kind translated once:
+
+* joint position / velocity costs: ``ResidualModelState`` with a weighted quadratic activation
+  (weights on the selected joints); torque costs: ``ResidualModelControl``;
+* frame placement / translation and any other state residual: the joint-space residual of
+  :mod:`mbplan.formulations.joint_space` (CasADi value and Jacobian) as a Python residual;
+* eq. (62): ``‖(x_i, y_i) - c‖ - r ≥ margin`` per link (:class:`ResidualModelCylinderClearance`;
+  in metres, the form the FDDP penalty is tuned for); coal distances ``d ≥ margin`` per pair
+  (:class:`ResidualModelCoalDistance`, through :mod:`mbplan.multibody.collision`);
+* joint position / velocity limits: bounds on ``ResidualModelState``; torque limits: control
+  bounds (box-FDDP) and, for CSQP, a constraint.
+
+Constraints: CSQP (``hard=True``) imposes every constraint (``ConstraintModelResidual``). FDDP
+has none: inequality constraints become ``½ W max(violation, 0)²`` penalties
+(``ActivationModelQuadraticBarrier``, :data:`OBSTACLE_WEIGHT` for obstacles,
+:data:`LIMIT_WEIGHT` for limits) and an equality constraint is not expressible (an
+:class:`~mbplan.errors.InputError` naming it; make it a cost or use CSQP).
+
+Importing needs the ``baselines`` extra (``crocoddyl==3.2.1``, ``mim-solvers==0.3.0``); the
+first build checks that Crocoddyl's forward dynamics equal Pinocchio's ABA
+(:func:`check_forward_dynamics`): a mismatched ``pin`` silently computes wrong dynamics.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+from typing import Any
+
+import casadi as cs
+import numpy as np
+import pinocchio as pin
+
+from mbplan.errors import InputError, MbplanError
+from mbplan.formulations.joint_space import distance_values, knot_function
+from mbplan.multibody.collision import chain_kinematics, point_jacobians
+from mbplan.ocp.problem import OCP, Item
+from mbplan.ocp.residuals import (
+    ComOutsideCylinder,
+    Distance,
+    JointPosition,
+    JointPositionLimits,
+    JointTorque,
+    JointTorqueLimits,
+    JointVelocity,
+    JointVelocityLimits,
+)
+
+try:
+    import crocoddyl
+    import mim_solvers  # noqa: F401  (the CSQP adapter's solver)
+except ImportError as err:
+    raise MbplanError(
+        f"the Crocoddyl baselines cannot import {err.name or 'their libraries'} ({err}); "
+        "install the baselines extra: pip install 'mbplan[baselines]' "
+        "(crocoddyl==3.2.1, mim-solvers==0.3.0)"
+    ) from None
+
+OBSTACLE_WEIGHT = 1e4  # FDDP: ½ W (margin - r)² per knot; a 3 cm violation costs 4.5
+LIMIT_WEIGHT = 1e3  # FDDP: the same on joint-position/velocity limits (rad, rad/s)
+FORWARD_DYNAMICS_TOL = 1e-8  # relative: |Δ ẍ| ≤ tol · max(1, |ẍ|)
+
+
+def compare_forward_dynamics(xout: np.ndarray, reference: np.ndarray) -> None:
+    """Raise :class:`MbplanError` if Crocoddyl's ``xout`` differs from Pinocchio's ABA
+    ``reference`` by more than :data:`FORWARD_DYNAMICS_TOL` (relative, or if either is NaN)."""
+    error = float(np.max(np.abs(np.asarray(xout) - reference)))
+    if not error <= FORWARD_DYNAMICS_TOL * max(1.0, float(np.max(np.abs(reference)))):
+        raise MbplanError(
+            f"crocoddyl {crocoddyl.__version__} computes forward dynamics different from "
+            f"pinocchio {pin.__version__} (max |Δq̈| = {error:.3g}): the wheels are built for "
+            "different Pinocchio versions; install pin==4.0.0 with crocoddyl==3.2.1 "
+            "(pip install 'mbplan[baselines]')"
+        )
+
+
+@cache
+def check_forward_dynamics(seed: int = 0) -> None:
+    """Compare Crocoddyl's free forward dynamics with ``pinocchio.aba`` at one random state of
+    Pinocchio's sample manipulator; raise :class:`MbplanError` on a mismatch."""
+    model = pin.buildSampleModelManipulator()
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-1.0, 1.0, model.nq)
+    v, tau = rng.standard_normal(model.nv), rng.standard_normal(model.nv)
+    try:
+        state = crocoddyl.StateMultibody(model)
+        dam = crocoddyl.DifferentialActionModelFreeFwdDynamics(
+            state, crocoddyl.ActuationModelFull(state), crocoddyl.CostModelSum(state, model.nv)
+        )
+        data = dam.createData()
+        dam.calc(data, np.concatenate([q, v]), tau)
+    except (TypeError, RuntimeError) as exc:  # Boost.Python rejects a foreign pinocchio.Model
+        raise MbplanError(
+            f"crocoddyl {crocoddyl.__version__} cannot use pinocchio {pin.__version__} "
+            f"models ({exc}); install pin==4.0.0 with crocoddyl==3.2.1"
+        ) from None
+    compare_forward_dynamics(data.xout, pin.aba(model, model.createData(), q, v, tau))
+
+
+class _Data(crocoddyl.ResidualDataAbstract):
+    """Residual data with its own Pinocchio data."""
+
+    def __init__(self, model: Any, collector: Any):
+        crocoddyl.ResidualDataAbstract.__init__(self, model, collector)
+        self.pinocchio = model.state.pinocchio.createData()
+
+
+class ResidualModelJointSpace(crocoddyl.ResidualModelAbstract):
+    """Any state residual of :mod:`mbplan.formulations.joint_space` (value and Jacobian by
+    CasADi; Crocoddyl uses Gauss–Newton Hessians of residuals)."""
+
+    def __init__(self, state: crocoddyl.StateMultibody, nu: int, fn: cs.Function):
+        x = cs.SX.sym("x", fn.size1_in(0))
+        out = fn(x)
+        self._fn = cs.Function("rj", [x], [out, cs.jacobian(out, x)])
+        crocoddyl.ResidualModelAbstract.__init__(self, state, out.numel(), nu, True, True, False)
+
+    def calc(self, data: _Data, x: np.ndarray, u: np.ndarray | None = None) -> None:
+        data.r[:] = np.asarray(self._fn(x)[0]).ravel()
+
+    def calcDiff(self, data: _Data, x: np.ndarray, u: np.ndarray | None = None) -> None:
+        data.Rx[:, :] = np.asarray(self._fn(x)[1])
+
+    def createData(self, collector: Any) -> _Data:
+        return _Data(self, collector)
+
+
+class ResidualModelCylinderClearance(crocoddyl.ResidualModelAbstract):
+    """``r_i = ‖(x_i, y_i) - c‖ - radius`` for the COM ``p_i`` of every link (eq. 62 without
+    the margin), with ``∂r/∂q = n_iᵀ J_i[:2]`` (horizontal unit vector ``n_i`` from the axis)."""
+
+    def __init__(self, state: crocoddyl.StateMultibody, nu: int, center: np.ndarray, radius: float):
+        model = state.pinocchio
+        self.links = np.arange(1, model.njoints)
+        self.center, self.radius = np.asarray(center, float), float(radius)
+        crocoddyl.ResidualModelAbstract.__init__(
+            self, state, len(self.links), nu, True, False, False
+        )
+        self.levers = np.array([model.inertias[int(j)].lever for j in self.links])
+
+    def _offsets(self, data: pin.Data) -> tuple[np.ndarray, np.ndarray]:
+        p = np.array(
+            [data.oMi[int(j)].act(l) for j, l in zip(self.links, self.levers, strict=True)]
+        )
+        return p, p[:, :2] - self.center
+
+    def calc(self, data: _Data, x: np.ndarray, u: np.ndarray | None = None) -> None:
+        model = self.state.pinocchio
+        pin.forwardKinematics(model, data.pinocchio, x[: model.nq])
+        data.r[:] = np.linalg.norm(self._offsets(data.pinocchio)[1], axis=-1) - self.radius
+
+    def calcDiff(self, data: _Data, x: np.ndarray, u: np.ndarray | None = None) -> None:
+        model = self.state.pinocchio
+        kin = chain_kinematics(model, data.pinocchio, x[None, : model.nq])
+        p, d = self._offsets(data.pinocchio)
+        n = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        J = point_jacobians(kin, self.links, p[None])[0]  # (nl, nv, 3)
+        data.Rx[:, : model.nv] = np.einsum("ia,ija->ij", n, J[..., :2])
+
+    def createData(self, collector: Any) -> _Data:
+        return _Data(self, collector)
+
+
+class ResidualModelCoalDistance(crocoddyl.ResidualModelAbstract):
+    """``r_p = d_p(q)``: coal's signed distance of every (link geometry, object) pair of a
+    :class:`~mbplan.ocp.residuals.Distance`, with the Jacobian ``-nᵀ J₁``."""
+
+    def __init__(self, state: crocoddyl.StateMultibody, nu: int, ocp: OCP, residual: Distance):
+        self.ocp, self.residual = ocp, residual
+        m = residual.dim(ocp.robot, ocp.scene)
+        crocoddyl.ResidualModelAbstract.__init__(self, state, m, nu, True, False, False)
+
+    def calc(self, data: _Data, x: np.ndarray, u: np.ndarray | None = None) -> None:
+        q = x[None, : self.state.nq]
+        value = distance_values(self.ocp.robot, self.ocp.scene, self.residual, q)[0][0]
+        data.r[:] = self.residual.margin - value
+
+    def calcDiff(self, data: _Data, x: np.ndarray, u: np.ndarray | None = None) -> None:
+        q = x[None, : self.state.nq]
+        _, grad, *_ = distance_values(self.ocp.robot, self.ocp.scene, self.residual, q, 1)
+        data.Rx[:, : self.state.nv] = -grad[0]
+
+    def createData(self, collector: Any) -> _Data:
+        return _Data(self, collector)
+
+
+class ShootingBuilder:
+    """The shooting problem of ``ocp`` for FDDP (``hard=False``) or CSQP (``hard=True``)."""
+
+    def __init__(self, ocp: OCP, hard: bool, method: str):
+        check_forward_dynamics()
+        self.ocp, self.hard, self.method = ocp, hard, method
+        self.model = ocp.robot.model
+        self.state = crocoddyl.StateMultibody(self.model)
+        self.actuation = crocoddyl.ActuationModelFull(self.state)
+        self.nu = self.actuation.nu
+        self.u_lb = np.full(self.nu, -np.inf)
+        self.u_ub = np.full(self.nu, np.inf)
+        for item in ocp.constraints:
+            if isinstance(item.residual, JointTorqueLimits):
+                self.u_lb = np.maximum(self.u_lb, item.residual.lower)
+                self.u_ub = np.minimum(self.u_ub, item.residual.upper)
+            elif item.residual.sense == "eq" and not hard:
+                raise InputError(
+                    f"{method} cannot express the equality constraint {item.name!r} (FDDP has "
+                    "no constraints): make it a cost or use csqp"
+                )
+        self._nodes: dict[tuple, crocoddyl.IntegratedActionModelEuler] = {}
+
+    def _residual(self, item: Item) -> tuple[Any, np.ndarray, np.ndarray, float]:
+        """Crocoddyl residual of a state or control item, its bounds ``r ∈ [lo, hi]`` (for
+        constraints) and the FDDP penalty weight."""
+        r, state, nu, nv = item.residual, self.state, self.nu, self.model.nv
+        if isinstance(r, (JointPositionLimits, JointVelocityLimits)):
+            lo, hi = np.full(2 * nv, -np.inf), np.full(2 * nv, np.inf)
+            part = slice(0, nv) if isinstance(r, JointPositionLimits) else slice(nv, 2 * nv)
+            lo[part], hi[part] = r.lower, r.upper
+            return crocoddyl.ResidualModelState(state, np.zeros(state.nx), nu), lo, hi, LIMIT_WEIGHT
+        if isinstance(r, ComOutsideCylinder):
+            x, y, radius = r.circle(self.ocp.scene)
+            res = ResidualModelCylinderClearance(state, nu, (x, y), radius - r.margin)
+            return res, np.full(res.nr, r.margin), np.full(res.nr, np.inf), OBSTACLE_WEIGHT
+        if isinstance(r, Distance):
+            res = ResidualModelCoalDistance(state, nu, self.ocp, r)
+            return res, np.full(res.nr, -np.inf), np.zeros(res.nr), OBSTACLE_WEIGHT
+        if isinstance(r, JointTorque):
+            res = crocoddyl.ResidualModelControl(state, self._full(r, nu))
+            return res, *self._equality(res.nr), 0.0
+        if isinstance(r, JointTorqueLimits):
+            res = crocoddyl.ResidualModelControl(state, nu)
+            return res, r.lower, r.upper, 0.0
+        if isinstance(r, (JointPosition, JointVelocity)) and item.role == "cost":
+            ref = np.zeros(state.nx)
+            offset = 0 if isinstance(r, JointPosition) else nv
+            ref[offset + self.ocp.robot.joint_indices(r.joints)] = r.target
+            return crocoddyl.ResidualModelState(state, ref, nu), *self._equality(state.nx), 0.0
+        res = ResidualModelJointSpace(state, nu, knot_function(self.ocp.robot, self.ocp.scene, r))
+        bounds = (
+            self._equality(res.nr)
+            if r.sense == "eq"
+            else (
+                np.full(res.nr, -np.inf),
+                np.zeros(res.nr),
+            )
+        )
+        return res, *bounds, OBSTACLE_WEIGHT
+
+    def _full(self, r: JointTorque, n: int) -> np.ndarray:
+        ref = np.zeros(n)
+        ref[self.ocp.robot.joint_indices(r.joints)] = r.target
+        return ref
+
+    @staticmethod
+    def _equality(n: int) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(n), np.zeros(n)
+
+    def _activation_weights(self, item: Item) -> np.ndarray:
+        r, nv = item.residual, self.model.nv
+        idx = self.ocp.robot.joint_indices(getattr(r, "joints", None))
+        if isinstance(r, JointTorque):
+            w = np.zeros(self.nu)
+            w[idx] = 1.0
+            return w
+        w = np.zeros(2 * nv)
+        w[(0 if isinstance(r, JointPosition) else nv) + idx] = 1.0
+        return w
+
+    def _node(self, k: int) -> crocoddyl.IntegratedActionModelEuler:
+        ocp = self.ocp
+        terminal = k == ocp.N
+        active = tuple(i.name for i in ocp.items if k in i.knots)  # state 1..N, control 0..N-1
+        if active in self._nodes:
+            return self._nodes[active]
+        state, nu = self.state, self.nu
+        dt = 0.0 if terminal else ocp.dt
+        scale = 1.0 / dt if dt else 1.0  # undo Crocoddyl's Δt factor on running costs
+        costs = crocoddyl.CostModelSum(state, nu)
+        constraints = crocoddyl.ConstraintModelManager(state, nu)
+        for name in active:
+            item = ocp[name]
+            res, lo, hi, weight = self._residual(item)
+            if item.role == "cost":
+                if isinstance(item.residual, (JointPosition, JointVelocity, JointTorque)):
+                    act = crocoddyl.ActivationModelWeightedQuad(self._activation_weights(item))
+                    cost = crocoddyl.CostModelResidual(state, act, res)
+                else:
+                    cost = crocoddyl.CostModelResidual(state, res)
+                costs.addCost(name, cost, item.weight * scale)
+            elif self.hard:
+                constraints.addConstraint(
+                    name, crocoddyl.ConstraintModelResidual(state, res, lo, hi)
+                )
+            elif not isinstance(item.residual, JointTorqueLimits):  # box-FDDP: control bounds
+                barrier = crocoddyl.ActivationModelQuadraticBarrier(
+                    crocoddyl.ActivationBounds(lo, hi)
+                )
+                costs.addCost(
+                    name, crocoddyl.CostModelResidual(state, barrier, res), weight * scale
+                )
+        dam = crocoddyl.DifferentialActionModelFreeFwdDynamics(
+            state, self.actuation, costs, constraints
+        )
+        node = crocoddyl.IntegratedActionModelEuler(dam, dt)
+        if np.all(np.isfinite(self.u_lb)) and np.all(np.isfinite(self.u_ub)):
+            node.u_lb, node.u_ub = self.u_lb, self.u_ub
+        self._nodes[active] = node
+        return node
+
+    def problem(self) -> crocoddyl.ShootingProblem:
+        x0 = np.concatenate([self.ocp.q0, self.ocp.v0])
+        running = [self._node(k) for k in range(self.ocp.N)]
+        return crocoddyl.ShootingProblem(x0, running, self._node(self.ocp.N))
+
+    def warm_start(self, q: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Quasi-static guess: ``xs = (q_k, 0)`` (knot 0: the OCP's ``v0``), ``us = g(q_k)``
+        clipped to the torque limits."""
+        data = self.model.createData()
+        xs = [np.concatenate([qk, np.zeros(self.model.nv)]) for qk in q]
+        xs[0] = np.concatenate([self.ocp.q0, self.ocp.v0])
+        us = [
+            np.clip(pin.computeGeneralizedGravity(self.model, data, qk), self.u_lb, self.u_ub)
+            for qk in q[:-1]
+        ]
+        return xs, us

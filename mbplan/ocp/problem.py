@@ -1,0 +1,226 @@
+"""The optimal control problem, described once for every formulation.
+
+An :class:`OCP` holds a robot, a scene, a horizon of ``N`` steps of ``dt`` from the initial state
+``(q0, v0)`` (knot 0, fixed), and named costs and constraints built from
+:mod:`mbplan.ocp.residuals`. Knots: ``"all"`` (state knots ``1..N``, intervals ``0..N-1``),
+``"running"`` (state knots ``1..N-1``, intervals ``0..N-1``), ``"terminal"`` (knot ``N``) or a
+list of indices. A cost is ``weight · ½‖r‖²`` summed over its knots; ``tolerance`` marks a soft
+goal whose error :func:`mbplan.verify` checks at the last knot.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from mbplan.errors import InfeasibleRequestError, InputError
+from mbplan.ocp.residuals import Distance, Residual
+from mbplan.ocp.robot import Robot, load_robot, robot_from_source
+from mbplan.ocp.scene import Scene
+from mbplan.validation import as_array, as_int, as_real
+
+Knots = str | Sequence[int]
+
+
+@dataclass(frozen=True, eq=False)
+class Item:
+    """A named cost (``weight``) or constraint on ``knots`` (state knots or intervals)."""
+
+    name: str
+    role: str  # "cost" | "constraint"
+    residual: Residual
+    knots: np.ndarray
+    weight: float = 0.0
+    tolerance: float | None = None
+
+    @property
+    def sense(self) -> str:
+        return "cost" if self.role == "cost" else self.residual.sense
+
+
+class OCP:
+    """A trajectory optimization problem; ``add_cost``/``add_constraint`` return the OCP.
+
+    ``robot``: anything :func:`mbplan.ocp.robot.load_robot` takes. ``q0`` defaults to the
+    robot's ``default`` reference configuration (SRDF) or neutral; ``v0`` to zero.
+    """
+
+    def __init__(
+        self,
+        robot: Any,
+        scene: Scene | None = None,
+        *,
+        N: int = 40,
+        dt: float = 0.075,
+        q0: ArrayLike | None = None,
+        v0: ArrayLike | None = None,
+    ) -> None:
+        self.robot: Robot = load_robot(robot)
+        if scene is not None and not isinstance(scene, Scene):
+            raise InputError(f"scene: expected a Scene, got {type(scene).__name__}")
+        self.scene = scene if scene is not None else Scene()
+        self.N = as_int(N, "N", minimum=2, what="horizon")
+        self.dt = as_real(dt, "dt", positive=True)
+        nq = self.robot.nq
+        default = "default" if "default" in self.robot.model.referenceConfigurations else "neutral"
+        q0 = self.robot.configuration(default) if q0 is None else q0
+        self.q0 = as_array(q0, (nq,), "q0")
+        self.v0 = as_array(np.zeros(nq) if v0 is None else v0, (nq,), "v0")
+        self.items: list[Item] = []
+
+    # -- building ------------------------------------------------------------------------------
+    def add_cost(
+        self,
+        name: str,
+        residual: Residual,
+        weight: float = 1.0,
+        knots: Knots = "all",
+        tolerance: float | None = None,
+    ) -> OCP:
+        if not isinstance(residual, Residual):
+            raise InputError(f"cost {name!r}: expected a residual, got {type(residual).__name__}")
+        if not residual.cost:
+            raise InputError(f"cost {name!r}: {type(residual).__name__} can only be a constraint")
+        w = as_real(weight, f"cost {name!r} weight", positive=True)
+        tol = None if tolerance is None else as_real(tolerance, f"cost {name!r} tolerance")
+        return self._add(Item(name, "cost", residual, self._knots(name, residual, knots), w, tol))
+
+    def add_constraint(self, name: str, residual: Residual, knots: Knots = "all") -> OCP:
+        if not isinstance(residual, Residual):
+            raise InputError(
+                f"constraint {name!r}: expected a residual, got {type(residual).__name__}"
+            )
+        return self._add(Item(name, "constraint", residual, self._knots(name, residual, knots)))
+
+    def add_terminal_cost(self, name: str, residual: Residual, weight: float = 1.0, **kw) -> OCP:
+        return self.add_cost(name, residual, weight, knots="terminal", **kw)
+
+    def add_terminal_constraint(self, name: str, residual: Residual) -> OCP:
+        return self.add_constraint(name, residual, knots="terminal")
+
+    def _add(self, item: Item) -> OCP:
+        if not isinstance(item.name, str) or not item.name:
+            raise InputError(f"name: expected a non-empty string, got {item.name!r}")
+        if item.name in self.names:
+            raise InputError(f"the OCP already has a cost or constraint named {item.name!r}")
+        try:
+            resolved = item.residual.resolve(self.robot, self.scene)
+        except InputError as err:
+            raise InputError(f"{item.role} {item.name!r}: {err}") from None
+        self.items.append(
+            Item(item.name, item.role, resolved, item.knots, item.weight, item.tolerance)
+        )
+        return self
+
+    def _knots(self, name: str, residual: Residual, knots: Knots) -> np.ndarray:
+        control = residual.space == "control"
+        N = self.N
+        if isinstance(knots, str):
+            table = {
+                "all": np.arange(N) if control else np.arange(1, N + 1),
+                "running": np.arange(N) if control else np.arange(1, N),
+                "terminal": None if control else np.array([N]),
+            }
+            if knots not in table:
+                raise InputError(f"{name!r}: knots must be all, running, terminal or a list")
+            if table[knots] is None:
+                raise InputError(f"{name!r}: torques live on the intervals 0..N-1, not at knot N")
+            return table[knots]
+        k = np.unique(np.asarray(knots, dtype=np.int64).ravel())
+        lo, hi = (0, N - 1) if control else (1, N)
+        if k.size == 0 or k[0] < lo or k[-1] > hi:
+            raise InputError(f"{name!r}: knots {list(knots)} outside {lo}..{hi}")
+        return k
+
+    # -- queries -------------------------------------------------------------------------------
+    @property
+    def names(self) -> list[str]:
+        return [i.name for i in self.items]
+
+    def __getitem__(self, name: str) -> Item:
+        for i in self.items:
+            if i.name == name:
+                return i
+        raise InputError(f"the OCP has no cost or constraint {name!r}; it has {self.names}")
+
+    @property
+    def costs(self) -> list[Item]:
+        return [i for i in self.items if i.role == "cost"]
+
+    @property
+    def constraints(self) -> list[Item]:
+        return [i for i in self.items if i.role == "constraint"]
+
+    def check(self) -> None:
+        """Raise before any solve if the start violates a state inequality constraint at knot 1
+        (at rest knot 1 equals knot 0: an obstacle overlapping the start, a limit violated)."""
+        from mbplan.formulations.joint_space import evaluate, row_label
+
+        for item in self.constraints:
+            r = item.residual
+            if r.space != "state" or r.sense != "ineq" or 1 not in item.knots:
+                continue
+            value = evaluate(self.robot, self.scene, r, self.q0[None], self.v0[None], None)[0]
+            i = int(np.argmax(value))
+            if value[i] > 1e-9:
+                what = row_label(self.robot, self.scene, r, i)
+                extra = ""
+                if isinstance(r, Distance):
+                    extra = f" (distance {r.margin - value[i]:.4f} m, margin {r.margin:g} m)"
+                raise InfeasibleRequestError(
+                    f"the start q0 violates constraint {item.name!r}: {what} by "
+                    f"{value[i]:.4g}{extra}"
+                )
+
+    def __repr__(self) -> str:
+        parts = ", ".join(f"{i.role} {i.name}" for i in self.items)
+        return (
+            f"OCP({self.robot.name}, N={self.N}, dt={self.dt:g}, scene={self.scene.names}, {parts})"
+        )
+
+    # -- serialisation -------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "robot": self.robot.source,
+            "scene": self.scene.to_dict(),
+            "N": self.N,
+            "dt": self.dt,
+            "q0": self.q0.tolist(),
+            "v0": self.v0.tolist(),
+            "items": [
+                {
+                    "name": i.name,
+                    "role": i.role,
+                    "residual": i.residual.to_dict(),
+                    "knots": i.knots.tolist(),
+                    "weight": i.weight,
+                    "tolerance": i.tolerance,
+                }
+                for i in self.items
+            ],
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], robot: Any = None) -> OCP:
+        """Rebuild an OCP saved by :meth:`to_dict` (the robot is loaded from its source unless
+        given)."""
+        robot = robot_from_source(data["robot"]) if robot is None else robot
+        ocp = cls(
+            robot,
+            Scene.from_dict(data["scene"]),
+            N=int(data["N"]),
+            dt=float(data["dt"]),
+            q0=data["q0"],
+            v0=data["v0"],
+        )
+        for d in data["items"]:
+            residual = Residual.from_dict(d["residual"])
+            if d["role"] == "cost":
+                ocp.add_cost(d["name"], residual, d["weight"], d["knots"], d.get("tolerance"))
+            else:
+                ocp.add_constraint(d["name"], residual, d["knots"])
+        return ocp

@@ -1,0 +1,248 @@
+"""The robot of an optimal control problem: a Pinocchio model with its geometry and its source.
+
+:func:`load_robot` accepts what the Pinocchio ecosystem passes around — a robot name
+(:func:`mbplan.robots.available_robots`), a URDF path (with ``package_dirs`` for ``package://``
+meshes), an MJCF path, or a ``pinocchio.Model`` (with optional geometry models) — and can lock
+joints at given values (``pinocchio.buildReducedModel``). The :class:`Robot` remembers how it was
+made (:attr:`Robot.source`), so a saved plan can load it again.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from mbplan.errors import InputError, RobotModelError
+from mbplan.robots import RobotDescription, load
+
+
+@dataclass(frozen=True, eq=False)
+class Robot:
+    """A fixed-base robot: ``model`` (1-dof joints only), collision and visual geometry (may be
+    None), its ``source`` (JSON-serialisable, see :func:`load_robot`) and the locked joints."""
+
+    name: str
+    model: pin.Model
+    collision_model: pin.GeometryModel | None
+    visual_model: pin.GeometryModel | None
+    source: dict[str, Any]
+    locked: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def nq(self) -> int:
+        return self.model.nq
+
+    @property
+    def nv(self) -> int:
+        return self.model.nv
+
+    def configuration(self, name: str) -> np.ndarray:
+        """A named reference configuration (SRDF), ``"neutral"`` or ``"default"``."""
+        refs = self.model.referenceConfigurations
+        if name in refs:
+            return np.array(refs[name], dtype=float)
+        if name == "neutral":
+            return pin.neutral(self.model)
+        raise InputError(
+            f"robot {self.name!r} has no configuration {name!r}; known: "
+            f"{', '.join(['neutral', *_ref_names(refs)])}"
+        )
+
+    def frame_id(self, frame: str) -> int:
+        """Index of frame ``frame``; :class:`InputError` listing similar names if unknown."""
+        if not self.model.existFrame(frame):
+            names = [f.name for f in self.model.frames]
+            hint = [n for n in names if frame.split("_")[-1] in n][:8] or names[-8:]
+            raise InputError(f"robot {self.name!r} has no frame {frame!r} (e.g. {hint})")
+        return self.model.getFrameId(frame)
+
+    def joint_indices(self, joints: Sequence[str] | None) -> np.ndarray:
+        """Velocity indices of ``joints`` (all if None); :class:`InputError` on an unknown name."""
+        if joints is None:
+            return np.arange(self.nv)
+        out = []
+        for j in joints:
+            if not self.model.existJointName(j):
+                locked = " (it is locked)" if j in self.locked else ""
+                raise InputError(
+                    f"robot {self.name!r} has no joint {j!r}{locked}; joints: "
+                    f"{list(self.model.names[1:])}"
+                )
+            out.append(self.model.joints[self.model.getJointId(j)].idx_v)
+        return np.array(out, dtype=np.int64)
+
+
+def load_robot(
+    robot: str | os.PathLike[str] | pin.Model | RobotDescription | Robot,
+    *,
+    package_dirs: Sequence[str | os.PathLike[str]] = (),
+    lock: Mapping[str, float] | Sequence[str] | None = None,
+    collision_model: pin.GeometryModel | None = None,
+    visual_model: pin.GeometryModel | None = None,
+) -> Robot:
+    """Load ``robot`` (name, ``.urdf`` or ``.xml`` MJCF path, ``pinocchio.Model``) and lock the
+    joints ``lock`` (names at their reference value: the SRDF ``default`` configuration if any,
+    else neutral; or a mapping name → value). Every remaining joint must be 1-dof (nq = nv)."""
+    if isinstance(robot, str | os.PathLike) and collision_model is None and visual_model is None:
+        names = dict(lock) if isinstance(lock, Mapping) else dict.fromkeys(lock or ())
+        frozen = tuple(sorted(names.items(), key=lambda kv: kv[0])) or None
+        return _cached(os.fspath(robot), tuple(os.fspath(d) for d in package_dirs), frozen)
+    return _load(robot, package_dirs, lock, collision_model, visual_model)
+
+
+def _load(robot, package_dirs, lock, collision_model, visual_model) -> Robot:
+    if isinstance(robot, Robot):
+        if lock or package_dirs or collision_model is not None or visual_model is not None:
+            raise InputError("load_robot: a Robot is returned as is; pass no other argument")
+        return robot
+    if isinstance(robot, pin.Model):
+        desc = load(robot, collision_model=collision_model, visual_model=visual_model)
+        source: dict[str, Any] = {"kind": "model", "name": robot.name}
+    elif isinstance(robot, RobotDescription):
+        desc = robot
+        source = (
+            {"kind": "urdf", "path": str(robot.urdf_path)}
+            if robot.urdf_path is not None
+            else {"kind": "model", "name": robot.name}
+        )
+    elif isinstance(robot, str | os.PathLike):
+        desc, source = _load_path(robot, package_dirs)
+    else:
+        raise InputError(
+            f"cannot load a robot from a {type(robot).__name__}: expected a robot name, a URDF or "
+            "MJCF path or a pinocchio.Model"
+        )
+    locked = _lock_values(desc, lock)
+    if locked:
+        source = {**source, "lock": locked}
+        desc = _reduced(desc, locked)
+    _check_joints(desc)
+    return Robot(desc.name, desc.model, desc.collision_model, desc.visual_model, source, locked)
+
+
+def robot_from_source(source: Mapping[str, Any]) -> Robot:
+    """Load the robot again from :attr:`Robot.source` (what a saved plan stores)."""
+    kind = source.get("kind")
+    lock = source.get("lock") or None
+    if kind == "name":
+        return load_robot(source["name"], lock=lock)
+    if kind in ("urdf", "mjcf"):
+        return load_robot(source["path"], package_dirs=source.get("package_dirs", ()), lock=lock)
+    raise InputError(
+        f"the robot was an in-memory pinocchio.Model ({source.get('name')!r}) and cannot be "
+        "loaded from the file: pass the OCP (or the robot) explicitly"
+    )
+
+
+def _freeze(lock: Mapping[str, float] | None) -> tuple[tuple[str, float], ...] | None:
+    return None if not lock else tuple(sorted((k, float(v)) for k, v in lock.items()))
+
+
+@cache
+def _cached(spec: str, package_dirs: tuple[str, ...], lock: tuple | None) -> Robot:
+    """One :class:`Robot` per (path or name, package_dirs, lock): shared, do not modify."""
+    return _load(spec, package_dirs, dict(lock) if lock else None, None, None)
+
+
+def _load_path(
+    robot: str | os.PathLike[str], package_dirs: Sequence[str | os.PathLike[str]]
+) -> tuple[RobotDescription, dict[str, Any]]:
+    path = Path(robot)
+    dirs = [str(Path(d).resolve()) for d in package_dirs]
+    if path.suffix.lower() in (".xml", ".mjcf"):
+        if not path.is_file():
+            raise InputError(f"MJCF file not found: {path}")
+        try:
+            model = pin.buildModelFromMJCF(str(path))
+            collision = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.COLLISION)
+            visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
+        except (RuntimeError, ValueError) as err:
+            raise RobotModelError(
+                f"Pinocchio cannot build a model from MJCF {path}: {err}"
+            ) from None
+        desc = RobotDescription(model.name, model, collision, visual, path)
+        return desc, {"kind": "mjcf", "path": str(path.resolve())}
+    if isinstance(robot, str) and path.suffix.lower() != ".urdf":
+        return load(robot), {"kind": "name", "name": robot}
+    if not dirs:
+        return load(path), {"kind": "urdf", "path": str(path.resolve())}
+    if not path.is_file():
+        raise InputError(f"URDF file not found: {path}")
+    try:
+        model, collision, visual = pin.buildModelsFromUrdf(str(path), package_dirs=dirs)
+    except (RuntimeError, ValueError) as err:
+        raise RobotModelError(f"Pinocchio cannot build a model from {path}: {err}") from None
+    desc = RobotDescription(model.name, model, collision, visual, path)
+    return desc, {"kind": "urdf", "path": str(path.resolve()), "package_dirs": dirs}
+
+
+def _lock_values(
+    desc: RobotDescription, lock: Mapping[str, float] | Sequence[str] | None
+) -> dict[str, float]:
+    if not lock:
+        return {}
+    model = desc.model
+    refs = model.referenceConfigurations
+    ref = np.array(refs["default"]) if "default" in refs else pin.neutral(model)
+    values = dict(lock) if isinstance(lock, Mapping) else dict.fromkeys(lock)
+    out = {}
+    for name, value in values.items():
+        if not model.existJointName(name):
+            raise InputError(
+                f"lock: robot {desc.name!r} has no joint {name!r}; joints: {list(model.names[1:])}"
+            )
+        joint = model.joints[model.getJointId(name)]
+        if joint.nq != 1:
+            raise InputError(f"lock: joint {name!r} has {joint.nq} coordinates; only 1-dof joints")
+        v = float(ref[joint.idx_q]) if value is None else float(value)
+        if not np.isfinite(v):
+            raise InputError(f"lock: value of joint {name!r} is not finite ({value!r})")
+        out[name] = v
+    return out
+
+
+def _reduced(desc: RobotDescription, locked: dict[str, float]) -> RobotDescription:
+    model = desc.model
+    q = pin.neutral(model)
+    refs = model.referenceConfigurations
+    if "default" in refs:
+        q = np.array(refs["default"])
+    ids = []
+    for name, value in locked.items():
+        j = model.getJointId(name)
+        q[model.joints[j].idx_q] = value
+        ids.append(j)
+    geoms = [g for g in (desc.collision_model, desc.visual_model) if g is not None]
+    if geoms:
+        reduced, reduced_geoms = pin.buildReducedModel(model, geoms, ids, q)
+    else:
+        reduced, reduced_geoms = pin.buildReducedModel(model, ids, q), []
+    it = iter(reduced_geoms)
+    collision = next(it) if desc.collision_model is not None else None
+    visual = next(it) if desc.visual_model is not None else None
+    keep = [model.joints[model.getJointId(n)].idx_q for n in reduced.names[1:]]
+    for name in _ref_names(refs):  # the reference configurations without the locked joints
+        reduced.referenceConfigurations[name] = np.array(refs[name])[keep]
+    return RobotDescription(desc.name, reduced, collision, visual, desc.urdf_path)
+
+
+def _ref_names(refs) -> list[str]:
+    """Names of Pinocchio's ``referenceConfigurations`` (a std::map without ``keys``)."""
+    return [str(pair.key()) if hasattr(pair, "key") else str(pair[0]) for pair in refs]
+
+
+def _check_joints(desc: RobotDescription) -> None:
+    model = desc.model
+    for j in range(1, model.njoints):
+        if model.joints[j].nq != 1 or model.joints[j].nv != 1:
+            raise RobotModelError(
+                f"{desc.name}: joint {model.names[j]!r} ({model.joints[j].shortname()}) is not a "
+                "1-dof revolute/prismatic joint (nq = nv = 1 required; lock it)"
+            )

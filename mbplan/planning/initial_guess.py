@@ -1,0 +1,146 @@
+"""Warm starts for any :class:`~mbplan.OCP`: a joint path ``q (N+1, nq)`` with ``q_1 = q_0``.
+
+* ``"linear"``: linear joint interpolation from ``q0`` to the goal configuration over knots
+  ``1..N`` (§VIII.C);
+* ``"via"``: the same if every knot keeps clear of the OCP's obstacle constraints; otherwise the
+  shortest collision-free two-segment path ``q0 → q_via → q_goal`` among :data:`VIA_CANDIDATES`
+  seeded random via points (falls back to linear if none is collision-free at the knots).
+
+The goal configuration is the target of a terminal :class:`~mbplan.ocp.residuals.JointPosition`
+(constraint or cost), else the inverse kinematics of a terminal frame goal
+(:func:`inverse_kinematics`, which reports an unreachable goal before any solve), else ``q0``.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pinocchio as pin
+
+from mbplan.errors import InfeasibleRequestError, InputError, WarmStartWarning
+from mbplan.formulations.joint_space import evaluate
+from mbplan.ocp.problem import OCP
+from mbplan.ocp.residuals import (
+    ComOutsideCylinder,
+    Distance,
+    FramePlacement,
+    FrameTranslation,
+    JointPosition,
+)
+from mbplan.ocp.robot import Robot
+
+VIA_CANDIDATES = 256  # random via points tried by the "via" warm start
+IK_STARTS = 32  # random restarts of the inverse kinematics
+IK_TOLERANCE = 1e-8  # ‖error‖ (m, rad) at which the IK stops
+
+
+def path_clearance(ocp: OCP, path: np.ndarray) -> float:
+    """Largest obstacle-constraint residual (``≤ 0``: clear, with the margins) over the knots
+    ``path (K, nq)``; ``-inf`` if the OCP has no obstacle constraint."""
+    worst = -np.inf
+    for item in ocp.constraints:
+        if isinstance(item.residual, (Distance, ComOutsideCylinder)):
+            r = evaluate(ocp.robot, ocp.scene, item.residual, path, np.zeros_like(path), None)
+            worst = max(worst, float(np.max(r)))
+    return worst
+
+
+def inverse_kinematics(
+    robot: Robot,
+    goal: FramePlacement | FrameTranslation,
+    q_init: np.ndarray,
+    accept=None,
+    seed: int = 0,
+) -> np.ndarray:
+    """A configuration within the joint limits that reaches ``goal`` (damped least squares from
+    ``q_init``, then from :data:`IK_STARTS` seeded random configurations) and that ``accept(q)``
+    (e.g. collision-free), if given. :class:`InfeasibleRequestError` naming the frame and the best
+    error if none does: the goal is outside the workspace (or blocked)."""
+    model, data = robot.model, robot.model.createData()
+    fid = robot.frame_id(goal.frame)
+    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    rng = np.random.default_rng(seed)
+    best_err, rejected = np.inf, 0
+    for start in range(IK_STARTS + 1):
+        q = np.array(q_init, float) if start == 0 else rng.uniform(lo, hi)
+        err = np.inf
+        for _ in range(200):
+            pin.framesForwardKinematics(model, data, q)
+            M = data.oMf[fid]
+            e = M.translation - goal.translation
+            J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
+            J = M.rotation @ J6[:3]
+            if isinstance(goal, FramePlacement):
+                w = pin.log3(goal.rotation.T @ M.rotation)
+                e = np.concatenate([e, w])
+                J = np.vstack([J, pin.Jlog3(goal.rotation.T @ M.rotation) @ J6[3:]])
+            err = float(np.linalg.norm(e))
+            if err < IK_TOLERANCE:
+                break
+            dq = -J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(len(e)), e)
+            q = np.clip(q + dq, lo, hi)
+        best_err = min(best_err, err)
+        if err < 1e-6:
+            if accept is None or accept(q):
+                return q
+            rejected += 1
+    detail = f"; {rejected} solutions collide with the scene" if rejected else ""
+    raise InfeasibleRequestError(
+        f"frame goal for {goal.frame!r} at {np.round(goal.translation, 4).tolist()} is out of "
+        f"reach: best inverse-kinematics error {best_err:.3g} after {IK_STARTS + 1} starts within "
+        f"the joint limits{detail} (is the goal inside the workspace?)"
+    )
+
+
+def goal_configuration(ocp: OCP) -> np.ndarray:
+    """The configuration the warm start heads for (module docstring)."""
+    terminal = [i for i in ocp.items if i.residual.space == "state" and ocp.N in i.knots]
+    terminal.sort(key=lambda i: i.role != "constraint")
+    for item in terminal:
+        r = item.residual
+        if isinstance(r, JointPosition) and r.joints is None:
+            return np.array(r.target)
+    for item in terminal:
+        r = item.residual
+        if isinstance(r, (FramePlacement, FrameTranslation)):
+            return inverse_kinematics(
+                ocp.robot, r, ocp.q0, accept=lambda q: path_clearance(ocp, q[None]) <= 0.0
+            )
+    return np.array(ocp.q0)
+
+
+def initial_path(ocp: OCP, kind: str = "linear") -> np.ndarray:
+    """The warm start ``q (N+1, nq)`` of kind ``"linear"`` or ``"via"`` (module docstring)."""
+    if kind not in ("linear", "via"):
+        raise InputError(f"warm_start: expected 'linear', 'via' or an array, got {kind!r}")
+    q0, q_goal = ocp.q0, goal_configuration(ocp)
+    s = np.concatenate([[0.0], np.linspace(0.0, 1.0, ocp.N)])
+    linear = q0 + s[:, None] * (q_goal - q0)
+    if kind == "linear" or path_clearance(ocp, linear) <= 0.0:
+        return linear
+    model = ocp.robot.model
+    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    rng = np.random.default_rng(0)
+    mid = 0.5 * (q0 + q_goal)
+    best, best_length = linear, np.inf
+    first = np.minimum(2 * s, 1.0)[:, None]
+    second = np.maximum(2 * s - 1.0, 0.0)[:, None]
+    for _ in range(VIA_CANDIDATES):
+        via = np.clip(mid + 0.5 * rng.uniform(-1.0, 1.0, mid.shape) * (hi - lo), lo, hi)
+        length = float(np.linalg.norm(via - q0) + np.linalg.norm(q_goal - via))
+        if length >= best_length:
+            continue
+        path = q0 + first * (via - q0) + second * (q_goal - via)
+        if path_clearance(ocp, path) <= 0.0:
+            best, best_length = path, length
+    if best is linear:
+        warnings.warn(WarmStartWarning(VIA_FALLBACK), stacklevel=2)
+    return best
+
+
+VIA_FALLBACK = (
+    f'warm start "via": none of {VIA_CANDIDATES} via points gives a collision-free path at the '
+    "knots; using the linear warm start (make this an error with "
+    'warnings.simplefilter("error", mbplan.errors.WarmStartWarning) or --strict-warm-start)'
+)

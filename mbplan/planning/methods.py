@@ -1,0 +1,163 @@
+"""Solver adapters: one function per method, ``solve(ocp, q_guess, settings) -> PlanResult``.
+
+An adapter builds its formulation's NLP from the OCP, runs its solver from the joint path
+``q_guess (N+1, nq)``, and returns the joint-space trajectory with the solver's statistics;
+:func:`mbplan.plan` then attaches the OCP and decides ``success`` (one meaning for all).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as cs
+import numpy as np
+
+from mbplan.baselines.ipopt import IpoptStats, base_options
+from mbplan.engine.jit import jit_available
+from mbplan.errors import InputError
+from mbplan.formulations import maximal
+from mbplan.formulations.generalized import GeneralizedNLP
+from mbplan.ocp.problem import OCP
+from mbplan.results import PlanResult
+from mbplan.solvers import RIPMOptions, RIPMStatus, solve_ripm
+
+_ITERATION_LINE = re.compile(r"^\s*\d+(r?)\s+[-+]?\d\.\d+e[-+]\d+\s")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What every adapter gets: tolerance, iteration limit, method-specific ``options``
+    (``RIPMOptions`` fields for the RIPM, IPOPT option names for IPOPT) and ``jit``."""
+
+    tol: float = 1e-6
+    max_iter: int = 500
+    options: dict[str, Any] = field(default_factory=dict)
+    jit: bool | None = None
+
+
+def solve_ripm_maximal(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
+    """The RIPM on the maximal-coordinate LGVI (success: ``CONVERGED``)."""
+    jit = jit_available() if settings.jit is None else settings.jit
+    nlp, build = maximal.build(ocp, jit)
+    t0 = time.perf_counter()
+    x0 = nlp.initial_point(q_guess)
+    build += time.perf_counter() - t0
+    options = RIPMOptions(tol=settings.tol, max_iter=settings.max_iter).replace(**settings.options)
+    result = solve_ripm(nlp.problem, x0, options)
+    traj = nlp.joint_trajectory(result.x)
+    h = result.history.arrays()
+    return PlanResult(
+        method="ripm",
+        status=result.status.name,
+        success=result.status is RIPMStatus.CONVERGED,
+        message=result.message,
+        iterations=result.iterations,
+        solve_time_s=result.wall_time_s,
+        total_time_s=result.wall_time_s + build,
+        time_per_iter_s=result.wall_time_s / max(result.iterations, 1),
+        dt=ocp.dt,
+        kkt_history=np.stack([h["inf_pr"], h["inf_du"]], axis=1),
+        entered_restoration=bool(np.any(h["restoration"])),
+        extra={
+            "kkt_error": result.kkt_error,
+            "n_variables": int(result.y.size),
+            "build_time_s": build,
+        },
+        R=result.x["R"],
+        p=result.x["p"],
+        body_names=nlp.mm.body_names,
+        formulation="maximal",
+        **traj,
+    )
+
+
+def _restoration_iterations(log: str) -> int:
+    """Number of iteration lines of IPOPT's log marked ``r`` (restoration phase)."""
+    marks = (_ITERATION_LINE.match(line) for line in log.splitlines())
+    return sum(1 for mark in marks if mark is not None and mark.group(1) == "r")
+
+
+def solve_ipopt_generalized(
+    ocp: OCP, q_guess: np.ndarray, settings: Settings, restoration: bool = True
+) -> PlanResult:
+    """IPOPT (exact Hessian, MUMPS) on the generalized formulation (success:
+    ``Solve_Succeeded``). IPOPT also writes its log to a temporary file to count the
+    restoration iterations (marked ``r``); ``restoration=False`` sets ``max_resto_iter = 0``:
+    IPOPT then stops at the first restoration iteration (the "w/o restoration" column of
+    Table III)."""
+    start = time.perf_counter()
+    options = base_options(settings.max_iter, settings.tol)
+    reserved = {"output_file", "file_print_level"} & set(settings.options)
+    if reserved:
+        raise InputError(f"ipopt options: {sorted(reserved)} are used to detect restoration")
+    nlp = GeneralizedNLP(ocp)
+    g_fn, jac_fn, hess_fn = nlp.callbacks()
+    z = cs.MX.sym("z", nlp.n)
+    fd, log_path = tempfile.mkstemp(prefix="ipopt_", suffix=".log")
+    os.close(fd)
+    options |= {"output_file": log_path, "file_print_level": 5}
+    if not restoration:
+        options["max_resto_iter"] = 0
+    options.update(settings.options)
+    try:
+        solver = cs.nlpsol(
+            "generalized_ipopt",
+            "ipopt",
+            {"x": z, "f": nlp.symbolic_objective(z), "g": g_fn(z)},
+            {
+                "jac_g": jac_fn,
+                "hess_lag": hess_fn,
+                "no_nlp_grad": True,
+                "print_time": False,
+                "record_time": True,
+                "ipopt": options,
+            },
+        )
+        build_time = time.perf_counter() - start
+        sol = solver(
+            x0=nlp.initial_guess(q_guess), lbx=nlp.lbz, ubx=nlp.ubz, lbg=nlp.lbg, ubg=nlp.ubg
+        )
+        stats = IpoptStats.of(solver.stats())
+        with open(log_path, encoding="utf-8", errors="replace") as fh:
+            resto = _restoration_iterations(fh.read())
+    finally:
+        os.unlink(log_path)
+    q, v, tau = nlp.unpack(np.asarray(sol["x"]).ravel())
+    message = stats.status.replace("_", " ")
+    if not restoration and resto:
+        message = "stopped on entering the restoration phase, which is disabled (max_resto_iter=0)"
+    return PlanResult(
+        method="ipopt" if restoration else "ipopt-no-restoration",
+        status=stats.status,
+        success=stats.status == "Solve_Succeeded",
+        message=message,
+        iterations=stats.iterations,
+        solve_time_s=stats.solve_time,
+        total_time_s=time.perf_counter() - start,
+        time_per_iter_s=stats.time_per_iteration,
+        q=q,
+        v=v,
+        tau=tau,
+        dt=ocp.dt,
+        kkt_history=np.column_stack([stats.inf_pr, stats.inf_du]).reshape(-1, 2),
+        entered_restoration=resto > 0,
+        extra={
+            "objective": float(sol["f"]),
+            "restoration_iterations": resto,
+            "eval_time_s": stats.eval_time,
+            "build_time_s": build_time,
+            "solver_time_per_iter_s": stats.solver_time_per_iteration,
+            "n_variables": nlp.n,
+            "n_constraints": nlp.m,
+        },
+        formulation="generalized",
+    )
+
+
+def solve_ipopt_no_restoration(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
+    return solve_ipopt_generalized(ocp, q_guess, settings, restoration=False)

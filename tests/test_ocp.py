@@ -1,0 +1,171 @@
+"""The OCP API: every residual kind × every formulation against finite differences (along the
+retraction in maximal coordinates), serialisation, bad input named before any solve."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import mbplan as mb
+from mbplan.formulations.generalized import GeneralizedNLP
+from mbplan.formulations.maximal import MaximalNLP
+from mbplan.ocp import residuals as res
+from mbplan.paper import IIWA_START
+from mbplan.planning.initial_guess import inverse_kinematics
+
+GOAL = pin.SE3(pin.rpy.rpyToMatrix(0.3, -0.2, 0.5), np.array([0.4, 0.1, 0.6]))
+
+
+def factory_ocp(distance: bool) -> mb.OCP:
+    """Every residual kind, as a cost where it can be one and as a constraint."""
+    scene = mb.Scene().add_cylinder("post", 0.08, 1.0, (0.55, -0.35, 0.5))
+    scene.add_box("box", (0.1, 0.1, 0.1), (0.0, 0.6, 0.6))
+    ocp = mb.OCP("iiwa", scene, N=3, dt=0.05, q0=IIWA_START)
+    target = np.linspace(-0.5, 0.5, 7)
+    ocp.add_cost("q", res.JointPosition(target), 1.3)
+    ocp.add_cost("v", res.JointVelocity(), 0.1)
+    ocp.add_cost("tau", res.JointTorque(np.full(7, 2.0)), 1e-3)
+    ocp.add_cost("pose", res.FramePlacement("iiwa_link_7", GOAL), 2.0)
+    ocp.add_cost("point", res.FrameTranslation("iiwa_link_5", [0.3, 0.2, 0.5]), 1.5)
+    ocp.add_constraint("q_eq", res.JointPosition([0.2], joints=("iiwa_joint_2",)), knots=[2])
+    ocp.add_constraint(
+        "v_eq", res.JointVelocity([0.1, -0.1], ("iiwa_joint_1", "iiwa_joint_4")), [1]
+    )
+    ocp.add_constraint("tau_eq", res.JointTorque([1.0], ("iiwa_joint_3",)), knots=[1])
+    ocp.add_terminal_constraint("pose_eq", res.FramePlacement("iiwa_link_ee", GOAL))
+    ocp.add_constraint("point_eq", res.FrameTranslation("iiwa_link_4", [0.1, 0.0, 0.7]), [2])
+    ocp.add_constraint("com", res.ComOutsideCylinder("post", 0.02))
+    ocp.add_constraint("q_limits", res.JointPositionLimits())
+    ocp.add_constraint("v_limits", res.JointVelocityLimits())
+    ocp.add_constraint("tau_limits", res.JointTorqueLimits())
+    if distance:
+        ocp.add_constraint("clearance", res.Distance(0.01))
+    return ocp
+
+
+def _central(fn, x, h):
+    return np.column_stack([(fn(x + h * e) - fn(x - h * e)) / (2 * h) for e in np.eye(x.size)])
+
+
+@pytest.mark.parametrize("distance", [False, True])
+def test_generalized_derivatives_match_finite_differences(distance: bool) -> None:
+    ocp = factory_ocp(distance)
+    nlp = GeneralizedNLP(ocp)
+    rng = np.random.default_rng(0)
+    q = np.linspace(ocp.q0, np.zeros(7), ocp.N + 1)
+    z = nlp.initial_guess(q) + 0.05 * rng.standard_normal(nlp.n)
+    J = nlp.jacobian(z).toarray()
+    np.testing.assert_allclose(
+        J, _central(nlp.constraints, z, 1e-6), atol=2e-5 * max(1, np.abs(J).max())
+    )
+    grad = nlp.objective_gradient(z)
+    np.testing.assert_allclose(
+        grad, _central(lambda x: np.array([nlp.objective(x)]), z, 1e-6)[0], rtol=1e-6, atol=1e-6
+    )
+    lam = rng.standard_normal(nlp.m)
+    for _item, row0 in nlp.distances:  # fixed-witness-point Hessian: tested in test_collision
+        lam[row0:] = 0.0
+    U = nlp.lagrangian_hessian(z, 0.7, lam).toarray()
+    H = U + U.T - np.diag(U.diagonal())
+
+    def grad_lagrangian(x):
+        return 0.7 * nlp.objective_gradient(x) + nlp.jacobian(x).T @ lam
+
+    fd = _central(grad_lagrangian, z, 1e-5)
+    np.testing.assert_allclose(H, 0.5 * (fd + fd.T), atol=1e-4 * max(1, np.abs(H).max()))
+    assert nlp.m == 2 * 3 * 7 + 1 + 2 + 1 + 6 + 3 + 3 * 7 + (3 * 7 * 2 if distance else 0)
+
+
+@pytest.mark.parametrize("distance", [False, True])
+def test_maximal_derivatives_match_finite_differences_along_the_retraction(distance: bool) -> None:
+    ocp = factory_ocp(distance)
+    prob = MaximalNLP(ocp, jit=False).problem
+    nlp = MaximalNLP(ocp, jit=False)
+    rng = np.random.default_rng(1)
+    x = nlp.initial_point(np.linspace(ocp.q0, np.zeros(7), ocp.N + 1))
+    x = prob.retract(x, 0.05 * rng.standard_normal(prob.n))
+    y = rng.standard_normal(prob.n_eq)
+    zi = np.zeros(prob.n_ineq) if distance else rng.standard_normal(prob.n_ineq)
+    ev = prob.evaluate(x, 1.0, y, zi)
+
+    def lag(pt):
+        f, h, g = prob.values(pt)
+        return f + y @ h + zi @ g
+
+    for _ in range(3):
+        d = rng.standard_normal(prob.n)
+        h = 1e-6
+        xp, xm = prob.retract(x, h * d), prob.retract(x, -h * d)
+        (fp, hp, gp), (fm, hm, gm) = prob.values(xp), prob.values(xm)
+        np.testing.assert_allclose((fp - fm) / (2 * h), ev.gradient @ d, rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose((hp - hm) / (2 * h), ev.eq_jacobian @ d, atol=1e-5)
+        np.testing.assert_allclose((gp - gm) / (2 * h), ev.ineq_jacobian @ d, atol=1e-5)
+        H = ev.hessian_lower
+        H = (H + H.T).toarray() - np.diag(H.diagonal())
+        h = 1e-4
+        fd2 = (lag(prob.retract(x, h * d)) - 2 * lag(x) + lag(prob.retract(x, -h * d))) / h**2
+        assert abs(fd2 - d @ H @ d) <= 1e-5 * max(1.0, abs(fd2))
+
+
+def test_both_formulations_write_the_same_residuals() -> None:
+    """At a joint path, every constraint of the maximal NLP vanishes where the joint-space
+    residual does: the terminal pose constraint equals the joint-space frame error."""
+    ocp = factory_ocp(False)
+    nlp = MaximalNLP(ocp, jit=False)
+    q = np.linspace(ocp.q0, np.zeros(7), ocp.N + 1)
+    x = nlp.initial_point(q)
+    from mbplan.formulations.joint_space import evaluate
+
+    item = ocp["pose_eq"]
+    expected = evaluate(ocp.robot, ocp.scene, item.residual, q[-1:], q[-1:], None)[0]
+    term = next(t for t in nlp.problem.terms if t.name == "pose_eq")
+    flat = {n: nlp.problem.variables.blocks[n].flat(a) for n, a in x.items()}
+    value = term.function.value(term.gather(flat), term.parameters)
+    np.testing.assert_allclose(np.ravel(value), expected, atol=1e-9)
+    assert np.linalg.norm(expected) > 0.1
+
+
+def test_ocp_round_trips_through_json() -> None:
+    ocp = factory_ocp(True)
+    again = mb.OCP.from_dict(ocp.to_dict())
+    assert again.names == ocp.names and again.scene.names == ocp.scene.names
+    for a, b in zip(ocp.items, again.items, strict=True):
+        assert a.residual.to_dict() == b.residual.to_dict()
+        assert np.array_equal(a.knots, b.knots) and a.weight == b.weight
+
+
+def test_bad_input_is_named_before_any_solve() -> None:
+    ocp = mb.OCP("iiwa", N=4)
+    with pytest.raises(mb.InputError, match="no frame 'hand'"):
+        ocp.add_cost("x", res.FrameTranslation("hand", [0, 0, 0]))
+    with pytest.raises(mb.InputError, match="no joint 'elbow'"):
+        ocp.add_cost("x", res.JointPosition([0.0], joints=("elbow",)))
+    with pytest.raises(mb.InputError, match="NaN"):
+        ocp.add_cost("x", res.JointPosition(np.full(7, np.nan)))
+    with pytest.raises(mb.InputError, match="q0: contains NaN"):
+        mb.OCP("iiwa", q0=np.full(7, np.nan))
+    with pytest.raises(mb.InputError, match="can only be a constraint"):
+        ocp.add_cost("x", res.Distance(0.01))
+    with pytest.raises(mb.InputError, match="no object"):
+        ocp.add_constraint("x", res.ComOutsideCylinder("nothing", 0.0))
+    bare = pin.buildModelFromUrdf(
+        str(mb.load_robot("iiwa").source.get("path", "robots/iiwa14.urdf"))
+    )
+    no_geometry = mb.OCP(bare, mb.Scene().add_sphere("s", 0.1, (0.5, 0, 0.5)))
+    with pytest.raises(mb.InputError, match="no collision geometry"):
+        no_geometry.add_constraint("x", res.Distance(0.01))
+    far = pin.SE3(np.eye(3), np.array([3.0, 0.0, 0.5]))
+    with pytest.raises(mb.InfeasibleRequestError, match="out of reach"):
+        inverse_kinematics(
+            ocp.robot, res.FramePlacement("iiwa_link_ee", far).resolve(ocp.robot, ocp.scene), ocp.q0
+        )
+    blocked = mb.OCP("iiwa", mb.Scene().add_sphere("s", 0.2, (0.0, 0.0, 0.4)), N=4)
+    blocked.add_constraint("clearance", res.Distance(0.01))
+    with pytest.raises(mb.InfeasibleRequestError, match=r"'clearance'.*scene object 's'"):
+        mb.plan(blocked, "ipopt")
+    with pytest.raises(mb.InputError, match="unknown method"):
+        mb.plan(factory_ocp(False), "newton")
+    velocity = mb.OCP("iiwa", N=4).add_cost("v", res.JointVelocity(np.ones(7)))
+    with pytest.raises(mb.InputError, match=r"maximal formulation.*'v'.*nonzero target"):
+        mb.plan(velocity, "ripm")
