@@ -91,6 +91,9 @@ def _plan(args: argparse.Namespace) -> int:
     if args.method not in METHODS:
         raise InputError(f"unknown method {args.method!r}; choose from {', '.join(METHODS)}")
     if args.robot != "iiwa":
+        from mbplan.ocp.robot import load_robot
+
+        load_robot(args.robot)  # an unknown robot is named as such
         raise InputError(
             f"the obstacle task is defined for the iiwa; for {args.robot!r} build an "
             "mbplan.OCP (README, Python API)"

@@ -154,6 +154,7 @@ def iiwa_obstacle_starts(n: int = 100, seed: int = 0, constraint: str = "com") -
     each joint range (a seeded ``numpy`` Generator), resampled while it violates a constraint at
     the start (or, with eq. 62, the robot geometry penetrates the cylinder)."""
     as_int(n, "n", minimum=1, what="number of cases")
+    as_int(seed, "seed", minimum=0, what="random seed")
     robot = load_robot("iiwa")
     lo, hi = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
     centre, half = 0.5 * (lo + hi), 0.5 * SAMPLING_RANGE * (hi - lo)

@@ -1,6 +1,6 @@
 """Memory a planning request will need, checked against the memory available before allocating.
 
-The per-knot costs are measured peaks (``ru_maxrss``) of ``plan(ObstacleTask(N=...), method,
+The per-knot costs are measured peaks (``ru_maxrss``) of ``plan(iiwa_obstacle(N=...), method,
 max_iter=2)`` for the iiwa (7 bodies) at N = 40, 320 and 1280 (RIPM 307, 722, 2032 MB; IPOPT
 203, 232, 329 MB): the RIPM's sparse KKT systems and CasADi evaluations grow by about 1.4 MB per
 knot, IPOPT's (generalized coordinates) by about 0.1 MB.

@@ -8,23 +8,25 @@ import re
 import warnings
 from pathlib import Path
 
-import mbplan.baselines.generalized_ipopt as generalized_ipopt
-import mbplan.planning.manipulator as manipulator
 import numpy as np
 import pytest
-from mbplan.tasks.obstacle import (
-    Cylinder,
-    ObstacleTask,
-    joint_interpolation,
-    sample_obstacle_cases,
-)
 
 import mbplan.benchmarks.harness as harness
 from mbplan.benchmarks.harness import Job, run_jobs
 from mbplan.cli import main
 from mbplan.cli_support import run_command
 from mbplan.errors import InputError, MbplanError, RobotModelError, WarmStartWarning
-from mbplan.planning.solve import plan
+from mbplan.ocp import Scene
+from mbplan.paper import (
+    IIWA_START,
+    IIWA_TARGET,
+    add_obstacle_constraint,
+    iiwa_obstacle,
+    iiwa_obstacle_starts,
+    tracking_ocp,
+)
+from mbplan.planning.initial_guess import initial_path
+from mbplan.planning.solve import METHODS, Method, plan
 from mbplan.results import PlanResult, load_npz, save_npz
 from mbplan.robots import load
 from mbplan.solvers import RIPMOptions
@@ -36,8 +38,8 @@ def _no_solve(*args, **kwargs):
 
 @pytest.fixture(autouse=True)
 def no_solves(monkeypatch):
-    monkeypatch.setattr(manipulator, "plan_maximal", _no_solve)
-    monkeypatch.setattr(generalized_ipopt, "solve_generalized_ipopt", _no_solve)
+    for name, method in list(METHODS.items()):
+        monkeypatch.setitem(METHODS, name, Method(method.formulation, _no_solve))
     monkeypatch.setattr(harness, "_execute", _no_solve)
 
 
@@ -87,7 +89,7 @@ CLI_CASES = [
     (["plan", "--method", "snopt"], "unknown method 'snopt'"),
     (["plan", "--task", "juggling"], "unknown task 'juggling'"),
     (["plan", "--robot", "nosuchbot"], "unknown robot 'nosuchbot'"),
-    (["plan", "--robot", "panda"], "q0: required for robot 'panda'"),
+    (["plan", "--robot", "panda"], "obstacle task is defined for the iiwa; for 'panda'"),
     (["plan", "--robot", "{tmp}/missing.urdf"], "URDF file not found"),
     (["plan", "--robot", "{tmp}/file"], "malformed XML in URDF .*file"),
     (["plan", "--warm-start", "magic"], "--warm-start: invalid choice"),
@@ -181,7 +183,7 @@ def test_ctrl_c_during_the_solve(tmp_path, capsys, monkeypatch):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(manipulator, "plan_maximal", interrupted)
+    monkeypatch.setitem(METHODS, "ripm", Method("maximal", interrupted))
     code = main(["plan", "--horizon", "5", "--out", str(tmp_path / "p.npz")])
     err = capsys.readouterr().err
     assert code == 130
@@ -190,14 +192,17 @@ def test_ctrl_c_during_the_solve(tmp_path, capsys, monkeypatch):
 
 
 def test_warm_start_fallback_is_a_warning_or_an_error():
-    blocked = ObstacleTask(N=5, warm_start="via", obstacles=(Cylinder((0.0, 0.0), 2.0),))
+    scene = Scene().add_cylinder("wall", 2.0, 1.5, (0.0, 0.0, 0.75))
+    blocked = add_obstacle_constraint(
+        tracking_ocp("iiwa", IIWA_START, IIWA_TARGET, scene, N=5), "com"
+    )
     with pytest.warns(WarmStartWarning, match="using the linear warm start"):
-        q = joint_interpolation(blocked)
-    assert np.allclose(q[-1], blocked.q_target)
+        q = initial_path(blocked, "via")
+    assert np.allclose(q[-1], IIWA_TARGET)
     with warnings.catch_warnings():
         warnings.simplefilter("error", WarmStartWarning)
         with pytest.raises(WarmStartWarning):
-            joint_interpolation(blocked)
+            initial_path(blocked, "via")
 
 
 def test_run_command_exit_codes(capsys):
@@ -222,23 +227,23 @@ def test_run_command_exit_codes(capsys):
     ]
 
 
-TASK = ObstacleTask(N=5)
+TASK = iiwa_obstacle(N=5)
 API_CASES = [
     (lambda: plan(TASK, "snopt"), "unknown method 'snopt'"),
     (lambda: plan(TASK, "ripm", tol=0.0), "tol: must be finite and > 0"),
     (lambda: plan(TASK, "ripm", tol=float("nan")), "tol: must be finite"),
     (lambda: plan(TASK, "ripm", max_iter=2.5), "max_iter: iteration limit must be an integer"),
     (lambda: plan(TASK, "ipopt", max_iter=-1), "max_iter: iteration limit must be an integer"),
-    (lambda: plan("iiwa", "ripm"), "expected an ObstacleTask, got str"),
-    (lambda: plan(ObstacleTask(N=10**8), "ripm"), r"GB \(estimate\)"),
-    (lambda: ObstacleTask(N=1), "N: horizon must be an integer >= 2"),
-    (lambda: ObstacleTask(N=2.5), "N: horizon must be an integer >= 2"),
-    (lambda: ObstacleTask(dt=0.0), "dt: must be finite and > 0"),
-    (lambda: ObstacleTask(dt=float("inf")), "dt: must be finite and > 0"),
-    (lambda: ObstacleTask(warm_start="magic"), "warm_start: expected 'linear' or 'via'"),
-    (lambda: sample_obstacle_cases("iiwa", 1, -1), "seed: random seed must be an integer >= 0"),
-    (lambda: sample_obstacle_cases("iiwa", 1, 0.5), "seed: random seed must be an integer >= 0"),
-    (lambda: sample_obstacle_cases("iiwa", 0, 0), "n: number of cases must be an integer >= 1"),
+    (lambda: plan("iiwa", "ripm"), "expected an OCP, got str"),
+    (lambda: plan(iiwa_obstacle(N=10**6), "ripm"), r"GB \(estimate\)"),
+    (lambda: iiwa_obstacle(N=1), "N: horizon must be an integer >= 2"),
+    (lambda: iiwa_obstacle(N=2.5), "N: horizon must be an integer >= 2"),
+    (lambda: iiwa_obstacle(dt=0.0), "dt: must be finite and > 0"),
+    (lambda: iiwa_obstacle(dt=float("inf")), "dt: must be finite and > 0"),
+    (lambda: plan(TASK, "ripm", warm_start="magic"), "warm_start: expected 'linear', 'via'"),
+    (lambda: iiwa_obstacle_starts(1, -1), "seed: random seed must be an integer >= 0"),
+    (lambda: iiwa_obstacle_starts(1, 0.5), "seed: random seed must be an integer >= 0"),
+    (lambda: iiwa_obstacle_starts(0, 0), "n: number of cases must be an integer >= 1"),
     (lambda: RIPMOptions(max_iter=2.5), r"max_iter=2.5 \(expected int\)"),
     (lambda: RIPMOptions(max_iter=True), r"max_iter=True \(expected int\)"),
     (lambda: RIPMOptions(tol="1e-6"), r"tol='1e-6' \(expected float\)"),
@@ -274,7 +279,7 @@ def test_api_refuses_bad_input(tmp_path, monkeypatch, call, message):
 def test_memory_limit_can_be_set(monkeypatch):
     monkeypatch.setenv("MBPLAN_MEMORY_LIMIT_GB", "0.5")
     with pytest.raises(InputError, match=r"N=400: .*more than the 0.5 GB available"):
-        plan(ObstacleTask(N=400), "ripm")
+        plan(iiwa_obstacle(N=400), "ripm")
 
 
 # --- malformed URDFs: the message names the element -------------------------------------------
