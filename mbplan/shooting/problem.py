@@ -63,8 +63,11 @@ class ShootingProblem:
         self.state_weights = _vector(self.state_weights, space.nx, "state weights")
         self.input_weights = _vector(self.input_weights, nu, "input weights")
         self.terminal_weights = _vector(self.terminal_weights, space.nx, "terminal weights")
-        self._wq = np.tile(self.state_weights, (N, 1))
-        self._wu = np.tile(self.input_weights, (N, 1))
+        # Stage and terminal knots in one vectorised call: row N has the terminal weights and
+        # no input term.
+        self._wq = np.vstack([np.tile(self.state_weights, (N, 1)), self.terminal_weights])
+        self._wu = np.vstack([np.tile(self.input_weights, (N, 1)), np.zeros(nu)])
+        self._uref = np.vstack([u_ref, np.zeros(nu)])
 
     @property
     def N(self) -> int:
@@ -78,37 +81,17 @@ class ShootingProblem:
     def nu(self) -> int:
         return self.dynamics.nu
 
+    def _padded(self, U: np.ndarray) -> np.ndarray:
+        return np.vstack([U, np.zeros((1, self.nu))])
+
     def cost_value(self, X: np.ndarray, U: np.ndarray) -> float:
-        N = self.N
-        stage = self.cost.values(X[:N], U, self.x_ref[:N], self.u_ref, self._wq, self._wu)
-        term = self.cost.values(
-            X[N:],
-            np.zeros((1, self.nu)),
-            self.x_ref[N:],
-            np.zeros((1, self.nu)),
-            self.terminal_weights[None],
-            np.zeros((1, self.nu)),
-        )
-        return float(np.sum(stage) + term[0])
+        """``Σ_{k<N} l_k(x_k, u_k) + l_N(x_N)``."""
+        values = self.cost.values(X, self._padded(U), self.x_ref, self._uref, self._wq, self._wu)
+        return float(np.sum(values))
 
     def cost_derivatives(self, X: np.ndarray, U: np.ndarray):
         """Total cost and ``l_x (N+1, nx)``, ``l_xx (N+1, nx, nx)``, ``l_u``, ``l_uu`` (N rows)."""
-        N = self.N
         l, lx, lxx, lu, luu = self.cost.derivatives(
-            X[:N], U, self.x_ref[:N], self.u_ref, self._wq, self._wu
+            X, self._padded(U), self.x_ref, self._uref, self._wq, self._wu
         )
-        lN, lxN, lxxN, _, _ = self.cost.derivatives(
-            X[N:],
-            np.zeros((1, self.nu)),
-            self.x_ref[N:],
-            np.zeros((1, self.nu)),
-            self.terminal_weights[None],
-            np.zeros((1, self.nu)),
-        )
-        return (
-            float(np.sum(l) + lN[0]),
-            np.vstack([lx, lxN]),
-            np.concatenate([lxx, lxxN]),
-            lu,
-            luu,
-        )
+        return float(np.sum(l)), lx, lxx, lu[:-1], luu[:-1]

@@ -3,8 +3,7 @@
 Backward pass (thesis 3-35…3-39; with defects, 3-61, using ``d_k``):
 ``Q_x = l_x + Aᵀ(V'_x + V'_xx d)``, ``Q_u = l_u + Bᵀ(V'_x + V'_xx d)``, ``Q_xx = l_xx + AᵀV'_xxA``,
 ``Q_ux = BᵀV'_xxA``, ``Q_uu = l_uu + BᵀV'_xxB + μI`` (``l_ux = 0``); gains ``k = -Q_uu⁻¹Q_u``,
-``K = -Q_uu⁻¹Q_ux``; value ``V_x = Q_x + KᵀQ_uu k + KᵀQ_u + Q_uxᵀk`` and
-``V_xx = Q_xx + KᵀQ_uu K + KᵀQ_ux + Q_uxᵀK``.
+``K = -Q_uu⁻¹Q_ux``; value ``V_x = Q_x + Q_uxᵀk``, ``V_xx = Q_xx + Q_uxᵀK``.
 """
 
 from __future__ import annotations
@@ -34,10 +33,9 @@ def _cholesky(M: np.ndarray, L: np.ndarray) -> bool:
 
 
 @numba.njit(cache=True)
-def _cho_solve(L: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve ``L Lᵀ X = b`` for a matrix right-hand side ``b`` (n, m)."""
-    n, m = b.shape
-    X = b.copy()
+def _cho_solve(L: np.ndarray, X: np.ndarray) -> None:
+    """Solve ``L Lᵀ Y = X`` in place for a matrix right-hand side ``X`` (n, m)."""
+    n, m = X.shape
     for c in range(m):
         for i in range(n):
             s = X[i, c]
@@ -49,57 +47,149 @@ def _cho_solve(L: np.ndarray, b: np.ndarray) -> np.ndarray:
             for p in range(i + 1, n):
                 s -= L[p, i] * X[p, c]
             X[i, c] = s / L[i, i]
-    return X
 
 
 @numba.njit(cache=True)
 def backward_pass(A, B, lx, lxx, lu, luu, d, mu, K, k):
     """Fill ``K (N, nu, nx)`` and ``k (N, nu)``; return -1 on success, else the knot where
-    ``Q_uu`` is not positive definite (or not finite)."""
+    ``Q_uu`` is not positive definite (or not finite).
+
+    The gains solve with the regularised ``Q_uu``, so ``V_x = Q_x + Q_uxᵀk`` and
+    ``V_xx = Q_xx + Q_uxᵀK`` exactly. Explicit loops: no temporaries per knot.
+    """
     N, nx, nu = B.shape
     Vx = lx[N].copy()
     Vxx = lxx[N].copy()
+    vx = np.empty(nx)
+    Qx = np.empty(nx)
+    Qu = np.empty(nu)
+    VA = np.empty((nx, nx))
+    VB = np.empty((nx, nu))
+    Qxx = np.empty((nx, nx))
+    Qux = np.empty((nu, nx))
+    Quu = np.empty((nu, nu))
     L = np.zeros((nu, nu))
     rhs = np.empty((nu, nx + 1))
     for t in range(N - 1, -1, -1):
-        At = A[t]
-        Bt = B[t]
-        vx = Vx + Vxx @ d[t]
-        Qx = lx[t] + At.T @ vx
-        Qu = lu[t] + Bt.T @ vx
-        VA = Vxx @ At
-        VB = Vxx @ Bt
-        Qxx = lxx[t] + At.T @ VA
-        Qux = Bt.T @ VA
-        Quu = luu[t] + Bt.T @ VB
+        At, Bt, dt = A[t], B[t], d[t]
+        for i in range(nx):
+            acc = Vx[i]
+            for j in range(nx):
+                acc += Vxx[i, j] * dt[j]
+            vx[i] = acc
+        for i in range(nx):
+            acc = lx[t, i]
+            for j in range(nx):
+                acc += At[j, i] * vx[j]
+            Qx[i] = acc
+        for i in range(nu):
+            acc = lu[t, i]
+            for j in range(nx):
+                acc += Bt[j, i] * vx[j]
+            Qu[i] = acc
+        for i in range(nx):
+            for j in range(nx):
+                acc = 0.0
+                for p in range(nx):
+                    acc += Vxx[i, p] * At[p, j]
+                VA[i, j] = acc
+            for j in range(nu):
+                acc = 0.0
+                for p in range(nx):
+                    acc += Vxx[i, p] * Bt[p, j]
+                VB[i, j] = acc
+        for i in range(nx):
+            for j in range(i, nx):
+                acc = lxx[t, i, j]
+                for p in range(nx):
+                    acc += At[p, i] * VA[p, j]
+                Qxx[i, j] = acc
+        for i in range(nx):
+            for j in range(i):
+                Qxx[i, j] = Qxx[j, i]
+        for i in range(nu):
+            for j in range(nx):
+                acc = 0.0
+                for p in range(nx):
+                    acc += Bt[p, i] * VA[p, j]
+                Qux[i, j] = acc
+            for j in range(nu):
+                acc = luu[t, i, j]
+                for p in range(nx):
+                    acc += Bt[p, i] * VB[p, j]
+                Quu[i, j] = acc
+        finite = True
         for i in range(nu):
             Quu[i, i] += mu
-        Quu = 0.5 * (Quu + Quu.T)
-        if not np.all(np.isfinite(Quu)) or not _cholesky(Quu, L):
+            for j in range(i):
+                Quu[i, j] = Quu[j, i] = 0.5 * (Quu[i, j] + Quu[j, i])
+            for j in range(nu):
+                finite = finite and np.isfinite(Quu[i, j])
+        if not finite or not _cholesky(Quu, L):
             return t
-        rhs[:, :nx] = Qux
-        rhs[:, nx] = Qu
-        sol = _cho_solve(L, rhs)
-        Kt = -sol[:, :nx]
-        kt = -sol[:, nx]
-        K[t] = Kt
-        k[t] = kt
-        Vx = Qx + Kt.T @ (Quu @ kt) + Kt.T @ Qu + Qux.T @ kt
-        Vxx = Qxx + Kt.T @ (Quu @ Kt) + Kt.T @ Qux + Qux.T @ Kt
-        Vxx = 0.5 * (Vxx + Vxx.T)
+        for i in range(nu):
+            for j in range(nx):
+                rhs[i, j] = Qux[i, j]
+            rhs[i, nx] = Qu[i]
+        _cho_solve(L, rhs)
+        for i in range(nu):
+            for j in range(nx):
+                K[t, i, j] = -rhs[i, j]
+            k[t, i] = -rhs[i, nx]
+        for i in range(nx):
+            acc = Qx[i]
+            for p in range(nu):
+                acc += Qux[p, i] * k[t, p]
+            Vx[i] = acc
+        for i in range(nx):
+            for j in range(i, nx):
+                acc = Qxx[i, j]
+                for p in range(nu):
+                    acc += Qux[p, i] * K[t, p, j]
+                Vxx[i, j] = acc
+        for i in range(nx):
+            for j in range(i):
+                Vxx[i, j] = Vxx[j, i]
     return -1
 
 
 @numba.njit(cache=True)
 def adjoint_gradient(A, B, lx, lu):
     """``∂J/∂u_k = l_u + Bᵀλ_{k+1}``, ``λ_k = l_x + Aᵀλ_{k+1}``, ``λ_N = l_{N,x}`` (3-49/50)."""
-    N, nu = B.shape[0], B.shape[2]
+    N, nx, nu = B.shape
     g = np.empty((N, nu))
     lam = lx[N].copy()
+    new = np.empty(nx)
     for t in range(N - 1, -1, -1):
-        g[t] = lu[t] + B[t].T @ lam
-        lam = lx[t] + A[t].T @ lam
+        for i in range(nu):
+            acc = lu[t, i]
+            for j in range(nx):
+                acc += B[t, j, i] * lam[j]
+            g[t, i] = acc
+        for i in range(nx):
+            acc = lx[t, i]
+            for j in range(nx):
+                acc += A[t, j, i] * lam[j]
+            new[i] = acc
+        lam[:] = new
     return g
+
+
+@numba.njit(cache=True)
+def row_norms(a):
+    """``(mean_k ‖a_k‖₂, max_k ‖a_k‖₂, ‖a‖₂)`` of a ``(K, n)`` array (inf if not finite)."""
+    total, worst, sq = 0.0, 0.0, 0.0
+    for t in range(a.shape[0]):
+        s = 0.0
+        for j in range(a.shape[1]):
+            s += a[t, j] * a[t, j]
+        r = np.sqrt(s)
+        total += r
+        worst = max(worst, r)
+        sq += s
+    if a.shape[0] == 0:
+        return 0.0, 0.0, 0.0
+    return total / a.shape[0], worst, np.sqrt(sq)
 
 
 @numba.njit(cache=True)

@@ -9,6 +9,7 @@ accepts on the merit ``J + γ‖d‖₂`` with an Armijo test against the model 
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 
@@ -18,7 +19,12 @@ from mbplan.errors import InputError
 from mbplan.shooting.problem import ShootingProblem
 from mbplan.solvers.ilqr.options import ILQROptions
 from mbplan.solvers.ilqr.result import ILQRHistory, ILQRResult, ILQRStatus
-from mbplan.solvers.ilqr.riccati import adjoint_gradient, backward_pass, expected_change
+from mbplan.solvers.ilqr.riccati import (
+    adjoint_gradient,
+    backward_pass,
+    expected_change,
+    row_norms,
+)
 
 
 class _Nominal:
@@ -33,16 +39,16 @@ class _Nominal:
         clock["derivatives"] += t1 - t
         self.d = np.zeros_like(self.defects) if single_shooting else self.defects
         self.grad = adjoint_gradient(self.A, self.B, self.lx, self.lu)
-        with np.errstate(over="ignore", invalid="ignore"):
-            self.grad_norm = float(np.mean(np.linalg.norm(self.grad, axis=1)))
-            self.defect_norm = float(np.linalg.norm(self.d))
-            self.max_defect = float(np.max(np.linalg.norm(self.defects, axis=1)))
+        self.grad_norm = row_norms(self.grad)[0]
+        self.defect_norm = 0.0 if single_shooting else row_norms(self.d)[2]
+        self.max_defect = row_norms(self.defects)[1]
         clock["backward"] += time.perf_counter() - t1
 
     def finite(self) -> bool:
-        arrays = (self.J, self.lx, self.lxx, self.lu, self.luu, self.A, self.B, self.d, self.grad)
-        norms = (self.grad_norm, self.defect_norm)
-        return all(np.all(np.isfinite(a)) for a in arrays) and np.all(np.isfinite(norms))
+        # A sum is finite only if every entry is (barring overflow of the sum itself).
+        arrays = (self.lx, self.lxx, self.lu, self.luu, self.A, self.B, self.d, self.grad)
+        scalars = (self.J, self.grad_norm, self.defect_norm, *(a.sum() for a in arrays))
+        return all(math.isfinite(v) for v in scalars)
 
 
 def _initial_guess(problem, opts, x_init, u_init):
@@ -208,18 +214,18 @@ def _forward(problem, opts, nominal, K, k, alphas, ss, clock):
         Xn, Un, gaps = dyn.rollout(nominal.X, nominal.U, K, k, nominal.d, alpha)
         bound = opts.divergence_bound
         if not (np.all(np.abs(Xn) < bound) and np.all(np.abs(Un) < bound)):
-            continue
+            continue  # also rejects NaN
+        if not opts.line_search:
+            out = (Xn, Un, alpha, j + 1)  # full step: the cost is evaluated with the derivatives
+            break
         Jn = problem.cost_value(Xn, Un)
         if not np.isfinite(Jn):
             continue
-        if not opts.line_search:
-            out = (Xn, Un, alpha, j + 1)
-            break
         if ss:
             ok = Jn < nominal.J
         else:
             model = alpha * d1 + 0.5 * alpha**2 * d2
-            merit = Jn + gamma * float(np.linalg.norm(gaps))
+            merit = Jn + gamma * row_norms(gaps)[2]
             ok = merit < merit0 + opts.armijo_kappa * (model - alpha * gamma * dbar)
         if ok:
             out = (Xn, Un, alpha, j + 1)
