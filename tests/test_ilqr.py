@@ -12,7 +12,7 @@ from mbplan.benchmarks.ilqr.scenarios import build
 from mbplan.errors import InputError
 from mbplan.lie import SE3, R, RnGroup
 from mbplan.shooting import DiscreteDynamics, ShootingProblem, StateSpace, TrackingCost
-from mbplan.solvers.ilqr import ILQROptions, ILQRStatus, solve_ilqr
+from mbplan.solvers.ilqr import ILQROptions, ILQRStatus, solve_ilqr, solve_ilqr_bounded
 
 
 def _retract(space: StateSpace, q: np.ndarray, dx: np.ndarray) -> np.ndarray:
@@ -264,3 +264,16 @@ def test_thesis_scenarios_ms_converges_and_ss_is_trapped(scenarios, key):
     # SS-iLQR from the zero-input rollout ends in a worse local solution (thesis §4-3, §4-5).
     assert ss.objective > 1.5 * ms.objective
     assert ms.iterations <= {"so3-tracking": 10, "pendulum": 19}[key]
+
+
+def test_input_bounds_by_augmented_lagrangian(scenarios):
+    problem = scenarios["pendulum", "euler"].problem
+    free = solve_ilqr(problem, ILQROptions(max_iter=100))
+    assert np.abs(free.u).max() > 10  # the bound below is active
+    res = solve_ilqr_bounded(problem, -8.0, 8.0, ILQROptions(max_iter=100))
+    assert res.success, res
+    assert np.abs(res.u).max() <= 8.0 + 1e-6
+    assert res.group_violation <= 1e-12
+    assert res.objective >= free.objective
+    with pytest.raises(InputError, match="lower <= upper"):
+        solve_ilqr_bounded(problem, 1.0, -1.0)
