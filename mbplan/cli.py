@@ -291,7 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
     ilqr.add_argument(
         "--methods",
         default="all",
-        help="comma-separated: ss-ilqr, ms-ilqr, ipopt-quaternion, ipopt-embedded-dynamics, "
+        help="comma-separated: ss-ilqr, ms-ilqr, ms-ddp, ipopt-quaternion, ipopt-embedded-dynamics, "
         "ipopt-embedded-manifold, fddp, ripm (default all)",
     )
     ilqr.add_argument("--repeats", type=int, default=3, help="timed solves per method (median)")

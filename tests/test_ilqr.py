@@ -277,3 +277,29 @@ def test_input_bounds_by_augmented_lagrangian(scenarios):
     assert res.objective >= free.objective
     with pytest.raises(InputError, match="lower <= upper"):
         solve_ilqr_bounded(problem, 1.0, -1.0)
+
+
+def test_ddp_dynamics_second_derivatives_and_quadratic_convergence(scenarios):
+    sc = scenarios["drone", "euler"]
+    dyn, space = sc.problem.dynamics, sc.problem.space
+    rng = np.random.default_rng(5)
+    X = np.stack([_random_state(space, rng, sc.problem.x_ref[k]) for k in range(2)])
+    U = rng.standard_normal((1, dyn.nu))
+    H = dyn.second_derivatives(X, U)[0]
+    nx, nz = space.nx, space.nx + dyn.nu
+    f0 = dyn.step(X[0], U[0])
+
+    def g(z):
+        return _local(space, f0, dyn.step(_retract(space, X[0], z[:nx]), U[0] + z[nx:]))
+
+    h, e = 1e-4, np.eye(nz)
+    for i, j in [(0, 0), (3, 7), (5, 12), (13, 14), (2, 15)]:
+        a, b = h * e[i], h * e[j]
+        fd = (g(a + b) - g(a - b) - g(b - a) + g(-a - b)) / (4 * h * h)
+        assert np.allclose(fd, H[:, i, j], atol=1e-6)
+    a = scenarios["so3-tracking", "euler"]
+    ilqr = solve_ilqr(a.problem, ILQROptions(max_iter=50))
+    ddp = solve_ilqr(a.problem, ILQROptions(max_iter=50, second_order=True))
+    assert ddp.success and ddp.method == "ms-ddp"
+    assert ddp.iterations < ilqr.iterations
+    assert abs(ddp.objective - ilqr.objective) < 1e-8 * ilqr.objective

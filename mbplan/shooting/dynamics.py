@@ -54,6 +54,17 @@ class DiscreteDynamics:
         AB = cs.jacobian(tangent, cs.vertcat(dx, du))
         AB = cs.substitute([AB], [dx, du], [cs.DM.zeros(nx), cs.DM.zeros(nu)])[0]
         defect = space.sym_local(qn, f_bar)
+        # Second derivatives (DDP): the tensor ∂²(F(x̄ ⊕ δx, ū + δu) ⊖ F(x̄, ū))/∂z², z = (δx, δu).
+        z = cs.vertcat(dx, du)
+        exact = space.sym_local(f_bar, f_pert)
+        tensor = cs.jacobian(cs.jacobian(exact, z), z)  # rows: (output i, column j) column-major
+        tensor = cs.substitute([tensor], [dx, du], [cs.DM.zeros(nx), cs.DM.zeros(nu)])[0]
+        nz = nx + nu
+        # Reorder to C-order (i, j, l): row of ``tensor`` is i + nx*j, column l.
+        perm = [i + nx * j for i in range(nx) for j in range(nz)]
+        self._hessian = cs.Function(
+            f"{name}_dynamics_hessian", [q, u], [cs.densify(cs.vec(tensor[perm, :].T))]
+        )
         self._linearize = cs.Function(
             f"{name}_linearize",
             [q, u, qn],
@@ -88,6 +99,8 @@ class DiscreteDynamics:
         if fn is None:
             if kind == "linearize":
                 mapped = self._linearize.map(N, "serial")
+            elif kind == "hessian":
+                mapped = self._hessian.map(N, "serial")
             elif kind == "simulate":
                 mapped = self.step_function.mapaccum(f"{self.name}_simulate", N, 1)
             else:
@@ -113,6 +126,12 @@ class DiscreteDynamics:
         nx, nu = self.space.nx, self.nu
         d, A, B = self._compiled("linearize", N)(X[:-1], U, X[1:])
         return d, A.reshape(N, nx, nx), B.reshape(N, nx, nu)
+
+    def second_derivatives(self, X: np.ndarray, U: np.ndarray) -> np.ndarray:
+        """``(N, nx, nz, nz)``: Hessians of each tangent component of ``F`` in ``z = (δx, δu)``."""
+        N = U.shape[0]
+        nx, nz = self.space.nx, self.space.nx + self.nu
+        return self._compiled("hessian", N)(X[:-1], U)[0].reshape(N, nx, nz, nz)
 
     def rollout(
         self,

@@ -20,6 +20,8 @@ class ILQROptions:
 
     multiple_shooting: bool = True
     line_search: bool = False
+    second_order: bool = False
+    """DDP: keep the dynamics' second derivatives in ``Q_xx, Q_ux, Q_uu`` (dropped by iLQR)."""
     max_iter: int = 100
     tol: float = 1e-8
     """Bound on the mean over knots of ``‖∂J/∂u_k‖₂``."""

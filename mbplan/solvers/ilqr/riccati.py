@@ -50,9 +50,12 @@ def _cho_solve(L: np.ndarray, X: np.ndarray) -> None:
 
 
 @numba.njit(cache=True)
-def backward_pass(A, B, lx, lxx, lu, luu, d, mu, K, k):
+def backward_pass(A, B, lx, lxx, lu, luu, d, mu, K, k, H, second_order):
     """Fill ``K (N, nu, nx)`` and ``k (N, nu)``; return -1 on success, else the knot where
     ``Q_uu`` is not positive definite (or not finite).
+
+    With ``second_order`` (DDP), ``Q_zz += Σᵢ (V'_x + V'_xx d)ᵢ Hᵢ`` with the dynamics' second
+    derivatives ``H (N, nx, nx+nu, nx+nu)`` (the terms iLQR drops, thesis 3-35).
 
     The gains solve with the regularised ``Q_uu``, so ``V_x = Q_x + Q_uxᵀk`` and
     ``V_xx = Q_xx + Q_uxᵀK`` exactly. Explicit loops: no temporaries per knot.
@@ -118,6 +121,18 @@ def backward_pass(A, B, lx, lxx, lu, luu, d, mu, K, k):
                 for p in range(nx):
                     acc += Bt[p, i] * VB[p, j]
                 Quu[i, j] = acc
+        if second_order:
+            Ht = H[t]
+            for p in range(nx):
+                w = vx[p]
+                for i in range(nx):
+                    for j in range(nx):
+                        Qxx[i, j] += w * Ht[p, i, j]
+                for i in range(nu):
+                    for j in range(nx):
+                        Qux[i, j] += w * Ht[p, nx + i, j]
+                    for j in range(nu):
+                        Quu[i, j] += w * Ht[p, nx + i, nx + j]
         finite = True
         for i in range(nu):
             Quu[i, i] += mu

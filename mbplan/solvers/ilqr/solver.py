@@ -30,11 +30,16 @@ from mbplan.solvers.ilqr.riccati import (
 class _Nominal:
     """A trajectory with its cost, derivatives, linearisation and stationarity measures."""
 
-    def __init__(self, problem: ShootingProblem, X, U, single_shooting: bool, clock: dict):
+    def __init__(
+        self, problem: ShootingProblem, X, U, single_shooting: bool, clock: dict, second_order
+    ):
         t = time.perf_counter()
         self.X, self.U = X, U
         self.J, self.lx, self.lxx, self.lu, self.luu = problem.cost_derivatives(X, U)
         self.defects, self.A, self.B = problem.dynamics.linearize(X, U)
+        self.H = (
+            problem.dynamics.second_derivatives(X, U) if second_order else np.zeros((1, 1, 1, 1))
+        )
         t1 = time.perf_counter()
         clock["derivatives"] += t1 - t
         self.d = np.zeros_like(self.defects) if single_shooting else self.defects
@@ -85,7 +90,7 @@ def solve_ilqr(
     """Solve a :class:`~mbplan.shooting.ShootingProblem` by SS- or MS-iLQR."""
     opts = options or ILQROptions()
     ss = not opts.multiple_shooting
-    method = "ss-ilqr" if ss else "ms-ilqr"
+    method = ("ss-" if ss else "ms-") + ("ddp" if opts.second_order else "ilqr")
     space = problem.space
     N, nu, nx = problem.N, problem.nu, space.nx
     clock = {"derivatives": 0.0, "backward": 0.0, "rollout": 0.0}
@@ -94,7 +99,7 @@ def solve_ilqr(
     history = ILQRHistory()
     K = np.zeros((N, nu, nx))
     k = np.zeros((N, nu))
-    nominal = _Nominal(problem, X, U, ss, clock)
+    nominal = _Nominal(problem, X, U, ss, clock, opts.second_order)
     mu, delta = opts.mu_init, 1.0
 
     def record(alpha: float, trials: int) -> None:
@@ -144,6 +149,8 @@ def solve_ilqr(
                 mu,
                 K,
                 k,
+                nominal.H,
+                opts.second_order,
             )
             clock["backward"] += time.perf_counter() - t
             if failed < 0:
@@ -166,7 +173,7 @@ def solve_ilqr(
         Xn, Un, alpha, trials = trial
         delta = min(1.0 / opts.mu_factor, delta / opts.mu_factor)
         mu = mu * delta if mu * delta >= opts.mu_min else 0.0
-        candidate = _Nominal(problem, Xn, Un, ss, clock)
+        candidate = _Nominal(problem, Xn, Un, ss, clock, opts.second_order)
         if not candidate.finite():
             status, message = (
                 ILQRStatus.NUMERICAL_ERROR,
