@@ -292,7 +292,7 @@ def _plot(out: Path, key: str, sc: Scenario, ext: dict, traj: dict) -> None:
         h = e["history"]
         for ax, field in zip(axes, ("objective", "gradient", "defect"), strict=True):
             y = np.abs(np.asarray(h.get(field, []), dtype=float))
-            if len(y):
+            if np.any(y > 0):  # SS-iLQR's defects are zero by construction
                 ax.semilogy(np.arange(len(y)), np.maximum(y, 1e-17), marker=".", label=m)
     for ax, title in zip(
         axes,
