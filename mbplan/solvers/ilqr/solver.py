@@ -49,6 +49,10 @@ class _Nominal:
         self.max_defect = row_norms(self.defects)[1]
         clock["backward"] += time.perf_counter() - t1
 
+    def lq(self) -> tuple:
+        """The linear–quadratic model ``(A, B, l_x, l_xx, l_u, l_uu, d)``."""
+        return self.A, self.B, self.lx, self.lxx, self.lu, self.luu, self.d
+
     def finite(self) -> bool:
         # A sum is finite only if every entry is (barring overflow of the sum itself).
         arrays = (self.lx, self.lxx, self.lu, self.luu, self.A, self.B, self.d, self.grad)
@@ -138,20 +142,7 @@ def solve_ilqr(
         trial = None
         while trial is None:
             t = time.perf_counter()
-            failed = backward_pass(
-                nominal.A,
-                nominal.B,
-                nominal.lx,
-                nominal.lxx,
-                nominal.lu,
-                nominal.luu,
-                nominal.d,
-                mu,
-                K,
-                k,
-                nominal.H,
-                opts.second_order,
-            )
+            failed = backward_pass(*nominal.lq(), mu, K, k, nominal.H, opts.second_order)
             clock["backward"] += time.perf_counter() - t
             if failed < 0:
                 trial = _forward(problem, opts, nominal, K, k, alphas, ss, clock)
@@ -199,17 +190,7 @@ def _forward(problem, opts, nominal, K, k, alphas, ss, clock):
     dbar = nominal.defect_norm
     gamma = opts.merit_gamma_min
     if opts.line_search:
-        d1, d2 = expected_change(
-            nominal.A,
-            nominal.B,
-            nominal.lx,
-            nominal.lxx,
-            nominal.lu,
-            nominal.luu,
-            nominal.d,
-            K,
-            k,
-        )
+        d1, d2 = expected_change(*nominal.lq(), K, k)
         if not ss and dbar > 1e-14:
             gamma = max(
                 opts.merit_gamma_min,
