@@ -303,3 +303,15 @@ def test_ddp_dynamics_second_derivatives_and_quadratic_convergence(scenarios):
     assert ddp.success and ddp.method == "ms-ddp"
     assert ddp.iterations < ilqr.iterations
     assert abs(ddp.objective - ilqr.objective) < 1e-8 * ilqr.objective
+
+
+def test_verbose_log_and_history(scenarios, capsys):
+    problem = scenarios["pendulum", "euler"].problem
+    seen = []
+    res = solve_ilqr(
+        problem, ILQROptions(max_iter=3), verbose=True, callback=lambda i, h: seen.append(i)
+    )
+    out = capsys.readouterr().out
+    assert res.status is ILQRStatus.MAX_ITER and not res.success
+    assert seen == [0, 1, 2, 3] and len(res.history) == 4
+    assert out.count("\n") == 5 and out.startswith("iter")

@@ -26,6 +26,8 @@ from mbplan.solvers.ilqr.riccati import (
     row_norms,
 )
 
+_HEADER = "iter        objective    ‖g‖    ‖d‖        μ        α  ls  group"
+
 
 class _Nominal:
     """A trajectory with its cost, derivatives, linearisation and stationarity measures."""
@@ -90,8 +92,13 @@ def solve_ilqr(
     x_init: np.ndarray | None = None,
     u_init: np.ndarray | None = None,
     callback: Callable[[int, ILQRHistory], None] | None = None,
+    verbose: bool = False,
 ) -> ILQRResult:
-    """Solve a :class:`~mbplan.shooting.ShootingProblem` by SS- or MS-iLQR."""
+    """Solve a :class:`~mbplan.shooting.ShootingProblem` by SS- or MS-iLQR (or DDP).
+
+    ``verbose`` prints one line per iterate (IPOPT-style, like ``solve_ripm``); ``callback``
+    is called with the iteration number and the history after each iterate.
+    """
     opts = options or ILQROptions()
     ss = not opts.multiple_shooting
     method = ("ss-" if ss else "ms-") + ("ddp" if opts.second_order else "ilqr")
@@ -115,6 +122,14 @@ def solve_ilqr(
         history.ls_trials.append(trials)
         history.group_violation.append(space.violation(nominal.X))
         history.time_s.append(time.perf_counter() - start)
+        if verbose:
+            it = len(history) - 1
+            if it % 10 == 0:
+                print(_HEADER)
+            print(
+                f"{it:4d} {nominal.J:16.10e} {nominal.grad_norm:8.2e} {nominal.defect_norm:8.2e}"
+                f" {mu:8.1e} {alpha:8.2e} {trials:3d} {history.group_violation[-1]:8.1e}"
+            )
         if callback is not None:
             callback(len(history) - 1, history)
 
