@@ -9,7 +9,7 @@ its own). The ``-lgvi`` scenarios replace the thesis' forward Euler by the LGVI.
 issue's list) is MS-iLQR with the dynamics' exact second derivatives (DDP), which the thesis
 left out as too hard to obtain on the manifold.
 
-Regenerate: ``mbplan bench ilqr --scenario all --out benchmarks/results/ilqr``.
+Regenerate: ``mbplan bench ilqr --scenario all --repeats 5 --out benchmarks/results/ilqr``.
 """
 
 from __future__ import annotations
@@ -223,7 +223,8 @@ def report(summary: dict, details: dict) -> str:
     lines = [
         "# Lie-group iLQR vs the thesis' baselines (Lin 2025, Tables 4-2 and 4-3)",
         "",
-        "Regenerate: `mbplan bench ilqr --scenario all --out benchmarks/results/ilqr`",
+        "Regenerate: `mbplan bench ilqr --scenario all"
+        f" --repeats {details['repeats']} --out benchmarks/results/ilqr`",
         f"(median of {details['repeats']} solves after a warm-up; tolerance 1e-8 everywhere;"
         " times in one run on one machine, the thesis' on unknown hardware).",
         "",
