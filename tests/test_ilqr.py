@@ -4,11 +4,14 @@ thesis scenarios A and C end to end."""
 
 from __future__ import annotations
 
+import json
+
 import casadi as cs
 import numpy as np
 import pytest
 
 from mbplan.benchmarks.ilqr.scenarios import build
+from mbplan.cli import main
 from mbplan.errors import InputError
 from mbplan.lie import SE3, R, RnGroup
 from mbplan.shooting import DiscreteDynamics, ShootingProblem, StateSpace, TrackingCost
@@ -315,3 +318,57 @@ def test_verbose_log_and_history(scenarios, capsys):
     assert res.status is ILQRStatus.MAX_ITER and not res.success
     assert seen == [0, 1, 2, 3] and len(res.history) == 4
     assert out.count("\n") == 5 and out.startswith("iter")
+
+
+def test_bench_ilqr_writes_the_issue_schema(tmp_path):
+    out = tmp_path / "ilqr"
+    rc = main(
+        [
+            "bench",
+            "ilqr",
+            "--scenario",
+            "pendulum",
+            "--methods",
+            "ss-ilqr,ms-ilqr,ipopt-quaternion",
+            "--repeats",
+            "1",
+            "--no-lgvi",
+            "--out",
+            str(out),
+        ]
+    )
+    assert rc == 0
+    summary = json.loads((out / "summary.json").read_text())
+    rows = summary["scenarios"]["pendulum"]
+    assert set(rows) == {"ss-ilqr", "ms-ilqr", "ipopt-quaternion"}
+    keys = {
+        "converged",
+        "iterations",
+        "time_s",
+        "time_per_iter_s",
+        "final_cost",
+        "max_defect",
+        "group_violation",
+    }
+    for row in rows.values():
+        assert set(row) == keys
+        assert isinstance(row["converged"], bool) and isinstance(row["iterations"], int)
+    assert rows["ms-ilqr"]["converged"] and rows["ms-ilqr"]["group_violation"] <= 1e-12
+    md = (out / "results.md").read_text()
+    assert "| pendulum | ms-ilqr |" in md and "55.96" in md  # thesis' numbers beside ours
+    assert (out / "pendulum-convergence.png").exists()
+    assert (
+        main(
+            [
+                "bench",
+                "ilqr",
+                "--scenario",
+                "pendulum",
+                "--methods",
+                "nope",
+                "--out",
+                str(tmp_path / "x"),
+            ]
+        )
+        == 2
+    )
