@@ -372,3 +372,15 @@ def test_bench_ilqr_writes_the_issue_schema(tmp_path):
         )
         == 2
     )
+
+
+def test_fddp_baseline_on_so3_tracking(scenarios):
+    from mbplan.benchmarks.ilqr.fddp import fddp_baseline
+
+    sc = scenarios["so3-tracking", "euler"]
+    run = fddp_baseline(sc)
+    assert run.converged and run.iterations <= sc.max_iter
+    assert run.x.shape == sc.problem.x_ref.shape and np.all(np.isfinite(run.u))
+    # Crocoddyl's semi-implicit Euler solves a nearby problem: close to, not equal to, MS-iLQR's.
+    ms = solve_ilqr(sc.problem, ILQROptions(max_iter=50))
+    assert abs(sc.problem.cost_value(run.x, run.u) - ms.objective) < 0.2 * ms.objective
