@@ -47,7 +47,9 @@ class ILQRHistory:
 class ILQRResult:
     """Outcome of :func:`~mbplan.solvers.ilqr.solve_ilqr` (fields as in ``RIPMResult``).
 
-    ``x``/``u`` are the last accepted iterate (finite whatever the status).
+    ``x``/``u`` are the last accepted iterate (finite whatever the status); ``K``/``k`` the gains
+    of the last backward pass (the feedback policy ``u = ū + k + K(x ⊖ x̄)`` around the
+    previous iterate).
     """
 
     status: ILQRStatus
