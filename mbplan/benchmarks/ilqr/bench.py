@@ -232,6 +232,14 @@ def report(summary: dict, details: dict) -> str:
         f"(median of {details['repeats']} solves after a warm-up; tolerance 1e-8 everywhere;"
         " times in one run on one machine, the thesis' on unknown hardware).",
         "",
+        "*final cost*: the thesis' cost (2-55) of each solution, embedded rotations projected onto"
+        " SO(3); comparable only between methods with the same dynamics (iLQR, DDP, embedded"
+        " w./on 𝓜, RIPM; the quaternion kinematics and Crocoddyl's semi-implicit Euler differ)."
+        " *max defect*: iLQR/DDP largest ‖d_k‖ at the end; IPOPT largest constraint residual;"
+        " RIPM inf_pr; FDDP ffeas. *group violation*: iLQR/DDP max over every iterate of"
+        " ‖XᵀX − I‖∞; the others at the solution (quaternions: max |‖q‖ − 1|)."
+        " *Notes*: the solver's status.",
+        "",
         "| Task | Algorithm | Overall Time (s) | Iterations | Time per Iteration (ms) |"
         " Notes | thesis time (s) | thesis iterations | thesis ms/iter | final cost (2-55) |"
         " max defect | group violation |",
