@@ -43,6 +43,7 @@ def scenarios():
             ("pendulum", "euler"),
             ("pendulum", "lgvi"),
             ("drone", "euler"),
+            ("drone", "lgvi"),
         ]
     }
 
@@ -53,7 +54,13 @@ def _random_state(space, rng, center):
 
 @pytest.mark.parametrize(
     "key",
-    [("so3-tracking", "euler"), ("pendulum", "euler"), ("drone", "euler"), ("pendulum", "lgvi")],
+    [
+        ("so3-tracking", "euler"),
+        ("pendulum", "euler"),
+        ("drone", "euler"),
+        ("pendulum", "lgvi"),
+        ("drone", "lgvi"),  # SO(3) × R³ × R³ × R³
+    ],
 )
 def test_dynamics_jacobians_match_finite_differences(scenarios, key):
     sc = scenarios[key]

@@ -7,6 +7,7 @@ from mbplan.shooting.models import (
     euler_poincare_euler,
     fully_actuated,
     pendulum_forcing,
+    quadrotor_lgvi,
     rigid_body_space,
     rotation_lgvi,
 )
@@ -22,6 +23,7 @@ __all__ = [
     "euler_poincare_euler",
     "fully_actuated",
     "pendulum_forcing",
+    "quadrotor_lgvi",
     "rigid_body_space",
     "rotation_lgvi",
 ]

@@ -82,6 +82,33 @@ def drone_forcing(mass: float, gravity: float, down: np.ndarray) -> Forcing:
     return f
 
 
+def _rotation_lgvi_step(inertia: np.ndarray, dt: float, newton: int):
+    """``(R, ω, τ, τ⁺(R⁺)) ↦ (R⁺, ω⁺)`` of the rotational LGVI (shared by both models)."""
+    Ib = np.asarray(inertia, dtype=float)
+    Jd = cs.DM(0.5 * np.trace(Ib) * np.eye(3) - Ib)
+    Iinv = cs.DM(np.linalg.inv(Ib))
+    Ib_dm = cs.DM(Ib)
+    fs, target_s = cs.SX.sym("f", 3), cs.SX.sym("target", 3)
+    Fs = SO3.exp(fs)
+    res = SO3.vee(cs.mtimes(Fs, Jd) - cs.mtimes(Jd, Fs.T)) - target_s
+    newton_step = cs.Function(
+        "lgvi_newton", [fs, target_s], [fs - cs.solve(cs.jacobian(res, fs), res)]
+    )
+
+    def rotate(Rm, w, tau, tau_next: Callable):
+        Pi = cs.mtimes(Ib_dm, w)
+        target = dt * Pi + 0.5 * dt**2 * tau
+        f = dt * w
+        for _ in range(newton):
+            f = newton_step(f, target)
+        F = SO3.exp(f)
+        R_next = cs.mtimes(Rm, F)
+        Pi_next = cs.mtimes(F.T, Pi) + 0.5 * dt * (cs.mtimes(F.T, tau) + tau_next(R_next))
+        return R_next, cs.mtimes(Iinv, Pi_next)
+
+    return rotate
+
+
 def rotation_lgvi(
     name: str,
     inertia: np.ndarray,
@@ -98,28 +125,39 @@ def rotation_lgvi(
     ``F = exp(f)`` (``newton`` Newton iterations on ``f`` from ``hω``), then ``R⁺ = R F`` and
     ``Π⁺ = FᵀΠ + (h/2)(Fᵀτ + τ⁺)`` with ``τ⁺ = τ(R⁺, u)`` (inputs held over the step).
     """
-    Ib = np.asarray(inertia, dtype=float)
-    Jd = cs.DM(0.5 * np.trace(Ib) * np.eye(3) - Ib)
-    Iinv = cs.DM(np.linalg.inv(Ib))
-    Ib_dm = cs.DM(Ib)
-    fs, target_s = cs.SX.sym("f", 3), cs.SX.sym("target", 3)
-    Fs = SO3.exp(fs)
-    res = SO3.vee(cs.mtimes(Fs, Jd) - cs.mtimes(Jd, Fs.T)) - target_s
-    newton_step = cs.Function(
-        "lgvi_newton", [fs, target_s], [fs - cs.solve(cs.jacobian(res, fs), res)]
-    )
+    rotate = _rotation_lgvi_step(inertia, dt, newton)
 
     def step(parts, u):
         Rm, w = parts
-        tau = torque(Rm, w, u)
-        Pi = cs.mtimes(Ib_dm, w)
-        target = dt * Pi + 0.5 * dt**2 * tau
-        f = dt * w
-        for _ in range(newton):
-            f = newton_step(f, target)
-        F = SO3.exp(f)
-        R_next = cs.mtimes(Rm, F)
-        Pi_next = cs.mtimes(F.T, Pi) + 0.5 * dt * (cs.mtimes(F.T, tau) + torque(R_next, w, u))
-        return [R_next, cs.mtimes(Iinv, Pi_next)]
+        return list(rotate(Rm, w, torque(Rm, w, u), lambda Rn: torque(Rn, w, u)))
 
     return DiscreteDynamics(name, rigid_body_space(SO3), nu, step, jit=jit)
+
+
+def quadrotor_lgvi(
+    name: str,
+    inertia: np.ndarray,
+    mass: float,
+    gravity: np.ndarray,
+    dt: float,
+    *,
+    newton: int = 8,
+    jit: bool = True,
+) -> DiscreteDynamics:
+    """Quadrotor LGVI on SO(3) × R³ × R³ × R³, state ``(R, p, ω, v)`` with world velocity ``v``,
+    input ``u = (f_z, τ)`` (RIPM paper eq. 30–35 with the forcing of eq. 60: thrust ``R⁺e_z f_z``
+    at the new knot): the rotational LGVI of :func:`rotation_lgvi` with body torque ``τ``,
+    ``v⁺ = v + h(g + R⁺e_z f_z/m)``, ``p⁺ = p + h v``."""
+    rotate = _rotation_lgvi_step(inertia, dt, newton)
+    g = cs.DM(np.asarray(gravity, dtype=float))
+    ez = cs.DM([0.0, 0.0, 1.0])
+
+    def step(parts, u):
+        Rm, p, w, v = parts
+        tau = u[1:4]
+        R_next, w_next = rotate(Rm, w, tau, lambda Rn: tau)
+        v_next = v + dt * (g + cs.mtimes(R_next, ez) * u[0] / mass)
+        return [R_next, p + dt * v, w_next, v_next]
+
+    space = StateSpace([SO3, R(3), R(3), R(3)])
+    return DiscreteDynamics(name, space, 4, step, jit=jit)

@@ -42,7 +42,7 @@ METHODS = (
     "ripm",
 )
 IPOPT = ("ipopt-quaternion", "ipopt-embedded-dynamics", "ipopt-embedded-manifold")
-LGVI_SCENARIOS = ("so3-tracking", "pendulum")
+LGVI_SCENARIOS = ("so3-tracking", "pendulum", "drone")
 FDDP_SKIP = (
     "pendulum (pivot-acceleration input) and drone (input (f_z, τ)) need custom Crocoddyl"
     " actuation models (not done); the LGVI has no Crocoddyl integrator"
