@@ -80,6 +80,19 @@ def _bench_iiwa(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_ilqr(args: argparse.Namespace) -> int:
+    from mbplan.benchmarks.ilqr.bench import METHODS, run
+    from mbplan.benchmarks.ilqr.scenarios import SCENARIOS
+
+    scenarios = SCENARIOS if args.scenario == "all" else (args.scenario,)
+    methods = (
+        METHODS if args.methods == "all" else tuple(m.strip() for m in args.methods.split(","))
+    )
+    run(Path(args.out), scenarios, methods, repeats=args.repeats, lgvi=not args.no_lgvi)
+    print((Path(args.out) / "results.md").read_text())
+    return 0
+
+
 def _plan(args: argparse.Namespace) -> int:
     from mbplan.paper import iiwa_obstacle, iiwa_obstacle_cases
     from mbplan.planning.solve import METHODS, plan
@@ -319,6 +332,27 @@ def build_parser() -> argparse.ArgumentParser:
     _add_constraint_option(iiwa)
     _add_pool_options(iiwa)
     iiwa.set_defaults(func=_bench_iiwa)
+    ilqr = bench_sub.add_parser(
+        "ilqr",
+        help="SS-/MS-iLQR vs embedded IPOPT and RIPM on the thesis' scenarios (Tables 4-2, 4-3)",
+    )
+    ilqr.add_argument(
+        "--scenario",
+        default="all",
+        choices=("so3-tracking", "se3-tracking", "pendulum", "drone", "all"),
+    )
+    ilqr.add_argument(
+        "--methods",
+        default="all",
+        help="comma-separated: ss-ilqr, ms-ilqr, ms-ddp, ipopt-quaternion, ipopt-embedded-dynamics, "
+        "ipopt-embedded-manifold, fddp, ripm (default all)",
+    )
+    ilqr.add_argument("--repeats", type=int, default=3, help="timed solves per method (median)")
+    ilqr.add_argument(
+        "--no-lgvi", action="store_true", help="skip the LGVI variants of so3-tracking, pendulum"
+    )
+    ilqr.add_argument("--out", default="benchmarks/results/ilqr", help="output directory")
+    ilqr.set_defaults(func=_bench_ilqr)
     return parser
 
 
