@@ -88,7 +88,8 @@ def _bench_ilqr(args: argparse.Namespace) -> int:
     methods = (
         METHODS if args.methods == "all" else tuple(m.strip() for m in args.methods.split(","))
     )
-    run(Path(args.out), scenarios, methods, repeats=args.repeats, lgvi=not args.no_lgvi)
+    out = output_dir(args.out, "--out")
+    run(out, scenarios, methods, repeats=args.repeats, lgvi=not args.no_lgvi)
     print((Path(args.out) / "results.md").read_text())
     return 0
 
@@ -347,11 +348,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="comma-separated: ss-ilqr, ms-ilqr, ms-ddp, ipopt-quaternion, ipopt-embedded-dynamics, "
         "ipopt-embedded-manifold, fddp, ripm (default all)",
     )
-    ilqr.add_argument("--repeats", type=int, default=3, help="timed solves per method (median)")
+    ilqr.add_argument(
+        "--repeats", type=integer(1), default=3, help="timed solves per method (median)"
+    )
     ilqr.add_argument(
         "--no-lgvi", action="store_true", help="skip the LGVI variants of so3-tracking, pendulum"
     )
-    ilqr.add_argument("--out", default="benchmarks/results/ilqr", help="output directory")
+    ilqr.add_argument("--out", default="out/bench/ilqr", help="output directory")
     ilqr.set_defaults(func=_bench_ilqr)
     return parser
 
