@@ -65,10 +65,6 @@ class RIPMOptions:
     s_phi: float = 2.3
     gamma_alpha: float = 0.05
     """Safety factor of α_min (WB eq. 23)."""
-    watchdog_shortened_iter_trigger: int = 0
-    """Watchdog (IPOPT, after Chamberlain et al. 1982): after this many consecutive shortened
-    steps take full steps for up to ``watchdog_trial_iter_max`` iterations (0: off)."""
-    watchdog_trial_iter_max: int = 3
     second_order_correction: bool = True
     max_soc: int = 4
     kappa_soc: float = 0.99
@@ -95,9 +91,6 @@ class RIPMOptions:
     kappa_c: float = 0.25
 
     # --- linear solver (IPOPT's PDFullSpaceSolver) ---
-    regularize_slacks: bool = False
-    """Add δ_w to the slack block too (IPOPT, which treats s as a primal variable), so that a
-    large δ_w damps ds as well as dx."""
     static_regularization: float = 1e-9
     """±ε on the diagonal of the factorized KKT matrix only (removed by iterative refinement),
     so that the LDLᵀ factorization, which does not pivot, never meets an exact zero pivot."""
@@ -105,21 +98,9 @@ class RIPMOptions:
     residual_ratio_max: float = 1e-10
     residual_ratio_singular: float = 1e-5
 
-    # --- elastic mode (ℓ1 penalty of the inequalities in the main phase) ---
-    elastic_inequalities: bool = False
-    """Relax every inequality to ``g + s - p + n = 0`` with ``ρ Σ(p + n)`` added to the
-    objective (exact ℓ1 penalty; Benson, Shanno & Vanderbei 2004): a violated inequality no
-    longer drives its slack to zero (jamming). Convergence still requires ``‖h, g + s‖∞ ≤ tol``."""
-    elastic_penalty: float = 1e3
-    """Initial ρ of the elastic mode, multiplied by 10 when a multiplier approaches it."""
-
     # --- feasibility restoration (WB §3.3) ---
     restoration: bool = True
     """Enter a restoration phase when the line search or the inertia correction fails."""
-    restoration_method: str = "elastic"
-    """``"elastic"``: IPOPT's ℓ1 restoration problem (elastic variables p, n, proximity term),
-    solved by the same interior point iteration; ``"simple"``: damped Gauss-Newton on
-    ½‖h, g + s‖² with slack resets (the first implementation)."""
     bound_mult_reset_threshold: float = 1e3
     """After restoration z = μ/s, or all z = 1 if max(μ/s) exceeds this (IPOPT's rule)."""
     kappa_resto: float = 0.9
@@ -131,10 +112,6 @@ class RIPMOptions:
     resto_ls_multipliers: bool = False
     """After restoration, y from least squares instead of 0 (IPOPT's
     constr_mult_reset_threshold > 0)."""
-    resto_stationarity_tol: float = 1e-8
-    """``"simple"`` restoration: stationarity of ½‖h, g + s‖² (relative to max(1, ‖h, g + s‖∞))
-    that proves infeasibility."""
-
     print_level: int = 0
     """0: silent; 1: an IPOPT-like line per iteration and a summary."""
 
@@ -160,11 +137,8 @@ class RIPMOptions:
             "kappa_w_plus": self.kappa_w_plus > 1,
             "kappa_w_plus_first": self.kappa_w_plus_first > 1,
             "print_level": self.print_level >= 0,
-            "restoration_method": self.restoration_method in ("elastic", "simple"),
             "mu_strategy": self.mu_strategy in ("monotone", "adaptive"),
-            "watchdog_shortened_iter_trigger": self.watchdog_shortened_iter_trigger >= 0,
             "resto_penalty": self.resto_penalty > 0,
-            "elastic_penalty": self.elastic_penalty > 0,
             "resto_proximity_weight": self.resto_proximity_weight >= 0,
         }
         bad = [name for name, ok in checks.items() if not ok]
