@@ -69,6 +69,10 @@ class NewtonStep:
         o, m = self.o, self.m
         self.kkt.set_matrices(self.ev.hessian_lower, self.ev.eq_jacobian, self.ev.ineq_jacobian)
         dw = dc = 0.0
+        if o.degenerate_iters and self.n_perturbed >= o.degenerate_iters and self.delta_w_last:
+            # IPOPT's structurally degenerate Hessian: the zero trial has failed every time
+            # lately, start from the last iteration's δ_w
+            dw = max(o.delta_w_min, o.kappa_w_minus * self.delta_w_last)
         pretend_singular = False
         while True:
             inertia = self.kkt.factorize(self._diagonal(dw, dc), o.static_regularization)
@@ -80,6 +84,9 @@ class NewtonStep:
                 if finite(sol) and (ratio <= o.residual_ratio_singular or pretend_singular):
                     if dw > 0:
                         self.delta_w_last = dw
+                        self.n_perturbed += 1
+                    else:
+                        self.n_perturbed = 0
                     return self._split(sol), dw
                 pretend_singular = singular = True  # IPOPT: refinement failed
             if singular and dc == 0.0 and m > 0:
@@ -96,4 +103,5 @@ class NewtonStep:
                 dw *= o.kappa_w_plus_first if first else o.kappa_w_plus
             if dw > o.delta_w_max:  # IC-6
                 self.delta_w_last = 0.0
+                self.n_perturbed = 0
                 return None

@@ -89,6 +89,10 @@ class RIPMOptions:
     kappa_w_plus_first: float = 100.0
     delta_c_bar: float = 1e-8
     kappa_c: float = 0.25
+    degenerate_iters: int = 2
+    """After this many consecutive iterations that needed ``δ_w > 0``, the first trial is
+    ``κ_w⁻ δ_w,last`` instead of 0 (one factorization fewer per such iteration; 0: always try
+    ``δ_w = 0`` first, WB Algorithm IC)."""
 
     # --- linear solver (IPOPT's PDFullSpaceSolver) ---
     static_regularization: float = 1e-9
@@ -137,6 +141,7 @@ class RIPMOptions:
             "kappa_w_plus": self.kappa_w_plus > 1,
             "kappa_w_plus_first": self.kappa_w_plus_first > 1,
             "print_level": self.print_level >= 0,
+            "degenerate_iters": self.degenerate_iters >= 0,
             "mu_strategy": self.mu_strategy in ("monotone", "adaptive"),
             "resto_penalty": self.resto_penalty > 0,
             "resto_proximity_weight": self.resto_proximity_weight >= 0,

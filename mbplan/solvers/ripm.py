@@ -101,6 +101,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.rho = options.resto_penalty
         self.zeta = 0.0
         self.delta_w_last = 0.0
+        self.n_perturbed = 0  # consecutive iterations that needed δ_w > 0
         self.filter: list[tuple[float, float]] = []
         self.ep = self.en = self.zp = self.zn = self.xi = None
         # describes the step that produced the current iterate (for the log and history)
