@@ -77,6 +77,23 @@ def _bench_iiwa(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_speed(args: argparse.Namespace) -> int:
+    from mbplan.benchmarks.speed import run
+
+    links = tuple(int(k) for k in args.links.split(",") if k.strip())
+    run(
+        Path(args.out),
+        n_iiwa=args.n_iiwa,
+        n_drone=args.n_drone,
+        links=links,
+        seed=args.seed,
+        workers=args.workers,
+        scheduler=args.scheduler,
+    )
+    print((Path(args.out) / "results.md").read_text())
+    return 0
+
+
 def _plan(args: argparse.Namespace) -> int:
     from mbplan.planning.solve import plan
     from mbplan.results import save_npz
@@ -266,6 +283,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_constraint_option(iiwa)
     _add_pool_options(iiwa)
     iiwa.set_defaults(func=_bench_iiwa)
+    speed = bench_sub.add_parser(
+        "speed",
+        help="RIPM vs every baseline on drone, iiwa (com) and chain reach, with the RIPM profile",
+    )
+    speed.add_argument("--n-iiwa", type=int, default=100, help="iiwa cases (default 100)")
+    speed.add_argument("--n-drone", type=int, default=100, help="drone cases (default 100)")
+    speed.add_argument("--links", default="4,8,16,32,64", help="chain sizes (comma-separated)")
+    speed.add_argument("--seed", type=int, default=0)
+    speed.add_argument("--out", default="benchmarks/results/speed", help="output directory")
+    _add_pool_options(speed)
+    speed.set_defaults(func=_bench_speed)
     return parser
 
 

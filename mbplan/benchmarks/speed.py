@@ -224,3 +224,310 @@ def profile_solve(problem: Any, x0: Any, options: RIPMOptions) -> dict[str, Any]
         row[k + "_per_iter"] = clock["n_" + k] / it
     row["kkt_dim"] = problem.n + problem.n_eq + problem.n_ineq
     return row
+
+
+def chain_case(method: str, links: int) -> dict:
+    """One chain reach solve (``ripm`` or ``ipopt``) with its verification, as a JSON row."""
+    from mbplan.planning.solve import plan
+    from mbplan.verification import verify
+
+    task = chain_task(links)
+    t0 = time.perf_counter()
+    plan(task, method, tol=1e-6, max_iter=500)  # cold: compilation, symbolic analysis
+    cold = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    result = plan(task, method, tol=1e-6, max_iter=500)
+    wall = time.perf_counter() - t0
+    check = verify(task, result)
+    return {
+        "cold_total_time_s": cold,
+        "success": bool(result.success),
+        "status": result.status,
+        "iterations": int(result.iterations),
+        "solve_time_s": float(result.solve_time_s),
+        "total_time_s": float(wall),
+        "time_per_iter_s": float(result.time_per_iter_s),
+        "verified": bool(check.passed),
+        "verification_reasons": check.reasons,
+    }
+
+
+# ------------------------------------------------------------------------------- orderings
+
+
+def ordering_stats(problem: Any, x0: Any) -> dict[str, dict[str, float]]:
+    """Predicted flops (multiply-adds) and stored factor entries of the KKT matrix at ``x0`` for
+    each elimination order of :mod:`mbplan.solvers.ordering`."""
+    ev = problem.evaluate(x0, 1.0, np.zeros(problem.n_eq), np.ones(problem.n_ineq))
+    out = {}
+    for ordering in ("amd", "nested"):
+        kkt = ls.KKTSystem(problem.n, problem.n_eq, problem.n_ineq, ordering=ordering)
+        kkt.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+        a = kkt.analysis
+        out[ordering] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": kkt.dim}
+    return out
+
+
+# ------------------------------------------------------------------------------- benchmark
+
+IIWA_METHODS = ("ripm", "ipopt", "csqp")
+DRONE_METHODS = ("ripm", "ripm-input-limits", "ipopt-quaternion")
+CHAIN_METHODS = ("ripm", "ipopt")
+
+
+def _med(rows: list[dict], key: str, ok_only: bool = True) -> float | None:
+    vals = [r[key] for r in rows if (r["success"] or not ok_only) and r.get(key) is not None]
+    return float(np.median(vals)) if vals else None
+
+
+def _method_stats(rows: list[dict]) -> dict[str, Any]:
+    return {
+        "n": len(rows),
+        "converged": sum(r["success"] for r in rows),
+        "verified": sum(bool(r.get("verified", r["success"])) and r["success"] for r in rows),
+        "median_iters": _med(rows, "iterations"),
+        "median_time_per_iter_s": _med(rows, "time_per_iter_s"),
+        "median_total_time_s": _med(rows, "total_time_s") or _med(rows, "solve_time_s"),
+        "statuses": {s: sum(r["status"] == s for r in rows) for s in {r["status"] for r in rows}},
+    }
+
+
+def run(
+    out: Path,
+    n_iiwa: int = 100,
+    n_drone: int = 100,
+    links: tuple[int, ...] = CHAIN_LINKS,
+    seed: int = 0,
+    workers: int = 1,
+    scheduler: str | None = None,
+    profile_cases: int = 3,
+) -> dict:
+    """Every method side by side on the drone, the iiwa (com, via warm start) and the chain
+    reach; then the RIPM's per-iteration profile and the orderings' flops. Writes
+    results.jsonl files (resumable), summary.json, results.md and plots under ``out``."""
+    from mbplan.benchmarks import drone_docking, iiwa_obstacle
+    from mbplan.benchmarks.common import machine_info, write_atomic, write_json
+    from mbplan.benchmarks.harness import Job, run_jobs
+
+    out.mkdir(parents=True, exist_ok=True)
+    pool = {"workers": workers, "scheduler": scheduler}
+    summary: dict[str, Any] = {"tasks": {}}
+    sections = (
+        (
+            "iiwa-com",
+            n_iiwa,
+            [
+                Job(i, m, iiwa_obstacle.solve_case, (m, n_iiwa, seed, i, 40, 1e-6, 500, "via"))
+                for i in range(n_iiwa)
+                for m in IIWA_METHODS
+            ],
+        ),
+        (
+            "drone",
+            n_drone,
+            [
+                Job(i, m, drone_docking.solve_case, (m, n_drone, seed, i, 1e-6))
+                for i in range(n_drone)
+                for m in DRONE_METHODS
+            ],
+        ),
+        (
+            "chain",
+            len(links),
+            [Job(k, m, chain_case, (m, k)) for k in links for m in CHAIN_METHODS],
+        ),
+    )
+    rows_by_task = {}
+    for name, count, jobs in sections:
+        if not count:
+            continue
+        rows = run_jobs(jobs, out / f"{name}.jsonl", description=name, **pool)
+        keys = {j.key for j in jobs}
+        rows = [r for r in rows if (r["case"], r["method"]) in keys]
+        rows_by_task[name] = rows
+        methods = sorted({r["method"] for r in rows})
+        if name == "chain":
+            summary["tasks"][name] = {
+                m: {
+                    str(k): _method_stats([r for r in rows if r["method"] == m and r["case"] == k])
+                    for k in links
+                }
+                for m in methods
+            }
+        else:
+            summary["tasks"][name] = {
+                m: _method_stats([r for r in rows if r["method"] == m]) for m in methods
+            }
+    profile: dict[str, list[dict]] = {}
+    names = ["iiwa-com"] * bool(n_iiwa) + ["drone", "drone-limits"] * bool(n_drone)
+    for name in names:
+        profile[name] = [profile_solve(*TASKS[name](i)) for i in range(profile_cases)]
+    for k in links:
+        profile[f"chain{k}"] = [profile_solve(*_chain(k))]
+    summary["profile"] = {
+        name: {key: float(np.median([r[key] for r in rs])) for key in rs[0] if key != "status"}
+        for name, rs in profile.items()
+    }
+    orderings = {}
+    if n_iiwa:
+        orderings["iiwa-com"] = ordering_stats(*manipulator_ripm_problem(iiwa_task(0)))
+    if n_drone:
+        orderings["drone"] = ordering_stats(*drone_ripm_problem(drone_task(0)))
+    for k in links:
+        orderings[f"chain{k}"] = ordering_stats(*manipulator_ripm_problem(chain_task(k)))
+    summary["orderings"] = orderings
+    if n_drone:
+        summary["drone_horizon_scaling"] = drone_docking.horizon_scaling(seed)
+    summary["command"] = (
+        f"mbplan bench speed --n-iiwa {n_iiwa} --n-drone {n_drone} "
+        f"--links {','.join(map(str, links))} --seed {seed} --workers {workers} --out {out}"
+    )
+    summary["machine"] = machine_info()
+    write_json(out / "summary.json", summary)
+    write_atomic(out / "results.md", _markdown(summary))
+    if "chain" in rows_by_task:
+        _chain_plot(summary, links, out)
+    return summary
+
+
+def _ratio(a: float | None, b: float | None) -> str:
+    return "—" if a is None or b is None or b == 0 else f"{a / b:.2f}"
+
+
+def _fmt(v: float | None, scale: float = 1.0, digits: int = 1) -> str:
+    return "—" if v is None else f"{scale * v:.{digits}f}"
+
+
+def _markdown(s: dict) -> str:
+    lines = [
+        "# Speed: the RIPM against the baselines on its own tasks",
+        "",
+        f"Command: `{s['command']}`  ",
+        "Every method in one run, on the same (shared, 2-core) machine: only ratios mean "
+        "anything. Time per iteration and total time are medians over converged runs.",
+        "",
+    ]
+    for task in ("iiwa-com", "drone"):
+        if task not in s["tasks"]:
+            continue
+        ms = s["tasks"][task]
+        base = "ipopt" if task == "iiwa-com" else "ipopt-quaternion"
+        lines += [
+            f"## {task}",
+            "",
+            "| method | solved & verified | converged | median iters | time/iter [ms] "
+            f"| total [ms] | total / {base} | time/iter / {base} |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+        b = ms.get(base, {})
+        for name, m in ms.items():
+            lines.append(
+                f"| {name} | {m['verified']}/{m['n']} | {m['converged']}/{m['n']} "
+                f"| {_fmt(m['median_iters'])} | {_fmt(m['median_time_per_iter_s'], 1e3, 2)} "
+                f"| {_fmt(m['median_total_time_s'], 1e3)} "
+                f"| {_ratio(m['median_total_time_s'], b.get('median_total_time_s'))} "
+                f"| {_ratio(m['median_time_per_iter_s'], b.get('median_time_per_iter_s'))} |"
+            )
+        lines += ["", "Statuses: " + "; ".join(f"{n}: {m['statuses']}" for n, m in ms.items()), ""]
+    if "chain" in s["tasks"]:
+        ch = s["tasks"]["chain"]
+        links = list(next(iter(ch.values())))
+        lines += [
+            "## Chain reach (N = 40, no obstacles), RIPM vs generalized IPOPT",
+            "",
+            "Warm solves (a cold solve with compilation and symbolic analysis runs first).",
+            "",
+            "| links | RIPM iters | RIPM ms/iter | IPOPT iters | IPOPT ms/iter | RIPM total [s] "
+            "| IPOPT total [s] | total RIPM/IPOPT | verified RIPM / IPOPT |",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+        for k in links:
+            r, i = ch["ripm"][k], ch["ipopt"][k]
+            lines.append(
+                f"| {k} | {_fmt(r['median_iters'], digits=0)} "
+                f"| {_fmt(r['median_time_per_iter_s'], 1e3)} | {_fmt(i['median_iters'], digits=0)} "
+                f"| {_fmt(i['median_time_per_iter_s'], 1e3)} | {_fmt(r['median_total_time_s'], digits=2)} "
+                f"| {_fmt(i['median_total_time_s'], digits=2)} "
+                f"| {_ratio(r['median_total_time_s'], i['median_total_time_s'])} "
+                f"| {r['verified']} / {i['verified']} |"
+            )
+        lines.append("")
+    prof = s["profile"]
+    lines += [
+        "## RIPM profile per iteration (median over the profiled cases, ms per iteration)",
+        "",
+        "`evaluate`: derivatives at the iterate; `values`/`retract`: line-search trials; "
+        "`assembly`: KKT values into the fixed pattern; `factorize`: numeric LDLᵀ (all inertia "
+        "trials); `solve`: triangular solves with refinement; `python`: the rest.",
+        "",
+        "| task | KKT dim | iters | ms/iter | evaluate | values | retract | assembly | factorize "
+        "| solve | python | factorizations/iter | solves/iter | trials/iter |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for name, p in prof.items():
+        lines.append(
+            f"| {name} | {p['kkt_dim']:.0f} | {p['iterations']:.0f} | {p['per_iter_ms']:.2f} "
+            + " ".join(
+                f"| {p[k + '_ms']:.2f}"
+                for k in (
+                    "evaluate",
+                    "values",
+                    "retract",
+                    "assembly",
+                    "factorize",
+                    "solve",
+                    "python",
+                )
+            )
+            + f" | {p['factorize_per_iter']:.2f} | {p['solve_per_iter']:.2f} "
+            f"| {p['values_per_iter']:.2f} |"
+        )
+    lines += [
+        "",
+        "## Elimination orders: predicted factorization cost",
+        "",
+        "| task | KKT dim | AMD Mflop | AMD factor entries | nested dissection Mflop | ND entries |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    for name, o in s["orderings"].items():
+        a, nd = o["amd"], o["nested"]
+        lines.append(
+            f"| {name} | {a['kkt_dim']} | {a['flops'] / 1e6:.1f} | {a['nnz_factor']} "
+            f"| {nd['flops'] / 1e6:.1f} | {nd['nnz_factor']} |"
+        )
+    if "drone_horizon_scaling" in s:
+        h = s["drone_horizon_scaling"]
+        lines += [
+            "",
+            f"Drone, whole iteration N = 160 / N = 40: {h['ratio']:.2f} (linear: "
+            f"{h['linear_ratio']:.0f}).",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def _chain_plot(s: dict, links: tuple[int, ...], out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mbplan.benchmarks.common import save_plot
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    ch = s["tasks"]["chain"]
+    x = np.array(links, dtype=float)
+    for m, style in (("ripm", "o-"), ("ipopt", "s-")):
+        per = [ch[m][str(k)]["median_time_per_iter_s"] for k in links]
+        tot = [ch[m][str(k)]["median_total_time_s"] for k in links]
+        axes[0].loglog(x, [np.nan if v is None else v for v in per], style, label=m)
+        axes[1].loglog(x, [np.nan if v is None else v for v in tot], style, label=m)
+    for ax, what in zip(axes, ("time per iteration [s]", "total time [s]"), strict=True):
+        ref = ax.get_lines()[0].get_ydata()[0]
+        if np.isfinite(ref):
+            ax.loglog(x, ref * (x / x[0]) ** 1.5, "k:", lw=0.8, label="∝ n^1.5")
+        ax.set_xlabel("links")
+        ax.set_ylabel(what)
+        ax.legend()
+    fig.suptitle("Chain reach, N = 40: maximal (RIPM) vs generalized (IPOPT)")
+    fig.tight_layout()
+    save_plot(fig, out / "chain_scaling.png", dpi=110)

@@ -93,7 +93,8 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.resto = parent is not None
         if parent is None:
             out = (lambda line: print(line, file=sys.stdout)) if options.print_level > 0 else None
-            self.sh = _Shared(KKTSystem(self.n, self.me, self.mi), IterationHistory(), out)
+            kkt = KKTSystem(self.n, self.me, self.mi, ordering=options.kkt_ordering)
+            self.sh = _Shared(kkt, IterationHistory(), out)
         else:
             self.sh = parent.sh
         # the phase: σ f + ρ Σ(p + n) + ζ/2 ‖ξ‖² (σ = 1, no elastics in the main phase)
@@ -157,7 +158,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
 
     def _least_squares_y(self, ev: NLPEvaluation) -> np.ndarray:
         """``y`` minimizing ``‖grad f + A_Eᵀy + A_Iᵀz‖`` (WB), or 0 if it is large."""
-        kkt = KKTSystem(self.n, self.me, 0)
+        kkt = KKTSystem(self.n, self.me, 0, ordering=self.o.kkt_ordering)
         kkt.set_matrices(None, ev.eq_jacobian, None)
         diag = np.concatenate([np.ones(self.n), np.zeros(self.me)])
         inertia = kkt.factorize(diag, self.o.static_regularization)
