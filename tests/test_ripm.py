@@ -292,11 +292,12 @@ def test_elastic_restoration_escapes_jamming():
 
 
 def test_adaptive_mu_option():
-    """Adaptive μ still solves HS071, the banded control problem and the jamming example, and
-    is not monotone; removed options are rejected by name."""
+    """Adaptive μ (LOQO's or Mehrotra's probing oracle) still solves HS071, the banded control
+    problem and the jamming example, and is not monotone; removed options are rejected by
+    name."""
     banded = BandedControlNLP(nx=4, nu=2, horizon=20)
     reference = solve_ripm(banded, banded.initial_guess())
-    variants = ({"mu_strategy": "adaptive"},)
+    variants = ({"mu_strategy": "adaptive"}, {"mu_strategy": "adaptive", "mu_oracle": "probing"})
     for options in variants:
         res = solve_ripm(hs071(), HS071_X0, **options)
         assert res.status is RIPMStatus.CONVERGED, options

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from mbplan.solvers.iterate import EPS
+from mbplan.solvers.iterate import EPS, frac_to_boundary
 
 
 class BarrierStrategy:
@@ -29,12 +29,12 @@ class BarrierStrategy:
                 self._enter_monotone_mode()
                 tiny_step = False
             else:
-                self._set_mu(self._loqo_mu())
+                self._free_mode_mu()
                 return False
         while (tiny_step or self._error(self.mu) <= o.kappa_eps * self.mu) and self.mu > mu_min:
             if o.mu_strategy == "adaptive" and not self.resto and not tiny_step:
                 self.free_mode, self.kkt_refs = True, []  # monotone phase done: free mode again
-                self._set_mu(self._loqo_mu())
+                self._free_mode_mu()
                 return False
             self.mu = max(mu_min, min(o.kappa_mu * self.mu, self.mu**o.theta_mu))
             self.tau = max(o.tau_min, 1 - self.mu)
@@ -43,6 +43,33 @@ class BarrierStrategy:
             self.filter = []
             tiny_step = False
         return tiny_step
+
+    def _free_mode_mu(self) -> None:
+        """μ of the free mode: LOQO's now, or Mehrotra's probing once the step's matrix is
+        factorized (:meth:`_probe_mu`, called by the Newton step)."""
+        if self.o.mu_oracle == "probing" and self.mi:
+            self.probe_pending = True
+        else:
+            self._set_mu(self._loqo_mu())
+
+    def _probe_mu(self) -> None:
+        """Mehrotra's predictor (IPOPT's probing oracle): the affine-scaling step (μ = 0) with
+        the current factorization, ``μ_aff`` the average complementarity after its
+        fraction-to-boundary steps, ``μ = σ μ_avg`` with ``σ = (μ_aff / μ_avg)³``."""
+        self.probe_pending = False
+        mu_avg, saved = self._avg_compl(), self.mu
+        self.mu = 0.0
+        try:
+            sol = self._solve(self._rhs(self.r_c))
+            aff = self._split(sol)
+        finally:
+            self.mu = saved
+        tau = self.tau
+        a_p = frac_to_boundary(self.s, aff.ds, tau)
+        a_d = frac_to_boundary(self.z, aff.dz, tau)
+        mu_aff = float(np.mean((self.s + a_p * aff.ds) * (self.z + a_d * aff.dz)))
+        sigma = min((mu_aff / mu_avg) ** 3, 1.0) if mu_avg > 0 else 0.0
+        self._set_mu(float(np.clip(sigma * mu_avg, self.o.tol / 10, self.mu_max)))
 
     def _set_mu(self, mu: float) -> None:
         if mu != self.mu:

@@ -79,6 +79,8 @@ class NewtonStep:
             correct = inertia is not None and inertia.zero == 0 and inertia.negative == m
             singular = not correct and (inertia is None or inertia.zero > 0 or inertia.negative < m)
             if correct:
+                if self.probe_pending:  # μ from an affine step with this factorization
+                    self._probe_mu()
                 rhs = self._rhs(self.r_c)
                 sol, ratio = self.kkt.solve(rhs, o.max_refinement_steps, o.residual_ratio_max)
                 if finite(sol) and (ratio <= o.residual_ratio_singular or pretend_singular):

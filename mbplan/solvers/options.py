@@ -46,6 +46,10 @@ class RIPMOptions:
     """``"monotone"``: Fiacco-McCormick (WB eq. 7, Algorithm 1); ``"adaptive"``: LOQO's oracle
     every iteration (free mode) while ``E_0`` decreases, with IPOPT's fall-back to the monotone
     rule (``adaptive_mu_globalization=kkt-error``)."""
+    mu_oracle: str = "loqo"
+    """Free-mode μ of ``mu_strategy="adaptive"``: ``"loqo"`` (Vanderbei & Shanno's rule on the
+    complementarity spread) or ``"probing"`` (Mehrotra's predictor: an affine-scaling step with
+    the iteration's factorization, ``μ = (μ_aff/μ_avg)³ μ_avg``; IPOPT's ``mu_oracle=probing``)."""
     mu_init: float = 0.1
     kappa_eps: float = 10.0
     """μ is decreased once E_μ ≤ κ_ε μ (WB eq. 7; Algorithm 1 uses 10)."""
@@ -148,6 +152,7 @@ class RIPMOptions:
             "degenerate_iters": self.degenerate_iters >= 0,
             "kkt_ordering": self.kkt_ordering in ("amd", "nested"),
             "mu_strategy": self.mu_strategy in ("monotone", "adaptive"),
+            "mu_oracle": self.mu_oracle in ("loqo", "probing"),
             "resto_penalty": self.resto_penalty > 0,
             "resto_proximity_weight": self.resto_proximity_weight >= 0,
         }

@@ -131,16 +131,67 @@ def _split(adj_ptr, adj, nodes, member, tag, level):
     return label
 
 
-def nested_dissection_order(indptr: np.ndarray, indices: np.ndarray, leaf: int = 200) -> np.ndarray:
-    """Nested dissection order (module docstring) of the symmetric pattern given by its lower
-    (or upper) CSR/CSC arrays: ``order[k]`` is the index of the k-th pivot."""
+def _adjacency(indptr: np.ndarray, indices: np.ndarray) -> sp.csr_matrix:
     n = len(indptr) - 1
     rows = np.repeat(np.arange(n), np.diff(indptr))
     off = rows != indices
     a = sp.csr_matrix(
         (np.ones(int(off.sum())), (rows[off], np.asarray(indices)[off])), shape=(n, n)
     )
-    a = (a + a.T).tocsr()
+    return (a + a.T).tocsr()
+
+
+def _leaf_order(a: sp.csr_matrix, nodes: np.ndarray) -> np.ndarray:
+    sub = a[nodes][:, nodes]
+    up = sp.triu(sub + sp.eye(nodes.shape[0]), format="csc")
+    return nodes[amd_order(up.indptr, up.indices)]
+
+
+def coordinate_dissection_order(
+    indptr: np.ndarray, indices: np.ndarray, coords: np.ndarray, leaf: int = 200
+) -> np.ndarray:
+    """Nested dissection by coordinates (e.g. the knot and body of every unknown, ``coords``
+    of shape ``(n, d)``): halve the box along its longest axis at the median, separate the
+    halves by the smaller of the two sets of vertices with a neighbour across, recurse; pieces
+    below ``leaf`` vertices by AMD."""
+    n = len(indptr) - 1
+    a = _adjacency(indptr, indices)
+    out: list[np.ndarray] = []
+    stack: list[tuple[np.ndarray, bool]] = [(np.arange(n, dtype=np.int64), False)]
+    side = np.zeros(n, np.int8)
+    while stack:
+        nodes, emit = stack.pop()
+        if emit:
+            out.append(nodes)
+            continue
+        c = coords[nodes]
+        extent = [np.unique(c[:, i]).size for i in range(c.shape[1])]
+        axis = int(np.argmax(extent))
+        if nodes.shape[0] <= leaf or extent[axis] < 2:
+            out.append(_leaf_order(a, nodes))
+            continue
+        values = np.unique(c[:, axis])
+        split = values[values.size // 2]
+        upper = c[:, axis] >= split
+        side[nodes] = 0
+        side[nodes[upper]] = 2
+        side[nodes[~upper]] = 1
+        sub = a[nodes]
+        cross_lo = (sub @ (side == 2).astype(float) > 0) & ~upper
+        cross_hi = (sub @ (side == 1).astype(float) > 0) & upper
+        sep = cross_lo if cross_lo.sum() <= cross_hi.sum() else cross_hi
+        side[nodes] = 0
+        stack.append((nodes[sep], True))
+        stack.append((nodes[upper & ~sep], False))
+        stack.append((nodes[~upper & ~sep], False))
+    return np.concatenate(out) if out else np.zeros(0, np.int64)
+
+
+def nested_dissection_order(indptr: np.ndarray, indices: np.ndarray, leaf: int = 200) -> np.ndarray:
+    """Nested dissection order (module docstring) of the symmetric pattern given by its lower
+    (or upper) CSR/CSC arrays: ``order[k]`` is the index of the k-th pivot."""
+    n = len(indptr) - 1
+    a = _adjacency(indptr, indices)
     adj_ptr, adj = a.indptr.astype(np.int64), a.indices.astype(np.int64)
     member = np.zeros(n, np.int64)
     level = np.full(n, -1, np.int64)
@@ -153,9 +204,7 @@ def nested_dissection_order(indptr: np.ndarray, indices: np.ndarray, leaf: int =
             out.append(nodes)
             continue
         if nodes.shape[0] <= leaf:
-            sub = a[nodes][:, nodes]
-            up = sp.triu(sub + sp.eye(nodes.shape[0]), format="csc")
-            out.append(nodes[amd_order(up.indptr, up.indices)])
+            out.append(_leaf_order(a, nodes))
             continue
         tag = next(tags)
         member[nodes] = tag

@@ -110,6 +110,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.free_mode = options.mu_strategy == "adaptive" and parent is None
         self.kkt_refs: list[float] = []
         self.mu_max = math.inf
+        self.probe_pending = False  # Mehrotra's μ is due once the step's matrix is factorized
 
     @property
     def kkt(self) -> KKTSystem:
@@ -223,6 +224,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
                 self._fail_or_restore("inertia correction failed (δ_w > δ_w,max)")
                 continue
             step, dw = computed
+            self.cur = self._current_trial()  # φ_μ with the step's μ (probing sets it)
             tiny_step = (
                 self.inf_pr < 1e-4
                 and max(amax(step.dx), amax(step.ds / (1 + self.s))) < o.tiny_step_tol
