@@ -8,7 +8,9 @@ structure from a pseudo-peripheral vertex (Gibbs-Poole-Stockmeyer) sweeps the gr
 longest extent, the thinnest level near the middle (shrunk to the vertices that touch the next
 level) separates the two halves, which are ordered first, the separator last. Pieces below
 ``leaf`` vertices are ordered by AMD. No coordinates are needed: the level structure finds the
-time (or body) direction by itself.
+time (or body) direction by itself. :func:`coordinate_dissection_order` cuts by given
+coordinates (knot, body) instead. On the benchmark KKT matrices both need more flops than AMD
+(docs/ripm-speed.md), which stays the default.
 """
 
 from __future__ import annotations
