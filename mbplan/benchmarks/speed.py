@@ -18,7 +18,7 @@ import numpy as np
 
 from mbplan.solvers import RIPMOptions, RIPMResult, solve_ripm
 from mbplan.solvers import linear_solver as ls
-from mbplan.solvers.ordering import coordinate_dissection_order
+from mbplan.solvers.ordering import amd_order, coordinate_dissection_order
 
 # ------------------------------------------------------------------------------- tasks
 
@@ -294,12 +294,10 @@ def ordering_stats(problem: Any, x0: Any) -> dict[str, dict[str, float]]:
         out[ordering] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": kkt.dim}
     keys = _grid_keys(problem, ev)
     if keys is not None:
-        amd = out_perm = kkt_amd_perm(problem, ev)
-        indptr, indices = amd[1], amd[2]
+        amd, indptr, indices = kkt_amd_perm(problem, ev)
         rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
         for name, (major, minor) in (("time-major", keys), ("body-major", keys[::-1])):
-            perm = out_perm[0]
-            perm = perm[np.lexsort((minor[perm], major[perm]))]
+            perm = amd[np.lexsort((minor[amd], major[amd]))]
             a = ls._Analysis(len(indptr) - 1, rows, indices, perm)
             out[name] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": len(perm)}
         coords = np.column_stack(keys).astype(float)
@@ -313,8 +311,6 @@ def kkt_amd_perm(problem: Any, ev: Any) -> tuple[np.ndarray, np.ndarray, np.ndar
     """The AMD order of the KKT pattern at ``ev`` and the pattern (lower CSR arrays)."""
     kkt = ls.KKTSystem(problem.n, problem.n_eq, problem.n_ineq)
     kkt.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
-    from mbplan.solvers.ordering import amd_order
-
     return amd_order(kkt._indptr, kkt._indices), kkt._indptr, kkt._indices
 
 
