@@ -94,6 +94,23 @@ def _bench_ilqr(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_speed(args: argparse.Namespace) -> int:
+    from mbplan.benchmarks.speed import run
+
+    out = output_dir(args.out, "--out")
+    run(
+        out,
+        n_iiwa=args.n_iiwa,
+        n_drone=args.n_drone,
+        links=tuple(args.links),
+        seed=args.seed,
+        workers=args.workers,
+        scheduler=args.scheduler,
+    )
+    print((Path(args.out) / "results.md").read_text())
+    return 0
+
+
 def _plan(args: argparse.Namespace) -> int:
     from mbplan.paper import iiwa_obstacle, iiwa_obstacle_cases
     from mbplan.planning.solve import METHODS, plan
@@ -356,6 +373,22 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ilqr.add_argument("--out", default="out/bench/ilqr", help="output directory")
     ilqr.set_defaults(func=_bench_ilqr)
+    speed = bench_sub.add_parser(
+        "speed",
+        help="RIPM vs every baseline on drone, iiwa (com) and chain reach, with the RIPM profile",
+    )
+    speed.add_argument("--n-iiwa", type=integer(1), default=100, help="iiwa cases (default 100)")
+    speed.add_argument("--n-drone", type=integer(1), default=100, help="drone cases (default 100)")
+    speed.add_argument(
+        "--links",
+        type=integer_list(1),
+        default=(4, 8, 16, 32, 64),
+        help="chain sizes (comma-separated)",
+    )
+    speed.add_argument("--seed", type=integer(0), default=0)
+    speed.add_argument("--out", default="out/bench/speed", help="output directory")
+    _add_pool_options(speed)
+    speed.set_defaults(func=_bench_speed)
     return parser
 
 

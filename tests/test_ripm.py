@@ -259,7 +259,7 @@ def _wachter_biegler() -> EuclideanNLP:
 def test_wachter_biegler_example_converges():
     """From (-2, 1, 1), where infeasible-start Newton steps stall (Wächter & Biegler 2000)."""
     x0 = np.array([-2.0, 1.0, 1.0])
-    for options in ({}, {"max_ls_trials": 3}, {"restoration_method": "simple"}):
+    for options in ({}, {"max_ls_trials": 3}):
         res = solve_ripm(_wachter_biegler(), x0, **options)
         assert res.success and np.allclose(res.x, [1.0, 0.0, 0.5], atol=1e-8)
 
@@ -280,32 +280,24 @@ def _outside_disc() -> EuclideanNLP:
 def test_elastic_restoration_escapes_jamming():
     """Started near the centre of the disc, the slack of the violated concave constraint is
     driven to zero and z blows up (jamming): the main loop's line search fails. The elastic ℓ1
-    restoration phase (WB §3.3) moves x out; the simple Gauss-Newton one ends on the circle
-    with a failed line search."""
+    restoration phase (WB §3.3) moves x out."""
     x0 = np.array([0.0, 1e-3])
     res = solve_ripm(_outside_disc(), x0)
     assert res.status is RIPMStatus.CONVERGED
     assert np.allclose(res.x, [2.0, 0.0], atol=1e-8)
     resto = np.flatnonzero(res.history.restoration)
     assert resto.size and resto[-1] < res.iterations - 2
-    simple = solve_ripm(_outside_disc(), x0, restoration_method="simple")
-    assert not simple.success and any(simple.history.restoration)
-    _assert_finite(simple)
     off = solve_ripm(_outside_disc(), x0, restoration=False)
     assert off.status is RIPMStatus.LINE_SEARCH_FAILED and not any(off.history.restoration)
 
 
-def test_adaptive_mu_watchdog_elastic_and_slack_regularization_options():
-    """Each globalization option still solves HS071, the banded control problem and the
-    jamming example; adaptive μ is not monotone."""
+def test_adaptive_mu_option():
+    """Adaptive μ (LOQO's or Mehrotra's probing oracle) still solves HS071, the banded control
+    problem and the jamming example, and is not monotone; removed options are rejected by
+    name."""
     banded = BandedControlNLP(nx=4, nu=2, horizon=20)
     reference = solve_ripm(banded, banded.initial_guess())
-    variants = (
-        {"mu_strategy": "adaptive"},
-        {"watchdog_shortened_iter_trigger": 2},
-        {"elastic_inequalities": True},
-        {"regularize_slacks": True},
-    )
+    variants = ({"mu_strategy": "adaptive"}, {"mu_strategy": "adaptive", "mu_oracle": "probing"})
     for options in variants:
         res = solve_ripm(hs071(), HS071_X0, **options)
         assert res.status is RIPMStatus.CONVERGED, options
@@ -319,8 +311,9 @@ def test_adaptive_mu_watchdog_elastic_and_slack_regularization_options():
     assert np.any(np.diff(mu) > 0)
     with pytest.raises(InputError, match="mu_strategy"):
         RIPMOptions(mu_strategy="mehrotra")
-    with pytest.raises(InputError, match="restoration_method"):
-        RIPMOptions(restoration_method="none")
+    for removed in ("restoration_method", "watchdog_shortened_iter_trigger", "regularize_slacks"):
+        with pytest.raises(InputError, match=removed):
+            RIPMOptions().replace(**{removed: 1})
 
 
 def _sqrt_problem(objective) -> EuclideanNLP:

@@ -44,11 +44,11 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
-import qdldl
 import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba, numba_cached
 from mbplan.errors import InputError
+from mbplan.solvers.ordering import amd_order, nested_dissection_order
 
 
 @dataclass(frozen=True)
@@ -80,17 +80,6 @@ def _same_pattern(a: sp.csr_matrix, b: sp.csr_matrix | None) -> bool:
         and np.array_equal(a.indptr, b.indptr)
         and np.array_equal(a.indices, b.indices)
     )
-
-
-def _amd_order(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
-    """qdldl's approximate minimum degree order (SuiteSparse AMD) of the pattern given as upper
-    CSC arrays: ``order[k]`` is the index of the k-th pivot. qdldl orders and factorizes on
-    construction, so it gets a matrix it factorizes without breakdown (``1`` on the diagonal,
-    explicit zeros elsewhere)."""
-    n = len(indptr) - 1
-    cols = np.repeat(np.arange(n), np.diff(indptr))
-    upper = sp.csc_matrix(((indices == cols).astype(float), indices, indptr), shape=(n, n))
-    return np.asarray(qdldl.Solver(upper, upper=True).factors()[2], dtype=np.int64)
 
 
 # ---------------------------------------------------------------------------- symbolic analysis
@@ -596,19 +585,27 @@ class _Analysis:
             _assembly_maps(n, self.sfirst, self.fptr, self.rows, sparent, snode, hi, lo)
         )
         self.wmax = int(np.diff(self.fptr).max(initial=1))
+        k, m = np.diff(self.sfirst), np.diff(self.fptr)
+        below = np.repeat(m - k, k) + np.concatenate([np.arange(c)[::-1] for c in k] or [[]])
+        self.flops = float(np.sum(below.astype(float) ** 2))  # multiply-adds of the numeric LDLᵀ
+        self.nnz_factor = int(np.sum(below) + n)  # L's stored entries (supernodal) with D
 
 
-_ANALYSES: OrderedDict[tuple[int, bytes, bytes], _Analysis] = OrderedDict()
+_ANALYSES: OrderedDict[tuple[int, bytes, bytes, str], _Analysis] = OrderedDict()
 _ANALYSES_KEPT = 8
 _ANALYSES_LOCK = threading.Lock()
+ORDERINGS = ("amd", "nested")
 
 
-def _analysis(indptr: np.ndarray, indices: np.ndarray) -> _Analysis:
+def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> _Analysis:
     """The analysis of the pattern given as lower CSR arrays, memoized per process for the last
     few patterns: the KKT systems of one task family (every case of a benchmark, every solve of
     a receding-horizon loop) share their pattern, and its ordering and symbolic factorization
-    cost as much as a few numeric factorizations."""
-    key = (len(indptr) - 1, indptr.tobytes(), indices.tobytes())
+    cost as much as a few numeric factorizations. ``ordering``: ``"amd"`` or ``"nested"``
+    (:mod:`mbplan.solvers.ordering`)."""
+    if ordering not in ORDERINGS:
+        raise InputError(f"ordering: expected one of {ORDERINGS}, got {ordering!r}")
+    key = (len(indptr) - 1, indptr.tobytes(), indices.tobytes(), ordering)
     with _ANALYSES_LOCK:
         hit = _ANALYSES.get(key)
         if hit is not None:
@@ -617,7 +614,8 @@ def _analysis(indptr: np.ndarray, indices: np.ndarray) -> _Analysis:
     announce_uncached_numba(*_ENTRY_KERNELS)  # first run only
     n = key[0]
     rows = np.repeat(np.arange(n), np.diff(indptr))
-    hit = _Analysis(n, rows, indices, _amd_order(indptr, indices))
+    order = amd_order if ordering == "amd" else nested_dissection_order
+    hit = _Analysis(n, rows, indices, order(indptr, indices))
     with _ANALYSES_LOCK:
         _ANALYSES[key] = hit
         while len(_ANALYSES) > _ANALYSES_KEPT:
@@ -649,15 +647,109 @@ class _SupernodalLDL:
         )  # fmt: skip
 
 
+@dataclass(frozen=True)
+class _KKTPattern:
+    """Where the blocks of ``K`` land in its lower CSR pattern, the full symmetric pattern for
+    refinement residuals and the symbolic analysis: read-only, shared by every KKTSystem of the
+    same block patterns."""
+
+    h_mask: np.ndarray
+    h_slot: np.ndarray
+    e_slot: np.ndarray
+    i_slot: np.ndarray
+    diag_slot: np.ndarray
+    indptr: np.ndarray
+    indices: np.ndarray
+    full_src: np.ndarray
+    full_indptr: np.ndarray
+    full_indices: np.ndarray
+    analysis: _Analysis
+
+
+_PATTERNS: OrderedDict[tuple, _KKTPattern] = OrderedDict()
+
+
+def _kkt_pattern(
+    n: int,
+    n_eq: int,
+    n_ineq: int,
+    hess: sp.csr_matrix,
+    jac_eq: sp.csr_matrix,
+    jac_in: sp.csr_matrix,
+    ordering: str,
+) -> _KKTPattern:
+    """The pattern of ``K`` for the blocks' patterns, memoized like :func:`analysis` (a solve
+    builds it once, a benchmark of many cases once per process)."""
+    key = (
+        n,
+        n_eq,
+        n_ineq,
+        ordering,
+        *tuple(a.tobytes() for m in (hess, jac_eq, jac_in) for a in (m.indptr, m.indices)),
+    )
+    with _ANALYSES_LOCK:
+        hit = _PATTERNS.get(key)
+        if hit is not None:
+            _PATTERNS.move_to_end(key)
+            return hit
+    N = n + n_eq + n_ineq
+    h_rows = np.repeat(np.arange(n), np.diff(hess.indptr))
+    h_mask = h_rows >= hess.indices
+    sources = [
+        (h_rows[h_mask], hess.indices[h_mask]),
+        (n + np.repeat(np.arange(n_eq), np.diff(jac_eq.indptr)), jac_eq.indices),
+        (n + n_eq + np.repeat(np.arange(n_ineq), np.diff(jac_in.indptr)), jac_in.indices),
+        (np.arange(N), np.arange(N)),
+    ]
+    keys = np.concatenate([r.astype(np.int64) * N + c for r, c in sources])
+    unique, slot = np.unique(keys, return_inverse=True)
+    sizes = np.cumsum([0] + [len(r) for r, _ in sources])
+    h_slot, e_slot, i_slot, diag_slot = (slot[a:b] for a, b in itertools.pairwise(sizes))
+    rows = unique // N
+    cols = unique % N
+    indices = cols.astype(np.int32)
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=N))]).astype(np.int32)
+    # the full symmetric matrix for refinement residuals (one SpMV): entry e of the lower
+    # triangle lands in its own slot and, off the diagonal, in the mirrored one
+    off = rows != cols
+    f_rows = np.concatenate([rows, cols[off]])
+    f_cols = np.concatenate([cols, rows[off]])
+    order = np.lexsort((f_cols, f_rows))
+    hit = _KKTPattern(
+        h_mask=h_mask,
+        h_slot=h_slot,
+        e_slot=e_slot,
+        i_slot=i_slot,
+        diag_slot=diag_slot,
+        indptr=indptr,
+        indices=indices,
+        full_src=np.concatenate([np.arange(len(unique)), np.flatnonzero(off)])[order],
+        full_indptr=np.concatenate([[0], np.cumsum(np.bincount(f_rows, minlength=N))]).astype(
+            np.int32
+        ),
+        full_indices=f_cols[order].astype(np.int32),
+        analysis=analysis(indptr, indices, ordering),
+    )
+    with _ANALYSES_LOCK:
+        _PATTERNS[key] = hit
+        while len(_PATTERNS) > _ANALYSES_KEPT:
+            _PATTERNS.popitem(last=False)
+    return hit
+
+
 class KKTSystem:
     """Assembles ``K`` for a fixed pattern, factorizes it (supernodal LDLᵀ) and solves with
     refinement.
 
     Typical use per Newton step: :meth:`set_matrices` once, then :meth:`factorize` for each trial
     perturbation of the diagonal (inertia correction) and :meth:`solve` for each right-hand side.
+    ``ordering`` selects the elimination order (:func:`analysis`).
     """
 
-    def __init__(self, n: int, n_eq: int, n_ineq: int) -> None:
+    def __init__(self, n: int, n_eq: int, n_ineq: int, *, ordering: str = "amd") -> None:
+        if ordering not in ORDERINGS:
+            raise InputError(f"ordering: expected one of {ORDERINGS}, got {ordering!r}")
+        self.ordering = ordering
         self.n, self.n_eq, self.n_ineq = n, n_eq, n_ineq
         self.dim = n + n_eq + n_ineq
         self._patterns: tuple[sp.csr_matrix | None, ...] = (None, None, None)
@@ -668,50 +760,21 @@ class KKTSystem:
 
     # ------------------------------------------------------------------ pattern
     def _build_pattern(self, hess: sp.csr_matrix, jac_eq: sp.csr_matrix, jac_in: sp.csr_matrix):
-        n, N = self.n, self.dim
-        h_rows = np.repeat(np.arange(n), np.diff(hess.indptr))
-        self._h_mask = h_rows >= hess.indices
-        sources = [
-            (h_rows[self._h_mask], hess.indices[self._h_mask]),
-            (n + np.repeat(np.arange(self.n_eq), np.diff(jac_eq.indptr)), jac_eq.indices),
-            (
-                n + self.n_eq + np.repeat(np.arange(self.n_ineq), np.diff(jac_in.indptr)),
-                jac_in.indices,
-            ),
-            (np.arange(N), np.arange(N)),
-        ]
-        keys = np.concatenate([r.astype(np.int64) * N + c for r, c in sources])
-        unique, slot = np.unique(keys, return_inverse=True)
-        sizes = np.cumsum([0] + [len(r) for r, _ in sources])
-        self._h_slot, self._e_slot, self._i_slot, self._diag_slot = (
-            slot[a:b] for a, b in itertools.pairwise(sizes)
-        )
-        rows = unique // N
-        cols = unique % N
-        self._indices = cols.astype(np.int32)
-        self._indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=N))]).astype(
-            np.int32
-        )
-        self._base = np.zeros(len(unique))
-        self._data = np.zeros(len(unique))
+        pat = _kkt_pattern(self.n, self.n_eq, self.n_ineq, hess, jac_eq, jac_in, self.ordering)
+        self._pattern = pat
+        self._h_mask, self._h_slot, self._e_slot = pat.h_mask, pat.h_slot, pat.e_slot
+        self._i_slot, self._diag_slot, self._full_src = pat.i_slot, pat.diag_slot, pat.full_src
+        self._indptr, self._indices = pat.indptr, pat.indices
+        nnz = len(pat.indices)
+        self._base = np.zeros(nnz)
+        self._data = np.zeros(nnz)
         # the factorized values, entry by entry of the lower CSR arrays (= upper CSC arrays)
-        self._factor_data = np.zeros(len(unique))
-        # the full symmetric matrix for refinement residuals: one SpMV; entry e of the lower
-        # triangle lands in slot _full_map[e] and, off the diagonal, also in _full_mirror[.]
-        off = rows != cols
-        f_rows = np.concatenate([rows, cols[off]])
-        f_cols = np.concatenate([cols, rows[off]])
-        order = np.lexsort((f_cols, f_rows))
-        self._full_src = np.concatenate([np.arange(len(unique)), np.flatnonzero(off)])[order]
+        self._factor_data = np.zeros(nnz)
         self._full = sp.csr_matrix(
-            (
-                np.zeros(len(order)),
-                f_cols[order].astype(np.int32),
-                np.concatenate([[0], np.cumsum(np.bincount(f_rows, minlength=N))]).astype(np.int32),
-            ),
-            shape=(N, N),
+            (np.zeros(len(pat.full_src)), pat.full_indices, pat.full_indptr),
+            shape=(self.dim, self.dim),
         )
-        self._solver = _SupernodalLDL(_analysis(self._indptr, self._indices))
+        self._solver = _SupernodalLDL(pat.analysis)
         self.n_analyses += 1
 
     def set_matrices(
@@ -765,6 +828,14 @@ class KKTSystem:
         if not ok:  # a zero or non-finite pivot
             return None
         return Inertia(positive, negative, 0)
+
+    @property
+    def analysis(self) -> _Analysis:
+        """The symbolic analysis in use (elimination order, supernodes, ``flops``,
+        ``nnz_factor``); available after the first :meth:`set_matrices`."""
+        if self._solver is None:
+            raise InputError("KKTSystem.analysis: call set_matrices first")
+        return self._solver.a
 
     def matrix(self) -> sp.csc_matrix:
         """The last factorized ``K`` (diagonal included, static regularization excluded), full,

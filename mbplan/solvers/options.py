@@ -46,6 +46,10 @@ class RIPMOptions:
     """``"monotone"``: Fiacco-McCormick (WB eq. 7, Algorithm 1); ``"adaptive"``: LOQO's oracle
     every iteration (free mode) while ``E_0`` decreases, with IPOPT's fall-back to the monotone
     rule (``adaptive_mu_globalization=kkt-error``)."""
+    mu_oracle: str = "loqo"
+    """Free-mode μ of ``mu_strategy="adaptive"``: ``"loqo"`` (Vanderbei & Shanno's rule on the
+    complementarity spread) or ``"probing"`` (Mehrotra's predictor: an affine-scaling step with
+    the iteration's factorization, ``μ = (μ_aff/μ_avg)³ μ_avg``; IPOPT's ``mu_oracle=probing``)."""
     mu_init: float = 0.1
     kappa_eps: float = 10.0
     """μ is decreased once E_μ ≤ κ_ε μ (WB eq. 7; Algorithm 1 uses 10)."""
@@ -65,10 +69,6 @@ class RIPMOptions:
     s_phi: float = 2.3
     gamma_alpha: float = 0.05
     """Safety factor of α_min (WB eq. 23)."""
-    watchdog_shortened_iter_trigger: int = 0
-    """Watchdog (IPOPT, after Chamberlain et al. 1982): after this many consecutive shortened
-    steps take full steps for up to ``watchdog_trial_iter_max`` iterations (0: off)."""
-    watchdog_trial_iter_max: int = 3
     second_order_correction: bool = True
     max_soc: int = 4
     kappa_soc: float = 0.99
@@ -93,11 +93,16 @@ class RIPMOptions:
     kappa_w_plus_first: float = 100.0
     delta_c_bar: float = 1e-8
     kappa_c: float = 0.25
+    degenerate_iters: int = 2
+    """After this many consecutive iterations that needed ``δ_w > 0``, the first trial is
+    ``κ_w⁻ δ_w,last`` instead of 0 (one factorization fewer per such iteration; 0: always try
+    ``δ_w = 0`` first, WB Algorithm IC)."""
 
     # --- linear solver (IPOPT's PDFullSpaceSolver) ---
-    regularize_slacks: bool = False
-    """Add δ_w to the slack block too (IPOPT, which treats s as a primal variable), so that a
-    large δ_w damps ds as well as dx."""
+    kkt_ordering: str = "amd"
+    """Elimination order of the KKT factorization: ``"amd"`` (approximate minimum degree) or
+    ``"nested"`` (nested dissection along the trajectory's level structure,
+    :mod:`mbplan.solvers.ordering`; more flops than AMD on every benchmark pattern so far)."""
     static_regularization: float = 1e-9
     """±ε on the diagonal of the factorized KKT matrix only (removed by iterative refinement),
     so that the LDLᵀ factorization, which does not pivot, never meets an exact zero pivot."""
@@ -105,21 +110,9 @@ class RIPMOptions:
     residual_ratio_max: float = 1e-10
     residual_ratio_singular: float = 1e-5
 
-    # --- elastic mode (ℓ1 penalty of the inequalities in the main phase) ---
-    elastic_inequalities: bool = False
-    """Relax every inequality to ``g + s - p + n = 0`` with ``ρ Σ(p + n)`` added to the
-    objective (exact ℓ1 penalty; Benson, Shanno & Vanderbei 2004): a violated inequality no
-    longer drives its slack to zero (jamming). Convergence still requires ``‖h, g + s‖∞ ≤ tol``."""
-    elastic_penalty: float = 1e3
-    """Initial ρ of the elastic mode, multiplied by 10 when a multiplier approaches it."""
-
     # --- feasibility restoration (WB §3.3) ---
     restoration: bool = True
     """Enter a restoration phase when the line search or the inertia correction fails."""
-    restoration_method: str = "elastic"
-    """``"elastic"``: IPOPT's ℓ1 restoration problem (elastic variables p, n, proximity term),
-    solved by the same interior point iteration; ``"simple"``: damped Gauss-Newton on
-    ½‖h, g + s‖² with slack resets (the first implementation)."""
     bound_mult_reset_threshold: float = 1e3
     """After restoration z = μ/s, or all z = 1 if max(μ/s) exceeds this (IPOPT's rule)."""
     kappa_resto: float = 0.9
@@ -131,10 +124,6 @@ class RIPMOptions:
     resto_ls_multipliers: bool = False
     """After restoration, y from least squares instead of 0 (IPOPT's
     constr_mult_reset_threshold > 0)."""
-    resto_stationarity_tol: float = 1e-8
-    """``"simple"`` restoration: stationarity of ½‖h, g + s‖² (relative to max(1, ‖h, g + s‖∞))
-    that proves infeasibility."""
-
     print_level: int = 0
     """0: silent; 1: an IPOPT-like line per iteration and a summary."""
 
@@ -174,11 +163,11 @@ class RIPMOptions:
             "kappa_w_plus": self.kappa_w_plus > 1,
             "kappa_w_plus_first": self.kappa_w_plus_first > 1,
             "print_level": self.print_level >= 0,
-            "restoration_method": self.restoration_method in ("elastic", "simple"),
+            "degenerate_iters": self.degenerate_iters >= 0,
+            "kkt_ordering": self.kkt_ordering in ("amd", "nested"),
             "mu_strategy": self.mu_strategy in ("monotone", "adaptive"),
-            "watchdog_shortened_iter_trigger": self.watchdog_shortened_iter_trigger >= 0,
+            "mu_oracle": self.mu_oracle in ("loqo", "probing"),
             "resto_penalty": self.resto_penalty > 0,
-            "elastic_penalty": self.elastic_penalty > 0,
             "resto_proximity_weight": self.resto_proximity_weight >= 0,
         }
         bad = [name for name, ok in checks.items() if not ok]

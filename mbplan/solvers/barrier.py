@@ -1,0 +1,109 @@
+"""Barrier parameter strategies of the RIPM.
+
+``"monotone"``: Fiacco-McCormick (RIPM Algorithm 1, WB eq. 7): ``μ ← max(ε_tol/10,
+min(κ_μ μ, μ^θ_μ))`` while ``E_μ ≤ κ_ε μ``. ``"adaptive"``: LOQO's oracle every iteration
+(free mode) while ``E_0`` decreases, with IPOPT's fall-back to the monotone rule
+(``adaptive_mu_globalization=kkt-error``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from mbplan.solvers.iterate import EPS, frac_to_boundary
+
+
+class BarrierStrategy:
+    """``mu``, ``tau`` (fraction to the boundary, WB eq. 8) and their updates."""
+
+    def _update_barrier(self, tiny_step: bool) -> bool:
+        """Decrease μ while the barrier problem is solved to κ_ε μ (WB eq. 7).
+
+        Returns ``True`` when a tiny step was taken at the smallest μ (no progress possible)."""
+        o = self.o
+        mu_min = o.tol / 10
+        if self.free_mode:
+            if tiny_step or not self._free_mode_progress():
+                self._enter_monotone_mode()
+                tiny_step = False
+            else:
+                self._free_mode_mu()
+                return False
+        while (tiny_step or self._error(self.mu) <= o.kappa_eps * self.mu) and self.mu > mu_min:
+            if o.mu_strategy == "adaptive" and not self.resto and not tiny_step:
+                self.free_mode, self.kkt_refs = True, []  # monotone phase done: free mode again
+                self._free_mode_mu()
+                return False
+            self.mu = max(mu_min, min(o.kappa_mu * self.mu, self.mu**o.theta_mu))
+            self.tau = max(o.tau_min, 1 - self.mu)
+            if self.resto:
+                self.zeta = o.resto_proximity_weight * math.sqrt(self.mu)
+            self.filter = []
+            tiny_step = False
+        return tiny_step
+
+    def _free_mode_mu(self) -> None:
+        """μ of the free mode: LOQO's now, or Mehrotra's probing once the step's matrix is
+        factorized (:meth:`_probe_mu`, called by the Newton step)."""
+        if self.o.mu_oracle == "probing" and self.mi:
+            self.probe_pending = True
+        else:
+            self._set_mu(self._loqo_mu())
+
+    def _probe_mu(self) -> None:
+        """Mehrotra's predictor (IPOPT's probing oracle): the affine-scaling step (μ = 0) with
+        the current factorization, ``μ_aff`` the average complementarity after its
+        fraction-to-boundary steps, ``μ = σ μ_avg`` with ``σ = (μ_aff / μ_avg)³``."""
+        self.probe_pending = False
+        mu_avg, saved = self._avg_compl(), self.mu
+        self.mu = 0.0
+        try:
+            sol = self._solve(self._rhs(self.r_c))
+            aff = self._split(sol)
+        finally:
+            self.mu = saved
+        tau = self.tau
+        a_p = frac_to_boundary(self.s, aff.ds, tau)
+        a_d = frac_to_boundary(self.z, aff.dz, tau)
+        mu_aff = float(np.mean((self.s + a_p * aff.ds) * (self.z + a_d * aff.dz)))
+        sigma = min((mu_aff / mu_avg) ** 3, 1.0) if mu_avg > 0 else 0.0
+        self._set_mu(float(np.clip(sigma * mu_avg, self.o.tol / 10, self.mu_max)))
+
+    def _set_mu(self, mu: float) -> None:
+        if mu != self.mu:
+            self.mu = mu
+            self.tau = max(self.o.tau_min, 1 - mu)
+            self.filter = []
+
+    def _avg_compl(self) -> float:
+        return float(np.mean(self.s * self.z)) if self.mi else 0.0
+
+    def _loqo_mu(self) -> float:
+        """LOQO's oracle (Vanderbei & Shanno 1999; IPOPT's ``mu_oracle=loqo``):
+        ``μ = σ sᵀz/m`` with ``σ = 0.1 min(0.05 (1-ξ)/ξ, 2)³``, ``ξ = min(s z)/avg(s z)``."""
+        if not self.mi:
+            return max(self.o.tol / 10, self.mu * self.o.kappa_mu)
+        sz = self.s * self.z
+        avg = float(np.mean(sz))
+        xi = float(np.min(sz)) / avg if avg > 0 else 1.0
+        sigma = 0.1 * min(0.05 * (1 - xi) / max(xi, EPS), 2.0) ** 3
+        return float(np.clip(sigma * avg, self.o.tol / 10, self.mu_max))
+
+    def _free_mode_progress(self) -> bool:
+        """IPOPT's ``adaptive_mu_globalization=kkt-error``: stay in free mode while ``E_0``
+        decreases by ``1 - 10⁻⁴`` against the worst of the last 4 reference values."""
+        refs = self.kkt_refs
+        ok = not refs or self.kkt_error <= (1 - 1e-4) * max(refs)
+        if ok:
+            refs.append(self.kkt_error)
+            del refs[:-4]
+        return ok
+
+    def _enter_monotone_mode(self) -> None:
+        """Fixed-μ fallback (IPOPT): μ = 0.8 · average complementarity, the filter reset."""
+        self.free_mode = False
+        self._count("monotone_switches")
+        self._set_mu(float(np.clip(0.8 * self._avg_compl(), self.o.tol / 10, self.mu_max)))
+        self.filter = []

@@ -1,0 +1,184 @@
+"""The RIPM's iterate: primal point, slacks, multipliers, their trial points and residuals.
+
+``_Trial`` is a candidate primal point with its values, ``_Step`` a Newton direction and
+``_IterateState`` the methods that evaluate the problem and the optimality residuals of eq. (50)
+(of the restoration problem in that phase; see :mod:`mbplan.solvers.restoration`) and the scaled
+KKT error ``E_μ`` (eq. 55-56, WB eq. 5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mbplan.errors import InputError
+from mbplan.solvers.problem import NLPEvaluation, Point
+
+EPS = float(np.finfo(float).eps)
+
+
+@dataclass
+class Trial:
+    """A candidate primal point with its values (``h``, ``g`` at ``x``; slacks ``s``).
+
+    ``c`` are the constraints of the phase (``(h, g + s)``, minus ``p`` plus ``n`` in the
+    restoration phase, whose trials also carry the elastic variables and the displacement ``ξ``).
+    """
+
+    x: Point
+    s: np.ndarray
+    f: float
+    h: np.ndarray
+    g: np.ndarray
+    c: np.ndarray
+    theta: float
+    phi: float
+    p: np.ndarray | None = None
+    n: np.ndarray | None = None
+    xi: np.ndarray | None = None
+
+
+@dataclass
+class Step:
+    """A Newton direction (the elastic parts only in the restoration phase)."""
+
+    dx: np.ndarray
+    ds: np.ndarray
+    dy: np.ndarray
+    dz: np.ndarray
+    dp: np.ndarray | None = None
+    dn: np.ndarray | None = None
+    dzp: np.ndarray | None = None
+    dzn: np.ndarray | None = None
+
+
+def finite(*arrays: Any) -> bool:
+    return all(np.all(np.isfinite(a)) for a in arrays)
+
+
+def amax(v: np.ndarray) -> float:
+    return float(np.max(np.abs(v), initial=0.0))
+
+
+def frac_to_boundary(v: np.ndarray, dv: np.ndarray, tau: float) -> float:
+    """Largest ``α ∈ (0, 1]`` with ``v + α dv ≥ (1 - τ) v`` (WB eq. 15)."""
+    neg = dv < 0
+    if not np.any(neg):
+        return 1.0
+    return float(min(1.0, np.min(-tau * v[neg] / dv[neg])))
+
+
+class IterateState:
+    """Evaluation, trial points and residuals of one phase (main or restoration).
+
+    Attributes set by the driver: ``p`` (problem), ``o`` (options), sizes ``n, me, mi, m``,
+    ``resto`` (restoration phase: elastic variables ``ep, en`` with multipliers ``zp, zn``,
+    displacement ``xi``, penalty ``rho``, proximity weight ``zeta``, ``sigma = 0`` on ``f``),
+    the iterate ``x, s, y, z`` with its evaluation ``ev``, and ``mu``.
+    """
+
+    def _evaluate(
+        self, x: Point, y: np.ndarray, z: np.ndarray, hessian: bool = True
+    ) -> NLPEvaluation | None:
+        self.sh.n_eval += 1
+        ev: NLPEvaluation = self.p.evaluate(x, self.sigma, y, z, hessian)
+        parts = [ev.objective, ev.gradient, ev.eq, ev.ineq, ev.eq_jacobian.data]
+        parts.append(ev.ineq_jacobian.data)
+        if hessian:
+            parts.append(ev.hessian_lower.data)
+        if not finite(*parts):
+            return None
+        shapes = (np.shape(ev.gradient), np.shape(ev.eq), np.shape(ev.ineq))
+        if shapes != ((self.n,), (self.me,), (self.mi,)):
+            raise InputError(
+                f"problem returned gradient/eq/ineq of shapes {shapes}, expected "
+                f"({self.n},), ({self.me},), ({self.mi},)"
+            )
+        return ev
+
+    def _values(self, x: Point) -> tuple[float, np.ndarray, np.ndarray] | None:
+        """``f, h, g`` at a trial point, or ``None`` if they are not finite."""
+        self.sh.n_values += 1
+        f, h, g = self.p.values(x)
+        return (float(f), np.asarray(h), np.asarray(g)) if finite(f, h, g) else None
+
+    def _constraints(self, h, g, s, p=None, n=None) -> np.ndarray:
+        c = np.concatenate([h, g + s])
+        if p is not None:
+            c += n - p
+        return c
+
+    def _lam(self) -> np.ndarray:
+        """Multipliers of all rows ``(y, z)`` (the elastic rows of the restoration phase)."""
+        return np.concatenate([self.y, self.z])
+
+    def _make_trial(self, x: Point, s: np.ndarray, f: float, h, g, p=None, n=None, xi=None):
+        c = self._constraints(h, g, s, p, n)
+        theta = float(np.sum(np.abs(c)))
+        phi = self.sigma * f - self.mu * float(np.sum(np.log(s)))
+        if p is not None:
+            phi += self.rho * float(np.sum(p) + np.sum(n))
+            phi -= self.mu * float(np.sum(np.log(p)) + np.sum(np.log(n)))
+            if xi is not None:
+                phi += 0.5 * self.zeta * float(xi @ xi)
+        return Trial(x, s, f, h, g, c, theta, phi, p, n, xi)
+
+    def _current_trial(self) -> Trial:
+        ev = self.ev
+        return self._make_trial(
+            self.x, self.s, ev.objective, ev.eq, ev.ineq, self.ep, self.en, self.xi
+        )
+
+    def _trial_at(self, step: Step, alpha: float) -> Trial | None:
+        """The point ``R_x(α dx)``, ``s + α ds`` (and elastics), or ``None`` if not finite."""
+        x = self.p.retract(self.x, alpha * step.dx)
+        vals = self._values(x)
+        if vals is None:
+            return None
+        p = n = xi = None
+        if self.resto:
+            p, n = self.ep + alpha * step.dp, self.en + alpha * step.dn
+            xi = self.xi + alpha * step.dx
+        return self._make_trial(x, self.s + alpha * step.ds, *vals, p, n, xi)
+
+    def _scalings(self) -> tuple[float, float]:
+        """``s_d``, ``s_c`` of WB eq. 5 (multipliers averaged per component, as in IPOPT)."""
+        smax = self.o.s_max
+        s_d = s_c = 1.0
+        n_bounds = self.mi + (2 * len(self.ep) if self.resto else 0)
+        bound_sum = float(np.sum(np.abs(self.z)))
+        if self.resto:
+            bound_sum += float(np.sum(self.zp) + np.sum(self.zn))
+        if self.m:
+            avg = (float(np.sum(np.abs(self.y))) + bound_sum) / (self.me + n_bounds)
+            s_d = max(smax, avg) / smax
+        if n_bounds:
+            s_c = max(smax, bound_sum / n_bounds) / smax
+        return s_d, s_c
+
+    def _measures(self) -> None:
+        """Residuals of (50) (of the restoration problem in that phase) at the current iterate."""
+        ev = self.ev
+        self.r_d = (
+            self.sigma * ev.gradient + ev.eq_jacobian.T @ self.y + ev.ineq_jacobian.T @ self.z
+        )
+        if self.zeta:
+            self.r_d += self.zeta * self.xi
+        self.r_c = self._constraints(ev.eq, ev.ineq, self.s, self.ep, self.en)
+        self.inf_du = amax(self.r_d)
+        if self.resto:
+            lam = self._lam()
+            self.r_pn = (self.rho - lam - self.zp, self.rho + lam - self.zn)
+            self.inf_du = max(self.inf_du, amax(self.r_pn[0]), amax(self.r_pn[1]))
+        self.inf_pr = amax(self.r_c)
+        self.s_d, self.s_c = self._scalings()
+        self.kkt_error = self._error(0.0)
+
+    def _error(self, mu: float) -> float:
+        """``E_μ`` (eq. 55-56): scaled dual infeasibility, infeasibility, complementarity."""
+        compl = amax(self.s * self.z - mu)
+        if self.resto:
+            compl = max(compl, amax(self.ep * self.zp - mu), amax(self.en * self.zn - mu))
+        return max(self.inf_du / self.s_d, self.inf_pr, compl / self.s_c)

@@ -1,0 +1,109 @@
+"""The RIPM's Newton step (eq. 53) with IPOPT's inertia correction (WB Algorithm IC).
+
+With ``Σ = S⁻¹Z`` the last row of (53), ``Z ds + S dz = -(Sz - μe)``, gives
+``ds = -Z⁻¹(Sz - μe + S dz)``; substituted into ``A_I dx + ds = -(g + s)`` it leaves the
+symmetric system solved by :class:`~mbplan.solvers.linear_solver.KKTSystem`::
+
+    [[W + δ_w I,  A_Eᵀ,    A_Iᵀ           ]   [dx]     [grad f + A_Eᵀy + A_Iᵀz]
+     [A_E,       -δ_c I,   0              ] · [dy] = - [h                     ]
+     [A_I,        0,      -(Σ⁻¹ + δ_c I)  ]]  [dz]     [g + μ/z               ]
+
+``W`` is the Riemannian Hessian of the Lagrangian (eq. 54). The step is a descent direction of
+the barrier problem iff the inertia is ``(n, n_eq + n_ineq, 0)``; otherwise ``δ_w``, ``δ_c``
+follow WB Algorithm IC. In the restoration phase the elastic variables and their multipliers
+are eliminated row by row as well (:mod:`mbplan.solvers.restoration`): the matrix keeps the main
+loop's pattern, and its symbolic factorization.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mbplan.solvers.iterate import Step, finite
+
+
+class NewtonStep:
+    """Right-hand side, diagonal, factorization with inertia correction and step recovery."""
+
+    def _rhs(self, c: np.ndarray) -> np.ndarray:
+        """Right-hand side for the constraint values ``c`` (``r_c``, or a second-order
+        correction's)."""
+        lower = -c
+        lower[self.me :] += self.s - self.mu / self.z
+        if self.resto:
+            lam = self._lam()
+            lower += (self.mu - self.ep * (self.rho - lam)) / self.zp
+            lower -= (self.mu - self.en * (self.rho + lam)) / self.zn
+        return np.concatenate([-self.r_d, lower])
+
+    def _diagonal(self, dw: float, dc: float) -> np.ndarray:
+        """Diagonal added to ``K``: ``δ_w (+ζ)`` on the primal, the eliminated blocks and
+        ``-δ_c`` on the dual rows."""
+        dual = np.full(self.m, -dc)
+        dual[self.me :] -= self.s / self.z
+        if self.resto:
+            dual -= self.ep / self.zp + self.en / self.zn
+        return np.concatenate([np.full(self.n, dw + self.zeta), dual])
+
+    def _solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve with the current factorization (iterative refinement as configured)."""
+        return self.kkt.solve(rhs, self.o.max_refinement_steps, self.o.residual_ratio_max)[0]
+
+    def _split(self, sol: np.ndarray) -> Step:
+        n, me = self.n, self.me
+        dlam = sol[n:]
+        dz = dlam[me:]
+        ds = -self.s + self.mu / self.z - self.s * dz / self.z
+        step = Step(sol[:n], ds, dlam[:me], dz)
+        if self.resto:
+            lam = self._lam()
+            p, nn, zp, zn, mu = self.ep, self.en, self.zp, self.zn, self.mu
+            step.dp = (p / zp) * (dlam + mu / p - self.rho + lam)
+            step.dn = (nn / zn) * (-dlam + mu / nn - self.rho - lam)
+            step.dzp = mu / p - zp - (zp / p) * step.dp
+            step.dzn = mu / nn - zn - (zn / nn) * step.dn
+        return step
+
+    def _newton_step(self) -> tuple[Step, float] | None:
+        """Factorize with inertia correction (WB Algorithm IC) and solve; ``None`` on failure."""
+        o, m = self.o, self.m
+        self.kkt.set_matrices(self.ev.hessian_lower, self.ev.eq_jacobian, self.ev.ineq_jacobian)
+        dw = dc = 0.0
+        if o.degenerate_iters and self.n_perturbed >= o.degenerate_iters and self.delta_w_last:
+            # IPOPT's structurally degenerate Hessian: the zero trial has failed every time
+            # lately, start from the last iteration's δ_w
+            dw = max(o.delta_w_min, o.kappa_w_minus * self.delta_w_last)
+        pretend_singular = False
+        while True:
+            inertia = self.kkt.factorize(self._diagonal(dw, dc), o.static_regularization)
+            correct = inertia is not None and inertia.zero == 0 and inertia.negative == m
+            singular = not correct and (inertia is None or inertia.zero > 0 or inertia.negative < m)
+            if correct:
+                if self.probe_pending:  # μ from an affine step with this factorization
+                    self._probe_mu()
+                rhs = self._rhs(self.r_c)
+                sol, ratio = self.kkt.solve(rhs, o.max_refinement_steps, o.residual_ratio_max)
+                if finite(sol) and (ratio <= o.residual_ratio_singular or pretend_singular):
+                    if dw > 0:
+                        self.delta_w_last = dw
+                        self.n_perturbed += 1
+                    else:
+                        self.n_perturbed = 0
+                    return self._split(sol), dw
+                pretend_singular = singular = True  # IPOPT: refinement failed
+            if singular and dc == 0.0 and m > 0:
+                dc = o.delta_c_bar * self.mu**o.kappa_c  # IC-2
+                continue
+            if dw == 0.0:  # IC-3
+                dw = (
+                    o.delta_w_init
+                    if self.delta_w_last == 0
+                    else max(o.delta_w_min, o.kappa_w_minus * self.delta_w_last)
+                )
+            else:  # IC-5
+                first = self.delta_w_last == 0 or 1e5 * self.delta_w_last < dw
+                dw *= o.kappa_w_plus_first if first else o.kappa_w_plus
+            if dw > o.delta_w_max:  # IC-6
+                self.delta_w_last = 0.0
+                self.n_perturbed = 0
+                return None
