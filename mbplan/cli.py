@@ -37,6 +37,27 @@ def _bench_drone(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_lie_ipm(args: argparse.Namespace) -> int:
+    from mbplan.benchmarks.lie_ipm import run
+
+    methods = tuple(m.strip() for m in args.methods.split(",")) if args.methods else None
+    run(
+        Path(args.out),
+        problem=args.problem,
+        n=args.n,
+        seed=args.seed,
+        rho=args.rho,
+        methods=methods,
+        objective=args.objective,
+        constants=args.constants,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        n_slow=args.n_slow,
+    )
+    print((Path(args.out) / "results.md").read_text())
+    return 0
+
+
 def _add_pool_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=1, help="local worker processes (default 1)")
     p.add_argument("--scheduler", default=None, help="Dask scheduler address (runs on the cluster)")
@@ -266,6 +287,32 @@ def build_parser() -> argparse.ArgumentParser:
     _add_constraint_option(iiwa)
     _add_pool_options(iiwa)
     iiwa.set_defaults(func=_bench_iiwa)
+    lie = bench_sub.add_parser(
+        "lie-ipm",
+        help="MLG-IPM vs Lai-Yoshise, RIPM, IPOPT on the MLG-IPM paper's SO(7)/SL(7) problems",
+    )
+    lie.add_argument("--problem", default="so7", choices=("so7", "sl7"), help="(10) or (11)")
+    lie.add_argument("--n", type=int, default=1000, help="number of instances")
+    lie.add_argument("--seed", type=int, default=0, help="seed of the instance sampler")
+    lie.add_argument(
+        "--rho", type=float, default=0.0, help="inexact term ‖ρ_k‖ = rho·‖F_k‖ (0, 0.01, 0.001)"
+    )
+    lie.add_argument("--methods", default=None, help="comma-separated (default: all that apply)")
+    lie.add_argument(
+        "--objective", default="squared", choices=("squared", "literal"), help="form of (10)"
+    )
+    lie.add_argument(
+        "--constants",
+        default="rendered",
+        choices=("rendered", "alt-text"),
+        help="0.5/0.3/0.2 (rendered) or 5/3/2 (LaTeX alt-text)",
+    )
+    lie.add_argument("--n-slow", type=int, default=None, help="fewer instances for ripm and ipopt")
+    lie.add_argument(
+        "--out", default="benchmarks/results/lie-ipm/so7-rho0", help="output directory"
+    )
+    _add_pool_options(lie)
+    lie.set_defaults(func=_bench_lie_ipm)
     return parser
 
 
