@@ -232,3 +232,18 @@ def test_bench_lie_ipm_writes_the_issue_schema_and_resumes(tmp_path) -> None:
     assert "Success Rate" in (out / "results.md").read_text() and (out / "study.png").exists()
     with pytest.raises(InputError, match="ipopt"):
         run(tmp_path / "x", problem="so7", n=1, methods=("ipopt",))
+
+
+def test_mlgipm_plans_a_drone_docking_case_through_the_planning_hook() -> None:
+    from mbplan.planning.drone import plan_docking
+    from mbplan.solvers.dispatch import options_for, solve_with
+    from mbplan.tasks.drone import sample_docking_cases
+
+    task = sample_docking_cases(1, 0, with_input_limits=True)[0]
+    sol = plan_docking(task, options_for("mlgipm", tol=1e-6, max_iter=100), method="mlgipm")
+    assert sol.converged and sol.result.kkt_error <= 1e-6
+    assert sol.replay_deviation_m < 1e-3  # the inputs replay through the LGVI simulator
+    with pytest.raises(InputError, match="MLGIPMOptions"):
+        solve_with("mlgipm", hs071(), HS071_X0, options_for("ripm"))
+    with pytest.raises(InputError, match="unknown solver"):
+        options_for("newton")

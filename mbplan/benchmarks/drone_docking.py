@@ -4,7 +4,8 @@ Methods on the same seeded cases and the same geodesic initial guess:
 
 * ``ripm``: RIPM on SO(3)×R³, no input limits;
 * ``ripm-input-limits``: RIPM with ``u_z ∈ [0, u_lim]``, ``τ ∈ [-τ_lim, τ_lim]³``;
-* ``ipopt-quaternion``: unit-quaternion variational integrator solved by IPOPT (ref. [7]).
+* ``ipopt-quaternion``: unit-quaternion variational integrator solved by IPOPT (ref. [7]);
+* ``mlgipm``, ``mlgipm-input-limits``: the RIPM's two problems solved by MLG-IPM.
 
 Regenerate: ``mbplan bench drone-docking --n 100 --seed 0 --out benchmarks/results/drone-docking``.
 """
@@ -23,10 +24,12 @@ from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
 from mbplan.planning.drone import plan_docking
 from mbplan.solvers import RIPMOptions
+from mbplan.solvers.dispatch import options_for
 from mbplan.tasks.drone import DockingTask, rotation_angles, sample_docking_cases, simulate
 
-METHODS = ("ripm", "ripm-input-limits", "ipopt-quaternion")
+METHODS = ("ripm", "ripm-input-limits", "ipopt-quaternion", "mlgipm", "mlgipm-input-limits")
 MAX_ITER = {"ripm": 100, "ripm-input-limits": 100, "ipopt-quaternion": 1000}  # as in Table II
+MAX_ITER |= {"mlgipm": 100, "mlgipm-input-limits": 100}
 
 
 def _case(n: int, seed: int, index: int, limits: bool) -> DockingTask:
@@ -35,10 +38,12 @@ def _case(n: int, seed: int, index: int, limits: bool) -> DockingTask:
 
 def solve_case(method: str, n: int, seed: int, index: int, tol: float) -> dict:
     """One (case, method) solve as a JSON-serialisable row."""
-    task = _case(n, seed, index, limits=method == "ripm-input-limits")
+    task = _case(n, seed, index, limits=method.endswith("-input-limits"))
     angle = float(rotation_angles(task.R0[None])[0])
-    if method in ("ripm", "ripm-input-limits"):
-        sol = plan_docking(task, RIPMOptions(tol=tol, max_iter=MAX_ITER[method]))
+    if method in ("ripm", "ripm-input-limits", "mlgipm", "mlgipm-input-limits"):
+        solver = method.removesuffix("-input-limits")
+        options = options_for(solver, tol=tol, max_iter=MAX_ITER[method])
+        sol = plan_docking(task, options, method=solver)
         r = sol.result
         return {
             "success": sol.converged,

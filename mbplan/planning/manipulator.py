@@ -16,7 +16,8 @@ from mbplan.engine.jit import jit_available
 from mbplan.multibody import MaximalModel, joint_positions, maximal_model
 from mbplan.results import PlanResult
 from mbplan.simulation.warm_start import maximal_warm_start
-from mbplan.solvers import RIPMOptions, RIPMResult, RIPMStatus, solve_ripm
+from mbplan.solvers import MLGIPMOptions, RIPMOptions, RIPMResult, RIPMStatus
+from mbplan.solvers.dispatch import options_for, solve_with
 from mbplan.tasks.obstacle import (
     ObstacleTask,
     joint_interpolation,
@@ -54,10 +55,14 @@ def task_ocp(task: ObstacleTask, mm: MaximalModel) -> ManipulatorOCP:
 
 
 def plan_maximal(
-    task: ObstacleTask, options: RIPMOptions | None = None, jit: bool | None = None
+    task: ObstacleTask,
+    options: RIPMOptions | MLGIPMOptions | None = None,
+    jit: bool | None = None,
+    method: str = "ripm",
 ) -> PlanResult:
-    """Solve ``task`` with the RIPM on the maximal-coordinate LGVI; return joint-space arrays too."""
-    require_eq62(task, "ripm")
+    """Solve ``task`` on the maximal-coordinate LGVI with the RIPM (or ``method="mlgipm"``);
+    return joint-space arrays too."""
+    require_eq62(task, method)
     validate(task)
     t0 = time.perf_counter()
     jit = jit_available() if jit is None else jit
@@ -65,12 +70,16 @@ def plan_maximal(
     problem = manipulator_problem(mm, task_ocp(task, mm), jit)
     x0 = problem.check_point(maximal_warm_start(mm, joint_interpolation(task), task.dt, jit=jit))
     build = time.perf_counter() - t0
-    result = solve_ripm(problem, x0, options or RIPMOptions(tol=1e-6, max_iter=500))
-    return to_plan_result(mm, task, result, build)
+    result = solve_with(method, problem, x0, options or options_for(method, tol=1e-6, max_iter=500))
+    return to_plan_result(mm, task, result, build, method)
 
 
 def to_plan_result(
-    mm: MaximalModel, task: ObstacleTask, result: RIPMResult, build_time_s: float
+    mm: MaximalModel,
+    task: ObstacleTask,
+    result: RIPMResult,
+    build_time_s: float,
+    method: str = "ripm",
 ) -> PlanResult:
     """Joint-space view of a maximal solution.
 
@@ -107,7 +116,7 @@ def to_plan_result(
     converged = result.status is RIPMStatus.CONVERGED
     finite = all(np.all(np.isfinite(a)) for a in (q, v, tau_knots))
     return PlanResult(
-        method="ripm",
+        method=method,
         status=result.status.name,
         success=converged and finite,
         message=result.message,

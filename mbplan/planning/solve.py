@@ -4,23 +4,25 @@ from __future__ import annotations
 
 from mbplan.errors import InputError
 from mbplan.results import PlanResult
-from mbplan.solvers import RIPMOptions
+from mbplan.solvers.dispatch import options_for
 from mbplan.tasks.obstacle import ObstacleTask
 
-METHODS = ("ripm", "ipopt", "ipopt-no-restoration", "fddp", "csqp")
+METHODS = ("ripm", "mlgipm", "ipopt", "ipopt-no-restoration", "fddp", "csqp")
 
 
 def plan(
     task: ObstacleTask, method: str = "ripm", tol: float = 1e-6, max_iter: int = 500
 ) -> PlanResult:
-    """Plan ``task`` with ``method``: ``ripm`` (maximal coordinates, RIPM), ``ipopt``
+    """Plan ``task`` with ``method``: ``ripm`` (maximal coordinates, RIPM), ``mlgipm``
+    (maximal coordinates, MLG-IPM), ``ipopt``
     (generalized coordinates, IPOPT with restoration), ``ipopt-no-restoration``, ``fddp``
     (Crocoddyl BoxFDDP, obstacle as a penalty) or ``csqp`` (mim-solvers, obstacle as a hard
     constraint); the last two need the ``baselines`` extra."""
-    if method == "ripm":
+    if method in ("ripm", "mlgipm"):
         from mbplan.planning.manipulator import plan_maximal
 
-        return plan_maximal(task, RIPMOptions(tol=tol, max_iter=max_iter))
+        options = options_for(method, tol=tol, max_iter=max_iter)
+        return plan_maximal(task, options, method=method)
     if method in ("ipopt", "ipopt-no-restoration"):
         from mbplan.baselines.generalized_ipopt import solve_generalized_ipopt
 

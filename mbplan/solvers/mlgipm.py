@@ -9,7 +9,7 @@ variant (5) solves ``𝕵_F Δ = -F + ρ_k`` with ``‖ρ_k‖ = ρ‖F_k‖`` i
 Our additions, each switchable back to the paper's literal rule (``MLGIPMOptions.paper()``):
 ``σ_k = min(σ, ‖F₀‖)`` and ``τ_k = max(τ, 1 - ‖F₀‖)`` (fast local convergence; the paper's fixed
 σ and τ make the rate linear, Theorem 2 with α < 1) and a backtracking line search on the merit
-``‖F_μ‖²`` (on by default: without it 8-15 % of the SL(7) instances diverge, see
+``‖F_μ‖²``, nonmonotone (on by default: without it 8-15 % of the SL(7) instances diverge, see
 ``benchmarks/results/lie-ipm``). The curvature defaults to the paper's 𝕳_ℒ when the problem
 offers it (fewer iterations than the symmetric Hessian on SO(7), the same on SL(7)).
 Termination: ``‖F₀‖∞ ≤ tol`` (μ = 0), the measure of every solver here.
@@ -68,6 +68,13 @@ class MLGIPMOptions:
     ls_beta: float = 1e-4
     ls_theta: float = 0.5
     ls_max_steps: int = 30
+    ls_memory: int = 10
+    """Nonmonotone reference (Grippo et al. 1986): the Armijo test compares with the largest
+    merit of the last ``ls_memory`` iterates (1: monotone; 10 escapes the slack jamming that
+    stalls the monotone search on ~0.5 % of the SO(7) instances)."""
+    slack_reset: float = 1e-2
+    """After a step shorter than this, reset ``s ← max(s, -g(x))`` (primal infeasibility only
+    decreases): the escape from slack jamming at the boundary; 0 disables it."""
     slack_min: float = 1e-2
     """Initial slacks ``s0 = max(-g(x0), slack_min)``."""
     mult_init: float = 1.0
@@ -86,7 +93,9 @@ class MLGIPMOptions:
             "ls_beta": 0 < self.ls_beta < 0.5,
             "ls_theta": 0 < self.ls_theta < 1,
             "ls_max_steps": self.ls_max_steps >= 1,
+            "ls_memory": self.ls_memory >= 1,
             "slack_min": self.slack_min > 0,
+            "slack_reset": 0 <= self.slack_reset < 1,
             "mult_init": self.mult_init > 0,
             "curvature": self.curvature in ("auto", "symmetric", "exact"),
         }
@@ -107,7 +116,13 @@ class MLGIPMOptions:
     @classmethod
     def paper(cls, **overrides: Any) -> MLGIPMOptions:
         """Algorithm 1 literally: fixed σ and τ, exact curvature matrix, no line search."""
-        base = cls(superlinear_mu=False, adaptive_tau=False, curvature="exact", line_search=False)
+        base = cls(
+            superlinear_mu=False,
+            adaptive_tau=False,
+            curvature="exact",
+            line_search=False,
+            slack_reset=0.0,
+        )
         return base.replace(**overrides)
 
 
@@ -195,6 +210,7 @@ class _MLGIPM:
             return self._result(it, None, math.nan, RIPMStatus.NUMERICAL_ERROR, "x0: not finite")
         mu = self._mu(it, fv.norm())
         self._record(fv, mu, 0.0, 0.0, 0)
+        merits: list[float] = []
         while True:
             if fv.kkt_error() <= o.tol:
                 return self._result(it, fv, mu, RIPMStatus.CONVERGED, "")
@@ -218,7 +234,8 @@ class _MLGIPM:
             dx, dnu, dlam, ds = split_step(self.p, sol)
             tau = max(o.tau, 1.0 - fv.norm()) if o.adaptive_tau else o.tau
             alpha = tau * min(1.0, max_step(it.s, ds), max_step(it.nu, dnu))
-            merit = float(F @ F)
+            merits.append(float(F @ F))
+            merit = max(merits[-o.ls_memory :])
             trials = 0
             while True:
                 trial = self._trial(it, alpha, dx, dnu, dlam, ds)
@@ -236,6 +253,13 @@ class _MLGIPM:
                 new = self._evaluate(trial, hessian=True)
                 if new is None:
                     return self._result(it, fv, mu, RIPMStatus.NUMERICAL_ERROR, "not finite")
+            if alpha < o.slack_reset and self.m1:
+                reset = np.maximum(trial.s, -np.asarray(new.ev.ineq, dtype=float))
+                if np.any(reset > trial.s):
+                    trial = PrimalDual(trial.x, trial.nu, trial.lam, reset)
+                    new = self._evaluate(trial, hessian=True)
+                    if new is None:
+                        return self._result(it, fv, mu, RIPMStatus.NUMERICAL_ERROR, "not finite")
             it, fv = trial, new
             mu = self._mu(it, fv.norm())
             self._record(fv, mu, float(np.max(np.abs(alpha * dx), initial=0.0)), alpha, trials)
