@@ -307,7 +307,12 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("rendered", "alt-text"),
         help="0.5/0.3/0.2 (rendered) or 5/3/2 (LaTeX alt-text)",
     )
-    lie.add_argument("--n-slow", type=int, default=None, help="fewer instances for ripm and ipopt")
+    lie.add_argument(
+        "--n-slow",
+        type=int,
+        default=None,
+        help="fewer instances for the slow baselines (lai-yoshise, ripm, ipopt)",
+    )
     lie.add_argument(
         "--out", default="benchmarks/results/lie-ipm/so7-rho0", help="output directory"
     )

@@ -48,6 +48,7 @@ METHODS = (
     "ipopt",
 )
 PERTURBABLE = ("mlgipm", "mlgipm-paper", "mlgipm-symmetric", "mlgipm-nols", "lai-yoshise")
+SLOW = ("lai-yoshise", "ripm", "ipopt")
 TOL = 1e-6
 MAX_ITER = 500
 PAPER = {
@@ -141,7 +142,8 @@ def run(
 ) -> dict:
     """Run the study; write results.jsonl, summary.json, statistics.json, results.md, plots.
 
-    ``n_slow`` (≤ n) caps the instances of ``ripm`` and ``ipopt`` (slow per solve here)."""
+    ``n_slow`` (≤ n) caps the instances of the slow baselines :data:`SLOW` (the first
+    ``n_slow`` instances, the same for every method)."""
     if problem not in PROBLEMS:
         raise InputError(f"problem must be one of {sorted(PROBLEMS)}, got {problem!r}")
     if methods is None:
@@ -158,7 +160,7 @@ def run(
     if "ipopt" in methods and problem != "sl7":
         raise InputError("ipopt runs on sl7 only: problem (10) has no embedded CasADi form")
     n_slow = n if n_slow is None else min(n_slow, n)
-    count = {m: (n_slow if m in ("ripm", "ipopt") else n) for m in methods}
+    count = {m: (n_slow if m in SLOW else n) for m in methods}
     jobs = [
         Job(i, m, solve_case, (problem, m, seed, i, rho, objective, constants))
         for m in methods

@@ -75,6 +75,19 @@ def sample_instance(problem: str, seed: int, index: int, n: int = 7) -> LieIPMIn
     return LieIPMInstance(problem, seed, index, mats[0], np.stack(mats[1:]))
 
 
+@dataclass(frozen=True)
+class Terms:
+    """One element's objective term ``f`` and inequalities ``g`` (shape (q,)), their gradients
+    (``(d,)``, ``(q, d)``) and curvature matrices (``(d, d)``, ``(q, d, d)``) up to some order."""
+
+    f: float
+    g: np.ndarray
+    grad_f: np.ndarray | None = None
+    jac_g: np.ndarray | None = None
+    curv_f: np.ndarray | None = None
+    curv_g: np.ndarray | None = None
+
+
 def _brackets(basis: np.ndarray) -> np.ndarray:
     """``EE[l, k] = E_l E_k`` for the curvature of linear functions of ``G``."""
     return np.einsum("lab,kbc->lkac", basis, basis)
@@ -127,30 +140,18 @@ class _SeparableLieNLP(ManifoldNLP):
         A = np.einsum("kd,dab->kab", dx.reshape(self.k, self.d), self.E)
         return np.stack([x[i] @ scipy.linalg.expm(A[i]) for i in range(self.k)])
 
-    # per element: value, gradient (d,), curvature (d, d) of the objective term / inequalities
-    def _objective_term(self, G: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    def _element(self, G: np.ndarray, level: int) -> Terms:
+        """One element's objective term and inequalities up to derivative order ``level``."""
         raise NotImplementedError
 
-    def _ineq_terms(self, G: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        raise NotImplementedError
-
-    def _ineq_values(self, G: np.ndarray) -> np.ndarray:
-        return self._ineq_terms(G)[0]
-
-    def _terms(self, x: np.ndarray, derivatives: bool = True) -> list[tuple]:
-        """Per element: objective term and inequality blocks, computed once per point."""
-        key = (x.tobytes(), derivatives)
-        if self._cache is not None and self._cache[0] == key:
-            return self._cache[1]
-        if derivatives:
-            terms = [(self._objective_term(G), self._ineq_terms(G)) for G in x]
-        else:
-            terms = [((self._objective_value(G),), (self._ineq_values(G),)) for G in x]
-        self._cache = (key, terms)
+    def _terms(self, x: np.ndarray, level: int = 2) -> list[Terms]:
+        """Per element, computed once per point (a cached higher level serves lower ones)."""
+        key = x.tobytes()
+        if self._cache is not None and self._cache[0] == key and self._cache[1] >= level:
+            return self._cache[2]
+        terms = [self._element(G, level) for G in x]
+        self._cache = (key, level, terms)
         return terms
-
-    def _objective_value(self, G: np.ndarray) -> float:
-        return self._objective_term(G)[0]
 
     def evaluate(
         self,
@@ -161,27 +162,26 @@ class _SeparableLieNLP(ManifoldNLP):
         hessian: bool = True,
     ) -> NLPEvaluation:
         """All quantities at ``x`` from one pass over the elements."""
-        terms = self._terms(x)
+        terms = self._terms(x, 2 if hessian else 1)
         z = np.zeros(self.n_ineq) if z is None else np.asarray(z, dtype=float)
-        J = np.concatenate([t[1][1] for t in terms])
         return NLPEvaluation(
-            objective=float(sum(t[0][0] for t in terms)),
-            gradient=np.concatenate([t[0][1] for t in terms]),
+            objective=float(sum(t.f for t in terms)),
+            gradient=np.concatenate([t.grad_f for t in terms]),
             eq=np.zeros(0),
             eq_jacobian=sp.csr_matrix((0, self.n)),
-            ineq=np.concatenate([t[1][0] for t in terms]),
-            ineq_jacobian=self._jacobian(J),
+            ineq=np.concatenate([t.g for t in terms]),
+            ineq_jacobian=self._jacobian(np.concatenate([t.jac_g for t in terms])),
             hessian_lower=self.lagrangian_hessian(x, obj_factor, np.zeros(0), z)
             if hessian
             else None,
         )
 
     def values(self, x: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        terms = self._terms(x, derivatives=False)
+        terms = self._terms(x, 0)
         return (
-            float(sum(t[0][0] for t in terms)),
+            float(sum(t.f for t in terms)),
             np.zeros(0),
-            np.concatenate([t[1][0] for t in terms]),
+            np.concatenate([t.g for t in terms]),
         )
 
     def _jacobian(self, J: np.ndarray) -> sp.csr_matrix:
@@ -191,21 +191,21 @@ class _SeparableLieNLP(ManifoldNLP):
         return self.values(x)[0]
 
     def gradient(self, x: np.ndarray) -> np.ndarray:
-        return np.concatenate([t[0][1] for t in self._terms(x)])
+        return np.concatenate([t.grad_f for t in self._terms(x, 1)])
 
     def ineq(self, x: np.ndarray) -> np.ndarray:
         return self.values(x)[2]
 
     def ineq_jacobian(self, x: np.ndarray) -> sp.csr_matrix:
-        return self._jacobian(np.concatenate([t[1][1] for t in self._terms(x)]))
+        return self._jacobian(np.concatenate([t.jac_g for t in self._terms(x, 1)]))
 
     def curvature_blocks(self, x: np.ndarray, obj_factor: float, z: np.ndarray) -> np.ndarray:
         """𝕳_ℒ per element, shape (k, d, d) (Def. 5 and §III-A)."""
         z = np.asarray(z, dtype=float).reshape(self.k, self.q)
-        terms = self._terms(x)
+        terms = self._terms(x, 2)
         out = np.empty((self.k, self.d, self.d))
-        for i, (obj, ineq) in enumerate(terms):
-            out[i] = obj_factor * obj[2] + np.einsum("j,jab->ab", z[i], ineq[2])
+        for i, e in enumerate(terms):
+            out[i] = obj_factor * e.curv_f + np.einsum("j,jab->ab", z[i], e.curv_g)
         return out
 
     def _block_diag(self, blocks: np.ndarray) -> sp.csr_matrix:
@@ -224,10 +224,10 @@ class _SeparableLieNLP(ManifoldNLP):
         H = self.curvature_blocks(x, obj_factor, z)
         return self._block_diag(0.5 * (H + np.swapaxes(H, 1, 2)))
 
-    def _linear_entry(self, G: np.ndarray, a: int) -> tuple[float, np.ndarray, np.ndarray]:
+    def _linear_entry(self, G: np.ndarray, a: int, level: int) -> tuple:
         """``G[a, a]`` with gradient ``(G E_k)[a,a]`` and curvature ``(G E_l E_k)[a,a]``."""
-        grad = np.einsum("b,kb->k", G[a], self.E[:, :, a])
-        curv = np.einsum("b,lkb->kl", G[a], self.EE[:, :, :, a])
+        grad = np.einsum("b,kb->k", G[a], self.E[:, :, a]) if level >= 1 else None
+        curv = np.einsum("b,lkb->kl", G[a], self.EE[:, :, :, a]) if level >= 2 else None
         return float(G[a, a]), grad, curv
 
 
@@ -263,31 +263,32 @@ class SOLogProblem(_SeparableLieNLP):
         self.objective_kind, self.constants = objective, constants
         self.c = np.array(CONSTANTS["so"][constants] if bounds is None else bounds, dtype=float)
 
-    def _objective_term(self, G: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    def _element(self, G: np.ndarray, level: int) -> Terms:
         xi = self.group.log(self.Gd.T @ G)
         # ‖ξ^‖²_F = 2‖ξ‖² in the basis E_ij; the gradient field along G exp(ζ^) is ∝ ξ
         # (J_r(ξ)⁻ᵀ ξ = ξ on SO(n)) and ∂ξ/∂ζ = J_r(ξ)⁻¹.
-        Jinv = _so_jac_right_inv(self.group.ad(xi))
-        if self.objective_kind == "squared":
-            return 0.5 * float(xi @ xi), xi, Jinv
+        Jinv = _so_jac_right_inv(self.group.ad(xi)) if level >= 2 else None
         r = float(np.linalg.norm(xi))
-        w = 0.5 * np.sqrt(2.0)
-        if r < 1e-300:
-            return 0.0, np.zeros(self.d), np.zeros((self.d, self.d))
-        u = xi / r
-        return w * r, w * u, w * (np.eye(self.d) - np.outer(u, u)) / r @ Jinv
-
-    def _ineq_terms(self, G: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        parts = [self._linear_entry(G, a) for a in (0, 1)]
-        vals = np.array([p[0] for p in parts]) - self.c
-        return vals, np.stack([p[1] for p in parts]), np.stack([p[2] for p in parts])
-
-    def _ineq_values(self, G: np.ndarray) -> np.ndarray:
-        return np.array([G[0, 0], G[1, 1]]) - self.c
-
-    def _objective_value(self, G: np.ndarray) -> float:
-        r = float(np.linalg.norm(self.group.log(self.Gd.T @ G)))
-        return 0.5 * r * r if self.objective_kind == "squared" else 0.5 * np.sqrt(2.0) * r
+        if self.objective_kind == "squared":
+            f, grad, curv = 0.5 * r * r, xi, Jinv
+        else:
+            w = 0.5 * np.sqrt(2.0)
+            u = xi / r if r > 1e-300 else np.zeros(self.d)
+            f, grad = w * r, w * u
+            if level >= 2:
+                curv = np.zeros((self.d, self.d))
+                if r > 1e-300:
+                    curv = w * (np.eye(self.d) - np.outer(u, u)) / r @ Jinv
+        parts = [self._linear_entry(G, a, level) for a in (0, 1)]
+        g = np.array([p[0] for p in parts]) - self.c
+        return Terms(
+            f,
+            g,
+            grad if level >= 1 else None,
+            np.stack([p[1] for p in parts]) if level >= 1 else None,
+            curv if level >= 2 else None,
+            np.stack([p[2] for p in parts]) if level >= 2 else None,
+        )
 
     def optimum(self) -> float | None:
         """The optimal value where it is known: 0 at ``G_i = G_d`` when ``G_d`` is feasible."""
@@ -307,29 +308,18 @@ class SLTraceProblem(_SeparableLieNLP):
         self.constants = constants
         self.c = CONSTANTS["sl"][constants][0]
 
-    def _trace(self, G: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    def _element(self, G: np.ndarray, level: int) -> Terms:
         P = self.A @ G
-        grad = np.einsum("ab,kba->k", P, self.E)
-        curv = np.einsum("ab,lkba->kl", P, self.EE)
-        return float(np.trace(P)), grad, curv
-
-    def _objective_term(self, G: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
-        t, gt, Ht = self._trace(G)
-        return 0.5 * t * t, t * gt, np.outer(gt, gt) + t * Ht
-
-    def _ineq_terms(self, G: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        t, gt, Ht = self._trace(G)
-        return (
-            np.array([self.c - t * t]),
-            (-2.0 * t * gt)[None],
-            (-2.0 * (np.outer(gt, gt) + t * Ht))[None],
-        )
-
-    def _ineq_values(self, G: np.ndarray) -> np.ndarray:
-        return np.array([self.c - np.trace(self.A @ G) ** 2])
-
-    def _objective_value(self, G: np.ndarray) -> float:
-        return 0.5 * float(np.trace(self.A @ G)) ** 2
+        t = float(np.trace(P))
+        f, g = 0.5 * t * t, np.array([self.c - t * t])
+        if level == 0:
+            return Terms(f, g)
+        gt = np.einsum("ab,kba->k", P, self.E)
+        if level == 1:
+            return Terms(f, g, t * gt, (-2.0 * t * gt)[None])
+        Ht = np.einsum("ab,lkba->kl", P, self.EE)
+        curv = np.outer(gt, gt) + t * Ht
+        return Terms(f, g, t * gt, (-2.0 * t * gt)[None], curv, (-2.0 * curv)[None])
 
     def optimum(self) -> float:
         """Every minimiser has ``t_i² = c``: the optimal value is ``k c / 2``."""

@@ -253,3 +253,47 @@ def _positive(v: np.ndarray, m: int, name: str) -> np.ndarray:
     if a.shape != (m,) or not np.all(np.isfinite(a)) or np.any(a <= 0):
         raise InputError(f"{name} must be {m} finite positive numbers, got {a!r}")
     return a.copy()
+
+
+class NewtonSolver:
+    """Solves system (3) for one problem, keeping what can be reused between iterations.
+
+    Small systems: dense LU of 𝕵_F (:func:`solve_newton`). Large ones with the symmetric
+    Hessian: ``Δs = (b_c - S Δν)/ν`` is eliminated, leaving the symmetric matrix
+    ``[[H, J_hᵀ, J_gᵀ], [J_h, 0, 0], [J_g, 0, -S/ν]]``, factorized by the RIPM's sparse LDLᵀ
+    (:class:`~mbplan.solvers.linear_solver.KKTSystem`, its pattern analysed once). Large ones
+    with the exact (non-symmetric) 𝕳_ℒ: sparse LU of 𝕵_F.
+    """
+
+    def __init__(self, problem: RIPMProblem, curvature: str) -> None:
+        self.p, self.curvature = problem, curvature
+        self._kkt: Any = None
+
+    def solve(self, it: PrimalDual, fv: FieldValue, rhs: np.ndarray) -> np.ndarray:
+        p = self.p
+        size = p.n + 2 * p.n_ineq + p.n_eq
+        if size <= DENSE_LIMIT or self.curvature == "exact":
+            return solve_newton(newton_matrix(p, it, fv, self.curvature), rhs)[0]
+        sol = self._reduced(it, fv, rhs)
+        if sol is None:
+            return solve_newton(newton_matrix(p, it, fv, self.curvature), rhs)[0]
+        return sol
+
+    def _reduced(self, it: PrimalDual, fv: FieldValue, rhs: np.ndarray) -> np.ndarray | None:
+        from mbplan.solvers.linear_solver import KKTSystem
+
+        p = self.p
+        n, m1, m2 = p.n, p.n_ineq, p.n_eq
+        b_d, b_g, b_h, b_c = split_step(p, rhs)
+        if self._kkt is None:
+            self._kkt = KKTSystem(n, m2, m1)
+        self._kkt.set_matrices(fv.ev.hessian_lower, fv.ev.eq_jacobian, fv.ev.ineq_jacobian)
+        diagonal = np.concatenate([np.zeros(n + m2), -it.s / it.nu])
+        if self._kkt.factorize(diagonal, static_reg=1e-9) is None:
+            return None
+        red, ratio = self._kkt.solve(np.concatenate([b_d, b_h, b_g - b_c / it.nu]))
+        if not (np.all(np.isfinite(red)) and ratio < 1e-5):
+            return None
+        dx, dlam, dnu = red[:n], red[n : n + m2], red[n + m2 :]
+        ds = (b_c - it.s * dnu) / it.nu
+        return np.concatenate([dx, dnu, dlam, ds])

@@ -154,7 +154,7 @@ def solve_lai_yoshise(
                             x = None
                     if x is not None and point_is_finite(x):
                         w = PrimalDual(x, nu, it.lam + alpha * dlam, s)
-                        new = evaluate(w, True)
+                        new = evaluate(w, False)
                         if new is not None and new.norm() ** 2 <= phi + alpha * o.ls_beta * slope:
                             accepted = (w, new)
                             break
@@ -165,10 +165,12 @@ def solve_lai_yoshise(
             with np.errstate(all="ignore"):
                 x = problem.retract(it.x, alpha * dx)
             w = PrimalDual(x, nu, it.lam + alpha * dlam, s)
-            new = evaluate(w, True) if np.all(nu > 0) and np.all(s > 0) else None
-            if new is None:
+            ok = point_is_finite(x) and np.all(nu > 0) and np.all(s > 0)
+            accepted = (w, None) if ok else None
+            if accepted is None:
                 return done(it, fv, mu, RIPMStatus.LINE_SEARCH_FAILED)
-            accepted = (w, new)
-        it, fv = accepted
+        it, fv = accepted[0], evaluate(accepted[0], True)
+        if fv is None:
+            return done(it, None, mu, RIPMStatus.NUMERICAL_ERROR, "not finite")
         gamma = 0.5 * (gamma + 0.5)
         record(fv, mu, float(np.max(np.abs(alpha * dx), initial=0.0)), alpha, trials)

@@ -29,15 +29,14 @@ from mbplan.errors import InputError
 from mbplan.solvers.kkt_field import (
     CurvatureProblem,
     FieldValue,
+    NewtonSolver,
     PrimalDual,
     check_curvature,
     check_start,
     evaluate_field,
     initial_duals,
     max_step,
-    newton_matrix,
     point_is_finite,
-    solve_newton,
     split_step,
 )
 from mbplan.solvers.problem import Point, RIPMProblem
@@ -158,6 +157,7 @@ class _MLGIPM:
         self.m1 = problem.n_ineq
         self.rng = np.random.default_rng(opts.rho_seed)
         self.hist = IterationHistory()
+        self.newton = NewtonSolver(problem, opts.curvature)
         self.n_eval = self.n_trial = self.n_fact = 0
         self.t0 = time.perf_counter()
 
@@ -224,8 +224,7 @@ class _MLGIPM:
                 u = self.rng.standard_normal(F.size)
                 rhs = rhs + o.rho * np.linalg.norm(F) * u / np.linalg.norm(u)
             try:
-                K = newton_matrix(self.p, it, fv, o.curvature)
-                sol, _ = solve_newton(K, rhs)
+                sol = self.newton.solve(it, fv, rhs)
             except (np.linalg.LinAlgError, RuntimeError, ValueError) as exc:
                 return self._result(it, fv, mu, RIPMStatus.NUMERICAL_ERROR, f"Newton: {exc}")
             self.n_fact += 1
