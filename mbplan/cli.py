@@ -177,7 +177,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="random start of the task sampler (default: the fixed demo start)",
     )
     plan.add_argument(
-        "--method", default="ripm", help="ripm | ipopt | ipopt-no-restoration | fddp | csqp"
+        "--method",
+        default="ripm",
+        help="ripm | mlgipm | ipopt | ipopt-no-restoration | fddp | csqp",
     )
     plan.add_argument("--horizon", type=int, default=40, help="number of steps N")
     plan.add_argument("--tol", type=float, default=1e-6, help="convergence tolerance")

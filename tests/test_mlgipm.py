@@ -247,3 +247,30 @@ def test_mlgipm_plans_a_drone_docking_case_through_the_planning_hook() -> None:
         solve_with("mlgipm", hs071(), HS071_X0, options_for("ripm"))
     with pytest.raises(InputError, match="unknown solver"):
         options_for("newton")
+
+
+def test_reduced_sparse_newton_step_equals_the_full_system() -> None:
+    """The LDLᵀ of the reduced symmetric system gives the step of the full 𝕵_F (sparse LU)."""
+    from mbplan.solvers.kkt_field import (
+        NewtonSolver,
+        evaluate_field,
+        initial_duals,
+        newton_matrix,
+        solve_newton,
+    )
+    from mbplan.tasks.drone import geodesic_initial_guess, sample_docking_cases
+    from mbplan.transcription.quadrotor import quadrotor_problem
+
+    task = sample_docking_cases(1, 0, with_input_limits=True)[0]
+    p = quadrotor_problem(task)
+    x0 = p.check_point(geodesic_initial_guess(task))
+    it = initial_duals(p, x0, None, None, None, 1e-2, 1.0)
+    it.nu = np.random.default_rng(0).uniform(0.5, 2.0, p.n_ineq)
+    fv = evaluate_field(p, it)
+    rhs = -fv.vector(0.05)
+    K = newton_matrix(p, it, fv, "symmetric")
+    assert K.shape[0] > 600  # the sparse path
+    full, _ = solve_newton(K, rhs)
+    reduced = NewtonSolver(p, "symmetric")._reduced(it, fv, rhs)
+    assert reduced is not None
+    assert np.abs(reduced - full).max() < 1e-8 * max(1.0, np.abs(full).max())
