@@ -53,7 +53,9 @@ def solve_case(method: str, n: int, seed: int, index: int, tol: float) -> dict:
             "time_per_iter_s": r.wall_time_s / max(r.iterations, 1),
             "kkt_final": r.kkt_error,
             "kkt_history": [float(e) for e in r.history.kkt_error],
-            "replay_deviation_m": sol.replay_deviation_m,
+            "replay_deviation_m": (
+                sol.replay_deviation_m if np.isfinite(sol.replay_deviation_m) else None
+            ),
             "initial_angle_rad": angle,
         }
     if method == "ipopt-quaternion":

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mbplan.errors import InputError
 from mbplan.solvers import MLGIPMOptions, RIPMOptions, RIPMResult, RIPMStatus
 from mbplan.solvers.dispatch import solve_with
 from mbplan.tasks.drone import DockingTask, geodesic_initial_guess, simulate
@@ -40,6 +41,9 @@ def plan_docking(
     x0 = problem.check_point(geodesic_initial_guess(task))
     build = time.perf_counter() - t0
     result = solve_with(method, problem, x0, options)
-    replay = simulate(task, result.x["u"])
-    deviation = float(np.max(np.abs(replay["p"] - result.x["p"])))
+    try:
+        replay = simulate(task, result.x["u"])
+        deviation = float(np.max(np.abs(replay["p"] - result.x["p"])))
+    except InputError:  # inputs of a failed solve the LGVI cannot replay
+        deviation = float("inf")
     return DockingSolution(result, build, deviation)
