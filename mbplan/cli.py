@@ -38,6 +38,27 @@ def _bench_drone(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_lie_ipm(args: argparse.Namespace) -> int:
+    from mbplan.benchmarks.lie_ipm import run
+
+    methods = tuple(m.strip() for m in args.methods.split(",")) if args.methods else None
+    run(
+        output_dir(args.out, "--out"),
+        problem=args.problem,
+        n=args.n,
+        seed=args.seed,
+        rho=args.rho,
+        methods=methods,
+        objective=args.objective,
+        constants=args.constants,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        n_slow=args.n_slow,
+    )
+    print((Path(args.out) / "results.md").read_text())
+    return 0
+
+
 def _add_pool_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--workers", type=integer(1), default=1, help="local worker processes (default 1)"
@@ -208,7 +229,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="random start of the task sampler (default: the fixed demo start)",
     )
     plan.add_argument(
-        "--method", default="ripm", help="ripm | ipopt | ipopt-no-restoration | fddp | csqp"
+        "--method",
+        default="ripm",
+        help="ripm | mlgipm | ipopt | ipopt-no-restoration | fddp | csqp",
     )
     plan.add_argument("--horizon", type=integer(2), default=40, help="number of steps N")
     plan.add_argument("--tol", type=real(), default=1e-6, help="convergence tolerance")
@@ -389,6 +412,38 @@ def build_parser() -> argparse.ArgumentParser:
     speed.add_argument("--out", default="out/bench/speed", help="output directory")
     _add_pool_options(speed)
     speed.set_defaults(func=_bench_speed)
+    lie = bench_sub.add_parser(
+        "lie-ipm",
+        help="MLG-IPM vs Lai-Yoshise, RIPM, IPOPT on the MLG-IPM paper's SO(7)/SL(7) problems",
+    )
+    lie.add_argument("--problem", default="so7", choices=("so7", "sl7"), help="(10) or (11)")
+    lie.add_argument("--n", type=integer(1), default=1000, help="number of instances")
+    lie.add_argument("--seed", type=integer(0), default=0, help="seed of the instance sampler")
+    lie.add_argument(
+        "--rho",
+        type=real(positive=False),
+        default=0.0,
+        help="inexact term ‖ρ_k‖ = rho·‖F_k‖ (0, 0.01, 0.001)",
+    )
+    lie.add_argument("--methods", default=None, help="comma-separated (default: all that apply)")
+    lie.add_argument(
+        "--objective", default="squared", choices=("squared", "literal"), help="form of (10)"
+    )
+    lie.add_argument(
+        "--constants",
+        default="rendered",
+        choices=("rendered", "alt-text"),
+        help="0.5/0.3/0.2 (rendered) or 5/3/2 (LaTeX alt-text)",
+    )
+    lie.add_argument(
+        "--n-slow",
+        type=integer(1),
+        default=None,
+        help="fewer instances for the slow baselines (lai-yoshise, ripm, ipopt)",
+    )
+    lie.add_argument("--out", default="out/bench/lie-ipm", help="output directory")
+    _add_pool_options(lie)
+    lie.set_defaults(func=_bench_lie_ipm)
     return parser
 
 

@@ -4,7 +4,8 @@ Methods on the same seeded cases and the same geodesic initial guess:
 
 * ``ripm``: RIPM on SO(3)×R³, no input limits;
 * ``ripm-input-limits``: RIPM with ``u_z ∈ [0, u_lim]``, ``τ ∈ [-τ_lim, τ_lim]³``;
-* ``ipopt-quaternion``: unit-quaternion variational integrator solved by IPOPT (ref. [7]).
+* ``ipopt-quaternion``: unit-quaternion variational integrator solved by IPOPT (ref. [7]);
+* ``mlgipm``, ``mlgipm-input-limits``: the RIPM's two problems solved by MLG-IPM.
 
 Regenerate: ``mbplan bench drone-docking --n 100 --seed 0 --out benchmarks/results/drone-docking``.
 """
@@ -23,11 +24,14 @@ from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
 from mbplan.planning.drone import plan_docking
 from mbplan.solvers import RIPMOptions
+from mbplan.solvers.dispatch import options_for
 from mbplan.tasks.drone import DockingTask, rotation_angles, sample_docking_cases, simulate
 from mbplan.validation import as_int, as_real
 
-METHODS = ("ripm", "ripm-input-limits", "ipopt-quaternion")
+METHODS = ("ripm", "ripm-input-limits", "ipopt-quaternion")  # the default run
+ALL_METHODS = (*METHODS, "mlgipm", "mlgipm-input-limits")
 MAX_ITER = {"ripm": 100, "ripm-input-limits": 100, "ipopt-quaternion": 1000}  # as in Table II
+MAX_ITER |= {"mlgipm": 100, "mlgipm-input-limits": 100}
 
 
 def _case(n: int, seed: int, index: int, limits: bool) -> DockingTask:
@@ -36,10 +40,12 @@ def _case(n: int, seed: int, index: int, limits: bool) -> DockingTask:
 
 def solve_case(method: str, n: int, seed: int, index: int, tol: float) -> dict:
     """One (case, method) solve as a JSON-serialisable row."""
-    task = _case(n, seed, index, limits=method == "ripm-input-limits")
+    task = _case(n, seed, index, limits=method.endswith("-input-limits"))
     angle = float(rotation_angles(task.R0[None])[0])
-    if method in ("ripm", "ripm-input-limits"):
-        sol = plan_docking(task, RIPMOptions(tol=tol, max_iter=MAX_ITER[method]))
+    if method in ("ripm", "ripm-input-limits", "mlgipm", "mlgipm-input-limits"):
+        solver = method.removesuffix("-input-limits")
+        options = options_for(solver, tol=tol, max_iter=MAX_ITER[method])
+        sol = plan_docking(task, options, method=solver)
         r = sol.result
         return {
             "success": sol.converged,
@@ -49,7 +55,9 @@ def solve_case(method: str, n: int, seed: int, index: int, tol: float) -> dict:
             "time_per_iter_s": r.wall_time_s / max(r.iterations, 1),
             "kkt_final": r.kkt_error,
             "kkt_history": [float(e) for e in r.history.kkt_error],
-            "replay_deviation_m": sol.replay_deviation_m,
+            "replay_deviation_m": (
+                sol.replay_deviation_m if np.isfinite(sol.replay_deviation_m) else None
+            ),
             "initial_angle_rad": angle,
         }
     if method == "ipopt-quaternion":
@@ -67,7 +75,7 @@ def solve_case(method: str, n: int, seed: int, index: int, tol: float) -> dict:
             "replay_deviation_m": deviation,
             "initial_angle_rad": angle,
         }
-    raise InputError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+    raise InputError(f"unknown method {method!r}; choose from {', '.join(ALL_METHODS)}")
 
 
 def horizon_scaling(seed: int, cases: int = 3, horizons: tuple[int, ...] = (40, 160)) -> dict:
@@ -97,9 +105,9 @@ def run(
     scaling: bool = True,
 ) -> dict:
     """Run the benchmark, write results.jsonl, summary.json, results.md and plots."""
-    unknown = sorted(set(methods) - set(METHODS))
+    unknown = sorted(set(methods) - set(ALL_METHODS))
     if unknown:
-        raise InputError(f"unknown methods {unknown}; choose from {', '.join(METHODS)}")
+        raise InputError(f"unknown methods {unknown}; choose from {', '.join(ALL_METHODS)}")
     as_int(n, "n", minimum=1, what="number of cases")
     as_int(seed, "seed", minimum=0, what="random seed")
     as_real(tol, "tol", positive=True)
@@ -117,7 +125,10 @@ def run(
     rows = [r for r in rows if r["case"] < n and r["method"] in methods]
     summary = summarize(rows, "drone-docking", tol)
     summary["command"] = (
-        f"mbplan bench drone-docking --n {n} --seed {seed} --tol {tol:g} --out {out}"
+        f"mbplan bench drone-docking --n {n} --seed {seed} --tol {tol:g}"
+        + ("" if methods == METHODS else f" --methods {','.join(methods)}")
+        + ("" if scaling else " --no-scaling")
+        + f" --out {out}"
     )
     summary["machine"] = machine_info()
     summary["wall_time_s"] = time.perf_counter() - t0

@@ -7,7 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mbplan.solvers import RIPMOptions, RIPMResult, RIPMStatus, solve_ripm
+from mbplan.errors import InputError
+from mbplan.solvers import MLGIPMOptions, RIPMOptions, RIPMResult, RIPMStatus
+from mbplan.solvers.dispatch import solve_with
 from mbplan.tasks.drone import DockingTask, geodesic_initial_guess, simulate
 from mbplan.transcription.quadrotor import quadrotor_problem
 
@@ -27,14 +29,21 @@ class DockingSolution:
 
 
 def plan_docking(
-    task: DockingTask, options: RIPMOptions | None = None, jit: bool | None = None
+    task: DockingTask,
+    options: RIPMOptions | MLGIPMOptions | None = None,
+    jit: bool | None = None,
+    method: str = "ripm",
 ) -> DockingSolution:
-    """Solve one docking task from the geodesic initial guess and replay the inputs."""
+    """Solve one docking task (``method`` ``"ripm"`` or ``"mlgipm"``, with that solver's
+    options) from the geodesic initial guess and replay the inputs."""
     t0 = time.perf_counter()
     problem = quadrotor_problem(task, jit=jit)
     x0 = problem.check_point(geodesic_initial_guess(task))
     build = time.perf_counter() - t0
-    result = solve_ripm(problem, x0, options)
-    replay = simulate(task, result.x["u"])
-    deviation = float(np.max(np.abs(replay["p"] - result.x["p"])))
+    result = solve_with(method, problem, x0, options)
+    try:
+        replay = simulate(task, result.x["u"])
+        deviation = float(np.max(np.abs(replay["p"] - result.x["p"])))
+    except InputError:  # inputs of a failed solve the LGVI cannot replay
+        deviation = float("inf")
     return DockingSolution(result, build, deviation)

@@ -24,7 +24,8 @@ from mbplan.formulations import maximal
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.ocp.problem import OCP
 from mbplan.results import PlanResult
-from mbplan.solvers import RIPMOptions, RIPMStatus, solve_ripm
+from mbplan.solvers import RIPMStatus
+from mbplan.solvers.dispatch import options_for, solve_with
 
 _ITERATION_LINE = re.compile(r"^\s*\d+(r?)\s+[-+]?\d\.\d+e[-+]\d+\s")
 
@@ -32,7 +33,8 @@ _ITERATION_LINE = re.compile(r"^\s*\d+(r?)\s+[-+]?\d\.\d+e[-+]\d+\s")
 @dataclass(frozen=True)
 class Settings:
     """What every adapter gets: tolerance, iteration limit, method-specific ``options``
-    (``RIPMOptions`` fields for the RIPM, IPOPT option names for IPOPT) and ``jit``."""
+    (``RIPMOptions`` or ``MLGIPMOptions`` fields for the RIPM or MLG-IPM, IPOPT option names
+    for IPOPT) and ``jit``."""
 
     tol: float = 1e-6
     max_iter: int = 500
@@ -42,17 +44,28 @@ class Settings:
 
 def solve_ripm_maximal(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
     """The RIPM on the maximal-coordinate LGVI (success: ``CONVERGED``)."""
+    return _solve_maximal("ripm", ocp, q_guess, settings)
+
+
+def solve_mlgipm_maximal(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
+    """MLG-IPM (Santos et al.) on the maximal-coordinate LGVI (success: ``CONVERGED``);
+    ``settings.options`` are ``MLGIPMOptions`` fields."""
+    return _solve_maximal("mlgipm", ocp, q_guess, settings)
+
+
+def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
+    """``solver`` (:mod:`mbplan.solvers.dispatch`) on the maximal-coordinate LGVI of ``ocp``."""
     jit = jit_available() if settings.jit is None else settings.jit
     nlp, build = maximal.build(ocp, jit)
     t0 = time.perf_counter()
     x0 = nlp.initial_point(q_guess)
     build += time.perf_counter() - t0
-    options = RIPMOptions(tol=settings.tol, max_iter=settings.max_iter).replace(**settings.options)
-    result = solve_ripm(nlp.problem, x0, options)
+    options = options_for(solver, tol=settings.tol, max_iter=settings.max_iter)
+    result = solve_with(solver, nlp.problem, x0, options.replace(**settings.options))
     traj = nlp.joint_trajectory(result.x)
     h = result.history.arrays()
     return PlanResult(
-        method="ripm",
+        method=solver,
         status=result.status.name,
         success=result.status is RIPMStatus.CONVERGED,
         message=result.message,

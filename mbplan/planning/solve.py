@@ -35,6 +35,7 @@ class Method:
 
 METHODS: dict[str, Method] = {
     "ripm": Method("maximal", m.solve_ripm_maximal),
+    "mlgipm": Method("maximal", m.solve_mlgipm_maximal),
     "ipopt": Method("generalized", m.solve_ipopt_generalized),
     "ipopt-no-restoration": Method("generalized", m.solve_ipopt_no_restoration),
 }

@@ -1,0 +1,31 @@
+"""Solve a :class:`~mbplan.solvers.problem.RIPMProblem` with a solver named by a string."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from mbplan.errors import InputError
+from mbplan.solvers.mlgipm import MLGIPMOptions, solve_mlgipm
+from mbplan.solvers.options import RIPMOptions
+from mbplan.solvers.problem import Point, RIPMProblem
+from mbplan.solvers.result import RIPMResult
+from mbplan.solvers.ripm import solve_ripm
+
+SOLVERS = {"ripm": (solve_ripm, RIPMOptions), "mlgipm": (solve_mlgipm, MLGIPMOptions)}
+
+
+def options_for(method: str, **values: Any) -> RIPMOptions | MLGIPMOptions:
+    """The options object of solver ``method`` (``"ripm"`` or ``"mlgipm"``)."""
+    if method not in SOLVERS:
+        raise InputError(f"unknown solver {method!r}; choose from {', '.join(SOLVERS)}")
+    return SOLVERS[method][1](**values)
+
+
+def solve_with(method: str, problem: RIPMProblem, x0: Point, options: Any = None) -> RIPMResult:
+    """``solve_ripm`` or ``solve_mlgipm``; ``options`` of that solver's type or ``None``."""
+    if method not in SOLVERS:
+        raise InputError(f"unknown solver {method!r}; choose from {', '.join(SOLVERS)}")
+    solve, options_type = SOLVERS[method]
+    if options is not None and not isinstance(options, options_type):
+        raise InputError(f"{method} takes {options_type.__name__}, got {type(options).__name__}")
+    return solve(problem, x0, options)
