@@ -274,3 +274,23 @@ def test_reduced_sparse_newton_step_equals_the_full_system() -> None:
     reduced = NewtonSolver(p, "symmetric")._reduced(it, fv, rhs)
     assert reduced is not None
     assert np.abs(reduced - full).max() < 1e-8 * max(1.0, np.abs(full).max())
+
+
+def test_mlgipm_plans_an_ocp_through_the_planning_registry():
+    """``mbplan.plan(ocp, "mlgipm")``: the maximal-coordinate LGVI of an OCP solved by MLG-IPM,
+    with the same result type, success rule and independent verification as the RIPM."""
+    import mbplan as mb
+
+    q0 = np.zeros(6)
+    q0[1] = -1.0
+    ocp = mb.OCP(mb.load_robot("ur5"), N=6, dt=0.1, q0=q0)
+    ocp.add_cost("velocity", mb.residuals.JointVelocity(), 1e-2)
+    ocp.add_cost("effort", mb.residuals.JointTorque(), 1e-4)
+    ocp.add_terminal_constraint("goal", mb.residuals.JointPosition(q0 + 0.2))
+    result = mb.plan(ocp, "mlgipm", warm_start="linear", max_iter=200)
+    assert result.method == "mlgipm" and result.formulation == "maximal"
+    assert result.status == "CONVERGED" and result.success
+    np.testing.assert_allclose(result.q[-1], q0 + 0.2, atol=1e-6)
+    assert mb.verify(result).passed
+    with pytest.raises(InputError, match=r"unknown MLG-IPM option\(s\): \[.sigmaa.\]"):
+        mb.plan(ocp, "mlgipm", options={"sigmaa": 0.2})
