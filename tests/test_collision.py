@@ -221,3 +221,29 @@ def test_verification_measures_coal_distances_of_distance_tasks() -> None:
     r = ocp["clearance"].residual
     d = r.margin - evaluate(ocp.robot, ocp.scene, r, path, path, None)
     assert clearance == pytest.approx(d.min(), abs=1e-12)
+
+
+def test_a_wrong_tight_gjk_distance_is_caught_by_the_default_request():
+    """At this iiwa configuration (knot 31 of a distance-task plan) coal's GJK at the tight
+    tolerance stops at 0.021 m from the obstacle where the distance is 0.085 m (1e-9 rad away
+    too); the default request cross-checks it and its result is used."""
+    import mbplan.multibody.collision as collision
+    from mbplan.formulations.joint_space import distance_values
+    from mbplan.paper import iiwa_obstacle
+
+    q = np.array([1.003111497864807, 0.3706807128646723, 0.001580589416948418,
+                  -1.2336641508135646, 0.004269912837888549, 1.001412071015906,
+                  0.0049814865702810145])  # fmt: skip
+    ocp = iiwa_obstacle(q, N=4, constraint="distance")
+    residual = ocp["clearance"].residual
+    nearby = q + 1e-9 * np.random.default_rng(1).standard_normal(7)
+    value = distance_values(ocp.robot, ocp.scene, residual, np.stack([q, nearby]))[0]
+    np.testing.assert_allclose(value[0], value[1], atol=1e-6)
+    assert value[0, 3] == pytest.approx(0.03 - 0.0854, abs=1e-3)
+    saved = collision._CROSS_CHECK
+    try:  # without the cross-check the wrong distance shows (so this test can fail)
+        collision._CROSS_CHECK = np.inf
+        wrong = distance_values(ocp.robot, ocp.scene, residual, q[None])[0]
+        assert wrong[0, 3] > value[0, 3] + 0.05
+    finally:
+        collision._CROSS_CHECK = saved
