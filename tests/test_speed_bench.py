@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from mbplan.benchmarks.speed import PROFILE_KEYS, chain_task, profile_solve
+from mbplan.benchmarks.kkt_profile import PROFILE_KEYS, profile_solve
+from mbplan.benchmarks.speed_tasks import chain_task
 from mbplan.solvers import RIPMOptions
 from mbplan.solvers.examples import BandedControlNLP
 

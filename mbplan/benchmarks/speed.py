@@ -1,302 +1,28 @@
 """Speed of the RIPM against the baselines on its own tasks, with a per-iteration profile.
 
-Task construction is one small function per task (:func:`iiwa_task`, :func:`drone_task`,
-:func:`chain_task`) so that it can move onto another task API without touching the rest.
+Tasks: :mod:`mbplan.benchmarks.speed_tasks`; profile and orderings:
+:mod:`mbplan.benchmarks.kkt_profile`.
 """
 
 from __future__ import annotations
 
-import functools
-import tempfile
-import time
-from collections.abc import Callable
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from mbplan.solvers import RIPMOptions, RIPMResult, solve_ripm
-from mbplan.solvers import linear_solver as ls
-from mbplan.solvers.ordering import amd_order, coordinate_dissection_order
-
-# ------------------------------------------------------------------------------- tasks
-
-
-def iiwa_task(index: int, n: int = 100, seed: int = 0, constraint: str = "com"):
-    """iiwa obstacle case ``index`` of ``n`` (N = 40) as an OCP (:mod:`mbplan.paper`)."""
-    from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
-
-    q0 = iiwa_obstacle_starts(n, seed, constraint)[index]
-    return iiwa_obstacle(q0, N=40, constraint=constraint)
-
-
-def maximal_ripm_problem(ocp, warm_start: str = "via") -> tuple[Any, Any]:
-    """The RIPM's problem and warm start for an OCP (as ``plan(ocp, "ripm")`` builds them)."""
-    from mbplan.engine.jit import jit_available
-    from mbplan.formulations import maximal
-    from mbplan.planning.initial_guess import initial_path
-
-    nlp, _ = maximal.build(ocp, jit_available())
-    return nlp.problem, nlp.initial_point(initial_path(ocp, warm_start))
-
-
-def drone_task(index: int, n: int = 100, seed: int = 0, limits: bool = False):
-    """Drone docking case ``index`` of ``n`` (RIPM paper §VIII.B)."""
-    from mbplan.tasks.drone import sample_docking_cases
-
-    return sample_docking_cases(n, seed, with_input_limits=limits)[index]
-
-
-def drone_ripm_problem(task) -> tuple[Any, Any]:
-    from mbplan.tasks.drone import geodesic_initial_guess
-    from mbplan.transcription.quadrotor import quadrotor_problem
-
-    problem = quadrotor_problem(task)
-    return problem, problem.check_point(geodesic_initial_guess(task))
-
-
-CHAIN_LINKS = (4, 8, 16, 32, 64)
-CHAIN_LENGTH = 1.0  # m, whole chain
-CHAIN_MASS = 2.0  # kg, whole chain
-
-
-def chain_urdf(n: int) -> str:
-    """URDF of a hanging serial chain of ``n`` equal links (revolute x, y, x, ...), 1 m, 2 kg."""
-    L, m, r = CHAIN_LENGTH / n, CHAIN_MASS / n, 0.01
-    ixx, izz = m * (3 * r * r + L * L) / 12, m * r * r / 2
-    parts = ['<?xml version="1.0"?>', f'<robot name="chain{n}">', '<link name="base"/>']
-    parent = "base"
-    for i in range(n):
-        link = f"link{i + 1}"
-        parts.append(
-            f'<link name="{link}"><inertial><origin xyz="0 0 {-L / 2}"/><mass value="{m}"/>'
-            f'<inertia ixx="{ixx}" iyy="{ixx}" izz="{izz}" ixy="0" ixz="0" iyz="0"/>'
-            "</inertial></link>"
-        )
-        axis = "1 0 0" if i % 2 == 0 else "0 1 0"
-        z = -L if i else 0.0
-        parts.append(
-            f'<joint name="joint{i + 1}" type="revolute"><parent link="{parent}"/>'
-            f'<child link="{link}"/><origin xyz="0 0 {z}"/><axis xyz="{axis}"/>'
-            '<limit lower="-3.1" upper="3.1" effort="100" velocity="10"/></joint>'
-        )
-        parent = link
-    parts.append("</robot>")
-    return "\n".join(parts)
-
-
-@functools.cache
-def _chain_path(n: int) -> str:
-    path = Path(tempfile.gettempdir()) / f"mbplan-chain{n}.urdf"
-    text = chain_urdf(n)
-    if not path.exists() or path.read_text() != text:
-        tmp = path.with_suffix(f".{time.time_ns()}.tmp")
-        tmp.write_text(text)
-        tmp.replace(path)
-    return str(path)
-
-
-def chain_task(n: int, N: int = 40):
-    """Reach with an ``n``-link hanging chain: from rest at q = 0 to a curl of 1.2 rad total."""
-    from mbplan.paper import tracking_ocp
-
-    return tracking_ocp(_chain_path(n), np.zeros(n), np.full(n, 1.2 / n), N=N)
-
-
-def _iiwa(i: int):
-    return (*maximal_ripm_problem(iiwa_task(i)), RIPMOptions(tol=1e-6, max_iter=500))
-
-
-def _drone(i: int, limits: bool = False):
-    return (*drone_ripm_problem(drone_task(i, limits=limits)), RIPMOptions(tol=1e-6, max_iter=100))
-
-
-def _chain(n: int):
-    return (*maximal_ripm_problem(chain_task(n), "linear"), RIPMOptions(tol=1e-6, max_iter=500))
-
-
-TASKS: dict[str, Callable[[int], tuple]] = {
-    "iiwa-com": _iiwa,
-    "drone": _drone,
-    "drone-limits": functools.partial(_drone, limits=True),
-    **{f"chain{n}": (lambda _i, n=n: _chain(n)) for n in CHAIN_LINKS},
-}
-
-# ------------------------------------------------------------------------------- profile
-
-
-class _TimedProblem:
-    """The problem with timers around ``evaluate``, ``values`` and ``retract``."""
-
-    def __init__(self, problem: Any, clock: dict[str, float]) -> None:
-        self._p, self._clock = problem, clock
-        self.n, self.n_eq, self.n_ineq = problem.n, problem.n_eq, problem.n_ineq
-
-    def _timed(self, key: str, fn: Callable, *args: Any, **kw: Any) -> Any:
-        t0 = time.perf_counter()
-        try:
-            return fn(*args, **kw)
-        finally:
-            self._clock[key] += time.perf_counter() - t0
-            self._clock["n_" + key] += 1
-
-    def evaluate(self, *args: Any, **kw: Any) -> Any:
-        return self._timed("evaluate", self._p.evaluate, *args, **kw)
-
-    def values(self, *args: Any, **kw: Any) -> Any:
-        return self._timed("values", self._p.values, *args, **kw)
-
-    def retract(self, *args: Any, **kw: Any) -> Any:
-        return self._timed("retract", self._p.retract, *args, **kw)
-
-
-PROFILE_KEYS = ("evaluate", "values", "retract", "assembly", "factorize", "solve")
-
-
-@contextmanager
-def _timed_kkt(clock: dict[str, float]):
-    """Timers on the KKT system's methods (class-level patch, restored on exit)."""
-    cls = ls.KKTSystem
-    saved = {name: getattr(cls, name) for name in ("set_matrices", "factorize", "solve")}
-    key = {"set_matrices": "assembly", "factorize": "factorize", "solve": "solve"}
-
-    def wrap(name: str) -> Callable:
-        fn = saved[name]
-
-        def timed(self: Any, *args: Any, **kw: Any) -> Any:
-            t0 = time.perf_counter()
-            try:
-                return fn(self, *args, **kw)
-            finally:
-                clock[key[name]] += time.perf_counter() - t0
-                clock["n_" + key[name]] += 1
-
-        return timed
-
-    try:
-        for name in saved:
-            setattr(cls, name, wrap(name))
-        yield
-    finally:
-        for name, fn in saved.items():
-            setattr(cls, name, fn)
-
-
-def profile_solve(problem: Any, x0: Any, options: RIPMOptions) -> dict[str, Any]:
-    """Solve once (after a warm-up solve for compilation and pattern analysis) and return the
-    time per iteration of each part, in ms, with counts per iteration."""
-    solve_ripm(problem, x0, options)
-    clock: dict[str, float] = dict.fromkeys(PROFILE_KEYS, 0.0)
-    clock |= {"n_" + k: 0 for k in PROFILE_KEYS}
-    with _timed_kkt(clock):
-        t0 = time.perf_counter()
-        res: RIPMResult = solve_ripm(_TimedProblem(problem, clock), x0, options)
-        wall = time.perf_counter() - t0
-    it = max(res.iterations, 1)
-    parts = sum(clock[k] for k in PROFILE_KEYS)
-    row: dict[str, Any] = {
-        "status": res.status.name,
-        "iterations": res.iterations,
-        "restoration_iterations": int(np.sum(res.history.restoration)),
-        "total_ms": 1e3 * wall,
-        "per_iter_ms": 1e3 * wall / it,
-    }
-    for k in PROFILE_KEYS:
-        row[k + "_ms"] = 1e3 * clock[k] / it
-    row["python_ms"] = 1e3 * (wall - parts) / it
-    for k in PROFILE_KEYS:
-        row[k + "_per_iter"] = clock["n_" + k] / it
-    row["kkt_dim"] = problem.n + problem.n_eq + problem.n_ineq
-    return row
-
-
-def chain_case(method: str, links: int) -> dict:
-    """One chain reach solve (``ripm`` or ``ipopt``) with its verification, as a JSON row."""
-    from mbplan.planning.solve import plan
-    from mbplan.verification import verify
-
-    ocp = chain_task(links)
-    t0 = time.perf_counter()
-    plan(ocp, method, warm_start="linear")  # cold: compilation, symbolic analysis
-    cold = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    result = plan(ocp, method, warm_start="linear", tol=1e-6, max_iter=500)
-    wall = time.perf_counter() - t0
-    check = verify(ocp, result)
-    return {
-        "cold_total_time_s": cold,
-        "success": bool(result.success),
-        "status": result.status,
-        "iterations": int(result.iterations),
-        "solve_time_s": float(result.solve_time_s),
-        "total_time_s": float(wall),
-        "time_per_iter_s": float(result.time_per_iter_s),
-        "verified": bool(check.passed),
-        "verification_reasons": check.reasons,
-    }
-
-
-# ------------------------------------------------------------------------------- orderings
-
-
-def _grid_keys(problem: Any, ev: Any) -> tuple[np.ndarray, np.ndarray] | None:
-    """(knot, body) of every KKT unknown of a TrajectoryProblem: primal coordinates from their
-    block (``flat = knot * count + element``), constraint rows from the first of their columns."""
-    variables = getattr(problem, "variables", None)
-    if variables is None:
-        return None
-    knot, body = np.zeros(problem.n, np.int64), np.zeros(problem.n, np.int64)
-    for name, b in variables.blocks.items():
-        idx = variables.tangent_index(name)
-        flat = np.repeat(np.arange(idx.shape[0]), idx.shape[1]).reshape(idx.shape)
-        free = idx >= 0
-        knot[idx[free]] = flat[free] // b.count
-        body[idx[free]] = flat[free] % b.count
-    keys = [knot, body]
-    for jac in (ev.eq_jacobian, ev.ineq_jacobian):
-        jac = jac.tocsr()
-        rows = np.repeat(np.arange(jac.shape[0]), np.diff(jac.indptr))
-        for i, key in enumerate((knot, body)):
-            first = np.full(jac.shape[0], np.iinfo(np.int64).max)
-            np.minimum.at(first, rows, key[jac.indices])
-            keys[i] = np.concatenate([keys[i], np.where(first == first.max(initial=0), 0, first)])
-    return keys[0], keys[1]
-
-
-def ordering_stats(problem: Any, x0: Any) -> dict[str, dict[str, float]]:
-    """Predicted flops (multiply-adds) and stored factor entries of the KKT matrix at ``x0`` for
-    each elimination order: AMD, nested dissection (:mod:`mbplan.solvers.ordering`) and, for a
-    trajectory problem, AMD constrained to eliminate knot by knot (time-major, stage-wise) or
-    body by body (body-major)."""
-    ev = problem.evaluate(x0, 1.0, np.zeros(problem.n_eq), np.ones(problem.n_ineq))
-    out = {}
-    for ordering in ("amd", "nested"):
-        kkt = ls.KKTSystem(problem.n, problem.n_eq, problem.n_ineq, ordering=ordering)
-        kkt.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
-        a = kkt.analysis
-        out[ordering] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": kkt.dim}
-    keys = _grid_keys(problem, ev)
-    if keys is not None:
-        amd, indptr, indices = kkt_amd_perm(problem, ev)
-        rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
-        for name, (major, minor) in (("time-major", keys), ("body-major", keys[::-1])):
-            perm = amd[np.lexsort((minor[amd], major[amd]))]
-            a = ls._Analysis(len(indptr) - 1, rows, indices, perm)
-            out[name] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": len(perm)}
-        coords = np.column_stack(keys).astype(float)
-        perm = coordinate_dissection_order(indptr, indices, coords)
-        a = ls._Analysis(len(indptr) - 1, rows, indices, perm)
-        out["grid-nd"] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": len(perm)}
-    return out
-
-
-def kkt_amd_perm(problem: Any, ev: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The AMD order of the KKT pattern at ``ev`` and the pattern (lower CSR arrays)."""
-    kkt = ls.KKTSystem(problem.n, problem.n_eq, problem.n_ineq)
-    kkt.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
-    return amd_order(kkt._indptr, kkt._indices), kkt._indptr, kkt._indices
-
+from mbplan.benchmarks.kkt_profile import ordering_stats, profile_solve
+from mbplan.benchmarks.speed_tasks import (
+    CHAIN_LINKS,
+    TASKS,
+    chain_case,
+    chain_problem,
+    chain_task,
+    drone_ripm_problem,
+    drone_task,
+    iiwa_task,
+    maximal_ripm_problem,
+)
 
 # ------------------------------------------------------------------------------- benchmark
 
@@ -394,7 +120,7 @@ def run(
     for name in names:
         profile[name] = [profile_solve(*TASKS[name](i)) for i in range(profile_cases)]
     for k in links:
-        profile[f"chain{k}"] = [profile_solve(*_chain(k))]
+        profile[f"chain{k}"] = [profile_solve(*chain_problem(k))]
     summary["profile"] = {
         name: {key: float(np.median([r[key] for r in rs])) for key in rs[0] if key != "status"}
         for name, rs in profile.items()

@@ -1,0 +1,161 @@
+"""Inside one RIPM solve: the per-iteration time breakdown and the factorization cost (flops,
+fill) of the KKT orderings."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from contextlib import contextmanager
+from typing import Any
+
+import numpy as np
+
+from mbplan.solvers import RIPMOptions, RIPMResult, solve_ripm
+from mbplan.solvers import linear_solver as ls
+from mbplan.solvers.ordering import amd_order, coordinate_dissection_order
+
+
+class _TimedProblem:
+    """The problem with timers around ``evaluate``, ``values`` and ``retract``."""
+
+    def __init__(self, problem: Any, clock: dict[str, float]) -> None:
+        self._p, self._clock = problem, clock
+        self.n, self.n_eq, self.n_ineq = problem.n, problem.n_eq, problem.n_ineq
+
+    def _timed(self, key: str, fn: Callable, *args: Any, **kw: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return fn(*args, **kw)
+        finally:
+            self._clock[key] += time.perf_counter() - t0
+            self._clock["n_" + key] += 1
+
+    def evaluate(self, *args: Any, **kw: Any) -> Any:
+        return self._timed("evaluate", self._p.evaluate, *args, **kw)
+
+    def values(self, *args: Any, **kw: Any) -> Any:
+        return self._timed("values", self._p.values, *args, **kw)
+
+    def retract(self, *args: Any, **kw: Any) -> Any:
+        return self._timed("retract", self._p.retract, *args, **kw)
+
+
+PROFILE_KEYS = ("evaluate", "values", "retract", "assembly", "factorize", "solve")
+
+
+@contextmanager
+def _timed_kkt(clock: dict[str, float]):
+    """Timers on the KKT system's methods (class-level patch, restored on exit)."""
+    cls = ls.KKTSystem
+    saved = {name: getattr(cls, name) for name in ("set_matrices", "factorize", "solve")}
+    key = {"set_matrices": "assembly", "factorize": "factorize", "solve": "solve"}
+
+    def wrap(name: str) -> Callable:
+        fn = saved[name]
+
+        def timed(self: Any, *args: Any, **kw: Any) -> Any:
+            t0 = time.perf_counter()
+            try:
+                return fn(self, *args, **kw)
+            finally:
+                clock[key[name]] += time.perf_counter() - t0
+                clock["n_" + key[name]] += 1
+
+        return timed
+
+    try:
+        for name in saved:
+            setattr(cls, name, wrap(name))
+        yield
+    finally:
+        for name, fn in saved.items():
+            setattr(cls, name, fn)
+
+
+def profile_solve(problem: Any, x0: Any, options: RIPMOptions) -> dict[str, Any]:
+    """Solve once (after a warm-up solve for compilation and pattern analysis) and return the
+    time per iteration of each part, in ms, with counts per iteration."""
+    solve_ripm(problem, x0, options)
+    clock: dict[str, float] = dict.fromkeys(PROFILE_KEYS, 0.0)
+    clock |= {"n_" + k: 0 for k in PROFILE_KEYS}
+    with _timed_kkt(clock):
+        t0 = time.perf_counter()
+        res: RIPMResult = solve_ripm(_TimedProblem(problem, clock), x0, options)
+        wall = time.perf_counter() - t0
+    it = max(res.iterations, 1)
+    parts = sum(clock[k] for k in PROFILE_KEYS)
+    row: dict[str, Any] = {
+        "status": res.status.name,
+        "iterations": res.iterations,
+        "restoration_iterations": int(np.sum(res.history.restoration)),
+        "total_ms": 1e3 * wall,
+        "per_iter_ms": 1e3 * wall / it,
+    }
+    for k in PROFILE_KEYS:
+        row[k + "_ms"] = 1e3 * clock[k] / it
+    row["python_ms"] = 1e3 * (wall - parts) / it
+    for k in PROFILE_KEYS:
+        row[k + "_per_iter"] = clock["n_" + k] / it
+    row["kkt_dim"] = problem.n + problem.n_eq + problem.n_ineq
+    return row
+
+
+# ------------------------------------------------------------------------------- orderings
+
+
+def _grid_keys(problem: Any, ev: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """(knot, body) of every KKT unknown of a TrajectoryProblem: primal coordinates from their
+    block (``flat = knot * count + element``), constraint rows from the first of their columns."""
+    variables = getattr(problem, "variables", None)
+    if variables is None:
+        return None
+    knot, body = np.zeros(problem.n, np.int64), np.zeros(problem.n, np.int64)
+    for name, b in variables.blocks.items():
+        idx = variables.tangent_index(name)
+        flat = np.repeat(np.arange(idx.shape[0]), idx.shape[1]).reshape(idx.shape)
+        free = idx >= 0
+        knot[idx[free]] = flat[free] // b.count
+        body[idx[free]] = flat[free] % b.count
+    keys = [knot, body]
+    for jac in (ev.eq_jacobian, ev.ineq_jacobian):
+        jac = jac.tocsr()
+        rows = np.repeat(np.arange(jac.shape[0]), np.diff(jac.indptr))
+        for i, key in enumerate((knot, body)):
+            first = np.full(jac.shape[0], np.iinfo(np.int64).max)
+            np.minimum.at(first, rows, key[jac.indices])
+            keys[i] = np.concatenate([keys[i], np.where(first == first.max(initial=0), 0, first)])
+    return keys[0], keys[1]
+
+
+def ordering_stats(problem: Any, x0: Any) -> dict[str, dict[str, float]]:
+    """Predicted flops (multiply-adds) and stored factor entries of the KKT matrix at ``x0`` for
+    each elimination order: AMD, nested dissection (:mod:`mbplan.solvers.ordering`) and, for a
+    trajectory problem, AMD constrained to eliminate knot by knot (time-major, stage-wise) or
+    body by body (body-major)."""
+    ev = problem.evaluate(x0, 1.0, np.zeros(problem.n_eq), np.ones(problem.n_ineq))
+    out = {}
+    for ordering in ("amd", "nested"):
+        kkt = ls.KKTSystem(problem.n, problem.n_eq, problem.n_ineq, ordering=ordering)
+        kkt.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+        a = kkt.analysis
+        out[ordering] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": kkt.dim}
+    keys = _grid_keys(problem, ev)
+    if keys is not None:
+        amd, indptr, indices = kkt_amd_perm(problem, ev)
+        rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+        for name, (major, minor) in (("time-major", keys), ("body-major", keys[::-1])):
+            perm = amd[np.lexsort((minor[amd], major[amd]))]
+            a = ls._Analysis(len(indptr) - 1, rows, indices, perm)
+            out[name] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": len(perm)}
+        coords = np.column_stack(keys).astype(float)
+        perm = coordinate_dissection_order(indptr, indices, coords)
+        a = ls._Analysis(len(indptr) - 1, rows, indices, perm)
+        out["grid-nd"] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": len(perm)}
+    return out
+
+
+def kkt_amd_perm(problem: Any, ev: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The AMD order of the KKT pattern at ``ev`` and the pattern (lower CSR arrays)."""
+    kkt = ls.KKTSystem(problem.n, problem.n_eq, problem.n_ineq)
+    kkt.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+    return amd_order(kkt._indptr, kkt._indices), kkt._indptr, kkt._indices

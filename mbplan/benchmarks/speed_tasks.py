@@ -1,0 +1,143 @@
+"""The speed benchmark's tasks: iiwa, drone and chain-reach problems as the RIPM sees them, one
+small function per task, and the chain reach as a benchmark job."""
+
+from __future__ import annotations
+
+import functools
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mbplan.solvers import RIPMOptions
+
+
+def iiwa_task(index: int, n: int = 100, seed: int = 0, constraint: str = "com"):
+    """iiwa obstacle case ``index`` of ``n`` (N = 40) as an OCP (:mod:`mbplan.paper`)."""
+    from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
+
+    q0 = iiwa_obstacle_starts(n, seed, constraint)[index]
+    return iiwa_obstacle(q0, N=40, constraint=constraint)
+
+
+def maximal_ripm_problem(ocp, warm_start: str = "via") -> tuple[Any, Any]:
+    """The RIPM's problem and warm start for an OCP (as ``plan(ocp, "ripm")`` builds them)."""
+    from mbplan.engine.jit import jit_available
+    from mbplan.formulations import maximal
+    from mbplan.planning.initial_guess import initial_path
+
+    nlp, _ = maximal.build(ocp, jit_available())
+    return nlp.problem, nlp.initial_point(initial_path(ocp, warm_start))
+
+
+def drone_task(index: int, n: int = 100, seed: int = 0, limits: bool = False):
+    """Drone docking case ``index`` of ``n`` (RIPM paper §VIII.B)."""
+    from mbplan.tasks.drone import sample_docking_cases
+
+    return sample_docking_cases(n, seed, with_input_limits=limits)[index]
+
+
+def drone_ripm_problem(task) -> tuple[Any, Any]:
+    from mbplan.tasks.drone import geodesic_initial_guess
+    from mbplan.transcription.quadrotor import quadrotor_problem
+
+    problem = quadrotor_problem(task)
+    return problem, problem.check_point(geodesic_initial_guess(task))
+
+
+CHAIN_LINKS = (4, 8, 16, 32, 64)
+CHAIN_LENGTH = 1.0  # m, whole chain
+CHAIN_MASS = 2.0  # kg, whole chain
+
+
+def chain_urdf(n: int) -> str:
+    """URDF of a hanging serial chain of ``n`` equal links (revolute x, y, x, ...), 1 m, 2 kg."""
+    L, m, r = CHAIN_LENGTH / n, CHAIN_MASS / n, 0.01
+    ixx, izz = m * (3 * r * r + L * L) / 12, m * r * r / 2
+    parts = ['<?xml version="1.0"?>', f'<robot name="chain{n}">', '<link name="base"/>']
+    parent = "base"
+    for i in range(n):
+        link = f"link{i + 1}"
+        parts.append(
+            f'<link name="{link}"><inertial><origin xyz="0 0 {-L / 2}"/><mass value="{m}"/>'
+            f'<inertia ixx="{ixx}" iyy="{ixx}" izz="{izz}" ixy="0" ixz="0" iyz="0"/>'
+            "</inertial></link>"
+        )
+        axis = "1 0 0" if i % 2 == 0 else "0 1 0"
+        z = -L if i else 0.0
+        parts.append(
+            f'<joint name="joint{i + 1}" type="revolute"><parent link="{parent}"/>'
+            f'<child link="{link}"/><origin xyz="0 0 {z}"/><axis xyz="{axis}"/>'
+            '<limit lower="-3.1" upper="3.1" effort="100" velocity="10"/></joint>'
+        )
+        parent = link
+    parts.append("</robot>")
+    return "\n".join(parts)
+
+
+@functools.cache
+def _chain_path(n: int) -> str:
+    path = Path(tempfile.gettempdir()) / f"mbplan-chain{n}.urdf"
+    text = chain_urdf(n)
+    if not path.exists() or path.read_text() != text:
+        tmp = path.with_suffix(f".{time.time_ns()}.tmp")
+        tmp.write_text(text)
+        tmp.replace(path)
+    return str(path)
+
+
+def chain_task(n: int, N: int = 40):
+    """Reach with an ``n``-link hanging chain: from rest at q = 0 to a curl of 1.2 rad total."""
+    from mbplan.paper import tracking_ocp
+
+    return tracking_ocp(_chain_path(n), np.zeros(n), np.full(n, 1.2 / n), N=N)
+
+
+def _iiwa(i: int):
+    return (*maximal_ripm_problem(iiwa_task(i)), RIPMOptions(tol=1e-6, max_iter=500))
+
+
+def _drone(i: int, limits: bool = False):
+    return (*drone_ripm_problem(drone_task(i, limits=limits)), RIPMOptions(tol=1e-6, max_iter=100))
+
+
+def chain_problem(n: int):
+    """The RIPM problem, warm start and options of the ``n``-link chain reach."""
+    return (*maximal_ripm_problem(chain_task(n), "linear"), RIPMOptions(tol=1e-6, max_iter=500))
+
+
+TASKS: dict[str, Callable[[int], tuple]] = {
+    "iiwa-com": _iiwa,
+    "drone": _drone,
+    "drone-limits": functools.partial(_drone, limits=True),
+    **{f"chain{n}": (lambda _i, n=n: chain_problem(n)) for n in CHAIN_LINKS},
+}
+
+
+def chain_case(method: str, links: int) -> dict:
+    """One chain reach solve (``ripm`` or ``ipopt``) with its verification, as a JSON row."""
+    from mbplan.planning.solve import plan
+    from mbplan.verification import verify
+
+    ocp = chain_task(links)
+    t0 = time.perf_counter()
+    plan(ocp, method, warm_start="linear")  # cold: compilation, symbolic analysis
+    cold = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    result = plan(ocp, method, warm_start="linear", tol=1e-6, max_iter=500)
+    wall = time.perf_counter() - t0
+    check = verify(ocp, result)
+    return {
+        "cold_total_time_s": cold,
+        "success": bool(result.success),
+        "status": result.status,
+        "iterations": int(result.iterations),
+        "solve_time_s": float(result.solve_time_s),
+        "total_time_s": float(wall),
+        "time_per_iter_s": float(result.time_per_iter_s),
+        "verified": bool(check.passed),
+        "verification_reasons": check.reasons,
+    }
