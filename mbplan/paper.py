@@ -22,7 +22,8 @@ reaches further, so :data:`IIWA_DISTANCE_CYLINDER` is moved 7 cm (57 of 100 bloc
 
 from __future__ import annotations
 
-from functools import lru_cache
+import dataclasses
+from functools import cache, lru_cache
 from typing import Any
 
 import numpy as np
@@ -40,7 +41,7 @@ from mbplan.ocp.residuals import (
     JointVelocity,
     JointVelocityLimits,
 )
-from mbplan.ocp.robot import load_robot
+from mbplan.ocp.robot import Robot, load_robot
 from mbplan.ocp.scene import Scene
 from mbplan.validation import as_int
 
@@ -121,8 +122,18 @@ def iiwa_obstacle(
     q0: Any = IIWA_START, *, N: int = 40, dt: float = 0.075, constraint: str = "com"
 ) -> OCP:
     """The iiwa obstacle task from ``q0`` (module docstring)."""
-    ocp = tracking_ocp("iiwa", q0, IIWA_TARGET, iiwa_scene(constraint), N=N, dt=dt)
+    ocp = tracking_ocp(_paper_iiwa(), q0, IIWA_TARGET, iiwa_scene(constraint), N=N, dt=dt)
     return add_obstacle_constraint(ocp, constraint)
+
+
+@cache
+def _paper_iiwa() -> Robot:
+    """The iiwa of the paper's tasks without the URDF's joint damping (0.5 N m s/rad), which the
+    paper's LGVI does not model. TODO(merge #11): ``load_robot("iiwa", damping=False)``."""
+    robot = load_robot("iiwa")
+    model = robot.model.copy()
+    model.damping[:] = 0.0
+    return dataclasses.replace(robot, model=model)
 
 
 def _start_problem(ocp: OCP, q: np.ndarray, constraint: str) -> str | None:

@@ -1,7 +1,13 @@
 """Discrete dynamics on SO(3)×R³: the Lie group variational integrator and joint constraints."""
 
 from mbplan.dynamics.constraints import axis_constraint, kinematic_chain, pivot_constraint
-from mbplan.dynamics.joints import constraint_forces, revolute_constraint, revolute_forces
+from mbplan.dynamics.joints import (
+    constraint_forces,
+    prismatic_constraint,
+    prismatic_forces,
+    revolute_constraint,
+    revolute_forces,
+)
 from mbplan.dynamics.rigid_body import (
     body_dynamics,
     body_kinematics,
@@ -19,6 +25,8 @@ __all__ = [
     "constraint_forces",
     "kinematic_chain",
     "pivot_constraint",
+    "prismatic_constraint",
+    "prismatic_forces",
     "quadrotor_step",
     "revolute_constraint",
     "revolute_forces",

@@ -4,7 +4,14 @@ Table I rows 5–6) and the generalized forces ``J(x)ᵀλ`` (eq. 25–27) plus 
 Generalized forces are expressed per body as a body-frame torque and a world-frame force, the
 same coordinates as the body's LGVI rows (:func:`mbplan.dynamics.rigid_body.body_dynamics`, in
 N·m and N), so a joint term adds ``-torque`` to a body's rotational and ``-force`` to its
-translational row. Pivot multipliers are then forces in N and axis multipliers torques in N·m.
+translational row. Pivot / slide multipliers are then forces in N and axis / rotation
+multipliers torques in N·m.
+
+Both joint kinds have 5 multipliers: a revolute joint's pivot (3) and axis (2) constraints, a
+prismatic joint's fixed relative rotation (3) and slide constraints (2). Actuation ``u`` (torque
+or force along the axis) and any other generalized joint force ``u`` enter as ``u ∇q(x)``, the
+gradient of the joint coordinate in the same Riemannian coordinates, so the lever arms of a
+prismatic force are those of its two pivot points by construction.
 """
 
 from __future__ import annotations
@@ -14,6 +21,9 @@ from collections.abc import Callable, Sequence
 import casadi as cs
 
 from mbplan.dynamics.constraints import axis_constraint, pivot_constraint
+from mbplan.lie import SO3
+
+Pose = tuple[cs.SX, cs.SX, cs.SX, cs.SX]  # (R_parent, p_parent, R_child, p_child)
 
 
 def revolute_constraint(
@@ -27,6 +37,39 @@ def revolute_constraint(
     return cs.vertcat(
         pivot_constraint(Rp, pp, Rc, pc, r_p, r_c), axis_constraint(Rp, Rc, perp_p.T, axis_c)
     )
+
+
+def prismatic_constraint(
+    Rp: cs.SX, pp: cs.SX, Rc: cs.SX, pc: cs.SX, r_p: cs.SX, r_c: cs.SX, perp_p: cs.SX, R_rel0: cs.SX
+) -> cs.SX:
+    """Fixed relative rotation (3) + slide (2): the 5 residuals of a prismatic joint.
+
+    ``vee(M - Mᵀ)/2 = 0`` with ``M = R_rel0ᵀ R_pᵀ R_c`` (equal to ``log M`` to first order) and
+    ``perp_pᵀ R_pᵀ (R_c r_c + p_c - R_p r_p - p_p) = 0``: the pivot points separate along the axis.
+    """
+    M = cs.mtimes([R_rel0.T, Rp.T, Rc])
+    rotation = 0.5 * SO3.vee(M - M.T)
+    slide = cs.mtimes(perp_p.T, cs.mtimes(Rp.T, -pivot_constraint(Rp, pp, Rc, pc, r_p, r_c)))
+    return cs.vertcat(rotation, slide)
+
+
+def revolute_increment(a: Pose, b: Pose, axis_c: cs.SX) -> cs.SX:
+    """Joint angle from configuration ``a`` to ``b``: ``θ`` of ``R_rel,aᵀ R_rel,b = exp(θ axis_c)``
+    (``atan2`` form, free of wrapping for steps below π)."""
+    E = cs.mtimes([a[2].T, a[0], b[0].T, b[2]])
+    s = 0.5 * cs.dot(axis_c, SO3.vee(E - E.T))
+    return cs.atan2(s, 0.5 * (cs.trace(E) - 1.0))
+
+
+def prismatic_displacement(x: Pose, r_p: cs.SX, r_c: cs.SX, axis_p: cs.SX) -> cs.SX:
+    """Joint displacement ``(R_p axis_p)ᵀ(R_c r_c + p_c - R_p r_p - p_p)`` (m)."""
+    Rp, pp, Rc, pc = x
+    return cs.dot(cs.mtimes(Rp, axis_p), -pivot_constraint(Rp, pp, Rc, pc, r_p, r_c))
+
+
+def prismatic_increment(a: Pose, b: Pose, r_p: cs.SX, r_c: cs.SX, axis_p: cs.SX) -> cs.SX:
+    """Joint displacement from configuration ``a`` to ``b`` (m)."""
+    return prismatic_displacement(b, r_p, r_c, axis_p) - prismatic_displacement(a, r_p, r_c, axis_p)
 
 
 def constraint_forces(
@@ -45,6 +88,15 @@ def constraint_forces(
     J = cs.jacobian(h(*perturbed), eta)
     gen = cs.substitute(cs.mtimes(J.T, lam), eta, cs.DM.zeros(eta.size1()))
     return [(gen[6 * i : 6 * i + 3], gen[6 * i + 3 : 6 * i + 6]) for i in range(len(bodies))]
+
+
+def joint_coordinate_forces(increment: Callable[[Pose, Pose], cs.SX], x: Pose, u: cs.SX) -> cs.SX:
+    """Rows ``-u ∇q(x)`` (parent rot., trans., child rot., trans.; 12) of a generalized joint
+    force ``u``, with ``∇q`` the gradient of ``increment(x, ·)`` at ``x``."""
+    (tp, fp), (tc, fc) = constraint_forces(
+        lambda *y: increment(x, y), [(x[0], x[1]), (x[2], x[3])], u
+    )
+    return cs.vertcat(-tp, -fp, -tc, -fc)
 
 
 def revolute_forces(
@@ -75,17 +127,35 @@ def revolute_forces(
     return cs.vertcat(-(tp + act_p), -fp, -(tc + act_c), -fc)
 
 
-def revolute_forces_on_child(
+def prismatic_forces(
+    Rp: cs.SX,
+    pp: cs.SX,
     Rc: cs.SX,
     pc: cs.SX,
     lam: cs.SX,
     tau: cs.SX,
-    Rp: cs.SX,
-    pp: cs.SX,
     r_p: cs.SX,
     r_c: cs.SX,
     perp_p: cs.SX,
-    axis_c: cs.SX,
+    axis_p: cs.SX,
+    R_rel0: cs.SX,
 ) -> cs.SX:
-    """:func:`revolute_forces` for a joint to a fixed parent (the world): child rows only (6)."""
-    return revolute_forces(Rp, pp, Rc, pc, lam, tau, r_p, r_c, perp_p, axis_c)[6:]
+    """:func:`revolute_forces` of a prismatic joint: ``J(x)ᵀλ`` of :func:`prismatic_constraint`
+    and the force ``τ`` along the axis, equal and opposite on the two pivot points."""
+
+    def h(Rp_, pp_, Rc_, pc_):
+        return prismatic_constraint(Rp_, pp_, Rc_, pc_, r_p, r_c, perp_p, R_rel0)
+
+    (tp, fp), (tc, fc) = constraint_forces(h, [(Rp, pp), (Rc, pc)], lam)
+    x = (Rp, pp, Rc, pc)
+    act = joint_coordinate_forces(lambda a, b: prismatic_increment(a, b, r_p, r_c, axis_p), x, tau)
+    return cs.vertcat(-tp, -fp, -tc, -fc) + act
+
+
+def world_child_rows(forces: Callable[..., cs.SX]) -> Callable[..., cs.SX]:
+    """``forces`` for a joint to a fixed parent (the world, ``Rp``/``pp`` data): child rows (6)."""
+
+    def child(Rc, pc, lam, tau, Rp, pp, **params):
+        return forces(Rp, pp, Rc, pc, lam, tau, **params)[6:]
+
+    return child

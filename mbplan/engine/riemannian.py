@@ -72,7 +72,8 @@ class RiemannianFunction(SiteFunction):
         p = cs.SX.sym("p", self.np)
         xi = cs.SX.sym("xi", self.n)
         args = _unpack(z, self.variables) | _unpack(p, self.parameters)
-        r0 = cs.vec(cs.SX(residual(**args)))
+        # dense: the value buffers are dense, a structural zero row would be left unwritten
+        r0 = cs.densify(cs.vec(cs.SX(residual(**args))))
         self.m = r0.size1()
         lam = cs.SX.sym("lam", self.m)
 

@@ -3,14 +3,9 @@
 The multi-body LGVI of :mod:`mbplan.transcription.multibody` plus one group of terms per OCP
 item, each residual kind written once on the bodies' poses:
 
-* joint position: with ``R_rel = R_pᵀR_c = R_rel0 exp(θ a)`` and ``E = R_targetᵀ R_rel =
-  exp(Δθ a)``, a cost is the chordal distance (eq. 57) ``w (1 - cos Δθ) ≈ ½ w Δθ²`` and a
-  constraint ``Δθ = atan2(aᵀ vee(E - Eᵀ)/2, (tr E - 1)/2) = 0``;
-* joint velocity, the step ``θ_{k+1} - θ_k`` over ``Δt`` from ``R_rel,k+1 = F_pᵀ R_rel,k F_c``:
-  a cost (target zero only) ``w (1 - cos(θ_{k+1} - θ_k))/Δt²``, a constraint the ``atan2`` step;
-* joint position limits ``cos(θ - θ_mid) ≥ cos(θ_half)`` and velocity limits
-  ``cos(θ_{k+1} - θ_k) ≥ cos(v_max Δt)`` (exact for ranges below 2π; symmetric velocity limits);
-* torques ``τ`` at the knots (interval ``k`` of the OCP is the LGVI's knot ``k+1``, eq. 29);
+* joint positions, velocities and their limits of revolute and prismatic joints
+  (:mod:`mbplan.formulations.maximal_joints`);
+* torques (forces for prismatic joints) ``τ`` at the knots (interval ``k`` of the OCP is the LGVI's knot ``k+1``, eq. 29);
 * frame translation and placement on the pose ``(R_b R_jf, p_b + R_b c)`` of the frame's body;
 * eq. (62) on the body COMs, coal distances on the body poses (:mod:`.distance`).
 """
@@ -27,6 +22,7 @@ import pinocchio as pin
 from mbplan.engine import RiemannianFunction
 from mbplan.errors import InputError
 from mbplan.formulations.joint_space import distance_pairs, frame_error
+from mbplan.formulations.maximal_joints import joint_terms
 from mbplan.lie import SO3, R
 from mbplan.multibody import MaximalModel, joint_positions, maximal_model
 from mbplan.ocp.problem import OCP, Item
@@ -44,79 +40,11 @@ from mbplan.ocp.residuals import (
 )
 from mbplan.simulation.warm_start import maximal_warm_start
 from mbplan.transcription.constraints import cylinder_clearance_function
-from mbplan.transcription.costs import chordal_cost
 from mbplan.transcription.distance import distance_constraint_function, pair_bodies
 from mbplan.transcription.multibody import multibody_layout
 from mbplan.transcription.problem import TrajectoryProblem
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Point, TrajectoryVariables
-
-
-def _relative(Rp, Fp, Rc, Fc):
-    rel = cs.mtimes(Rp.T, Rc)
-    return rel, cs.mtimes([Fp.T, rel, Fc])
-
-
-def _cos_angle(A, B):
-    return 0.5 * (cs.trace(cs.mtimes(A.T, B)) - 1.0)
-
-
-def _angle(A, B, a):
-    """Signed angle of ``AᵀB = exp(θ a)`` about ``a``."""
-    E = cs.mtimes(A.T, B)
-    s = 0.5 * cs.dot(a, cs.vertcat(E[2, 1] - E[1, 2], E[0, 2] - E[2, 0], E[1, 0] - E[0, 1]))
-    return cs.atan2(s, 0.5 * (cs.trace(E) - 1.0))
-
-
-def _position_cost(Rp, Fp, Rc, Fc, R_t, w):
-    return chordal_cost(_relative(Rp, Fp, Rc, Fc)[0], R_t, 0.5 * w * cs.DM.eye(3))
-
-
-def _position_eq(Rp, Fp, Rc, Fc, R_t, a):
-    return _angle(R_t, _relative(Rp, Fp, Rc, Fc)[0], a)
-
-
-def _velocity_cost(Rp, Fp, Rc, Fc, w):
-    rel, nxt = _relative(Rp, Fp, Rc, Fc)
-    return chordal_cost(nxt, rel, 0.5 * w * cs.DM.eye(3))
-
-
-def _velocity_eq(Rp, Fp, Rc, Fc, a, target, dt):
-    rel, nxt = _relative(Rp, Fp, Rc, Fc)
-    return _angle(rel, nxt, a) / dt - target
-
-
-def _position_limits(Rp, Fp, Rc, Fc, R_mid, cos_half):
-    return cos_half - _cos_angle(R_mid, _relative(Rp, Fp, Rc, Fc)[0])
-
-
-def _velocity_limits(Rp, Fp, Rc, Fc, cos_step):
-    rel, nxt = _relative(Rp, Fp, Rc, Fc)
-    return cos_step - _cos_angle(rel, nxt)
-
-
-_JOINT = {
-    "position_cost": (_position_cost, [("R_t", (3, 3)), ("w", 1)]),
-    "position_eq": (_position_eq, [("R_t", (3, 3)), ("a", 3)]),
-    "velocity_cost": (_velocity_cost, [("w", 1)]),
-    "velocity_eq": (_velocity_eq, [("a", 3), ("target", 1), ("dt", 1)]),
-    "position_limits": (_position_limits, [("R_mid", (3, 3)), ("cos_half", 1)]),
-    "velocity_limits": (_velocity_limits, [("cos_step", 1)]),
-}
-_JOINT_VARS = [("Rp", SO3), ("Fp", SO3), ("Rc", SO3), ("Fc", SO3)]
-
-
-@cache
-def _joint_function(kind: str, jit: bool, world: bool) -> RiemannianFunction:
-    fn, params = _JOINT[kind]
-    if world:
-
-        def world_fn(Rc, Fc, **p):
-            return fn(cs.DM.eye(3), cs.DM.eye(3), Rc, Fc, **p)
-
-        return RiemannianFunction(f"joint_{kind}_world", _JOINT_VARS[2:], world_fn, params, jit=jit)
-    return RiemannianFunction(f"joint_{kind}", _JOINT_VARS, fn, params, jit=jit)
-
 
 _TORQUE = {
     "cost": (lambda tau, t, w: 0.5 * w * (tau - t) ** 2, [("t", 1), ("w", 1)]),
@@ -176,63 +104,64 @@ class MaximalNLP:
         return np.array([where[int(i)] for i in idx], dtype=np.int64)
 
     def _about_axis(self, bodies: np.ndarray, angles: np.ndarray) -> np.ndarray:
+        """``R_rel0 exp(θ a)`` of revolute joints (identity for other joints' entries)."""
         mm = self.mm
+        angles = np.where(mm.revolute[bodies], angles, 0.0)
         return mm.R_rel0[bodies] @ SO3.exp(angles[:, None] * mm.axis_child[bodies])
 
-    def _joint_terms(self, item: Item, kind: str, bodies: np.ndarray, per_body: dict, shared: dict):
-        """Terms of a joint function at ``item.knots × bodies`` (world / non-world parents)."""
-        mm, nb = self.mm, self.mm.nb
-        kk, ii = (a.ravel() for a in np.meshgrid(item.knots, np.arange(len(bodies)), indexing="ij"))
-        b = bodies[ii]
-        out = []
-        sense = "cost" if item.role == "cost" else item.residual.sense
-        for world in (True, False):
-            mask = (mm.parent[b] < 0) == world
-            if not mask.any():
-                continue
-            k, bb = kk[mask], b[mask]
-            bind = {"Rc": ("R", k * nb + bb), "Fc": ("F", k * nb + bb)}
-            if not world:
-                par = mm.parent[bb]
-                bind |= {"Rp": ("R", k * nb + par), "Fp": ("F", k * nb + par)}
-            params = {n: v[ii[mask]] for n, v in per_body.items()} | shared
-            fn = _joint_function(kind, self.jit, world)
-            out.append(Term(f"{item.name}{'_world' if world else ''}", sense, fn, bind, params))
-        return out
+    def _joint_terms(
+        self,
+        item: Item,
+        kind: str,
+        bodies: np.ndarray,
+        revolute: dict,
+        prismatic: dict,
+        shared: dict | None = None,
+    ) -> list[Term]:
+        """Terms of a joint residual at ``item.knots × bodies`` (revolute / prismatic joints)."""
+        per = {"revolute": revolute, "prismatic": prismatic}
+        common = {"revolute": dict(shared or {}), "prismatic": dict(shared or {})}
+        common["revolute"] |= {"dt": self.ocp.dt} if kind == "velocity_eq" else {}
+        return joint_terms(self.mm, item, kind, self.jit, bodies, per, common, self.ocp.dt)
 
     def _terms(self, item: Item) -> list[Term]:
         r, mm, nb, ocp = item.residual, self.mm, self.mm.nb, self.ocp
         cost = item.role == "cost"
+        rev = mm.revolute
         if isinstance(r, JointPosition):
             b = self._bodies(item)
-            R_t = self._about_axis(b, np.asarray(r.target))
+            t = np.asarray(r.target, dtype=float)
+            R_t = self._about_axis(b, t)
             if cost:
-                return self._joint_terms(item, "position_cost", b, {"R_t": R_t}, {"w": item.weight})
-            return self._joint_terms(
-                item, "position_eq", b, {"R_t": R_t, "a": mm.axis_child[b]}, {}
-            )
+                w = {"w": item.weight}
+                return self._joint_terms(item, "position_cost", b, {"R_t": R_t}, {"t": t}, w)
+            per = {"R_t": R_t, "a": mm.axis_child[b]}
+            return self._joint_terms(item, "position_eq", b, per, {"t": t})
         if isinstance(r, JointVelocity):
             b = self._bodies(item)
+            target = np.asarray(r.target, dtype=float)
             if cost:
-                if np.any(np.asarray(r.target) != 0.0):
+                if np.any(target != 0.0):
                     raise InputError("a velocity cost with a nonzero target is not expressible")
-                return self._joint_terms(
-                    item, "velocity_cost", b, {}, {"w": item.weight / ocp.dt**2}
-                )
-            per = {"a": mm.axis_child[b], "target": np.asarray(r.target)}
-            return self._joint_terms(item, "velocity_eq", b, per, {"dt": ocp.dt})
+                w = {"w": item.weight / ocp.dt**2}
+                return self._joint_terms(item, "velocity_cost", b, {}, {}, w)
+            per = {"a": mm.axis_child[b], "target": target}
+            return self._joint_terms(item, "velocity_eq", b, per, {"target": target})
         if isinstance(r, JointPositionLimits):
             b = np.arange(nb)
             lo, hi = np.asarray(r.lower)[mm.idx_v], np.asarray(r.upper)[mm.idx_v]
             half = np.minimum(0.5 * (hi - lo), np.pi)
             per = {"R_mid": self._about_axis(b, 0.5 * (lo + hi)), "cos_half": np.cos(half)}
-            return self._joint_terms(item, "position_limits", b, per, {})
+            return self._joint_terms(item, "position_limits", b, per, {"lo": lo, "hi": hi})
         if isinstance(r, JointVelocityLimits):
             lo, hi = np.asarray(r.lower)[mm.idx_v], np.asarray(r.upper)[mm.idx_v]
-            if not np.allclose(lo, -hi):
-                raise InputError("asymmetric velocity limits are not expressible")
+            if not np.allclose(lo[rev], -hi[rev]):
+                raise InputError(
+                    "asymmetric velocity limits of revolute joints are not expressible"
+                )
             per = {"cos_step": np.cos(np.minimum(hi * ocp.dt, np.pi))}
-            return self._joint_terms(item, "velocity_limits", np.arange(nb), per, {})
+            b = np.arange(nb)
+            return self._joint_terms(item, "velocity_limits", b, per, {"lo": lo, "hi": hi})
         if isinstance(r, (JointTorque, JointTorqueLimits)):
             if isinstance(r, JointTorque):
                 b = self._bodies(item)
@@ -295,22 +224,24 @@ class MaximalNLP:
         """Joint-space view of a maximal point: ``q, v (N+1, nq)``, ``tau (N, nv)`` (interval
         means), ``tau_knots (N+1, nv)`` (first-order hold of the LGVI's knot torques, eq. 29).
 
-        ``q_k`` from the relative rotations and ``v_k = (q_{k+1} - q_{k-1})/(2Δt)`` (with
+        ``q_k`` from the relative poses and ``v_k = (q_{k+1} - q_{k-1})/(2Δt)`` (with
         ``q_{N+1}`` from ``R_N F_N``). Knot 0's torque does not enter the LGVI, where the arm
         rests over the first step as in eq. (61): ``tau_knots[0]`` makes the mean over
         ``[t_0, t_1]`` the torque for which eq. (61)'s first step reaches the planned ``v_1``.
         """
         mm, N, dt = self.mm, self.ocp.N, self.ocp.dt
         Rk = np.concatenate([x["R"], (x["R"][-1] @ x["F"][-1])[None]])
+        pk = np.concatenate([x["p"], (x["p"][-1] + x["v"][-1] * dt)[None]])
         q = np.empty((N + 2, mm.nq))
-        q[0] = joint_positions(mm, Rk[0], q_ref=self.ocp.q0)
+        q[0] = joint_positions(mm, Rk[0], pk[0], q_ref=self.ocp.q0)
         for k in range(1, N + 2):
-            q[k] = joint_positions(mm, Rk[k], q_ref=q[k - 1])
+            q[k] = joint_positions(mm, Rk[k], pk[k], q_ref=q[k - 1])
         v = np.zeros((N + 1, mm.nv))
         v[0] = self.ocp.v0
         v[1:] = (q[2:] - q[:-2]) / (2 * dt)
         tau_knots = np.array(x["tau"][:, :, 0])[:, np.argsort(mm.idx_v)]
         tau_0 = pin.rnea(mm.model, mm.model.createData(), q[0], v[0], (v[1] - v[0]) / dt)
+        tau_0 = tau_0 + np.asarray(mm.model.damping) * v[0]  # the LGVI's viscous damping
         tau_knots[0] = 2.0 * tau_0 - tau_knots[1]
         tau = 0.5 * (tau_knots[:-1] + tau_knots[1:])
         return {"q": q[: N + 1], "v": v, "tau": tau, "tau_knots": tau_knots}

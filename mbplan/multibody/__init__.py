@@ -4,6 +4,7 @@ from mbplan.multibody.model import MaximalModel, maximal_model, nonstandard_iner
 from mbplan.multibody.state_maps import (
     body_poses,
     body_velocities,
+    joint_constraint_residuals,
     joint_positions,
     joint_velocities,
 )
@@ -12,6 +13,7 @@ __all__ = [
     "MaximalModel",
     "body_poses",
     "body_velocities",
+    "joint_constraint_residuals",
     "joint_positions",
     "joint_velocities",
     "maximal_model",

@@ -131,6 +131,28 @@ def joint_velocities(
     return v
 
 
+def joint_constraint_residuals(mm: MaximalModel, R: npt.ArrayLike, p: npt.ArrayLike) -> np.ndarray:
+    """Worst joint constraint residual at each knot of poses ``R (K, nb, 3, 3)``, ``p (K, nb, 3)``:
+    ``(K,)``. Revolute: pivot gap (3) and axis ``(R_p perp_i)ᵀ(R_c a)`` (2); prismatic: rotation
+    ``vee(M - Mᵀ)/2``, ``M = R_rel0ᵀR_pᵀR_c`` (3), and slide ``perp_iᵀR_pᵀ gap`` (2)."""
+    R, p = np.asarray(R, dtype=float), np.asarray(p, dtype=float)
+    out = np.empty(len(R))
+    revolute = mm.revolute
+    for k, (Rk, pk) in enumerate(zip(R, p, strict=True)):
+        Rp = _from_parent(mm, Rk, np.eye(3))
+        gap = _pivot_separation(mm, Rk, pk, Rp)
+        perp_world = np.einsum("bij,bkj->bki", Rp, mm.perp_parent)
+        axis = np.einsum("bki,bij,bj->bk", perp_world, Rk, mm.axis_child)
+        M = np.einsum("bji,bjk->bik", mm.R_rel0, np.einsum("bji,bjk->bik", Rp, Rk))
+        skew = 0.5 * (M - M.transpose(0, 2, 1))
+        rotation = np.stack([skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0]], 1)
+        slide = np.einsum("bki,bi->bk", perp_world, gap)
+        rev = np.concatenate([gap, axis], 1)[revolute]
+        pri = np.concatenate([rotation, slide], 1)[~revolute]
+        out[k] = np.abs(np.concatenate([rev.ravel(), pri.ravel(), [0.0]])).max()
+    return out
+
+
 def _pivot_separation(mm: MaximalModel, R: np.ndarray, p: np.ndarray, Rp: np.ndarray) -> np.ndarray:
     """(nb, 3) world vector from the parent's pivot point to the child's (pivot constraint)."""
     pp = _from_parent(mm, p, np.zeros(3))

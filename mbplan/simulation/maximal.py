@@ -58,7 +58,9 @@ def simulate_maximal(
 ) -> MaximalTrajectory:
     """Simulate ``N`` steps from configurations ``q0`` (t = 0) and ``q1`` (t = Δt).
 
-    ``tau``: joint torques, ``(nb,)`` constant or ``(N+1, nb)`` per knot (knot 0 unused).
+    ``tau``: joint torques (forces for prismatic joints), ``(nb,)`` constant or ``(N+1, nb)``
+    per knot (knot 0 unused; knot ``k`` acts at ``t = kΔt``). Joints with ``mm.damping > 0``
+    are damped (:mod:`mbplan.dynamics.damping`).
     """
     jit = jit_available() if jit is None else jit
     if N < 1 or dt <= 0:
@@ -101,8 +103,25 @@ def simulate_maximal(
     return MaximalTrajectory(R, p, F, v, lam, iterations, worst)
 
 
+def discrete_energy(
+    mm: MaximalModel, p: np.ndarray, F: np.ndarray, v: np.ndarray, dt: float
+) -> np.ndarray:
+    """Discrete energy of each step ``k → k+1`` (eq. 33): ``(K,)``.
+
+    ``E_k = Σ_b tr((I - F_k) J_b)/Δt² + ½ m_b‖v_k‖² - m_b gᵀ(p_k + p_{k+1})/2``; the rotational
+    term equals ``tr((F_k - I) J (F_k - I)ᵀ)/(2Δt²)``, i.e. ``T_d/Δt`` of eq. 33, and tends to
+    ``½ ωᵀ I_b ω``.
+    """
+    rot = np.einsum("kbij,bji->kb", np.eye(3) - F, mm.inertia_nonstandard) / dt**2
+    trans = 0.5 * mm.mass * np.einsum("kbi,kbi->kb", v, v)
+    mid = p + 0.5 * dt * v  # (p_k + p_{k+1}) / 2 with p_{k+1} = p_k + v_k Δt (eq. 30)
+    potential = -mm.mass * np.einsum("kbi,i->kb", mid, mm.gravity)
+    return (rot + trans + potential).sum(axis=1)
+
+
 def _newton(problem: TrajectoryProblem, point: dict, tol: float, max_iter: int, step: int):
-    """Newton's method on the manifold with backtracking on ``‖residual‖∞``."""
+    """Newton's method on the manifold with backtracking on ``‖residual‖∞``; a residual below
+    ``100 tol`` that a step no longer halves is accepted as converged (round-off floor)."""
     ev = problem.evaluate(point, hessian=False)
     res = float(np.max(np.abs(ev.eq)))
     for it in range(max_iter + 1):
@@ -120,6 +139,8 @@ def _newton(problem: TrajectoryProblem, point: dict, tol: float, max_iter: int, 
             if trial_res < res or alpha < 1e-4:
                 break
             alpha *= 0.5
+        if res <= 100.0 * tol and trial_res > 0.5 * res:
+            return (trial, it + 1, trial_res) if trial_res < res else (point, it, res)
         point = trial
         ev = problem.evaluate(point, hessian=False)
         res = float(np.max(np.abs(ev.eq)))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pinocchio as pin
 
@@ -10,22 +12,33 @@ def integrate_aba(
     model: pin.Model,
     q0: np.ndarray,
     v0: np.ndarray,
-    tau: np.ndarray,
+    tau: np.ndarray | Callable[[float], np.ndarray],
     T: float,
     substeps: int,
     tau_end: np.ndarray | None = None,
+    *,
+    damping: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(q(T), v(T))`` by RK4 on the configuration manifold (no damping) for constant ``tau``,
-    or, with ``tau_end``, the torque ramping linearly from ``tau`` at 0 to ``tau_end`` at ``T``
-    (first-order hold; RK4 samples it at each stage's time, so it stays fourth order)."""
+    """``(q(T), v(T))`` by RK4 on the configuration manifold for constant ``tau``, or, with
+    ``tau_end``, the torque ramping linearly from ``tau`` at 0 to ``tau_end`` at ``T``
+    (first-order hold; RK4 samples it at each stage's time, so it stays fourth order), or a
+    callable ``tau(t)``, ``t`` from 0 to ``T``. ``damping=True`` adds the viscous joint force
+    ``-model.damping * v`` (URDF ``<dynamics damping>``) to the torque."""
     data = model.createData()
     h = T / substeps
     q, v = np.array(q0, dtype=float), np.array(v0, dtype=float)
-    tau0 = np.asarray(tau, dtype=float)
-    slope = None if tau_end is None else (np.asarray(tau_end, dtype=float) - tau0) / T
+    c = np.array(model.damping) if damping else np.zeros(model.nv)
+    if callable(tau):
+        torque = tau
+    else:
+        tau0 = np.asarray(tau, dtype=float)
+        slope = None if tau_end is None else (np.asarray(tau_end, dtype=float) - tau0) / T
+
+        def torque(t: float) -> np.ndarray:
+            return tau0 if slope is None else tau0 + t * slope
 
     def acc(qq: np.ndarray, vv: np.ndarray, t: float) -> np.ndarray:
-        return pin.aba(model, data, qq, vv, tau0 if slope is None else tau0 + t * slope)
+        return pin.aba(model, data, qq, vv, torque(t) - c * vv)
 
     for i in range(substeps):
         t = i * h

@@ -1,0 +1,121 @@
+"""A smooth, non-chaotic motion for validating the LGVI against Pinocchio (issue #11 item 4).
+
+From rest at ``q₀`` (each joint in the central half of its range), joint ``i`` follows the
+nominal motion ``δ_i(t) = A_i (1 - cos ω_i t)`` (``A_i`` 10 % of its range, at most 0.3 rad,
+``ω_i ~ U(3, 8) rad/s``) under the open-loop torque of Pinocchio's inverse dynamics plus the
+viscous damping of the model, pushed off it by a smooth random torque that starts at zero:
+
+    τ(t) = RNEA(q_d, q̇_d, q̈_d) + c q̇_d + s ∘ sin²(ω' t),   s = 0.2 M(q₀) u,  u ~ U(-1, 1)
+
+(pushes of ~0.2 rad/s², ``ω' ~ U(5, 15) rad/s``). Speeds stay of order ``A ω`` (≤ 2.4 rad/s), the
+start is at rest on the motion (no initial layer in stiffly damped joints), and the torques are
+smooth, so the error of a method of order ``p`` behaves as ``C Δt^p`` — unlike a free fall from a
+random pose, where light arms reach 100+ rad/s and errors of right and wrong integrators agree.
+
+The reference is RK4 on Pinocchio's ABA with the damping force ``-c v``, at a step of at most
+``Δt_min/16`` and ``0.5/λ_max`` (``λ_max`` the largest eigenvalue of ``M(q₀)⁻¹ diag(c)``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from mbplan.multibody import MaximalModel, joint_positions
+from mbplan.simulation import integrate_aba
+
+
+@dataclass(frozen=True, eq=False)
+class SmoothScenario:
+    """The motion and torques of the module docstring (arrays in Pinocchio's ``v`` order)."""
+
+    model: pin.Model  # with the damping of the run (model.damping)
+    q0: np.ndarray  # (nq,)
+    amplitude: np.ndarray  # (nv,)
+    omega: np.ndarray  # (nv,)
+    push: np.ndarray  # (nv,)
+    push_omega: np.ndarray  # (nv,)
+
+    def motion(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Nominal ``(q_d, q̇_d, q̈_d)`` at time ``t``."""
+        A, w = self.amplitude, self.omega
+        q = pin.integrate(self.model, self.q0, A * (1.0 - np.cos(w * t)))
+        return q, A * w * np.sin(w * t), A * w**2 * np.cos(w * t)
+
+    def torque(self, t: float) -> np.ndarray:
+        """Joint torques ``τ(t)`` (N·m, N for prismatic joints), ``(nv,)``."""
+        q, v, a = self.motion(t)
+        data = self.model.createData()
+        nominal = pin.rnea(self.model, data, q, v, a) + np.asarray(self.model.damping) * v
+        return nominal + self.push * np.sin(self.push_omega * t) ** 2
+
+    def reference_step(self, dt_min: float) -> int:
+        """RK4 substeps per ``dt_min`` (module docstring)."""
+        data = self.model.createData()
+        M = pin.crba(self.model, data, self.q0)
+        M = np.triu(M) + np.triu(M, 1).T
+        lam = np.linalg.eigvals(np.linalg.solve(M, np.diag(self.model.damping))).real.max()
+        return max(16, math.ceil(dt_min * lam / 0.5))
+
+    def reference(self, h: float, n: int, substeps: int) -> tuple[np.ndarray, np.ndarray]:
+        """``q (n+1, nq)`` and ``v (n+1, nv)`` at ``t = k h`` (RK4 on ABA, damped)."""
+        q, v = self.q0.copy(), np.zeros(self.model.nv)
+        qs, vs = [q], [v]
+        for k in range(n):
+            t0 = k * h
+            q, v = integrate_aba(
+                self.model, q, v, lambda s, t0=t0: self.torque(t0 + s), h, substeps, damping=True
+            )
+            qs.append(q)
+            vs.append(v)
+        return np.array(qs), np.array(vs)
+
+
+def smooth_scenario(mm: MaximalModel, seed: int) -> SmoothScenario:
+    """The seeded scenario of ``mm.model`` (module docstring)."""
+    model = mm.model
+    rng = np.random.default_rng(seed)
+    lo, hi = np.full(model.nv, -np.pi), np.full(model.nv, np.pi)
+    bounded = np.isfinite(mm.lower_position_limit) & np.isfinite(mm.upper_position_limit)
+    bounded &= mm.upper_position_limit > mm.lower_position_limit
+    lo[mm.idx_v[bounded]] = mm.lower_position_limit[bounded]
+    hi[mm.idx_v[bounded]] = mm.upper_position_limit[bounded]
+    span, mid = hi - lo, 0.5 * (lo + hi)
+    revolute = np.zeros(model.nv, dtype=bool)
+    revolute[mm.idx_v] = mm.revolute
+    q0 = pin.integrate(model, pin.neutral(model), mid + span * rng.uniform(-0.25, 0.25, model.nv))
+    amplitude = 0.1 * span * rng.uniform(0.5, 1.0, model.nv)
+    amplitude = np.where(revolute, np.minimum(amplitude, 0.3), amplitude)
+    omega = rng.uniform(3.0, 8.0, model.nv)
+    M = pin.crba(model, model.createData(), q0)
+    M = np.triu(M) + np.triu(M, 1).T
+    push = 0.2 * M @ rng.uniform(-1.0, 1.0, model.nv)
+    return SmoothScenario(model, q0, amplitude, omega, push, rng.uniform(5.0, 15.0, model.nv))
+
+
+def joint_trajectory(
+    mm: MaximalModel, R: np.ndarray, p: np.ndarray, q_start: np.ndarray
+) -> np.ndarray:
+    """Joint configurations ``(K, nq)`` of body poses ``R (K, nb, 3, 3)``, ``p (K, nb, 3)``, each
+    angle taken in the 2π-window of the previous knot's (continuity from ``q_start``)."""
+    out = np.empty((len(R), mm.nq))
+    q = q_start
+    for k, (Rk, pk) in enumerate(zip(R, p, strict=True)):
+        q = out[k] = joint_positions(mm, Rk, pk, q_ref=q)
+    return out
+
+
+def joint_errors(mm: MaximalModel, q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+    """Joint differences ``(K, nb)`` in rad or m (continuous joints via their (cos, sin) pair)."""
+    plain = mm.idx_q[~mm.continuous]
+    err = np.zeros((len(q), mm.nb))
+    err[:, ~mm.continuous] = q[:, plain] - q_ref[:, plain]
+    c = mm.idx_q[mm.continuous]
+    err[:, mm.continuous] = np.arctan2(
+        q[:, c + 1] * q_ref[:, c] - q[:, c] * q_ref[:, c + 1],
+        q[:, c] * q_ref[:, c] + q[:, c + 1] * q_ref[:, c + 1],
+    )
+    return err
