@@ -120,7 +120,9 @@ CLI_CASES = [
     (["validate-dynamics", "--duration", "0"], "--duration: must be a finite number > 0"),
     (["validate-dynamics", "--duration", "nan"], "--duration: must be a finite number > 0"),
     (["validate-dynamics", "--duration", "-1"], "--duration: must be a finite number > 0"),
-    (["validate-dynamics", "--long-steps", "0"], "--long-steps: must be >= 1"),
+    (["validate-dynamics", "--duration", "0.3"], "dt=0.008 must divide T=0.3"),
+    (["validate-dynamics", "--robot", "iiwa,iiwa"], "--robot: expected distinct"),
+    (["validate-dynamics", "--robot", "nosuchbot"], "nosuchbot"),
     (["validate-dynamics", "--seed", "-3"], "--seed: must be >= 0"),
     (["validate-dynamics", "--out", "{tmp}/file"], "--out: .*file is a file, expected a directory"),
     # bench engine / chain

@@ -44,6 +44,27 @@ def factory_ocp(distance: bool) -> mb.OCP:
     return ocp
 
 
+PANDA_START = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.79, 0.01, 0.01])
+FINGERS = ("panda_finger_joint1", "panda_finger_joint2")
+
+
+def panda_ocp() -> mb.OCP:
+    """Every joint residual kind on the panda with its two prismatic fingers not locked."""
+    ocp = mb.OCP("panda", N=3, dt=0.05, q0=PANDA_START)
+    target = PANDA_START + np.r_[np.full(7, 0.2), 0.01, 0.015]
+    ocp.add_cost("q", res.JointPosition(target), 1.3)
+    ocp.add_cost("v", res.JointVelocity(), 0.1)
+    ocp.add_cost("tau", res.JointTorque(), 1e-3)
+    ocp.add_constraint("fingers", res.JointPosition([0.02, 0.025], joints=FINGERS), knots=[2])
+    ocp.add_constraint("finger_v", res.JointVelocity([0.05], FINGERS[:1]), knots=[1])
+    ocp.add_constraint("finger_force", res.JointTorque([1.0], FINGERS[1:]), knots=[1])
+    ocp.add_terminal_constraint("hand", res.FrameTranslation("panda_leftfinger", [0.3, 0.0, 0.5]))
+    ocp.add_constraint("q_limits", res.JointPositionLimits())
+    ocp.add_constraint("v_limits", res.JointVelocityLimits())
+    ocp.add_constraint("tau_limits", res.JointTorqueLimits())
+    return ocp
+
+
 def _central(fn, x, h):
     return np.column_stack([(fn(x + h * e) - fn(x - h * e)) / (2 * h) for e in np.eye(x.size)])
 
@@ -77,13 +98,15 @@ def test_generalized_derivatives_match_finite_differences(distance: bool) -> Non
     assert nlp.m == 2 * 3 * 7 + 1 + 2 + 1 + 6 + 3 + 3 * 7 + (3 * 7 * 2 if distance else 0)
 
 
-@pytest.mark.parametrize("distance", [False, True])
-def test_maximal_derivatives_match_finite_differences_along_the_retraction(distance: bool) -> None:
-    ocp = factory_ocp(distance)
-    prob = MaximalNLP(ocp, jit=False).problem
+@pytest.mark.parametrize("case", ["iiwa", "iiwa-distance", "panda"])
+def test_maximal_derivatives_match_finite_differences_along_the_retraction(case: str) -> None:
+    distance = case == "iiwa-distance"
+    ocp = panda_ocp() if case == "panda" else factory_ocp(distance)
     nlp = MaximalNLP(ocp, jit=False)
+    prob = nlp.problem
     rng = np.random.default_rng(1)
-    x = nlp.initial_point(np.linspace(ocp.q0, np.zeros(7), ocp.N + 1))
+    goal = np.zeros(ocp.robot.nq) if case != "panda" else PANDA_START + 0.1
+    x = nlp.initial_point(np.linspace(ocp.q0, goal, ocp.N + 1))
     x = prob.retract(x, 0.05 * rng.standard_normal(prob.n))
     y = rng.standard_normal(prob.n_eq)
     zi = np.zeros(prob.n_ineq) if distance else rng.standard_normal(prob.n_ineq)
@@ -124,6 +147,42 @@ def test_both_formulations_write_the_same_residuals() -> None:
     value = term.function.value(term.gather(flat), term.parameters)
     np.testing.assert_allclose(np.ravel(value), expected, atol=1e-9)
     assert np.linalg.norm(expected) > 0.1
+
+
+def test_prismatic_residuals_equal_the_joint_space_ones() -> None:
+    """Finger positions, velocities (forward step) and limits in maximal coordinates read the
+    same numbers as in joint space; the joint path round-trips through the bodies' poses."""
+    ocp = panda_ocp()
+    nlp = MaximalNLP(ocp, jit=False)
+    q = np.linspace(ocp.q0, PANDA_START + np.r_[np.full(7, 0.1), 0.02, 0.01], ocp.N + 1)
+    x = nlp.initial_point(q)
+    np.testing.assert_allclose(nlp.joint_trajectory(x)["q"], q, atol=1e-12)
+    flat = {n: nlp.problem.variables.blocks[n].flat(a) for n, a in x.items()}
+
+    def value(name: str) -> np.ndarray:
+        term = next(t for t in nlp.problem.terms if t.name == name)
+        return np.ravel(term.function.value(term.gather(flat), term.parameters))
+
+    np.testing.assert_allclose(value("fingers_prismatic"), q[2, 7:] - [0.02, 0.025], atol=1e-12)
+    step = (q[2, 7] - q[1, 7]) / ocp.dt
+    np.testing.assert_allclose(value("finger_v_prismatic"), [step - 0.05], atol=1e-10)
+    lo, hi = ocp.robot.model.lowerPositionLimit[7:], ocp.robot.model.upperPositionLimit[7:]
+    limits = value("q_limits_prismatic").reshape(ocp.N, 2, 2)  # knots 1..N, fingers, (lo, hi)
+    np.testing.assert_allclose(limits[:, :, 0], lo - q[1:, 7:], atol=1e-12)
+    np.testing.assert_allclose(limits[:, :, 1], q[1:, 7:] - hi, atol=1e-12)
+
+
+def test_panda_with_prismatic_fingers_plans_in_maximal_coordinates_and_verifies() -> None:
+    """Issue #11: the fingers not locked, the RIPM on SO(3)×R³ bodies, Pinocchio's verifier."""
+    from mbplan.paper import tracking_ocp
+
+    goal = np.array([0.4, -0.1, 0.1, -1.9, 0.0, 2.1, 0.6, 0.03, 0.03])
+    ocp = tracking_ocp("panda", PANDA_START, goal, N=8, dt=0.06)
+    result = mb.plan(ocp, "ripm")
+    assert result.success, result.message
+    check = mb.verify(ocp, result)
+    assert check.passed, check.reasons
+    assert np.all(np.abs(result.q[-1, 7:] - goal[7:]) < 0.005)  # the fingers moved 2 cm
 
 
 def test_ocp_round_trips_through_json() -> None:
