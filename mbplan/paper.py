@@ -72,6 +72,7 @@ def tracking_ocp(
 ) -> OCP:
     """The point-to-point joint tracking problem (module docstring) without obstacles."""
     w = {**IIWA_WEIGHTS, **(weights or {})}
+    robot = _paper_iiwa() if isinstance(robot, str) and robot == "iiwa" else robot  # no damping
     ocp = OCP(robot, scene, N=N, dt=dt, q0=q0)
     goal = JointPosition(q_target)
     ocp.add_cost("joint_position", goal, w["w_q"], knots="running")
@@ -122,14 +123,15 @@ def iiwa_obstacle(
     q0: Any = IIWA_START, *, N: int = 40, dt: float = 0.075, constraint: str = "com"
 ) -> OCP:
     """The iiwa obstacle task from ``q0`` (module docstring)."""
-    ocp = tracking_ocp(_paper_iiwa(), q0, IIWA_TARGET, iiwa_scene(constraint), N=N, dt=dt)
+    ocp = tracking_ocp("iiwa", q0, IIWA_TARGET, iiwa_scene(constraint), N=N, dt=dt)
     return add_obstacle_constraint(ocp, constraint)
 
 
 @cache
 def _paper_iiwa() -> Robot:
-    """The iiwa of the paper's tasks without the URDF's joint damping (0.5 N m s/rad), which the
-    paper's LGVI does not model. TODO(merge #11): ``load_robot("iiwa", damping=False)``."""
+    """The iiwa of the paper's tasks (``tracking_ocp("iiwa", …)``) without the URDF's joint
+    damping (0.5 N m s/rad), which the paper's LGVI does not model.
+    TODO(merge #11): ``load_robot("iiwa", damping=False)``."""
     robot = load_robot("iiwa")
     model = robot.model.copy()
     model.damping[:] = 0.0

@@ -119,9 +119,7 @@ def validate_case(
 
 def _joint_counts(mm) -> dict[str, int]:
     """Joints per kind, continuous (unbounded revolute) joints counted apart."""
-    kinds = [
-        "continuous" if c else t for t, c in zip(mm.joint_types, mm.continuous, strict=True)
-    ]
+    kinds = ["continuous" if c else t for t, c in zip(mm.joint_types, mm.continuous, strict=True)]
     return {k: kinds.count(k) for k in ("revolute", "continuous", "prismatic") if k in kinds}
 
 
