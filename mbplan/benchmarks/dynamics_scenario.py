@@ -73,6 +73,22 @@ class SmoothScenario:
             vs.append(v)
         return np.array(qs), np.array(vs)
 
+    def euler(self, dt: float, N: int) -> np.ndarray:
+        """Baseline of order 1: semi-implicit Euler on ABA, damping implicit (stable for stiff
+        damping): ``(M + Δt C) v⁺ = M (v + Δt ABA(q, v, τ))``, ``q⁺ = q ⊕ Δt v⁺``; ``(N+1, nq)``."""
+        data = self.model.createData()
+        C = np.diag(self.model.damping)
+        q, v = self.q0.copy(), np.zeros(self.model.nv)
+        qs = [q]
+        for k in range(N):
+            M = pin.crba(self.model, data, q)
+            M = np.triu(M) + np.triu(M, 1).T
+            a = pin.aba(self.model, data, q, v, self.torque(k * dt))
+            v = np.linalg.solve(M + dt * C, M @ (v + dt * a))
+            q = pin.integrate(self.model, q, dt * v)
+            qs.append(q)
+        return np.array(qs)
+
 
 def smooth_scenario(mm: MaximalModel, seed: int) -> SmoothScenario:
     """The seeded scenario of ``mm.model`` (module docstring)."""

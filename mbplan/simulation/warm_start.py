@@ -5,9 +5,10 @@ The configurations give every body's pose ``(R_k, p_k)``, hence ``F_k = R_kᵀR_
 fixed configuration the dynamics rows (eq. 27 with 34–35) are linear in the constraint forces
 ``λ_{k+1}`` and actuation ``τ_{k+1}``, so inverse dynamics in maximal coordinates is a linear
 system in the exact Jacobian columns of the ``lam`` and ``tau`` blocks, block diagonal with one
-``6nb × 6nb`` block per knot. For a revolute tree (every joint actuated) each block is square and
-regular, since a joint's 5 multipliers and its torque apply a full 6-D wrench to its child, so
-the least-squares solution is the exact one and the dynamics rows vanish up to round-off.
+``6nb × 6nb`` block per knot. For a tree of revolute and prismatic joints (every joint actuated)
+each block is square and regular, since a joint's 5 multipliers and its torque or force apply a
+full 6-D wrench to its child, so the solution is exact and the dynamics rows (with any joint
+damping, evaluated on the given motion) vanish up to round-off.
 """
 
 from __future__ import annotations
