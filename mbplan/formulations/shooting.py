@@ -22,7 +22,9 @@ Residuals, each kind translated once:
 Constraints: CSQP (``hard=True``) imposes every constraint (``ConstraintModelResidual``). FDDP
 has none: inequality constraints become ``½ W max(violation, 0)²`` penalties
 (``ActivationModelQuadraticBarrier``, :data:`OBSTACLE_WEIGHT` for obstacles,
-:data:`LIMIT_WEIGHT` for limits) and an equality constraint is not expressible (an
+:data:`LIMIT_WEIGHT` for limits) of the bounds tightened by :data:`PENALTY_MARGIN`, so that the
+small violations a finite penalty leaves (up to 3e-3 rad/s on the iiwa's velocity limits at
+``W = 1e3``) stay inside the true bounds; an equality constraint is not expressible (an
 :class:`~mbplan.errors.InputError` naming it; make it a cost or use CSQP).
 
 Importing needs the ``baselines`` extra (``crocoddyl==3.2.1``, ``mim-solvers==0.3.0``); the
@@ -66,6 +68,7 @@ except ImportError as err:
 
 OBSTACLE_WEIGHT = 1e4  # FDDP: ½ W (margin - r)² per knot; a 3 cm violation costs 4.5
 LIMIT_WEIGHT = 1e3  # FDDP: the same on joint-position/velocity limits (rad, rad/s)
+PENALTY_MARGIN = 5e-3  # FDDP: penalised bounds are tightened by this (rad, rad/s, m)
 FORWARD_DYNAMICS_TOL = 1e-8  # relative: |Δ ẍ| ≤ tol · max(1, |ẍ|)
 
 
@@ -299,9 +302,8 @@ class ShootingBuilder:
                     name, crocoddyl.ConstraintModelResidual(state, res, lo, hi)
                 )
             elif not isinstance(item.residual, JointTorqueLimits):  # box-FDDP: control bounds
-                barrier = crocoddyl.ActivationModelQuadraticBarrier(
-                    crocoddyl.ActivationBounds(lo, hi)
-                )
+                bounds = crocoddyl.ActivationBounds(lo + PENALTY_MARGIN, hi - PENALTY_MARGIN)
+                barrier = crocoddyl.ActivationModelQuadraticBarrier(bounds)
                 costs.addCost(
                     name, crocoddyl.CostModelResidual(state, barrier, res), weight * scale
                 )
