@@ -4,9 +4,10 @@ Decision vector ``z = (q_1..q_N, v_1..v_N, τ_0..τ_{N-1})``; knot 0 is fixed at
 For ``k = 0..N-1`` (eq. 61, explicit Euler as the paper writes it)::
 
     (q_{k+1} - q_k)/Δt - v_k = 0                          kinematics (divided by Δt: rad/s)
-    RNEA(q_k, v_k, (v_{k+1} - v_k)/Δt) - τ_k = 0           dynamics
+    RNEA(q_k, v_k, (v_{k+1} - v_k)/Δt) + D v_k - τ_k = 0   dynamics
 
-then the OCP's constraints, item by item and knot by knot (equalities ``r = 0``, inequalities
+(``D = diag(model.damping)``: URDF viscous joint damping, zero unless the robot has it), then the
+OCP's constraints, item by item and knot by knot (equalities ``r = 0``, inequalities
 ``r ≤ 0``); joint position, velocity and torque limits become bounds on ``z``. Costs are
 ``Σ w ½‖r(x_k)‖²`` (a CasADi expression of ``z``). Residuals come from
 :mod:`mbplan.formulations.joint_space`: exact first and second derivatives by CasADi, except coal
@@ -95,6 +96,7 @@ class GeneralizedNLP:
         self.ocp = ocp
         robot = ocp.robot
         self.model, self.data = robot.model, robot.model.createData()
+        self.damping = np.array(robot.model.damping, dtype=float)
         N, nv = ocp.N, robot.nv
         self.N, self.nv, self.dt = N, nv, ocp.dt
         self.n = 3 * N * nv
@@ -189,7 +191,7 @@ class GeneralizedNLP:
         v[:-1] = np.diff(q, axis=0) / self.dt
         a = np.diff(v, axis=0) / self.dt
         tau = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
-        return self.pack(q, v, tau)
+        return self.pack(q, v, tau + self.damping * v[:-1])
 
     # -- per-item evaluation -------------------------------------------------------------------
     @staticmethod
@@ -224,7 +226,7 @@ class GeneralizedNLP:
         a = np.diff(v, axis=0) / self.dt
         kin = np.diff(q, axis=0) / self.dt - v[:-1]
         dyn = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
-        parts = [kin.ravel(), (dyn - tau).ravel()]
+        parts = [kin.ravel(), (dyn + self.damping * v[:-1] - tau).ravel()]
         for r in self.rows:
             parts.append(np.asarray(r.value.map(r.K)(self._x(r, z))).T.ravel())
         for item, _ in self.distances:
@@ -287,6 +289,7 @@ class GeneralizedNLP:
         dq, dv, M = (np.empty((self.N, self.nv, self.nv)) for _ in range(3))
         for k in range(self.N):
             dq[k], dv[k], M[k] = pin.computeRNEADerivatives(self.model, self.data, q[k], v[k], a[k])
+        dv += np.diag(self.damping)  # ∂(D v_k)/∂v_k; D v is linear: no Hessian term
         parts = [
             self._jac_constant,
             dq[1:].ravel(),

@@ -1,7 +1,8 @@
 """Shooting: an :class:`~mbplan.OCP` as a Crocoddyl ``ShootingProblem`` (FDDP, mim-solvers CSQP).
 
 State ``x = (q, v)``, control ``u = τ`` (fully actuated), forward dynamics by ABA
-(``DifferentialActionModelFreeFwdDynamics``) and ``IntegratedActionModelEuler`` with the OCP's
+(``DifferentialActionModelFreeFwdDynamics``; it ignores ``model.damping``, so a robot with
+viscous joint damping applies ``τ = u - D v`` through :class:`ActuationModelDamped`) and ``IntegratedActionModelEuler`` with the OCP's
 Δt, which is *semi-implicit* (``v_{k+1} = v_k + Δt aba``, ``q_{k+1} = q_k + Δt v_{k+1}``), first
 order like eq. (61). Node ``k < N`` carries the state items at knot ``k`` (``k ≥ 1``) and the
 control items of interval ``k``; the terminal node the state items at knot ``N``. Crocoddyl
@@ -195,6 +196,28 @@ class ResidualModelCoalDistance(crocoddyl.ResidualModelAbstract):
         return _Data(self, collector)
 
 
+class ActuationModelDamped(crocoddyl.ActuationModelAbstract):
+    """Full actuation with viscous joint damping: ``τ = u - D v``, ``D = diag(model.damping)``."""
+
+    def __init__(self, state: crocoddyl.StateMultibody):
+        crocoddyl.ActuationModelAbstract.__init__(self, state, state.nv)
+        self.damping = np.array(state.pinocchio.damping, dtype=float)
+
+    def calc(self, data: Any, x: np.ndarray, u: np.ndarray) -> None:
+        data.tau[:] = u - self.damping * x[self.state.nq :]
+
+    def calcDiff(self, data: Any, x: np.ndarray, u: np.ndarray) -> None:
+        nv = self.state.nv
+        data.dtau_dx[:, nv:] = -np.diag(self.damping)
+        data.dtau_du[:, :] = np.eye(nv)
+
+    def commands(self, data: Any, x: np.ndarray, tau: np.ndarray) -> None:
+        data.u[:] = tau + self.damping * x[self.state.nq :]
+
+    def torqueTransform(self, data: Any, x: np.ndarray, u: np.ndarray) -> None:
+        data.Mtau[:, :] = np.eye(self.state.nv)
+
+
 class ShootingBuilder:
     """The shooting problem of ``ocp`` for FDDP (``hard=False``) or CSQP (``hard=True``)."""
 
@@ -203,7 +226,11 @@ class ShootingBuilder:
         self.ocp, self.hard, self.method = ocp, hard, method
         self.model = ocp.robot.model
         self.state = crocoddyl.StateMultibody(self.model)
-        self.actuation = crocoddyl.ActuationModelFull(self.state)
+        self.actuation = (
+            ActuationModelDamped(self.state)
+            if np.any(self.model.damping)
+            else crocoddyl.ActuationModelFull(self.state)
+        )
         self.nu = self.actuation.nu
         self.u_lb = np.full(self.nu, -np.inf)
         self.u_ub = np.full(self.nu, np.inf)

@@ -6,6 +6,14 @@ import numpy as np
 import pinocchio as pin
 
 
+def damped_aba(
+    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray
+) -> np.ndarray:
+    """``q̈ = M(q)⁻¹ (τ - D v - h(q, v))``: ABA with the model's viscous joint damping
+    ``D = diag(model.damping)`` (Pinocchio's ABA ignores ``model.damping``)."""
+    return pin.aba(model, data, q, v, np.asarray(tau) - model.damping * v)
+
+
 def integrate_aba(
     model: pin.Model,
     q0: np.ndarray,
@@ -14,18 +22,22 @@ def integrate_aba(
     T: float,
     substeps: int,
     tau_end: np.ndarray | None = None,
+    damping: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(q(T), v(T))`` by RK4 on the configuration manifold (no damping) for constant ``tau``,
-    or, with ``tau_end``, the torque ramping linearly from ``tau`` at 0 to ``tau_end`` at ``T``
-    (first-order hold; RK4 samples it at each stage's time, so it stays fourth order)."""
+    """``(q(T), v(T))`` by RK4 on the configuration manifold for constant ``tau``, or, with
+    ``tau_end``, the torque ramping linearly from ``tau`` at 0 to ``tau_end`` at ``T``
+    (first-order hold; RK4 samples it at each stage's time, so it stays fourth order); with
+    ``damping``, the model's viscous joint damping applies (:func:`damped_aba`)."""
     data = model.createData()
     h = T / substeps
     q, v = np.array(q0, dtype=float), np.array(v0, dtype=float)
     tau0 = np.asarray(tau, dtype=float)
     slope = None if tau_end is None else (np.asarray(tau_end, dtype=float) - tau0) / T
 
+    forward = damped_aba if damping else pin.aba
+
     def acc(qq: np.ndarray, vv: np.ndarray, t: float) -> np.ndarray:
-        return pin.aba(model, data, qq, vv, tau0 if slope is None else tau0 + t * slope)
+        return forward(model, data, qq, vv, tau0 if slope is None else tau0 + t * slope)
 
     for i in range(substeps):
         t = i * h
