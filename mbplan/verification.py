@@ -2,7 +2,8 @@
 
 :func:`verify` integrates the robot's equations of motion (``pinocchio.aba`` with the model's
 viscous joint damping ``-D v``, RK4 with :data:`SUBSTEPS` steps per interval,
-:func:`mbplan.simulation.reference.integrate_aba`) under the planned torques, and measures how far the plan is from that motion, from the obstacles, from the
+:func:`mbplan.simulation.reference.integrate_aba`) under the planned torques, and measures how far
+the plan is from that motion, from the obstacles, from the
 goal and from the torque limits. It shares no code with the planners' transcriptions.
 
 Torques are replayed as each transcription applies them. Eq. (61) holds ``τ_k`` over
@@ -29,8 +30,11 @@ Thresholds (all documented values are checked by ``tests/test_verification.py``)
   replayed and planned ``(q_{k+1}, v_{k+1})``. The transcriptions are first order (eq. 61,
   explicit Euler: local errors ``½Δt²|q̈|`` in ``q`` and ``½Δt²|d q̈/dt|`` in ``v``) or better
   (the LGVI), so the threshold is *computed* for each knot, trajectory and Δt: the explicit-Euler
-  step ``(q_k + Δt v_k, v_k + Δt·aba(q_k, v_k, τ_k))`` is an exactly known solution of eq. (61),
-  and its distance ``e_k`` to the replay is the discretisation error of a first-order scheme
+  step ``(q_k + Δt v_k, v_k + Δt·aba(q_k, v_k, τ_k))`` is an exactly known solution of eq. (61)
+  (with viscous joint damping ``D``, taken at ``v_{k+1}`` as eq. 61 does, so the reference stays
+  accurate where the damping is stiff, ``λ(M⁻¹D) Δt ≫ 1``; explicit damping there would make
+  ``e_k`` grow with ``D`` and pass plans that ignore it), and its distance ``e_k`` to the replay is
+  the discretisation error of a first-order scheme
   there. Any transcription at least as accurate stays within ``e_k`` of the replay; knot
   ``k+1`` passes if its deviation is at most ``2 e_k`` (the planner's and the reference
   scheme's errors may add up) plus :data:`DEVIATION_FLOOR` for the solver tolerance.
@@ -70,7 +74,7 @@ from mbplan.formulations.joint_space import evaluate
 from mbplan.ocp.problem import OCP, Item
 from mbplan.ocp.residuals import ComOutsideCylinder, Distance, JointTorqueLimits
 from mbplan.results import PlanResult
-from mbplan.simulation.reference import damped_aba, integrate_aba
+from mbplan.simulation.reference import damped_euler_velocity, damping_rate, integrate_aba
 
 SUBSTEPS = 20  # RK4 steps per interval: at Δt = 0.075 s, 20 and 40 agree to < 1e-8 rad
 DAMPING_STEP = 0.5  # RK4 substep h ≤ DAMPING_STEP / λ_max(M⁻¹D) (stiff damping of light links)
@@ -119,17 +123,7 @@ def substeps(ocp: OCP, result: PlanResult) -> int:
     """RK4 substeps per interval: :data:`SUBSTEPS`, more where viscous joint damping is stiff
     (``Δt/S ≤`` :data:`DAMPING_STEP` ``/ λ_max(M(q_k)⁻¹ D)`` at the planned knots; RK4 is
     unstable beyond ``hλ ≈ 2.8``)."""
-    model = ocp.robot.model
-    if not np.any(model.damping):
-        return SUBSTEPS
-    data = model.createData()
-    rate = 0.0
-    for q in result.q:
-        M = np.triu(pin.crba(model, data, q))  # Pinocchio fills the upper triangle
-        M = M + np.triu(M, 1).T
-        rate = max(
-            rate, float(np.max(np.linalg.eigvals(np.linalg.solve(M, np.diag(model.damping))).real))
-        )
+    rate = max(damping_rate(ocp.robot.model, q) for q in result.q)
     return max(SUBSTEPS, int(np.ceil(ocp.dt * rate / DAMPING_STEP)))
 
 
@@ -148,12 +142,13 @@ def _replay_step(
 
 
 def _euler_steps(ocp: OCP, result: PlanResult) -> tuple[np.ndarray, np.ndarray]:
-    """One explicit-Euler step of eq. (61) from each planned knot: ``q, v (N, nq)``."""
+    """One explicit-Euler step of eq. (61) from each planned knot (damping implicit,
+    :func:`~mbplan.simulation.reference.damped_euler_velocity`): ``q, v (N, nq)``."""
     model = ocp.robot.model
     data = model.createData()
-    q, v, dt = result.q[:-1], result.v[:-1], ocp.dt
-    acc = np.array([damped_aba(model, data, q[k], v[k], result.tau[k]) for k in range(ocp.N)])
-    return q + dt * v, v + dt * acc
+    q, v, tau, dt = result.q[:-1], result.v[:-1], result.tau, ocp.dt
+    v_next = [damped_euler_velocity(model, data, q[k], v[k], tau[k], dt) for k in range(ocp.N)]
+    return q + dt * v, np.array(v_next)
 
 
 def _open_loop_deviation(ocp: OCP, result: PlanResult) -> float:

@@ -14,7 +14,12 @@ from mbplan.ocp import load_robot
 from mbplan.ocp import residuals as res
 from mbplan.ocp.robot import robot_from_source
 from mbplan.paper import IIWA_START, tracking_ocp
-from mbplan.simulation.reference import damped_aba, integrate_aba
+from mbplan.simulation.reference import (
+    damped_aba,
+    damped_euler_velocity,
+    integrate_aba,
+    mass_matrix,
+)
 from mbplan.verification import SUBSTEPS, substeps, verify
 
 DAMPING = np.linspace(0.5, 3.5, 7)  # N m s/rad, distinct per joint (the iiwa URDF's is 0.5)
@@ -59,8 +64,11 @@ def test_damped_generalized_dynamics_derivatives_match_finite_differences() -> N
     np.testing.assert_allclose(guess[(ocp.N + 1) * 7 : 2 * ocp.N * 7], 0.0, atol=1e-9)
     q, v, tau = nlp.unpack(z)
     data = ocp.robot.model.createData()
-    a = pin.aba(ocp.robot.model, data, q[1], v[1], tau[1] - DAMPING * v[1])
-    dyn = nlp.constraints(nlp.pack(q, np.vstack([v[:2], v[1] + ocp.dt * a, v[3:]]), tau))
+    v2 = damped_euler_velocity(ocp.robot.model, data, q[1], v[1], tau[1], ocp.dt)
+    M = mass_matrix(ocp.robot.model, data, q[1])  # M (v₂ - v₁)/Δt = τ₁ - h - D v₂
+    h = pin.rnea(ocp.robot.model, data, q[1], v[1], np.zeros(7))
+    np.testing.assert_allclose(M @ (v2 - v[1]) / ocp.dt, tau[1] - h - DAMPING * v2, atol=1e-8)
+    dyn = nlp.constraints(nlp.pack(q, np.vstack([v[:2], v2, v[3:]]), tau))
     np.testing.assert_allclose(dyn[(ocp.N + 1) * 7 : (ocp.N + 2) * 7], 0.0, atol=1e-9)
     J = nlp.jacobian(z).toarray()
     np.testing.assert_allclose(J, _central(nlp.constraints, z, 1e-6), atol=2e-5 * np.abs(J).max())
@@ -75,7 +83,8 @@ def test_crocoddyl_damped_actuation_matches_damped_aba() -> None:
     crocoddyl = pytest.importorskip("crocoddyl")
     from mbplan.formulations.shooting import ShootingBuilder
 
-    ocp = mb.OCP(damped_iiwa(), N=2, dt=0.05, q0=IIWA_START)
+    proximal = DAMPING * [1, 1, 1, 1, 0.01, 0.01, 0.01]  # λ(M⁻¹D) Δt < 1 at Δt = 0.02
+    ocp = mb.OCP(damped_iiwa(proximal), N=2, dt=0.02, q0=IIWA_START)
     ocp.add_cost("tau", res.JointTorque(), 1e-3)
     builder = ShootingBuilder(ocp, hard=False, method="fddp")
     dam = crocoddyl.DifferentialActionModelFreeFwdDynamics(
@@ -91,6 +100,9 @@ def test_crocoddyl_damped_actuation_matches_damped_aba() -> None:
     np.testing.assert_allclose(data.xout, expected, rtol=1e-10, atol=1e-10)
     assert np.abs(expected - pin.aba(model, model.createData(), x[:7], x[7:], u)).max() > 1.0
     dam.calcDiff(data, x, u)
+    stiff = mb.OCP(damped_iiwa(), N=2, dt=0.075, q0=IIWA_START)
+    with pytest.raises(mb.InputError, match="too stiff for Crocoddyl"):
+        ShootingBuilder(stiff, hard=False, method="fddp")
 
     def xout(xx: np.ndarray) -> np.ndarray:
         dam.calc(data, xx, u)
@@ -116,15 +128,17 @@ def test_damped_replay_integrates_the_damped_dynamics() -> None:
     assert substeps(ocp, plan) > SUBSTEPS == substeps(plain, plan)
 
 
-def test_verifier_replays_damped_plans_and_flags_undamped_ones() -> None:
-    # damping of the heavy proximal joints and a short Δt (λ(M⁻¹D) Δt < 1, the damping torques
-    # larger than the explicit-Euler error): where λ Δt ≳ 1 (stiff damping of light links) the
-    # verifier's explicit-Euler thresholds grow with the damping and cannot tell the two apart
-    robot = damped_iiwa(np.array([1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0]))
+@pytest.mark.parametrize(
+    ("damping", "N", "dt"),
+    [(np.array([1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0]), 40, 0.02), (DAMPING, 12, 0.1)],
+    ids=["proximal", "stiff"],  # λ(M⁻¹D) Δt < 1; up to ~300 on the wrist
+)
+def test_verifier_replays_damped_plans_and_flags_undamped_ones(damping, N: int, dt: float) -> None:
+    robot = damped_iiwa(damping)
     target = np.asarray(IIWA_START) + np.array([0.5, -0.3, 0.4, 0.3, 0.0, -0.3, 0.0])
-    damped = tracking_ocp(robot, IIWA_START, target, N=40, dt=0.02, goal_tolerance=None)
+    damped = tracking_ocp(robot, IIWA_START, target, N=N, dt=dt, goal_tolerance=None)
     plain = tracking_ocp(
-        load_robot("iiwa", damping=False), IIWA_START, target, N=40, dt=0.02, goal_tolerance=None
+        load_robot("iiwa", damping=False), IIWA_START, target, N=N, dt=dt, goal_tolerance=None
     )
     with_damping = mb.plan(damped, "ipopt", warm_start="linear")
     without = mb.plan(plain, "ipopt", warm_start="linear")

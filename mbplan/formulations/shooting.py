@@ -1,10 +1,12 @@
 """Shooting: an :class:`~mbplan.OCP` as a Crocoddyl ``ShootingProblem`` (FDDP, mim-solvers CSQP).
 
 State ``x = (q, v)``, control ``u = τ`` (fully actuated), forward dynamics by ABA
-(``DifferentialActionModelFreeFwdDynamics``; it ignores ``model.damping``, so a robot with
-viscous joint damping applies ``τ = u - D v`` through :class:`ActuationModelDamped`) and ``IntegratedActionModelEuler`` with the OCP's
+(``DifferentialActionModelFreeFwdDynamics``) and ``IntegratedActionModelEuler`` with the OCP's
 Δt, which is *semi-implicit* (``v_{k+1} = v_k + Δt aba``, ``q_{k+1} = q_k + Δt v_{k+1}``), first
-order like eq. (61). Node ``k < N`` carries the state items at knot ``k`` (``k ≥ 1``) and the
+order like eq. (61). Crocoddyl ignores ``model.damping``: a robot with viscous joint damping
+applies ``τ = u - D v_k`` through :class:`ActuationModelDamped`, explicit in ``v``, so damping
+stiffer than :data:`MAX_DAMPING_STIFFNESS` (``λ(M⁻¹D) Δt`` at ``q0``) is refused. Node ``k < N``
+carries the state items at knot ``k`` (``k ≥ 1``) and the
 control items of interval ``k``; the terminal node the state items at knot ``N``. Crocoddyl
 multiplies running costs by Δt, so their weights are divided by Δt.
 
@@ -56,6 +58,7 @@ from mbplan.ocp.residuals import (
     JointVelocity,
     JointVelocityLimits,
 )
+from mbplan.simulation.reference import damping_rate
 
 try:
     import crocoddyl
@@ -70,6 +73,7 @@ except ImportError as err:
 OBSTACLE_WEIGHT = 1e4  # FDDP: ½ W (margin - r)² per knot; a 3 cm violation costs 4.5
 LIMIT_WEIGHT = 1e3  # FDDP: the same on joint-position/velocity limits (rad, rad/s)
 PENALTY_MARGIN = 5e-3  # FDDP: penalised bounds are tightened by this (rad, rad/s, m)
+MAX_DAMPING_STIFFNESS = 1.0  # λ(M⁻¹D) Δt: explicit damping is stable below 2, accurate below ~1
 FORWARD_DYNAMICS_TOL = 1e-8  # relative: |Δ ẍ| ≤ tol · max(1, |ẍ|)
 
 
@@ -244,6 +248,14 @@ class ShootingBuilder:
                     "no constraints): make it a cost or use csqp"
                 )
         self._nodes: dict[tuple, crocoddyl.IntegratedActionModelEuler] = {}
+        stiffness = damping_rate(self.model, ocp.q0) * ocp.dt
+        if stiffness > MAX_DAMPING_STIFFNESS:
+            raise InputError(
+                f"{method}: the joint damping of {ocp.robot.name!r} is too stiff for Crocoddyl's "
+                f"Euler step (explicit in v): λ(M⁻¹D) Δt = {stiffness:.3g} > "
+                f"{MAX_DAMPING_STIFFNESS:g} at q0; use a smaller dt, load the robot with "
+                "damping=False, or plan with ipopt"
+            )
 
     def _residual(self, item: Item) -> tuple[Any, np.ndarray, np.ndarray, float]:
         """Crocoddyl residual of a state or control item, its bounds ``r ∈ [lo, hi]`` (for

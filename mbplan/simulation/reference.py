@@ -14,6 +14,33 @@ def damped_aba(
     return pin.aba(model, data, q, v, np.asarray(tau) - model.damping * v)
 
 
+def mass_matrix(model: pin.Model, data: pin.Data, q: np.ndarray) -> np.ndarray:
+    """``M(q)``, symmetric (Pinocchio's CRBA fills the upper triangle)."""
+    M = np.triu(pin.crba(model, data, q))
+    return M + np.triu(M, 1).T
+
+
+def damping_rate(model: pin.Model, q: np.ndarray) -> float:
+    """``λ_max(M(q)⁻¹ D)`` (1/s): the fastest decay rate of the viscous joint damping."""
+    if not np.any(model.damping):
+        return 0.0
+    M = mass_matrix(model, model.createData(), q)
+    return float(np.max(np.linalg.eigvals(np.linalg.solve(M, np.diag(model.damping))).real))
+
+
+def damped_euler_velocity(
+    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float
+) -> np.ndarray:
+    """``v⁺`` of the Euler step ``M(q) (v⁺ - v)/Δt = τ - h(q, v) - D v⁺``: explicit in ``h``,
+    implicit in the viscous damping (stable for any ``λ(M⁻¹D) Δt``; eq. 61 as
+    :mod:`mbplan.formulations.generalized` writes it)."""
+    a = pin.aba(model, data, q, v, tau)
+    if not np.any(model.damping):
+        return v + dt * a
+    M = mass_matrix(model, data, q)
+    return v + dt * np.linalg.solve(M + dt * np.diag(model.damping), M @ a - model.damping * v)
+
+
 def integrate_aba(
     model: pin.Model,
     q0: np.ndarray,
