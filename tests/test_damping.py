@@ -40,7 +40,9 @@ def test_load_robot_reads_and_zeroes_damping() -> None:
     damped, plain = load_robot("iiwa"), load_robot("iiwa", damping=False)
     np.testing.assert_array_equal(damped.model.damping, np.full(7, 0.5))  # the URDF's value
     assert not np.any(plain.model.damping)
-    assert plain.source["damping"] is False and "damping" not in damped.source
+    assert plain.source["damping"] is False and damped.source["damping"] is True
+    old = {k: v for k, v in damped.source.items() if k != "damping"}  # saved before damping
+    assert not np.any(robot_from_source(old).model.damping)
     assert not np.any(robot_from_source(plain.source).model.damping)
     np.testing.assert_array_equal(robot_from_source(damped.source).model.damping, 0.5)
     model = damped_iiwa().model

@@ -53,7 +53,7 @@ def test_mjcf_arm_loads_with_joints_limits_damping_and_geometry(arm) -> None:
     np.testing.assert_allclose(model.damping, [0.3, 0.2])
     np.testing.assert_allclose(model.inertias[1].mass + model.inertias[2].mass, 1.5)
     assert {g.name for g in robot.collision_model.geometryObjects} == {"link1_geom", "link2_geom"}
-    assert robot.source == {"kind": "mjcf", "path": str(arm.resolve())}
+    assert robot.source == {"kind": "mjcf", "path": str(arm.resolve()), "damping": True}
     again = robot_from_source(mb.load_robot(arm, damping=False).source)
     assert again.nq == 2 and not np.any(again.model.damping)
     # the tip site is a frame: at q = 0 the arm is stretched along x at z = 0.1
@@ -63,15 +63,18 @@ def test_mjcf_arm_loads_with_joints_limits_damping_and_geometry(arm) -> None:
     np.testing.assert_allclose(value, 0.0, atol=1e-12)
 
 
-def test_mjcf_arm_plans_a_frame_goal_and_verifies(arm) -> None:
-    ocp = mb.OCP(arm, N=10, dt=0.05, q0=np.zeros(2))
+@pytest.mark.parametrize("method", ["ipopt", "ripm"])
+def test_mjcf_arm_plans_a_frame_goal_and_verifies(arm, method: str) -> None:
+    # the maximal LGVI does not apply joint damping on this branch: RIPM plans it undamped
+    robot = mb.load_robot(arm, damping=method != "ripm")
+    ocp = mb.OCP(robot, N=10, dt=0.05, q0=np.zeros(2))
     ocp.add_cost("v", res.JointVelocity(), 1e-2)
     ocp.add_cost("tau", res.JointTorque(), 1e-3)
     reach = 0.3 + 0.25 * np.cos(0.6)  # shoulder yaw 0.8 rad, elbow pitch 0.6 rad
     goal = [reach * np.cos(0.8), reach * np.sin(0.8), 0.1 - 0.25 * np.sin(0.6)]
     ocp.add_terminal_constraint("tip", res.FrameTranslation("tip", goal))
     ocp.add_constraint("q_limits", res.JointPositionLimits())
-    result = mb.plan(ocp, "ipopt", warm_start="linear")
+    result = mb.plan(ocp, method, warm_start="linear")
     assert result.success, result.message
     assert mb.verify(ocp, result).passed
 

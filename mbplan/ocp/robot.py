@@ -28,8 +28,9 @@ from mbplan.robots import RobotDescription, load
 
 @dataclass(frozen=True, eq=False)
 class Robot:
-    """A fixed-base robot: ``model`` (1-dof joints only), collision and visual geometry (may be
-    None), its ``source`` (JSON-serialisable, see :func:`load_robot`) and the locked joints."""
+    """A fixed-base robot: ``model`` (1-dof joints only; ``model.damping`` the viscous joint
+    damping every formulation applies), collision and visual geometry (may be None), its
+    ``source`` (JSON-serialisable, see :func:`load_robot`) and the locked joints."""
 
     name: str
     model: pin.Model
@@ -141,15 +142,16 @@ def _load(robot, package_dirs, lock, collision_model, visual_model, damping=True
         desc = RobotDescription(
             desc.name, model, desc.collision_model, desc.visual_model, desc.urdf_path
         )
-        source = {**source, "damping": False}
+    source = {**source, "damping": bool(damping)}
     return Robot(desc.name, desc.model, desc.collision_model, desc.visual_model, source, locked)
 
 
 def robot_from_source(source: Mapping[str, Any]) -> Robot:
-    """Load the robot again from :attr:`Robot.source` (what a saved plan stores)."""
+    """Load the robot again from :attr:`Robot.source` (what a saved plan stores). A source
+    without ``damping`` is from before mbplan applied joint damping: loaded without it."""
     kind = source.get("kind")
     lock = source.get("lock") or None
-    damping = bool(source.get("damping", True))
+    damping = bool(source.get("damping", False))
     if kind == "name":
         return load_robot(source["name"], lock=lock, damping=damping)
     if kind in ("urdf", "mjcf"):
@@ -159,10 +161,6 @@ def robot_from_source(source: Mapping[str, Any]) -> Robot:
         f"the robot was an in-memory pinocchio.Model ({source.get('name')!r}) and cannot be "
         "loaded from the file: pass the OCP (or the robot) explicitly"
     )
-
-
-def _freeze(lock: Mapping[str, float] | None) -> tuple[tuple[str, float], ...] | None:
-    return None if not lock else tuple(sorted((k, float(v)) for k, v in lock.items()))
 
 
 @cache
