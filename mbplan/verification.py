@@ -1,8 +1,9 @@
 """Independent check of a planned trajectory against Pinocchio's continuous-time dynamics.
 
-:func:`verify` integrates the robot's equations of motion (``pinocchio.aba``, RK4 with
-:data:`SUBSTEPS` steps per interval, :func:`mbplan.simulation.reference.integrate_aba`) under the
-planned torques, and measures how far the plan is from that motion, from the obstacles, from the
+:func:`verify` integrates the robot's equations of motion (``pinocchio.aba`` with the model's
+viscous joint damping ``-D v``, RK4 with :data:`SUBSTEPS` steps per interval,
+:func:`mbplan.simulation.reference.integrate_aba`) under the planned torques, and measures how far
+the plan is from that motion, from the obstacles, from the
 goal and from the torque limits. It shares no code with the planners' transcriptions.
 
 Torques are replayed as each transcription applies them. Eq. (61) holds ``τ_k`` over
@@ -29,8 +30,11 @@ Thresholds (all documented values are checked by ``tests/test_verification.py``)
   replayed and planned ``(q_{k+1}, v_{k+1})``. The transcriptions are first order (eq. 61,
   explicit Euler: local errors ``½Δt²|q̈|`` in ``q`` and ``½Δt²|d q̈/dt|`` in ``v``) or better
   (the LGVI), so the threshold is *computed* for each knot, trajectory and Δt: the explicit-Euler
-  step ``(q_k + Δt v_k, v_k + Δt·aba(q_k, v_k, τ_k))`` is an exactly known solution of eq. (61),
-  and its distance ``e_k`` to the replay is the discretisation error of a first-order scheme
+  step ``(q_k + Δt v_k, v_k + Δt·aba(q_k, v_k, τ_k))`` is an exactly known solution of eq. (61)
+  (with viscous joint damping ``D``, taken at ``v_{k+1}`` as eq. 61 does, so the reference stays
+  accurate where the damping is stiff, ``λ(M⁻¹D) Δt ≫ 1``; explicit damping there would make
+  ``e_k`` grow with ``D`` and pass plans that ignore it), and its distance ``e_k`` to the replay is
+  the discretisation error of a first-order scheme
   there. Any transcription at least as accurate stays within ``e_k`` of the replay; knot
   ``k+1`` passes if its deviation is at most ``2 e_k`` (the planner's and the reference
   scheme's errors may add up) plus :data:`DEVIATION_FLOOR` for the solver tolerance.
@@ -70,9 +74,10 @@ from mbplan.formulations.joint_space import evaluate
 from mbplan.ocp.problem import OCP, Item
 from mbplan.ocp.residuals import ComOutsideCylinder, Distance, JointTorqueLimits
 from mbplan.results import PlanResult
-from mbplan.simulation.reference import integrate_aba
+from mbplan.simulation.reference import damped_euler_velocity, damping_rate, integrate_aba
 
 SUBSTEPS = 20  # RK4 steps per interval: at Δt = 0.075 s, 20 and 40 agree to < 1e-8 rad
+DAMPING_STEP = 0.5  # RK4 substep h ≤ DAMPING_STEP / λ_max(M⁻¹D) (stiff damping of light links)
 DEVIATION_FLOOR = 1e-5  # rad and rad/s: IPOPT's tolerance on the eq. (61) rows, after Δt scaling
 TORQUE_TOLERANCE = 1e-6
 CONSTRAINT_TOLERANCE = 1e-4  # residual units (m, rad, rad/s, N m): IPOPT's default constr_viol_tol
@@ -98,19 +103,28 @@ class Verification:
 
 def _interval_replays(ocp: OCP, result: PlanResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """RK4 replay of every interval from the planned knot: substep configurations
-    ``(N, SUBSTEPS+1, nq)`` and end states ``q, v (N, nq)``."""
+    ``(N, S+1, nq)`` and end states ``q, v (N, nq)`` (``S``: :func:`substeps`)."""
     model = ocp.robot.model
-    h = ocp.dt / SUBSTEPS
-    path = np.empty((ocp.N, SUBSTEPS + 1, model.nq))
+    steps = substeps(ocp, result)
+    h = ocp.dt / steps
+    path = np.empty((ocp.N, steps + 1, model.nq))
     v_end = np.empty((ocp.N, model.nv))
     for k in range(ocp.N):
         q, v = result.q[k], result.v[k]
         path[k, 0] = q
-        for s in range(SUBSTEPS):
+        for s in range(steps):
             q, v = _replay_step(model, q, v, result, k, s * h, h)
             path[k, s + 1] = q
         v_end[k] = v
     return path, path[:, -1], v_end
+
+
+def substeps(ocp: OCP, result: PlanResult) -> int:
+    """RK4 substeps per interval: :data:`SUBSTEPS`, more where viscous joint damping is stiff
+    (``Δt/S ≤`` :data:`DAMPING_STEP` ``/ λ_max(M(q_k)⁻¹ D)`` at the planned knots; RK4 is
+    unstable beyond ``hλ ≈ 2.8``)."""
+    rate = max(damping_rate(ocp.robot.model, q) for q in result.q)
+    return max(SUBSTEPS, int(np.ceil(ocp.dt * rate / DAMPING_STEP)))
 
 
 def _replay_step(
@@ -119,28 +133,32 @@ def _replay_step(
     """RK4 over ``[t_k + t, t_k + t + h]`` under the plan's torque: ``τ_k`` held, or the linear
     ramp between ``tau_knots[k]`` and ``tau_knots[k+1]`` when the plan has knot torques."""
     if result.tau_knots is None:
-        return integrate_aba(model, q, v, result.tau[k], h, 1)
+        return integrate_aba(model, q, v, result.tau[k], h, 1, damping=True)
     a, b = result.tau_knots[k], result.tau_knots[k + 1]
     s0, s1 = t / result.dt, (t + h) / result.dt
-    return integrate_aba(model, q, v, a + s0 * (b - a), h, 1, tau_end=a + s1 * (b - a))
+    return integrate_aba(
+        model, q, v, a + s0 * (b - a), h, 1, tau_end=a + s1 * (b - a), damping=True
+    )
 
 
 def _euler_steps(ocp: OCP, result: PlanResult) -> tuple[np.ndarray, np.ndarray]:
-    """One explicit-Euler step of eq. (61) from each planned knot: ``q, v (N, nq)``."""
+    """One explicit-Euler step of eq. (61) from each planned knot (damping implicit,
+    :func:`~mbplan.simulation.reference.damped_euler_velocity`): ``q, v (N, nq)``."""
     model = ocp.robot.model
     data = model.createData()
-    q, v, dt = result.q[:-1], result.v[:-1], ocp.dt
-    acc = np.array([pin.aba(model, data, q[k], v[k], result.tau[k]) for k in range(ocp.N)])
-    return q + dt * v, v + dt * acc
+    q, v, tau, dt = result.q[:-1], result.v[:-1], result.tau, ocp.dt
+    v_next = [damped_euler_velocity(model, data, q[k], v[k], tau[k], dt) for k in range(ocp.N)]
+    return q + dt * v, np.array(v_next)
 
 
 def _open_loop_deviation(ocp: OCP, result: PlanResult) -> float:
     model = ocp.robot.model
     q, v = ocp.q0, ocp.v0
     deviation = 0.0
-    h = ocp.dt / SUBSTEPS
+    steps = substeps(ocp, result)
+    h = ocp.dt / steps
     for k in range(ocp.N):
-        for s in range(SUBSTEPS):
+        for s in range(steps):
             q, v = _replay_step(model, q, v, result, k, s * h, h)
         deviation = max(deviation, float(np.max(np.abs(q - result.q[k + 1]))))
     return deviation

@@ -22,7 +22,7 @@ from mbplan.ocp import residuals as res
 from mbplan.paper import IIWA_TARGET, add_obstacle_constraint, iiwa_obstacle, tracking_ocp
 from mbplan.verification import CONSTRAINT_TOLERANCE
 
-MODEL = mb.load_robot("iiwa").model
+MODEL = mb.load_robot("iiwa", damping=False).model  # the paper task: no damping
 
 
 def small_cases(n: int = 3) -> list[mb.OCP]:
@@ -36,7 +36,8 @@ def small_cases(n: int = 3) -> list[mb.OCP]:
     for _ in range(n):
         q0 = np.array(IIWA_TARGET) + np.concatenate([[-0.8], 0.1 * rng.uniform(-1.0, 1.0, 6)])
         scene = mb.Scene().add_cylinder("cylinder", 0.08, 1.5, (*c, 0.75))
-        ocp = tracking_ocp("iiwa", q0, IIWA_TARGET, scene, N=10, dt=0.1, torque_limit=limit)
+        robot = mb.load_robot("iiwa", damping=False)
+        ocp = tracking_ocp(robot, q0, IIWA_TARGET, scene, N=10, dt=0.1, torque_limit=limit)
         out.append(add_obstacle_constraint(ocp, "com"))
     return out
 

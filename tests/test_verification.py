@@ -23,7 +23,7 @@ from mbplan.results import PlanResult, load_npz, save_npz
 from mbplan.simulation.reference import integrate_aba
 from mbplan.verification import SUBSTEPS, verify
 
-MODEL = load_robot("iiwa").model
+MODEL = load_robot("iiwa", damping=False).model  # the paper task: no damping
 
 
 def make_task(q0=IIWA_START, q_target=IIWA_TARGET, cylinder=None, **fields) -> OCP:
@@ -31,7 +31,7 @@ def make_task(q0=IIWA_START, q_target=IIWA_TARGET, cylinder=None, **fields) -> O
     scene = Scene()
     if cylinder is not None:
         scene.add_cylinder("cylinder", cylinder[1], 1.5, (*cylinder[0], 0.75))
-    ocp = tracking_ocp("iiwa", q0, q_target, scene, **fields)
+    ocp = tracking_ocp(load_robot("iiwa", damping=False), q0, q_target, scene, **fields)
     return add_obstacle_constraint(ocp, "com")
 
 

@@ -4,9 +4,12 @@ Decision vector ``z = (q_1..q_N, v_1..v_N, τ_0..τ_{N-1})``; knot 0 is fixed at
 For ``k = 0..N-1`` (eq. 61, explicit Euler as the paper writes it)::
 
     (q_{k+1} - q_k)/Δt - v_k = 0                          kinematics (divided by Δt: rad/s)
-    RNEA(q_k, v_k, (v_{k+1} - v_k)/Δt) - τ_k = 0           dynamics
+    RNEA(q_k, v_k, (v_{k+1} - v_k)/Δt) + D v_{k+1} - τ_k = 0   dynamics
 
-then the OCP's constraints, item by item and knot by knot (equalities ``r = 0``, inequalities
+(``D = diag(model.damping)``: URDF viscous joint damping, zero unless the robot has it; taken at
+``v_{k+1}``, implicitly, so that stiff damping of light links, ``λ(M⁻¹D) Δt ≫ 1``, stays stable
+and the step relaxes to the quasi-static ``D v = τ - h``), then the OCP's constraints, item by item
+and knot by knot (equalities ``r = 0``, inequalities
 ``r ≤ 0``); joint position, velocity and torque limits become bounds on ``z``. Costs are
 ``Σ w ½‖r(x_k)‖²`` (a CasADi expression of ``z``). Residuals come from
 :mod:`mbplan.formulations.joint_space`: exact first and second derivatives by CasADi, except coal
@@ -95,6 +98,7 @@ class GeneralizedNLP:
         self.ocp = ocp
         robot = ocp.robot
         self.model, self.data = robot.model, robot.model.createData()
+        self.damping = np.array(robot.model.damping, dtype=float)
         N, nv = ocp.N, robot.nv
         self.N, self.nv, self.dt = N, nv, ocp.dt
         self.n = 3 * N * nv
@@ -189,7 +193,7 @@ class GeneralizedNLP:
         v[:-1] = np.diff(q, axis=0) / self.dt
         a = np.diff(v, axis=0) / self.dt
         tau = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
-        return self.pack(q, v, tau)
+        return self.pack(q, v, tau + self.damping * v[1:])
 
     # -- per-item evaluation -------------------------------------------------------------------
     @staticmethod
@@ -224,7 +228,7 @@ class GeneralizedNLP:
         a = np.diff(v, axis=0) / self.dt
         kin = np.diff(q, axis=0) / self.dt - v[:-1]
         dyn = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
-        parts = [kin.ravel(), (dyn - tau).ravel()]
+        parts = [kin.ravel(), (dyn + self.damping * v[1:] - tau).ravel()]
         for r in self.rows:
             parts.append(np.asarray(r.value.map(r.K)(self._x(r, z))).T.ravel())
         for item, _ in self.distances:
@@ -291,7 +295,7 @@ class GeneralizedNLP:
             self._jac_constant,
             dq[1:].ravel(),
             (dv[1:] - M[1:] / self.dt).ravel(),
-            (M / self.dt).ravel(),
+            (M / self.dt + np.diag(self.damping)).ravel(),  # D v_{k+1}: linear, no Hessian term
             np.full(self.N * self.nv, -1.0),
         ]
         for r in self.rows:

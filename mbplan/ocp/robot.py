@@ -3,8 +3,11 @@
 :func:`load_robot` accepts what the Pinocchio ecosystem passes around — a robot name
 (:func:`mbplan.robots.available_robots`), a URDF path (with ``package_dirs`` for ``package://``
 meshes), an MJCF path, or a ``pinocchio.Model`` (with optional geometry models) — and can lock
-joints at given values (``pinocchio.buildReducedModel``). The :class:`Robot` remembers how it was
-made (:attr:`Robot.source`), so a saved plan can load it again.
+joints at given values (``pinocchio.buildReducedModel``). URDF viscous joint damping
+(``<dynamics damping>``, the generalized force ``-D q̇``) is read into ``model.damping``, which
+every formulation and the verifier apply; ``damping=False`` zeroes it (the paper tasks: the
+papers' dynamics have none). The :class:`Robot` remembers how it was made
+(:attr:`Robot.source`), so a saved plan can load it again.
 """
 
 from __future__ import annotations
@@ -25,8 +28,9 @@ from mbplan.robots import RobotDescription, load
 
 @dataclass(frozen=True, eq=False)
 class Robot:
-    """A fixed-base robot: ``model`` (1-dof joints only), collision and visual geometry (may be
-    None), its ``source`` (JSON-serialisable, see :func:`load_robot`) and the locked joints."""
+    """A fixed-base robot: ``model`` (1-dof joints only; ``model.damping`` the viscous joint
+    damping every formulation applies), collision and visual geometry (may be None), its
+    ``source`` (JSON-serialisable, see :func:`load_robot`) and the locked joints."""
 
     name: str
     model: pin.Model
@@ -86,21 +90,29 @@ def load_robot(
     lock: Mapping[str, float] | Sequence[str] | None = None,
     collision_model: pin.GeometryModel | None = None,
     visual_model: pin.GeometryModel | None = None,
+    damping: bool = True,
 ) -> Robot:
     """Load ``robot`` (name, ``.urdf`` or ``.xml`` MJCF path, ``pinocchio.Model``) and lock the
     joints ``lock`` (names at their reference value: the SRDF ``default`` configuration if any,
-    else neutral; or a mapping name → value). Every remaining joint must be 1-dof (nq = nv)."""
+    else neutral; or a mapping name → value). Every remaining joint must be 1-dof (nq = nv).
+    ``damping=False``: the robot's ``model.damping`` is zeroed (on a copy of the model)."""
     if isinstance(robot, str | os.PathLike) and collision_model is None and visual_model is None:
         names = dict(lock) if isinstance(lock, Mapping) else dict.fromkeys(lock or ())
         frozen = tuple(sorted(names.items(), key=lambda kv: kv[0])) or None
-        return _cached(os.fspath(robot), tuple(os.fspath(d) for d in package_dirs), frozen)
-    return _load(robot, package_dirs, lock, collision_model, visual_model)
+        dirs = tuple(os.fspath(d) for d in package_dirs)
+        return _cached(os.fspath(robot), dirs, frozen, bool(damping))
+    return _load(robot, package_dirs, lock, collision_model, visual_model, damping)
 
 
-def _load(robot, package_dirs, lock, collision_model, visual_model) -> Robot:
+def _load(robot, package_dirs, lock, collision_model, visual_model, damping=True) -> Robot:
     if isinstance(robot, Robot):
         if lock or package_dirs or collision_model is not None or visual_model is not None:
             raise InputError("load_robot: a Robot is returned as is; pass no other argument")
+        if not damping and np.any(robot.model.damping):
+            raise InputError(
+                "load_robot: damping=False with a Robot whose model has damping; load it "
+                "again with damping=False"
+            )
         return robot
     if isinstance(robot, pin.Model):
         desc = load(robot, collision_model=collision_model, visual_model=visual_model)
@@ -124,31 +136,38 @@ def _load(robot, package_dirs, lock, collision_model, visual_model) -> Robot:
         source = {**source, "lock": locked}
         desc = _reduced(desc, locked)
     _check_joints(desc)
+    if not damping:
+        model = pin.Model(desc.model)  # a copy: the caller's (or the cached) model is untouched
+        model.damping[:] = 0.0
+        desc = RobotDescription(
+            desc.name, model, desc.collision_model, desc.visual_model, desc.urdf_path
+        )
+    source = {**source, "damping": bool(damping)}
     return Robot(desc.name, desc.model, desc.collision_model, desc.visual_model, source, locked)
 
 
 def robot_from_source(source: Mapping[str, Any]) -> Robot:
-    """Load the robot again from :attr:`Robot.source` (what a saved plan stores)."""
+    """Load the robot again from :attr:`Robot.source` (what a saved plan stores). A source
+    without ``damping`` is from before mbplan applied joint damping: loaded without it."""
     kind = source.get("kind")
     lock = source.get("lock") or None
+    damping = bool(source.get("damping", False))
     if kind == "name":
-        return load_robot(source["name"], lock=lock)
+        return load_robot(source["name"], lock=lock, damping=damping)
     if kind in ("urdf", "mjcf"):
-        return load_robot(source["path"], package_dirs=source.get("package_dirs", ()), lock=lock)
+        dirs = source.get("package_dirs", ())
+        return load_robot(source["path"], package_dirs=dirs, lock=lock, damping=damping)
     raise InputError(
         f"the robot was an in-memory pinocchio.Model ({source.get('name')!r}) and cannot be "
         "loaded from the file: pass the OCP (or the robot) explicitly"
     )
 
 
-def _freeze(lock: Mapping[str, float] | None) -> tuple[tuple[str, float], ...] | None:
-    return None if not lock else tuple(sorted((k, float(v)) for k, v in lock.items()))
-
-
 @cache
-def _cached(spec: str, package_dirs: tuple[str, ...], lock: tuple | None) -> Robot:
-    """One :class:`Robot` per (path or name, package_dirs, lock): shared, do not modify."""
-    return _load(spec, package_dirs, dict(lock) if lock else None, None, None)
+def _cached(spec: str, package_dirs: tuple[str, ...], lock: tuple | None, damping: bool) -> Robot:
+    """One :class:`Robot` per (path or name, package_dirs, lock, damping): shared, do not
+    modify."""
+    return _load(spec, package_dirs, dict(lock) if lock else None, None, None, damping)
 
 
 def _load_path(

@@ -8,6 +8,41 @@ import numpy as np
 import pinocchio as pin
 
 
+def damped_aba(
+    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray
+) -> np.ndarray:
+    """``q̈ = M(q)⁻¹ (τ - D v - h(q, v))``: ABA with the model's viscous joint damping
+    ``D = diag(model.damping)`` (Pinocchio's ABA ignores ``model.damping``)."""
+    return pin.aba(model, data, q, v, np.asarray(tau) - model.damping * v)
+
+
+def mass_matrix(model: pin.Model, data: pin.Data, q: np.ndarray) -> np.ndarray:
+    """``M(q)``, symmetric (Pinocchio's CRBA fills the upper triangle)."""
+    M = np.triu(pin.crba(model, data, q))
+    return M + np.triu(M, 1).T
+
+
+def damping_rate(model: pin.Model, q: np.ndarray) -> float:
+    """``λ_max(M(q)⁻¹ D)`` (1/s): the fastest decay rate of the viscous joint damping."""
+    if not np.any(model.damping):
+        return 0.0
+    M = mass_matrix(model, model.createData(), q)
+    return float(np.max(np.linalg.eigvals(np.linalg.solve(M, np.diag(model.damping))).real))
+
+
+def damped_euler_velocity(
+    model: pin.Model, data: pin.Data, q: np.ndarray, v: np.ndarray, tau: np.ndarray, dt: float
+) -> np.ndarray:
+    """``v⁺`` of the Euler step ``M(q) (v⁺ - v)/Δt = τ - h(q, v) - D v⁺``: explicit in ``h``,
+    implicit in the viscous damping (stable for any ``λ(M⁻¹D) Δt``; eq. 61 as
+    :mod:`mbplan.formulations.generalized` writes it)."""
+    a = pin.aba(model, data, q, v, tau)
+    if not np.any(model.damping):
+        return v + dt * a
+    M = mass_matrix(model, data, q)
+    return v + dt * np.linalg.solve(M + dt * np.diag(model.damping), M @ a - model.damping * v)
+
+
 def integrate_aba(
     model: pin.Model,
     q0: np.ndarray,
@@ -22,12 +57,11 @@ def integrate_aba(
     """``(q(T), v(T))`` by RK4 on the configuration manifold for constant ``tau``, or, with
     ``tau_end``, the torque ramping linearly from ``tau`` at 0 to ``tau_end`` at ``T``
     (first-order hold; RK4 samples it at each stage's time, so it stays fourth order), or a
-    callable ``tau(t)``, ``t`` from 0 to ``T``. ``damping=True`` adds the viscous joint force
-    ``-model.damping * v`` (URDF ``<dynamics damping>``) to the torque."""
+    callable ``tau(t)``, ``t`` from 0 to ``T``. With ``damping``, the model's viscous
+    joint damping applies (:func:`damped_aba`)."""
     data = model.createData()
     h = T / substeps
     q, v = np.array(q0, dtype=float), np.array(v0, dtype=float)
-    c = np.array(model.damping) if damping else np.zeros(model.nv)
     if callable(tau):
         torque = tau
     else:
@@ -37,8 +71,10 @@ def integrate_aba(
         def torque(t: float) -> np.ndarray:
             return tau0 if slope is None else tau0 + t * slope
 
+    forward = damped_aba if damping else pin.aba
+
     def acc(qq: np.ndarray, vv: np.ndarray, t: float) -> np.ndarray:
-        return pin.aba(model, data, qq, vv, torque(t) - c * vv)
+        return forward(model, data, qq, vv, torque(t))
 
     for i in range(substeps):
         t = i * h
