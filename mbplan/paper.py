@@ -73,7 +73,9 @@ def tracking_ocp(
 ) -> OCP:
     """The point-to-point joint tracking problem (module docstring) without obstacles."""
     w = {**IIWA_WEIGHTS, **(weights or {})}
-    robot = load_robot("iiwa", damping=False) if isinstance(robot, str) and robot == "iiwa" else robot
+    robot = (
+        load_robot("iiwa", damping=False) if isinstance(robot, str) and robot == "iiwa" else robot
+    )
     ocp = OCP(robot, scene, N=N, dt=dt, q0=q0)
     goal = JointPosition(q_target)
     ocp.add_cost("joint_position", goal, w["w_q"], knots="running")
