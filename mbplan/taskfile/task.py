@@ -109,6 +109,8 @@ def load_task(
 def _horizon(t: Table) -> tuple[int, float]:
     t.check_keys(("N", "dt", "T"))
     N = int(t.integer("N", required=True, minimum=2))  # type: ignore[arg-type]
+    if (*t.key, "dt") in t.doc.overridden:  # --dt replaces the file's step or duration
+        t.data.pop("T", None)
     if ("dt" in t) == ("T" in t):
         raise t.error(None, "give one of dt (the step, s) or T (the duration, s)")
     if "dt" in t:

@@ -74,8 +74,9 @@ class Document:
 
     def where(self, key: Key) -> str:
         """``FILE:LINE: [table].key`` (``FILE: [table].key (from --flag)`` if overridden)."""
-        if key in self.overridden:
-            return f"{self.path}: {label(key)} (from {self.overridden[key]})"
+        origin = [o for k, o in self.overridden.items() if k[: len(key)] == key]
+        if origin:
+            return f"{self.path}: {label(key)} (from {origin[0]})"
         for n in range(len(key), 0, -1):
             if key[:n] in self.lines:
                 return f"{self.path}:{self.lines[key[:n]]}: {label(key)}"
