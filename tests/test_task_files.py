@@ -80,8 +80,8 @@ CASES = [
     pytest.param(
         PANDA, "ripm", ["--horizon", "12", "--dt", "0.125", FINGERS_LOCKED], id="panda-locked-ripm"
     ),
-    pytest.param(UR5, "ripm", ["--horizon", "12"], id="ur5-ripm"),
-    pytest.param(UR5, "ipopt", ["--horizon", "12"], id="ur5-ipopt"),
+    pytest.param(UR5, "ripm", ["--horizon", "10"], id="ur5-ripm"),
+    pytest.param(UR5, "ipopt", ["--horizon", "10"], id="ur5-ipopt"),
 ]
 
 
