@@ -112,3 +112,20 @@ def test_replay_of_a_task_file_plan_needs_only_the_result(tmp_path, capsys):
     assert main(["replay", str(out), "--html", str(page)]) == 0
     assert page.stat().st_size > 1_000_000
     assert f"wrote {page}" in capsys.readouterr().out
+
+
+def test_goal_tolerance_is_the_acceptance_of_the_terminal_constraint():
+    """``[goal] tolerance`` without ``weight``: a hard constraint whose violation at the planned
+    knots is accepted up to the tolerance (instead of the verifier's default), saved with the
+    OCP."""
+    from mbplan.verification import hard_constraints_met
+
+    ocp = load_task(PANDA, {"horizon.N": 4}).ocp
+    goal = ocp["goal"]
+    assert (goal.role, goal.tolerance, goal.knots.tolist()) == ("constraint", 1e-3, [4])
+    assert mb.OCP.from_dict(ocp.to_dict())["goal"].tolerance == 1e-3
+    fine = dict.fromkeys(ocp.names, 0.0)
+    assert hard_constraints_met(ocp, {**fine, "goal": 9e-4}) == []
+    assert hard_constraints_met(ocp, {**fine, "goal": 2e-3}) == [
+        "constraint 'goal' is violated by 0.002 at the planned knots (tolerance 0.001)"
+    ]
