@@ -222,10 +222,12 @@ class MaximalNLP:
             per = {"a": mm.axis_child[b], "target": np.asarray(r.target)}
             return self._joint_terms(item, "velocity_eq", b, per, {"dt": ocp.dt})
         if isinstance(r, JointPositionLimits):
-            b = np.arange(nb)
             lo, hi = np.asarray(r.lower)[mm.idx_v], np.asarray(r.upper)[mm.idx_v]
-            half = np.minimum(0.5 * (hi - lo), np.pi)
-            per = {"R_mid": self._about_axis(b, 0.5 * (lo + hi)), "cos_half": np.cos(half)}
+            b = np.flatnonzero(hi - lo < 2 * np.pi)  # a 2π range limits no rotation: cos ≥ -1
+            if not b.size:
+                return []
+            half = 0.5 * (hi[b] - lo[b])
+            per = {"R_mid": self._about_axis(b, 0.5 * (lo[b] + hi[b])), "cos_half": np.cos(half)}
             return self._joint_terms(item, "position_limits", b, per, {})
         if isinstance(r, JointVelocityLimits):
             lo, hi = np.asarray(r.lower)[mm.idx_v], np.asarray(r.upper)[mm.idx_v]

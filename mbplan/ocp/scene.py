@@ -61,7 +61,9 @@ class SceneObject:
         if self.shape == "sphere":
             return np.full(3, s[0])
         if self.shape == "mesh":
-            aabb = self.geometry().aabb_local
+            mesh = self.geometry()
+            mesh.computeLocalAABB()  # coal leaves it unset (±1.8e308) until asked
+            aabb = mesh.aabb_local
             return np.maximum(np.abs(aabb.min_), np.abs(aabb.max_))
         cap = s[0] if self.shape == "capsule" else 0.0
         return np.array([s[0], s[0], 0.5 * s[1] + cap])
