@@ -252,12 +252,12 @@ def read_toml(path: str | Path, overrides: Sequence[tuple[str, Any, str]] = ()) 
     except UnicodeDecodeError as err:
         raise InputError(f"{path}: not a UTF-8 text file ({err.reason})") from None
     except tomllib.TOMLDecodeError as err:
-        message = str(err)
-        line = re.search(r"\(at line (\d+), column (\d+)\)", message)
-        if line:
-            message = message[: line.start()].strip()
-            raise InputError(f"{path}:{line.group(1)}: invalid TOML: {message}") from None
-        raise InputError(f"{path}: invalid TOML: {message}") from None
+        message = getattr(err, "msg", None) or str(err)  # Python >= 3.14: msg, lineno
+        at = re.search(r"\(at line (\d+), column \d+\)", message)
+        lineno = getattr(err, "lineno", None) or (at and at.group(1))
+        message = message[: at.start()].strip() if at else message
+        where = f"{path}:{lineno}" if lineno else f"{path}"
+        raise InputError(f"{where}: invalid TOML: {message}") from None
     overridden: dict[Key, str] = {}
     for dotted, value, origin in overrides:
         parts = dotted.split(".")
