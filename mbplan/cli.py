@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from mbplan.cli_support import Parser, integer, integer_list, names, parse, real, run_command
 from mbplan.errors import InputError, WarmStartWarning
@@ -144,7 +145,7 @@ _BUILTIN_DEFAULTS = {
 }
 
 
-def _builtin_task(args: argparse.Namespace):
+def _builtin_task(args: argparse.Namespace) -> tuple[Any, Callable[[], Any]]:
     """The OCP of ``mbplan plan --robot iiwa ...`` and a function planning it."""
     from mbplan.paper import iiwa_obstacle, iiwa_obstacle_cases
     from mbplan.planning.solve import METHODS, plan
@@ -173,7 +174,7 @@ def _builtin_task(args: argparse.Namespace):
     )
 
 
-def _task_file(args: argparse.Namespace):
+def _task_file(args: argparse.Namespace) -> tuple[Any, Callable[[], Any]]:
     """The OCP of ``mbplan plan TASK.toml``, the flags overriding the file, and its planner."""
     from mbplan.taskfile import load_task
     from mbplan.taskfile.toml_table import parse_value
