@@ -1,7 +1,8 @@
 """mbplan: trajectory optimization of multi-body robots on matrix Lie groups.
 
 The user API: describe the problem once (:class:`OCP` with a :class:`Scene` and residuals from
-:mod:`mbplan.residuals`), :func:`plan` it with any method, :func:`verify` the result, save it.
+:mod:`mbplan.residuals`), :func:`plan` it with any method, :func:`verify` the result, save it;
+or write it as a task file (:func:`load_task`, ``mbplan plan TASK.toml``).
 """
 
 from mbplan import residuals
@@ -9,6 +10,7 @@ from mbplan.errors import InfeasibleRequestError, InputError, MbplanError, Robot
 from mbplan.ocp import OCP, Robot, Scene, load_robot
 from mbplan.planning.solve import METHODS, plan
 from mbplan.results import PlanResult, load_npz, save_npz
+from mbplan.taskfile import Task, load_task
 from mbplan.verification import Verification, verify
 
 __all__ = [
@@ -21,9 +23,11 @@ __all__ = [
     "Robot",
     "RobotModelError",
     "Scene",
+    "Task",
     "Verification",
     "load_npz",
     "load_robot",
+    "load_task",
     "plan",
     "residuals",
     "save_npz",

@@ -54,7 +54,7 @@ Thresholds (all documented values are checked by ``tests/test_verification.py``)
   on every RK4 substep of the replayed intervals without their margin (which exists to absorb
   the inter-knot motion): ``min_obstacle_distance_m`` ≥ 0, coal through the planner's own path
   (:mod:`mbplan.multibody.collision`); the others at the planned knots within
-  :data:`CONSTRAINT_TOLERANCE`; torque limits on the applied torques (``tau_knots`` when given)
+  :data:`CONSTRAINT_TOLERANCE` (or the constraint's own ``tolerance``); torque limits on the applied torques (``tau_knots`` when given)
   within :data:`TORQUE_TOLERANCE` ``· max(1, limit)``.
 * soft goals (costs with a ``tolerance``): the residual's ∞-norm at the end of the replayed
   last interval (``goal_errors``; ``final_goal_error_rad`` is the largest) ≤ the tolerance (the
@@ -226,7 +226,7 @@ def hard_constraints_met(ocp: OCP, violations: dict[str, float]) -> list[str]:
     """Reasons the planned knots violate a hard constraint (empty: all met)."""
     reasons = []
     for item in ocp.constraints:
-        tol = CONSTRAINT_TOLERANCE
+        tol = CONSTRAINT_TOLERANCE if item.tolerance is None else item.tolerance
         if isinstance(item.residual, JointTorqueLimits):
             tol = TORQUE_TOLERANCE * max(1.0, float(np.max(np.abs(item.residual.upper))))
         if violations[item.name] > tol and isinstance(item.residual, JointTorqueLimits):

@@ -148,8 +148,12 @@ class MaximalNLP:
             per = {"a": mm.axis_child[b], "target": target}
             return self._joint_terms(item, "velocity_eq", b, per, {"target": target})
         if isinstance(r, JointPositionLimits):
-            b = np.arange(nb)
             lo, hi = np.asarray(r.lower)[mm.idx_v], np.asarray(r.upper)[mm.idx_v]
+            # a revolute range of 2π or more limits no rotation (cos ≥ -1): no rows for it
+            b = np.flatnonzero(~rev | (hi - lo < 2 * np.pi))
+            if not b.size:
+                return []
+            lo, hi = lo[b], hi[b]
             half = np.minimum(0.5 * (hi - lo), np.pi)
             per = {"R_mid": self._about_axis(b, 0.5 * (lo + hi)), "cos_half": np.cos(half)}
             return self._joint_terms(item, "position_limits", b, per, {"lo": lo, "hi": hi})

@@ -5,7 +5,8 @@ An :class:`OCP` holds a robot, a scene, a horizon of ``N`` steps of ``dt`` from 
 :mod:`mbplan.ocp.residuals`. Knots: ``"all"`` (state knots ``1..N``, intervals ``0..N-1``),
 ``"running"`` (state knots ``1..N-1``, intervals ``0..N-1``), ``"terminal"`` (knot ``N``) or a
 list of indices. A cost is ``weight · ½‖r‖²`` summed over its knots; ``tolerance`` marks a soft
-goal whose error :func:`mbplan.verify` checks at the last knot.
+goal whose error :func:`mbplan.verify` checks at the last knot. A constraint's ``tolerance``
+replaces the verifier's default acceptance of its violation at the planned knots.
 """
 
 from __future__ import annotations
@@ -89,12 +90,16 @@ class OCP:
         tol = None if tolerance is None else as_real(tolerance, f"cost {name!r} tolerance")
         return self._add(Item(name, "cost", residual, self._knots(name, residual, knots), w, tol))
 
-    def add_constraint(self, name: str, residual: Residual, knots: Knots = "all") -> OCP:
+    def add_constraint(
+        self, name: str, residual: Residual, knots: Knots = "all", tolerance: float | None = None
+    ) -> OCP:
         if not isinstance(residual, Residual):
             raise InputError(
                 f"constraint {name!r}: expected a residual, got {type(residual).__name__}"
             )
-        return self._add(Item(name, "constraint", residual, self._knots(name, residual, knots)))
+        tol = None if tolerance is None else as_real(tolerance, f"constraint {name!r} tolerance")
+        knots_ = self._knots(name, residual, knots)
+        return self._add(Item(name, "constraint", residual, knots_, tolerance=tol))
 
     def add_terminal_cost(self, name: str, residual: Residual, weight: float = 1.0, **kw) -> OCP:
         return self.add_cost(name, residual, weight, knots="terminal", **kw)
@@ -222,5 +227,5 @@ class OCP:
             if d["role"] == "cost":
                 ocp.add_cost(d["name"], residual, d["weight"], d["knots"], d.get("tolerance"))
             else:
-                ocp.add_constraint(d["name"], residual, d["knots"])
+                ocp.add_constraint(d["name"], residual, d["knots"], d.get("tolerance"))
         return ocp

@@ -1,0 +1,96 @@
+"""The ``[robot]`` table of a task file: which robot, its package folders, locked joints and what
+to do with URDF ``<mimic>`` joints."""
+
+from __future__ import annotations
+
+import warnings
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from mbplan.errors import InputError, RobotModelError
+from mbplan.ocp.robot import Robot, load_robot
+from mbplan.robots import available_robots, load
+from mbplan.taskfile.toml_table import Document, Table
+
+ROBOT_KEYS = ("urdf", "name", "mjcf", "package_dirs", "lock", "mimic")
+_SUFFIXES = {"urdf": (".urdf",), "mjcf": (".xml", ".mjcf")}
+
+
+def read_robot(doc: Document) -> tuple[Robot, list[str] | None]:
+    """The robot of ``[robot]`` and, if every joint of the unlocked robot is 1-dof, the joint
+    names of the unlocked robot (a ``q`` may list them all)."""
+    t = doc.table("robot", required=True, what=" (with urdf, name or mjcf)")
+    t.check_keys(ROBOT_KEYS)
+    given = [k for k in ("urdf", "name", "mjcf") if k in t]
+    if len(given) != 1:
+        got = f", got {' and '.join(given)}" if given else ""
+        raise t.error(None, f"give exactly one of urdf, name (see `mbplan robots`), mjcf{got}")
+    kind = given[0]
+    base = doc.path.parent
+    if kind == "name":
+        spec: str | Path = t.string("name", choices=available_robots())  # type: ignore[assignment]
+    else:
+        spec = base / str(t.string(kind))
+        if spec.suffix.lower() not in _SUFFIXES[kind]:
+            raise t.error(kind, f"{spec.name!r} must end in {' or '.join(_SUFFIXES[kind])}")
+        if not spec.is_file():
+            raise t.error(kind, f"file not found: {spec}")
+    dirs = [base / d for d in t.strings("package_dirs") or []]
+    for d in dirs:
+        if not d.is_dir():
+            raise t.error("package_dirs", f"not a folder: {d}")
+    lock = _lock(t)
+    mimic = t.string("mimic", choices=("refuse", "independent")) or "refuse"
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r".*<mimic>")  # refused or accepted below
+        try:
+            robot = load_robot(spec, package_dirs=dirs, lock=lock)
+        except (InputError, RobotModelError) as err:
+            text = str(err)
+            key = "lock" if text.startswith("lock:") else kind
+            raise type(err)(f"{doc.where(('robot', key))}: {text.removeprefix('lock: ')}") from None
+        model, urdf = _unreduced(spec, kind)
+    if mimic == "refuse" and urdf is not None:
+        for joint, leader in _mimic_joints(urdf).items():
+            if robot.model.existJointName(joint):
+                raise RobotModelError(
+                    f"{doc.where(('robot', kind))}: joint {joint!r} mimics {leader!r}: mimic "
+                    "joints are not supported yet; lock it (lock = "
+                    f'["{joint}"]) or plan it as an independent joint (mimic = "independent")'
+                )
+    one_dof = all(model.joints[j].nq == 1 for j in range(1, model.njoints))
+    return robot, list(model.names[1:]) if one_dof else None
+
+
+def _lock(t: Table) -> dict[str, float | None] | None:
+    value = t.data.get("lock")
+    if value is None:
+        return None
+    if isinstance(value, list):
+        names = t.strings("lock") or []
+        return dict.fromkeys(names)
+    if not isinstance(value, dict):
+        raise t.error("lock", "expected a table { joint = value } or a list of joint names")
+    sub = Table(t.doc, (*t.key, "lock"), value)
+    return {name: sub.number(name, minimum=-np.inf) for name in value}
+
+
+def _unreduced(spec: str | Path, kind: str) -> tuple[pin.Model, Path | None]:
+    """The model without locked joints and its URDF (None for MJCF)."""
+    if kind == "mjcf":
+        return pin.buildModelFromMJCF(str(spec)), None
+    desc = load(spec, geometry=False)
+    return desc.model, desc.urdf_path
+
+
+def _mimic_joints(path: Path) -> dict[str, str]:
+    """``{joint: leader}`` of the URDF's ``<mimic>`` tags (the loader has checked the file)."""
+    out = {}
+    for joint in ET.parse(path).getroot().iter("joint"):
+        mimic = joint.find("mimic")
+        if mimic is not None:
+            out[str(joint.get("name"))] = str(mimic.get("joint"))
+    return out
