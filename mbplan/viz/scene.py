@@ -102,16 +102,17 @@ class Scene:
     def knots(self) -> int:
         return max(len(la.placements) for la in self.layers)
 
-    def extent(self) -> np.ndarray:
-        """World points ``(n, 3)`` the camera must see: every layer and the labels."""
-        return np.concatenate(
-            [la.extent() for la in self.layers]
-            + [label.position[None] for label in self.labels if label.position is not None]
-        )
-
     def __call__(self, vis: meshcat.Visualizer) -> None:
         shown = 0 if self.frame is None else int(self.frame) % self.knots
-        points = self.extent()
+        points = np.concatenate([la.extent() for la in self.layers])
+        lo, hi = bounding_box(points)
+        height = 0.03 * float(np.max(hi - lo))  # of the labels' letters
+        quads = [
+            (k, _LabelQuad(label, height, self.view))
+            for k, label in enumerate(self.labels)
+            if label.position is not None
+        ]
+        points = np.concatenate([points, *(q.corners() for _, q in quads)])
         lo, hi = bounding_box(points, PAD)
         shift = np.eye(4)
         shift[:3, 3] = -0.5 * (lo + hi)
@@ -127,10 +128,8 @@ class Scene:
             _draw_layer(vis, la, shown, animation, self.knots)
         if self.extra is not None:
             self.extra(vis)
-        size = float(np.max(hi - lo))
-        for k, label in enumerate(self.labels):
-            if label.position is not None:
-                _draw_label(vis[f"mbplan/labels/{k}"], label, 0.025 * size, self.view)
+        for k, quad in quads:
+            quad.draw(vis[f"mbplan/labels/{k}"])
         place_camera(vis, camera_offset(points + shift[:3, 3], self.view))
         if animation.clips:
             vis.set_animation(animation, play=self.frame is None, repetitions=1)
@@ -158,32 +157,44 @@ def _draw_layer(
                 frame[node].set_transform(la.placements[min(k, last), g])
 
 
-def _draw_label(node: meshcat.Visualizer, label: Label, height: float, d: np.ndarray) -> None:
-    """``label.caption`` (a PNG texture on a flat box), letters ``height`` tall, centred at
-    ``label.position`` and facing the camera."""
-    font = ImageFont.load_default(size=_LABEL_PX)
-    left, top, right, bottom = font.getbbox(label.caption)
-    # power-of-two sizes: WebGL would otherwise resample the texture (blurred text)
-    size = (1 << (right - left + 8).bit_length(), 1 << (bottom - top + 8).bit_length())
-    rgb = tuple(round(255 * c) for c in label.rgb)
-    image = Image.new("RGBA", size, (*rgb, 0))  # the text colour, so that edges blend cleanly
-    xy = ((size[0] - right - left) // 2, (size[1] - bottom - top) // 2)
-    ImageDraw.Draw(image).text(xy, label.caption, font=font, fill=(*rgb, 255))
-    png = io.BytesIO()
-    image.save(png, format="PNG")
-    height *= size[1] / (bottom - top)
-    width = height * size[0] / size[1]
-    texture = mg.ImageTexture(mg.PngImage(png.getvalue()))
-    # a flat box: three.js maps its +x face with the image's left-to-right along -z, top along +y
-    node.set_object(
-        mg.Box([0.0, height, width]), mg.MeshBasicMaterial(map=texture, transparent=True, side=0)
-    )
-    up = np.array([0.0, 0.0, 1.0]) - d[2] * d
-    up /= np.linalg.norm(up)
-    pose = np.eye(4)
-    pose[:3, :3] = np.column_stack([d, up, -np.cross(up, d)])
-    pose[:3, 3] = label.position
-    node.set_transform(pose)
+class _LabelQuad:
+    """``label.caption`` as a PNG texture on a flat box, letters ``height`` tall, centred at
+    ``label.position`` and facing the camera along ``d``."""
+
+    def __init__(self, label: Label, height: float, d: np.ndarray) -> None:
+        font = ImageFont.load_default(size=_LABEL_PX)
+        left, top, right, bottom = font.getbbox(label.caption)
+        # power-of-two sizes: WebGL would otherwise resample the texture (blurred text)
+        size = (1 << (right - left + 8).bit_length(), 1 << (bottom - top + 8).bit_length())
+        rgb = tuple(round(255 * c) for c in label.rgb)
+        image = Image.new("RGBA", size, (*rgb, 0))  # the text colour: edges blend cleanly
+        xy = ((size[0] - right - left) // 2, (size[1] - bottom - top) // 2)
+        ImageDraw.Draw(image).text(xy, label.caption, font=font, fill=(*rgb, 255))
+        png = io.BytesIO()
+        image.save(png, format="PNG")
+        self.png = png.getvalue()
+        self.height = height * size[1] / (bottom - top)
+        self.width = self.height * size[0] / size[1]
+        up = np.array([0.0, 0.0, 1.0]) - d[2] * d
+        up /= np.linalg.norm(up)
+        self.pose = np.eye(4)
+        self.pose[:3, :3] = np.column_stack([d, up, -np.cross(up, d)])
+        self.pose[:3, 3] = label.position
+
+    def corners(self) -> np.ndarray:
+        """The quad's four corners ``(4, 3)`` in the world."""
+        half = np.array([[0.0, y, z] for y in (-1, 1) for z in (-1, 1)]) / 2
+        local = half * [0.0, self.height, self.width]
+        return local @ self.pose[:3, :3].T + self.pose[:3, 3]
+
+    def draw(self, node: meshcat.Visualizer) -> None:
+        texture = mg.ImageTexture(mg.PngImage(self.png))
+        # a flat box: three.js maps its +x face with the image's left-to-right along -z, top +y
+        node.set_object(
+            mg.Box([0.0, self.height, self.width]),
+            mg.MeshBasicMaterial(map=texture, transparent=True, side=0),
+        )
+        node.set_transform(self.pose)
 
 
 def obstacle_layer(name: str, obstacles: ObstacleScene, rgba: Rgba) -> Layer:
