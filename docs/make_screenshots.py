@@ -19,11 +19,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+sys.path[:0] = [str(ROOT), str(ROOT / "tests"), str(ROOT / "examples")]
 
+import panda_between_boxes  # noqa: E402
 from test_browser import screenshot  # noqa: E402
 
 import mbplan as mb  # noqa: E402
@@ -35,22 +35,6 @@ from mbplan.viz import drone_replay, static_html  # noqa: E402
 
 OUT = ROOT / "out" / "screenshots"
 DOCS = ROOT / "docs"
-
-
-def panda_boxes() -> mb.OCP:
-    """The panda (fingers locked) to a hand pose between two boxes (examples/)."""
-    robot = mb.load_robot("panda", lock=["panda_finger_joint1", "panda_finger_joint2"])
-    scene = mb.Scene().add_box("left", (0.3, 0.1, 0.4), (0.5, 0.2, 0.2))
-    scene.add_box("right", (0.3, 0.1, 0.4), (0.5, -0.2, 0.2))
-    goal = pin.SE3(pin.rpy.rpyToMatrix(np.pi, 0, 0), np.array([0.5, 0.0, 0.25]))
-    ocp = mb.OCP(robot, scene, N=30, dt=0.05)
-    ocp.add_cost("velocity", mb.residuals.JointVelocity(), 1e-2)
-    ocp.add_cost("effort", mb.residuals.JointTorque(), 1e-4)
-    ocp.add_terminal_constraint("hand", mb.residuals.FramePlacement("panda_hand", goal))
-    ocp.add_constraint("clearance", mb.residuals.Distance(margin=0.01))
-    ocp.add_constraint("limits", mb.residuals.JointPositionLimits())
-    ocp.add_constraint("torque", mb.residuals.JointTorqueLimits())
-    return ocp
 
 
 def point_to_point(robot: str) -> Callable[[], mb.OCP]:
@@ -68,7 +52,7 @@ def point_to_point(robot: str) -> Callable[[], mb.OCP]:
 
 TASKS: dict[str, Callable[[], mb.OCP]] = {
     "iiwa": lambda: iiwa_obstacle_cases(2, 0)[1],
-    "panda": panda_boxes,
+    "panda": panda_between_boxes.task,
     "ur5": point_to_point("ur5"),
     "ur10": point_to_point("ur10"),
     "z1": point_to_point("z1"),

@@ -175,6 +175,10 @@ def test_vertex_normals_and_capsule_mesh() -> None:
     assert np.all(np.sum(n * radial, axis=1) > 0)  # outward everywhere
     obj = pin.GeometryObject("cap", 0, pin.SE3.Identity(), coal.Capsule(0.1, 0.6))
     np.testing.assert_allclose(shape_of(obj).hi, [0.1, 0.1, 0.4])
+    hull = coal.ConvexBase.convexHull(list(corners * 0.1), False, "")  # no polygons: its hull
+    shape = shape_of(pin.GeometryObject("hull", 0, pin.SE3.Identity(), hull))
+    assert shape.geometry.faces.shape == (4, 3)
+    np.testing.assert_allclose(shape.hi, [0.1, 0.1, 0.1])
     with pytest.raises(RobotModelError, match="cannot draw"):
         shape_of(pin.GeometryObject("plane", 0, pin.SE3.Identity(), coal.Plane()))
 

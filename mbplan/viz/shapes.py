@@ -154,10 +154,14 @@ def _shape(obj: pin.GeometryObject) -> Shape:
         if isinstance(g, coal.BVHModelBase):
             vertices, count, face = g.vertices(), g.num_tris, g.tri_indices
         else:
-            vertices, count, face = g.points(), g.num_polygons, g.polygons
-        faces = np.fromiter(
-            (i for k in range(count) for i in _corners(face(k))), np.uint32, 3 * count
-        ).reshape(-1, 3)
+            count = getattr(g, "num_polygons", 0)
+            vertices, face = g.points(), getattr(g, "polygons", None)
+        if count:
+            faces = np.fromiter(
+                (i for k in range(count) for i in _corners(face(k))), np.uint32, 3 * count
+            ).reshape(-1, 3)
+        else:  # a convex without its polygons: its hull
+            faces = _hull(vertices)
         if len(vertices) == 0 or len(faces) == 0:
             raise RobotModelError(f"geometry {obj.name!r}: its mesh has no triangles")
         return Shape(TriangleMesh(vertices, faces), np.eye(4), vertices.min(0), vertices.max(0))
@@ -203,6 +207,23 @@ def capsule_mesh(radius: float, half_length: float, n: int = 24) -> tuple[np.nda
     c, d = a + n, b + n
     faces = np.concatenate([np.stack([a, c, b], -1), np.stack([b, c, d], -1)]).reshape(-1, 3)
     return vertices, faces
+
+
+def _hull(points: np.ndarray) -> np.ndarray:
+    """Outward-wound triangles of the convex hull of ``points``."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        hull = ConvexHull(points)
+    except (QhullError, ValueError):
+        return np.zeros((0, 3), dtype=np.uint32)
+    faces = hull.simplices.copy()
+    v = points[faces]
+    outward = np.einsum(
+        "fi,fi->f", np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), hull.equations[:, :3]
+    )
+    faces[outward < 0] = faces[outward < 0][:, ::-1]
+    return faces.astype(np.uint32)
 
 
 def _corners(triangle: Any) -> tuple[int, int, int]:
