@@ -56,6 +56,31 @@ def objects(path: Path) -> dict[str, dict]:
     }
 
 
+_TYPES = {"Int8Array": np.int8, "Uint16Array": np.uint16, "Uint32Array": np.uint32}
+
+
+def decoded(attribute: dict) -> np.ndarray:
+    """A three.js buffer attribute as floats ``(n, itemSize)`` (normalized ones scaled)."""
+    dtype = np.dtype(_TYPES[attribute["type"]])
+    a = np.frombuffer(attribute["array"].data, dtype).reshape(-1, attribute.get("itemSize", 1))
+    if attribute.get("normalized"):
+        return np.maximum(a / np.iinfo(dtype).max, -1.0)
+    return a.astype(float)
+
+
+def mesh_of(drawn: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices (in the geometry object's frame), triangles and unit normals of a drawn mesh."""
+    (geometry,) = drawn["geometries"]
+    assert geometry["type"] == "BufferGeometry"
+    M = np.array(drawn["object"]["matrix"]).reshape(4, 4).T  # column-major
+    attributes = geometry["data"]["attributes"]
+    vertices = decoded(attributes["position"]) @ M[:3, :3].T + M[:3, 3]
+    normals = decoded(attributes["normal"]) @ np.linalg.inv(M[:3, :3])  # inverse transpose
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    faces = decoded(geometry["data"]["index"]).astype(int).reshape(-1, 3)
+    return vertices, faces, normals
+
+
 def color_of(obj: dict) -> tuple[float, float, float]:
     (material,) = obj["materials"]
     c = material["color"]
@@ -82,13 +107,10 @@ def test_mesh_robot_in_maximal_and_generalized_replays_is_drawn_tinted(tmp_path:
         for obj in visual.geometryObjects:
             assert obj.meshPath.endswith(".dae")
             drawn_obj = drawn[f"mbplan/robot{i}/visuals/{obj.name}"]
-            (geometry,) = drawn_obj["geometries"]
-            assert geometry["type"] == "BufferGeometry"
-            attributes = geometry["data"]["attributes"]
-            n = len(attributes["position"]["array"].data) // 12  # float32 xyz
-            assert n == obj.geometry.num_vertices
-            assert len(attributes["normal"]["array"].data) == 12 * n
-            assert len(geometry["data"]["index"]["array"].data) == 12 * obj.geometry.num_tris
+            vertices, faces, normals = mesh_of(drawn_obj)
+            np.testing.assert_allclose(vertices, obj.geometry.vertices(), atol=1e-5)
+            assert len(faces) == obj.geometry.num_tris and faces.max() < len(vertices)
+            np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-6)
             np.testing.assert_allclose(color_of(drawn_obj), tint, atol=1 / 255)
     assert "mbplan/obstacles0/visuals/box" in drawn
 
@@ -152,12 +174,18 @@ def test_scaled_meshes_and_mesh_obstacles(tmp_path: Path) -> None:
     robot = load_robot(tmp_path / "r.urdf", package_dirs=[tmp_path])
     shape = shape_of(robot.visual_model.geometryObjects[0])
     np.testing.assert_allclose(shape.hi, [0.2, 0.3, 0.4], rtol=1e-6)  # scaled once
-    np.testing.assert_array_equal(shape.matrix, np.eye(4))
     scene = Scene().add_mesh("rock", tmp_path / "tet.stl", (2, 2, 2), (0.4, 0.0, 0.1))
     ocp = OCP(robot, scene, N=2, dt=0.1)
     drawn = objects(static_html(results_for(ocp, 3), tmp_path / "rock.html"))
-    (rock,) = drawn["mbplan/obstacles0/visuals/rock"]["geometries"]
-    assert rock["type"] == "BufferGeometry"
+    tet = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float) * 0.1
+    for node, scale in (("robot0/visuals/l1_0", [2, 3, 4]), ("obstacles0/visuals/rock", 2)):
+        vertices, faces, normals = mesh_of(drawn[f"mbplan/{node}"])
+        assert faces.shape == (4, 3)
+        np.testing.assert_allclose(
+            np.sort(vertices, axis=0), np.sort(tet * scale, axis=0), atol=1e-6
+        )
+        centre = vertices.mean(axis=0)
+        assert np.all(np.sum(normals * (vertices - centre), axis=1) > 0)  # outward
 
 
 def test_vertex_normals_and_capsule_mesh() -> None:

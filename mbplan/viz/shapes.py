@@ -21,6 +21,7 @@ import meshcat
 import meshcat.geometry as mg
 import numpy as np
 import pinocchio as pin
+import umsgpack
 
 from mbplan.errors import RobotModelError
 
@@ -45,26 +46,56 @@ class Shape:
 
 
 class TriangleMesh(mg.Geometry):
-    """Indexed triangles with vertex normals (three.js ``BufferGeometry``)."""
+    """Indexed triangles with vertex normals (three.js ``BufferGeometry``), quantized: positions
+    as normalized uint16 in their bounding box, which :attr:`matrix` (4x4) maps back to the
+    mesh's frame, normals as normalized int8 in that box's frame, indices as uint16 when they
+    fit — a third of float32 data, resolution 1/65535 of the box."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
         super().__init__()
-        self.vertices = np.asarray(vertices, dtype=np.float32)
+        vertices = np.asarray(vertices, dtype=float)
         self.faces = np.asarray(faces, dtype=np.uint32)
-        self.normals = vertex_normals(self.vertices, self.faces)
+        lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+        span = np.maximum(hi - lo, 1e-9)
+        self.matrix = np.eye(4)
+        self.matrix[:3, :3], self.matrix[:3, 3] = np.diag(span), lo
+        self.positions = np.rint((vertices - lo) / span * 65535).astype(np.uint16)
+        normals = vertex_normals(vertices, self.faces) * span  # normals transform by diag(span)
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        self.normals = np.rint(127 * normals).astype(np.int8)
 
     def lower(self, object_data: Any) -> dict[str, Any]:
+        index = self.faces.astype(np.uint16) if len(self.positions) <= 65536 else self.faces
         return {
             "uuid": self.uuid,
             "type": "BufferGeometry",
             "data": {
                 "attributes": {
-                    "position": mg.pack_numpy_array(self.vertices.T),
-                    "normal": mg.pack_numpy_array(self.normals.T),
+                    "position": _packed(self.positions, normalized=True),
+                    "normal": _packed(self.normals, normalized=True),
                 },
-                "index": mg.pack_numpy_array(self.faces.T),
+                "index": _packed(index.reshape(-1, 1)),
             },
         }
+
+
+_EXT_TYPES = {  # msgpack ext codes of meshcat's viewer (msgpack-lite's typed arrays)
+    np.dtype(np.int8): ("Int8Array", 0x11),
+    np.dtype(np.uint16): ("Uint16Array", 0x14),
+    np.dtype(np.uint32): ("Uint32Array", 0x16),
+}
+
+
+def _packed(array: np.ndarray, normalized: bool = False) -> dict[str, Any]:
+    """A three.js buffer attribute of ``array (n, item)``."""
+    name, code = _EXT_TYPES[array.dtype]
+    data = np.ascontiguousarray(array).tobytes()
+    return {
+        "itemSize": array.shape[1],
+        "type": name,
+        "array": umsgpack.Ext(code, data),
+        "normalized": normalized,
+    }
 
 
 class ColladaFile(mg.Object):
@@ -164,7 +195,8 @@ def _shape(obj: pin.GeometryObject) -> Shape:
             faces = _hull(vertices)
         if len(vertices) == 0 or len(faces) == 0:
             raise RobotModelError(f"geometry {obj.name!r}: its mesh has no triangles")
-        return Shape(TriangleMesh(vertices, faces), np.eye(4), vertices.min(0), vertices.max(0))
+        mesh = TriangleMesh(vertices, faces)
+        return Shape(mesh, mesh.matrix, vertices.min(0), vertices.max(0))
     # primitives: meshScale scales them (coal has already scaled a mesh's vertices)
     scale = np.asarray(obj.meshScale, dtype=float).ravel()
     rotation = np.eye(3)
@@ -179,13 +211,14 @@ def _shape(obj: pin.GeometryObject) -> Shape:
         geometry = mg.Cylinder(2 * g.halfLength, radiusTop=top, radiusBottom=g.radius)
         half, rotation = np.array([g.radius, g.radius, g.halfLength]), _Y_TO_Z
     elif isinstance(g, coal.Capsule):
-        vertices, faces = capsule_mesh(g.radius, g.halfLength)
-        geometry, half = TriangleMesh(vertices, faces), np.array([1, 1, 0]) * g.radius
-        half[2] = g.halfLength + g.radius
+        geometry = TriangleMesh(*capsule_mesh(g.radius, g.halfLength))
+        half = np.array([g.radius, g.radius, g.halfLength + g.radius])
     else:
         raise RobotModelError(f"geometry {obj.name!r}: cannot draw a {type(g).__name__} in MeshCat")
     matrix = np.eye(4)
     matrix[:3, :3] = np.diag(scale) @ rotation
+    if isinstance(geometry, TriangleMesh):
+        matrix = matrix @ geometry.matrix
     half = half * np.abs(scale)
     return Shape(geometry, matrix, -half, half)
 
