@@ -72,6 +72,7 @@ def mesh_of(drawn: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vertices (in the geometry object's frame), triangles and unit normals of a drawn mesh."""
     (geometry,) = drawn["geometries"]
     assert geometry["type"] == "BufferGeometry"
+    assert drawn["object"]["frustumCulled"] is False  # quantized: bounds the viewer gets wrong
     M = np.array(drawn["object"]["matrix"]).reshape(4, 4).T  # column-major
     attributes = geometry["data"]["attributes"]
     vertices = decoded(attributes["position"]) @ M[:3, :3].T + M[:3, 3]

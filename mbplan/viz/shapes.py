@@ -134,6 +134,9 @@ class _Mesh(mg.Mesh):
     def lower(self) -> dict[str, Any]:
         data = super().lower()
         data["object"]["matrix"] = self.matrix.T.ravel().tolist()  # three.js: column-major
+        # the viewer's three.js bounds a normalized (quantized) attribute by its raw integers,
+        # which culls meshes wrongly: draw them always
+        data["object"]["frustumCulled"] = False
         return data
 
 
