@@ -1,8 +1,8 @@
 """MeshCat objects for Pinocchio geometry objects: primitives, triangle meshes, mesh files.
 
 A mesh (STL, OBJ, DAE, or a scene's ``add_mesh`` obstacle) is sent as the indexed triangles coal
-loaded — already scaled by ``meshScale`` — with area-weighted vertex normals: compact binary
-arrays in the page, drawn in one colour. To keep its own materials, a Collada file is embedded
+loaded — already scaled by ``meshScale`` — with area-weighted vertex normals, quantized into
+compact binary arrays (:class:`TriangleMesh`) and drawn in one colour. To keep its own materials, a Collada file is embedded
 whole instead (three.js's ColladaLoader reads it in the page, its textures as data URIs). Either
 way nothing refers to a file, so a static page stays self-contained.
 """
