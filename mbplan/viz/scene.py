@@ -22,12 +22,13 @@ from PIL import Image, ImageDraw, ImageFont
 
 from mbplan.errors import InputError
 from mbplan.ocp.scene import Scene as ObstacleScene
-from mbplan.viz.camera import bounding_box, camera_offset, direction, place_camera
+from mbplan.viz.camera import FOV, bounding_box, camera_offset, direction, place_camera
 from mbplan.viz.shapes import Rgba, Shape, draw_geometry, shape_of
 
 ROBOT_VIEW = (25.0, 10.0)  # degrees: elevation and azimuth of the camera seen from the scene
 PAD = 0.05  # m around the geometry's bounding box when framing and spacing the scene
 _LABEL_PX = 48  # font size of in-scene labels (texture pixels)
+_LABEL_SCREEN = 0.035  # height of their letters, as a share of the screen's
 _BACKGROUND = ((0.93, 0.94, 0.96), (0.62, 0.66, 0.72))  # top and bottom: robots of any tint show
 
 
@@ -106,7 +107,9 @@ class Scene:
         shown = 0 if self.frame is None else int(self.frame) % self.knots
         points = np.concatenate([la.extent() for la in self.layers])
         lo, hi = bounding_box(points)
-        height = 0.03 * float(np.max(hi - lo))  # of the labels' letters
+        # the labels' letters: a fixed share of the screen's height at the geometry's framing
+        distance = np.linalg.norm(camera_offset(points - 0.5 * (lo + hi), self.view))
+        height = _LABEL_SCREEN * 2 * distance * np.tan(np.radians(FOV) / 2)
         quads = [
             (k, _LabelQuad(label, height, self.view))
             for k, label in enumerate(self.labels)
