@@ -17,19 +17,27 @@ import pinocchio as pin
 
 import mbplan as mb
 
+GOAL = pin.SE3(pin.rpy.rpyToMatrix(np.pi, 0, 0), np.array([0.5, 0.0, 0.25]))
 
-def main(out: Path) -> int:
+
+def task() -> mb.OCP:
+    """The panda (fingers locked), from its SRDF default configuration at rest, to ``GOAL``."""
     robot = mb.load_robot("panda", lock=["panda_finger_joint1", "panda_finger_joint2"])
     scene = mb.Scene().add_box("left", (0.3, 0.1, 0.4), (0.5, 0.2, 0.2))
     scene.add_box("right", (0.3, 0.1, 0.4), (0.5, -0.2, 0.2))
-    goal = pin.SE3(pin.rpy.rpyToMatrix(np.pi, 0, 0), np.array([0.5, 0.0, 0.25]))
-    ocp = mb.OCP(robot, scene, N=30, dt=0.05)  # from the SRDF default configuration, at rest
+    ocp = mb.OCP(robot, scene, N=30, dt=0.05)
     ocp.add_cost("velocity", mb.residuals.JointVelocity(), 1e-2)
     ocp.add_cost("effort", mb.residuals.JointTorque(), 1e-4)
-    ocp.add_terminal_constraint("hand", mb.residuals.FramePlacement("panda_hand", goal))
+    ocp.add_terminal_constraint("hand", mb.residuals.FramePlacement("panda_hand", GOAL))
     ocp.add_constraint("clearance", mb.residuals.Distance(margin=0.01))
     ocp.add_constraint("limits", mb.residuals.JointPositionLimits())
     ocp.add_constraint("torque", mb.residuals.JointTorqueLimits())
+    return ocp
+
+
+def main(out: Path) -> int:
+    ocp = task()
+    robot, goal = ocp.robot, GOAL
     ok = True
     for method in ("ripm", "ipopt"):
         plan = mb.plan(ocp, method, warm_start="via")

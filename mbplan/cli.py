@@ -254,7 +254,7 @@ def _replay(args: argparse.Namespace) -> int:
     from mbplan.viz import replay_main
 
     html = output_file(args.html, (".html", ".htm"), "--html") if args.html else None
-    return replay_main(args.results, html, args.no_browser, robot=args.robot)
+    return replay_main(args.results, html, args.no_browser, robot=args.robot, colors=args.colors)
 
 
 def _plot(args: argparse.Namespace) -> int:
@@ -356,6 +356,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--no-browser", action="store_true", help="do not open a browser (print the URL)"
     )
     rep.add_argument("--robot", default="iiwa", help="robot of the results (default iiwa)")
+    rep.add_argument(
+        "--colors",
+        choices=("formulation", "materials"),
+        default="formulation",
+        help="tint each robot by its formulation (default) or keep the meshes' own materials",
+    )
     rep.set_defaults(func=_replay)
 
     plot = sub.add_parser("plot", help="plot result.npz files (convergence or joint trajectories)")

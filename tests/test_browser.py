@@ -1,8 +1,8 @@
 """Replays rendered by headless Chromium (SwiftShader WebGL): the robots are on screen and move.
 
 Skipped without /usr/bin/chromium; CI installs it (``apt-get install chromium``). A robot pixel
-is one clearly redder than green: the replay's robot colours (orange, purple) are, the sky-blue
-background, the grey grid and the green goal are not. The scenes have no task, so no red
+is one of a formulation's tint — clearly orange (generalized) or clearly blue (maximal) — which
+the grey background and grid and the green goal are not. The scenes have no task, so no red
 obstacles.
 """
 
@@ -64,7 +64,8 @@ def screenshot(url: str, png: Path, budget_ms: int = 5000, timeout_s: float = 45
 
 
 def robot_pixels(image: np.ndarray) -> np.ndarray:
-    return image[..., 0] > image[..., 1] + 30
+    r, g, b = image[..., 0], image[..., 1], image[..., 2]
+    return ((r > g + 30) & (r > b + 60)) | ((b > r + 60) & (b > g + 20))
 
 
 def halves(mask: np.ndarray) -> tuple[int, int]:

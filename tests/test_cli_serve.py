@@ -3,7 +3,7 @@
 import webbrowser
 
 from mbplan.cli import main
-from mbplan.viz import meshcat_replay
+from mbplan.viz import server as meshcat_server
 
 
 def test_plan_viz_serves_until_ctrl_c(monkeypatch, capsys):
@@ -14,11 +14,11 @@ def test_plan_viz_serves_until_ctrl_c(monkeypatch, capsys):
         assert "MeshCat viewer at" in capsys.readouterr().out
         raise KeyboardInterrupt  # the user's Ctrl-C
 
-    monkeypatch.setattr(meshcat_replay.MeshcatServer, "wait", wait)
+    monkeypatch.setattr(meshcat_server.MeshcatServer, "wait", wait)
     monkeypatch.setattr(webbrowser, "open", lambda url: True)
     argv = ["plan", "--method", "ipopt", "--seed", "1", "--horizon", "10", "--viz"]
     code = main(argv)
     assert code in (0, 1)  # the plan's own status, not the interrupt's
     ((url, alive),) = served
     assert url.startswith("http://127.0.0.1:") and alive is None
-    assert not meshcat_replay._LIVE  # nothing left serving in the background
+    assert not meshcat_server.LIVE  # nothing left serving in the background
