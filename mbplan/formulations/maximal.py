@@ -148,8 +148,8 @@ class MaximalNLP:
             per = {"a": mm.axis_child[b], "target": target}
             return self._joint_terms(item, "velocity_eq", b, per, {"target": target})
         if isinstance(r, JointPositionLimits):
-            b = np.arange(nb)
-            lo, hi = np.asarray(r.lower)[mm.idx_v], np.asarray(r.upper)[mm.idx_v]
+            b = np.flatnonzero(np.isin(mm.idx_v, r.indices(ocp.robot)))  # no continuous joints
+            lo, hi = np.asarray(r.lower)[mm.idx_v[b]], np.asarray(r.upper)[mm.idx_v[b]]
             half = np.minimum(0.5 * (hi - lo), np.pi)
             per = {"R_mid": self._about_axis(b, 0.5 * (lo + hi)), "cos_half": np.cos(half)}
             return self._joint_terms(item, "position_limits", b, per, {"lo": lo, "hi": hi})

@@ -20,13 +20,15 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import InputError, RobotModelError
+from mbplan.ocp.continuous import to_angles, unbounded_revolute_model
 from mbplan.robots import RobotDescription, load
 
 
 @dataclass(frozen=True, eq=False)
 class Robot:
     """A fixed-base robot: ``model`` (1-dof joints only), collision and visual geometry (may be
-    None), its ``source`` (JSON-serialisable, see :func:`load_robot`) and the locked joints."""
+    None), its ``source`` (JSON-serialisable, see :func:`load_robot`), the locked joints and the
+    continuous joints (revolute without limits in ``model``: :mod:`mbplan.ocp.continuous`)."""
 
     name: str
     model: pin.Model
@@ -34,6 +36,7 @@ class Robot:
     visual_model: pin.GeometryModel | None
     source: dict[str, Any]
     locked: dict[str, float] = field(default_factory=dict)
+    continuous: tuple[str, ...] = ()
 
     @property
     def nq(self) -> int:
@@ -89,7 +92,8 @@ def load_robot(
 ) -> Robot:
     """Load ``robot`` (name, ``.urdf`` or ``.xml`` MJCF path, ``pinocchio.Model``) and lock the
     joints ``lock`` (names at their reference value: the SRDF ``default`` configuration if any,
-    else neutral; or a mapping name → value). Every remaining joint must be 1-dof (nq = nv)."""
+    else neutral; or a mapping name → value). Continuous joints become unbounded revolute joints
+    (one angle each, :mod:`mbplan.ocp.continuous`); every other joint must be 1-dof (nq = nv)."""
     if isinstance(robot, str | os.PathLike) and collision_model is None and visual_model is None:
         names = dict(lock) if isinstance(lock, Mapping) else dict.fromkeys(lock or ())
         frozen = tuple(sorted(names.items(), key=lambda kv: kv[0])) or None
@@ -119,12 +123,30 @@ def _load(robot, package_dirs, lock, collision_model, visual_model) -> Robot:
             f"cannot load a robot from a {type(robot).__name__}: expected a robot name, a URDF or "
             "MJCF path or a pinocchio.Model"
         )
+    desc, continuous = _unbounded(desc)
     locked = _lock_values(desc, lock)
     if locked:
         source = {**source, "lock": locked}
         desc = _reduced(desc, locked)
     _check_joints(desc)
-    return Robot(desc.name, desc.model, desc.collision_model, desc.visual_model, source, locked)
+    continuous = tuple(n for n in continuous if n not in locked)
+    return Robot(
+        desc.name, desc.model, desc.collision_model, desc.visual_model, source, locked, continuous
+    )
+
+
+def _unbounded(desc: RobotDescription) -> tuple[RobotDescription, tuple[str, ...]]:
+    """``desc`` with its continuous joints as unbounded revolute joints (reference configurations
+    converted to angles)."""
+    model, names = unbounded_revolute_model(desc.model)
+    if not names:
+        return desc, ()
+    refs = desc.model.referenceConfigurations
+    for name in _ref_names(refs):
+        model.referenceConfigurations[name] = to_angles(desc.model, np.array(refs[name]))
+    return RobotDescription(
+        desc.name, model, desc.collision_model, desc.visual_model, desc.urdf_path
+    ), names
 
 
 def robot_from_source(source: Mapping[str, Any]) -> Robot:
