@@ -159,3 +159,32 @@ def test_a_joint_target_of_the_wrong_length_names_the_expected_size() -> None:
         ocp.add_cost("q", res.JointPosition([0.0, 1.0, 0.0]))
     with pytest.raises(mb.InputError, match=r"expected shape \(1,\)"):
         ocp.add_cost("q1", res.JointPosition([0.0, 1.0], joints=("joint1",)))
+
+
+@pytest.mark.parametrize("method", ["ripm", "ipopt"])
+def test_kinova_with_three_continuous_joints_plans_and_verifies(method: str) -> None:
+    """Continuous joints 1, 4, 6 beside limited ones (their limits keep their rows); joint 4
+    goes past π. The SRDF's ``arm_up`` has joint 3 outside its limits modulo 2π: shifted in."""
+    robot = mb.load_robot("kinova")
+    assert robot.continuous == ("j2s6s200_joint_1", "j2s6s200_joint_4", "j2s6s200_joint_6")
+    scene = mb.Scene()
+    assert res.JointPositionLimits().resolve(robot, scene).dim(robot, scene) == 6
+    q0 = robot.configuration("arm_up") + np.array([0.0, 0.0, 2 * np.pi, 0.0, 0.0, 0.0])
+    goal = q0 + np.array([1.0, -0.3, 0.3, 1.0, -0.3, 1.0])
+    ocp = tracking_ocp(robot, q0, goal, N=20, dt=0.1)
+    result = mb.plan(ocp, method)
+    assert result.success, result.message
+    check = mb.verify(ocp, result)
+    assert check.passed, check.reasons
+    assert np.all(np.abs(result.q[-1] - goal) < 0.01)
+
+
+def test_a_continuous_joint_locks_at_an_angle() -> None:
+    robot = mb.load_robot("double_pendulum_continuous", lock={"joint2": 0.5})
+    assert robot.continuous == ("joint1",) and robot.nq == 1
+    original = load("double_pendulum_continuous").model
+    d0, d1 = original.createData(), robot.model.createData()
+    pin.framesForwardKinematics(original, d0, from_angles(original, np.array([1.2, 0.5])))
+    pin.framesForwardKinematics(robot.model, d1, np.array([1.2]))
+    M0, M1 = d0.oMf[original.getFrameId("link2")], d1.oMf[robot.frame_id("link2")]
+    np.testing.assert_allclose(M0.homogeneous, M1.homogeneous, atol=1e-12)

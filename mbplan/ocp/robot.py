@@ -266,5 +266,5 @@ def _check_joints(desc: RobotDescription) -> None:
         if model.joints[j].nq != 1 or model.joints[j].nv != 1:
             raise RobotModelError(
                 f"{desc.name}: joint {model.names[j]!r} ({model.joints[j].shortname()}) is not a "
-                "1-dof revolute/prismatic joint (nq = nv = 1 required; lock it)"
+                "revolute, continuous or prismatic joint (lock it)"
             )
