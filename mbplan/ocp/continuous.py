@@ -93,32 +93,36 @@ def unbounded_revolute_model(model: pin.Model) -> tuple[pin.Model, tuple[str, ..
 def to_angles(model: pin.Model, q: np.ndarray) -> np.ndarray:
     """A configuration of ``model`` (continuous joints as ``(cos, sin)``) as one coordinate per
     joint (``θ = atan2(sin, cos)`` in ``(-π, π]``): ``(..., nq) -> (..., nv)``."""
-    q = np.asarray(q, dtype=float)
-    if q.shape[-1:] != (model.nq,):
-        raise InputError(f"expected a configuration of {model.nq} entries, got shape {q.shape}")
-    cols = []
-    for j in range(1, model.njoints):
-        iq = model.idx_qs[j]
-        if is_continuous(model, j):
-            cols.append(np.arctan2(q[..., iq + 1], q[..., iq])[..., None])
-        else:
-            cols.append(q[..., iq : iq + model.nqs[j]])
-    return np.concatenate(cols, axis=-1)
+    return _per_joint(
+        model,
+        q,
+        (model.idx_qs, model.nqs, model.nq, "a configuration of"),
+        lambda x, i: np.arctan2(x[..., i + 1], x[..., i])[..., None],
+    )
 
 
 def from_angles(model: pin.Model, theta: np.ndarray) -> np.ndarray:
     """Inverse of :func:`to_angles`: ``(..., nv) -> (..., nq)`` of ``model``."""
-    theta = np.asarray(theta, dtype=float)
-    if theta.shape[-1:] != (model.nv,):
-        raise InputError(f"expected {model.nv} joint coordinates, got shape {theta.shape}")
-    cols = []
-    for j in range(1, model.njoints):
-        iv = model.idx_vs[j]
-        if is_continuous(model, j):
-            a = theta[..., iv]
-            cols.append(np.stack([np.cos(a), np.sin(a)], axis=-1))
-        else:
-            cols.append(theta[..., iv : iv + model.nvs[j]])
+    return _per_joint(
+        model,
+        theta,
+        (model.idx_vs, model.nvs, model.nv, "joint coordinates:"),
+        lambda x, i: np.stack([np.cos(x[..., i]), np.sin(x[..., i])], axis=-1),
+    )
+
+
+def _per_joint(model: pin.Model, x, layout, continuous) -> np.ndarray:
+    """``x`` joint by joint: ``continuous(x, index)`` for continuous joints, else the entries."""
+    index, width, n, what = layout
+    x = np.asarray(x, dtype=float)
+    if x.shape[-1:] != (n,):
+        raise InputError(f"expected {what} {n} entries for {model.name!r}, got shape {x.shape}")
+    cols = [
+        continuous(x, index[j])
+        if is_continuous(model, j)
+        else x[..., index[j] : index[j] + width[j]]
+        for j in range(1, model.njoints)
+    ]
     return np.concatenate(cols, axis=-1)
 
 

@@ -87,7 +87,8 @@ class _JointResidual(Residual):
 
 @dataclass(frozen=True, eq=False)
 class JointPosition(_JointResidual):
-    """``q[joints] - target`` (rad or m)."""
+    """``q[joints] - target`` (rad or m); ``2 sin((θ - θ_t)/2)`` for a continuous joint (a goal
+    modulo 2π, :mod:`mbplan.ocp.continuous`)."""
 
 
 @dataclass(frozen=True, eq=False)
