@@ -188,3 +188,25 @@ def test_a_continuous_joint_locks_at_an_angle() -> None:
     pin.framesForwardKinematics(robot.model, d1, np.array([1.2]))
     M0, M1 = d0.oMf[original.getFrameId("link2")], d1.oMf[robot.frame_id("link2")]
     np.testing.assert_allclose(M0.homogeneous, M1.homogeneous, atol=1e-12)
+
+
+def test_both_formulations_cost_a_continuous_goal_alike_modulo_two_pi() -> None:
+    """The maximal chordal cost ``w (1 - cos Δθ)`` equals joint space's ``½ w (2 sin(Δθ/2))²``
+    knot by knot, on a path that turns a full turn past the target."""
+    ocp = fd_ocp()
+    nlp = MaximalNLP(ocp, jit=False)
+    q = np.linspace(ocp.q0, [3.0 + 2 * np.pi, -2.5 - 0.4], ocp.N + 1)
+    x = nlp.initial_point(q)
+    np.testing.assert_allclose(nlp.joint_trajectory(x)["q"], q, atol=1e-9)
+    item = ocp["q"]
+    expected = evaluate(ocp.robot, ocp.scene, item.residual, q[item.knots], q[item.knots], None)
+    flat = {n: nlp.problem.variables.blocks[n].flat(a) for n, a in x.items()}
+    value = {  # joint 1 hangs from the world, joint 2 from link 1: one term each, per knot
+        t.name: np.ravel(t.function.value(t.gather(flat), t.parameters))
+        for t in nlp.problem.terms
+        if t.name in ("q_world", "q")
+    }
+    cost = 0.5 * item.weight * expected**2
+    np.testing.assert_allclose(value["q_world"], cost[:, 0], rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(value["q"], cost[:, 1], rtol=1e-10, atol=1e-14)
+    assert cost.sum() > 1.0
