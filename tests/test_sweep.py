@@ -13,7 +13,6 @@ import mbplan as mb
 from mbplan.robots import available_robots, load
 from mbplan.viz import static_html
 
-CONTINUOUS = {"kinova", "double_pendulum_continuous"}  # unbounded joints: nq = 2 per joint
 # Known failures, asserted so that a fix shows up: IPOPT's restoration fails on the 3-dof
 # finger's fingertip goal (3 equations on 3 joints) where the RIPM converges.
 KNOWN_FAILURES = {("finger_edu", "frame", "ipopt")}
@@ -56,7 +55,7 @@ def _tasks(robot: mb.Robot, seed: int) -> dict[str, mb.OCP]:
     return tasks
 
 
-@pytest.mark.parametrize("name", [n for n in available_robots() if n not in CONTINUOUS])
+@pytest.mark.parametrize("name", available_robots())  # continuous joints: one angle each
 def test_every_arm_plans_joint_and_frame_goals_in_both_formulations(name: str, tmp_path: Path):
     robot = _robot(name)
     for kind, ocp in _tasks(robot, seed=len(name)).items():
@@ -78,9 +77,3 @@ def test_every_arm_plans_joint_and_frame_goals_in_both_formulations(name: str, t
         ):
             page = static_html(results, tmp_path / f"{name}.html")
             assert page.stat().st_size > 10_000
-
-
-@pytest.mark.parametrize("name", sorted(CONTINUOUS))
-def test_continuous_joints_are_refused_with_a_clear_error(name: str) -> None:
-    with pytest.raises(mb.RobotModelError, match="not a 1-dof revolute/prismatic joint"):
-        mb.load_robot(name)

@@ -86,10 +86,20 @@ def _symbolic(robot: Robot, scene: Scene, residual: Residual, x: cs.SX) -> cs.SX
     if isinstance(residual, (JointPosition, JointVelocity, JointTorque)):
         idx = robot.joint_indices(residual.joints).tolist()
         source = {JointPosition: q, JointVelocity: v, JointTorque: x}[type(residual)]
-        return cs.vertcat(*[source[i] for i in idx]) - cs.DM(residual.target)
+        error = cs.vertcat(*[source[i] for i in idx]) - cs.DM(residual.target)
+        if isinstance(residual, JointPosition) and robot.continuous:
+            wrapped = set(robot.joint_indices(robot.continuous).tolist())
+            rows = [
+                2 * cs.sin(error[r] / 2) if i in wrapped else error[r] for r, i in enumerate(idx)
+            ]
+            error = cs.vertcat(*rows)  # continuous: 2 sin(Δθ/2), zero at Δθ ≡ 0 (mod 2π)
+        return error
     if isinstance(residual, _Limits):
         var = {"JointPositionLimits": q, "JointVelocityLimits": v}.get(type(residual).__name__, x)
-        return cs.vertcat(cs.DM(residual.lower) - var, var - cs.DM(residual.upper))
+        keep = residual.indices(robot).tolist()
+        var = cs.vertcat(*[var[i] for i in keep])
+        lo, hi = (cs.DM(np.asarray(b)[keep]) for b in (residual.lower, residual.upper))
+        return cs.vertcat(lo - var, var - hi)
     placements = symbolic_placements(model, q)
     if isinstance(residual, (FrameTranslation, FramePlacement)):
         frame = model.frames[robot.frame_id(residual.frame)]
@@ -166,8 +176,9 @@ def row_label(robot: Robot, scene: Scene, residual: Residual, row: int) -> str:
     if isinstance(residual, ComOutsideCylinder):
         return f"the COM of the link of joint {names[row]!r} near cylinder {residual.obstacle!r}"
     if isinstance(residual, _Limits):
-        side = "lower" if row < robot.nv else "upper"
-        return f"the {side} limit of joint {names[row % robot.nv]!r}"
+        keep = residual.indices(robot)
+        side = "lower" if row < len(keep) else "upper"
+        return f"the {side} limit of joint {names[int(keep[row % len(keep)])]!r}"
     if isinstance(residual, (JointPosition, JointVelocity, JointTorque)):
         idx = robot.joint_indices(residual.joints)
         return f"joint {names[int(idx[row])]!r}"

@@ -149,8 +149,10 @@ class MaximalNLP:
             return self._joint_terms(item, "velocity_eq", b, per, {"target": target})
         if isinstance(r, JointPositionLimits):
             lo, hi = np.asarray(r.lower)[mm.idx_v], np.asarray(r.upper)[mm.idx_v]
-            # a revolute range of 2π or more limits no rotation (cos ≥ -1): no rows for it
-            b = np.flatnonzero(~rev | (hi - lo < 2 * np.pi))
+            # no rows for continuous joints, nor for a revolute range of 2π or more (it limits
+            # no rotation: cos ≥ -1)
+            limited = np.isin(mm.idx_v, r.indices(ocp.robot))
+            b = np.flatnonzero(limited & (~rev | (hi - lo < 2 * np.pi)))
             if not b.size:
                 return []
             lo, hi = lo[b], hi[b]

@@ -170,8 +170,8 @@ class OCP:
             if r.space != "state" or r.sense != "ineq" or 1 not in item.knots:
                 continue
             value = evaluate(self.robot, self.scene, r, self.q0[None], self.v0[None], None)[0]
-            i = int(np.argmax(value))
-            if value[i] > 1e-9:
+            i = int(np.argmax(value)) if value.size else 0
+            if value.size and value[i] > 1e-9:
                 what = row_label(self.robot, self.scene, r, i)
                 extra = ""
                 if isinstance(r, Distance):

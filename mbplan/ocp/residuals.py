@@ -87,7 +87,8 @@ class _JointResidual(Residual):
 
 @dataclass(frozen=True, eq=False)
 class JointPosition(_JointResidual):
-    """``q[joints] - target`` (rad or m)."""
+    """``q[joints] - target`` (rad or m); ``2 sin((θ - θ_t)/2)`` for a continuous joint (a goal
+    modulo 2π, :mod:`mbplan.ocp.continuous`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -219,24 +220,40 @@ class _Limits(Residual):
         name = type(self).__name__
         lower = lo if self.lower is None else as_array(self.lower, (robot.nv,), f"{name}.lower")
         upper = hi if self.upper is None else as_array(self.upper, (robot.nv,), f"{name}.upper")
-        if not np.all(np.isfinite(lower)) or not np.all(np.isfinite(upper)):
+        free = self._unbounded(robot)
+        if not np.all(np.isfinite(lower[~free])) or not np.all(np.isfinite(upper[~free])):
             raise InputError(f"{name}: limits must be finite (URDF without limits?)")
-        if np.any(lower >= upper):
-            j = int(np.argmax(lower >= upper))
+        if np.any((lower >= upper) & ~free):
+            j = int(np.argmax((lower >= upper) & ~free))
             raise InputError(
                 f"{name}: lower >= upper for joint {robot.model.names[j + 1]!r} "
                 f"({lower[j]:g}, {upper[j]:g}; URDF without limits?)"
             )
         return replace(self, lower=np.array(lower), upper=np.array(upper))
 
+    def _unbounded(self, robot: Robot) -> np.ndarray:
+        """(nv,) mask of the joints without rows (continuous joints' positions)."""
+        return np.zeros(robot.nv, dtype=bool)
+
+    def indices(self, robot: Robot) -> np.ndarray:
+        """Velocity indices of the limited joints: rows ``(lower - x, x - upper)[indices]``."""
+        return np.flatnonzero(~self._unbounded(robot))
+
     def dim(self, robot: Robot, scene: Scene) -> int:
-        return 2 * robot.nv
+        return 2 * len(self.indices(robot))
 
 
 @dataclass(frozen=True, eq=False)
 class JointPositionLimits(_Limits):
+    """Position limits of every joint but the continuous ones (no limits, no rows)."""
+
     def _defaults(self, robot: Robot) -> tuple[np.ndarray, np.ndarray]:
         return robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+
+    def _unbounded(self, robot: Robot) -> np.ndarray:
+        free = np.zeros(robot.nv, dtype=bool)
+        free[robot.joint_indices(robot.continuous)] = True
+        return free
 
 
 @dataclass(frozen=True, eq=False)

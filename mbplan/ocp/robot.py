@@ -23,6 +23,7 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import InputError, RobotModelError
+from mbplan.ocp.continuous import to_angles, unbounded_revolute_model
 from mbplan.robots import RobotDescription, load
 
 
@@ -30,7 +31,8 @@ from mbplan.robots import RobotDescription, load
 class Robot:
     """A fixed-base robot: ``model`` (1-dof joints only; ``model.damping`` the viscous joint
     damping every formulation applies), collision and visual geometry (may be None), its
-    ``source`` (JSON-serialisable, see :func:`load_robot`) and the locked joints."""
+    ``source`` (JSON-serialisable, see :func:`load_robot`), the locked joints and the continuous
+    joints (revolute without limits in ``model``: :mod:`mbplan.ocp.continuous`)."""
 
     name: str
     model: pin.Model
@@ -38,6 +40,7 @@ class Robot:
     visual_model: pin.GeometryModel | None
     source: dict[str, Any]
     locked: dict[str, float] = field(default_factory=dict)
+    continuous: tuple[str, ...] = ()
 
     @property
     def nq(self) -> int:
@@ -94,7 +97,8 @@ def load_robot(
 ) -> Robot:
     """Load ``robot`` (name, ``.urdf`` or ``.xml`` MJCF path, ``pinocchio.Model``) and lock the
     joints ``lock`` (names at their reference value: the SRDF ``default`` configuration if any,
-    else neutral; or a mapping name → value). Every remaining joint must be 1-dof (nq = nv).
+    else neutral; or a mapping name → value). Continuous joints become unbounded revolute joints
+    (one angle each, :mod:`mbplan.ocp.continuous`); every other joint must be 1-dof (nq = nv).
     ``damping=False``: the robot's ``model.damping`` is zeroed (on a copy of the model)."""
     if isinstance(robot, str | os.PathLike) and collision_model is None and visual_model is None:
         names = dict(lock) if isinstance(lock, Mapping) else dict.fromkeys(lock or ())
@@ -131,6 +135,7 @@ def _load(robot, package_dirs, lock, collision_model, visual_model, damping=True
             f"cannot load a robot from a {type(robot).__name__}: expected a robot name, a URDF or "
             "MJCF path or a pinocchio.Model"
         )
+    desc, continuous = _unbounded(desc)
     locked = _lock_values(desc, lock)
     if locked:
         source = {**source, "lock": locked}
@@ -143,7 +148,24 @@ def _load(robot, package_dirs, lock, collision_model, visual_model, damping=True
             desc.name, model, desc.collision_model, desc.visual_model, desc.urdf_path
         )
     source = {**source, "damping": bool(damping)}
-    return Robot(desc.name, desc.model, desc.collision_model, desc.visual_model, source, locked)
+    continuous = tuple(n for n in continuous if n not in locked)
+    return Robot(
+        desc.name, desc.model, desc.collision_model, desc.visual_model, source, locked, continuous
+    )
+
+
+def _unbounded(desc: RobotDescription) -> tuple[RobotDescription, tuple[str, ...]]:
+    """``desc`` with its continuous joints as unbounded revolute joints (reference configurations
+    converted to angles)."""
+    model, names = unbounded_revolute_model(desc.model)
+    if not names:
+        return desc, ()
+    refs = desc.model.referenceConfigurations
+    for name in _ref_names(refs):
+        model.referenceConfigurations[name] = to_angles(desc.model, np.array(refs[name]))
+    return RobotDescription(
+        desc.name, model, desc.collision_model, desc.visual_model, desc.urdf_path
+    ), names
 
 
 def robot_from_source(source: Mapping[str, Any]) -> Robot:
@@ -263,5 +285,5 @@ def _check_joints(desc: RobotDescription) -> None:
         if model.joints[j].nq != 1 or model.joints[j].nv != 1:
             raise RobotModelError(
                 f"{desc.name}: joint {model.names[j]!r} ({model.joints[j].shortname()}) is not a "
-                "1-dof revolute/prismatic joint (nq = nv = 1 required; lock it)"
+                "revolute, continuous or prismatic joint (lock it)"
             )

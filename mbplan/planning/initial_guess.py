@@ -9,6 +9,8 @@
 The goal configuration is the target of a terminal :class:`~mbplan.ocp.residuals.JointPosition`
 (constraint or cost), else the inverse kinematics of a terminal frame goal
 (:func:`inverse_kinematics`, which reports an unreachable goal before any solve), else ``q0``.
+Continuous joints interpolate in angle (to the target as given, not modulo 2π); via points and
+IK starts sample them within ``± π`` of the midpoint / the IK's start.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import pinocchio as pin
 
 from mbplan.errors import InfeasibleRequestError, InputError, WarmStartWarning
 from mbplan.formulations.joint_space import evaluate
+from mbplan.ocp.continuous import joint_ranges
 from mbplan.ocp.problem import OCP
 from mbplan.ocp.residuals import (
     ComOutsideCylinder,
@@ -59,7 +62,7 @@ def inverse_kinematics(
     error if none does: the goal is outside the workspace (or blocked)."""
     model, data = robot.model, robot.model.createData()
     fid = robot.frame_id(goal.frame)
-    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    lo, hi = joint_ranges(robot, np.asarray(q_init, float))
     rng = np.random.default_rng(seed)
     best_err, rejected = np.inf, 0
     for start in range(IK_STARTS + 1):
@@ -119,10 +122,9 @@ def initial_path(ocp: OCP, kind: str = "linear") -> np.ndarray:
     linear = q0 + s[:, None] * (q_goal - q0)
     if kind == "linear" or path_clearance(ocp, linear) <= 0.0:
         return linear
-    model = ocp.robot.model
-    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
     rng = np.random.default_rng(0)
     mid = 0.5 * (q0 + q_goal)
+    lo, hi = joint_ranges(ocp.robot, mid)
     best, best_length = linear, np.inf
     first = np.minimum(2 * s, 1.0)[:, None]
     second = np.maximum(2 * s - 1.0, 0.0)[:, None]
