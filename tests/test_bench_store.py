@@ -98,7 +98,7 @@ def test_two_concurrent_writers(tmp_path):
             )
         )
         assert procs[-1].stdout.readline() == "ready\n"
-    (first, _), (second, refused) = [(p.wait(timeout=120), p.communicate()[1]) for p in procs]
+    (first, _), (second, refused) = [(p.wait(timeout=120), p.communicate(timeout=60)[1]) for p in procs]
     assert (first, second) == (0, 2), refused
     assert "another benchmark run" in refused and "Traceback" not in refused
     assert len(refused.strip().splitlines()) == 1
@@ -126,7 +126,7 @@ def test_interrupts_at_random_points(tmp_path, signum, workers):
         time.sleep(rng.uniform(0.0, 1.0))
         proc.send_signal(signum)
         codes.append(proc.wait(timeout=60))
-        err = proc.communicate()[1]
+        err = proc.communicate(timeout=60)[1]  # a worker left holding the pipe fails, not hangs
         # 0: it had finished; -signum: the signal came during the interpreter's shutdown
         assert codes[-1] in (0, 128 + signum, -signum), err
         assert "Traceback" not in err, err

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -113,14 +114,28 @@ def _execute(
     except BaseException:
         # Interrupted (Ctrl-C, SIGTERM) or a job failed: stop the workers now instead of
         # waiting for the running jobs; their rows are simply not written.
-        for process in list((getattr(pool, "_processes", None) or {}).values()):
-            process.terminate()
+        _stop_workers(list((getattr(pool, "_processes", None) or {}).values()))
         pool.shutdown(wait=True, cancel_futures=True)  # joins the pool's thread: a quiet exit
         raise
     pool.shutdown()
 
 
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+_STOP_GRACE = 2.0  # s a terminated worker gets before it is killed
+
+
+def _stop_workers(processes: list) -> None:
+    """SIGTERM every worker, then SIGKILL those still alive after :data:`_STOP_GRACE`: a worker
+    that cannot take SIGTERM (still blocked, or a child forked while another thread held a lock)
+    must not outlive the run holding its parent's pipes."""
+    for process in processes:
+        process.terminate()
+    deadline = time.monotonic() + _STOP_GRACE
+    for process in processes:
+        process.join(max(0.0, deadline - time.monotonic()))
+        if process.is_alive():
+            process.kill()
+            process.join(_STOP_GRACE)
 
 
 @contextlib.contextmanager
