@@ -98,7 +98,9 @@ def test_two_concurrent_writers(tmp_path):
             )
         )
         assert procs[-1].stdout.readline() == "ready\n"
-    (first, _), (second, refused) = [(p.wait(timeout=120), p.communicate(timeout=60)[1]) for p in procs]
+    (first, _), (second, refused) = [
+        (p.wait(timeout=120), p.communicate(timeout=60)[1]) for p in procs
+    ]
     assert (first, second) == (0, 2), refused
     assert "another benchmark run" in refused and "Traceback" not in refused
     assert len(refused.strip().splitlines()) == 1
