@@ -150,11 +150,12 @@ def test_both_formulations_write_the_same_residuals() -> None:
 
 
 def test_prismatic_residuals_equal_the_joint_space_ones() -> None:
-    """Finger positions, velocities (forward step) and limits in maximal coordinates read the
-    same numbers as in joint space; the joint path round-trips through the bodies' poses."""
+    """Finger positions, velocities (central difference) and limits in maximal coordinates read
+    the same numbers as in joint space; the joint path round-trips through the bodies' poses."""
     ocp = panda_ocp()
     nlp = MaximalNLP(ocp, jit=False)
-    q = np.linspace(ocp.q0, PANDA_START + np.r_[np.full(7, 0.1), 0.02, 0.01], ocp.N + 1)
+    s = np.linspace(0.0, 1.0, ocp.N + 1)[:, None] ** 2  # accelerating: steps differ
+    q = ocp.q0 + s * (PANDA_START + np.r_[np.full(7, 0.1), 0.02, 0.01] - ocp.q0)
     x = nlp.initial_point(q)
     np.testing.assert_allclose(nlp.joint_trajectory(x)["q"], q, atol=1e-12)
     flat = {n: nlp.problem.variables.blocks[n].flat(a) for n, a in x.items()}
@@ -164,8 +165,9 @@ def test_prismatic_residuals_equal_the_joint_space_ones() -> None:
         return np.ravel(term.function.value(term.gather(flat), term.parameters))
 
     np.testing.assert_allclose(value("fingers_prismatic"), q[2, 7:] - [0.02, 0.025], atol=1e-12)
-    step = (q[2, 7] - q[1, 7]) / ocp.dt
-    np.testing.assert_allclose(value("finger_v_prismatic"), [step - 0.05], atol=1e-10)
+    central = (q[2, 7] - q[0, 7]) / (2 * ocp.dt)  # the velocity a plan reports at knot 1
+    assert abs(central - (q[2, 7] - q[1, 7]) / ocp.dt) > 1e-3
+    np.testing.assert_allclose(value("finger_v_prismatic"), [central - 0.05], atol=1e-10)
     lo, hi = ocp.robot.model.lowerPositionLimit[7:], ocp.robot.model.upperPositionLimit[7:]
     limits = value("q_limits_prismatic").reshape(ocp.N, 2, 2)  # knots 1..N, fingers, (lo, hi)
     np.testing.assert_allclose(limits[:, :, 0], lo - q[1:, 7:], atol=1e-12)
@@ -183,6 +185,24 @@ def test_panda_with_prismatic_fingers_plans_in_maximal_coordinates_and_verifies(
     check = mb.verify(ocp, result)
     assert check.passed, check.reasons
     assert np.all(np.abs(result.q[-1, 7:] - goal[7:]) < 0.005)  # the fingers moved 2 cm
+
+
+def test_rest_at_the_goal_plans_in_both_formulations() -> None:
+    """A terminal velocity equality means the velocity the plan reports and the verifier checks
+    (maximal coordinates: the central difference; it was the forward step, which left the RIPM
+    plan moving at 0.87 rad/s at the last knot)."""
+    qT = np.array([0.5, 0.3, 0.0, -0.5, 0.0, 0.4, 0.0])
+    ocp = mb.OCP(mb.load_robot("iiwa", damping=False), N=20, dt=0.05, q0=np.zeros(7))
+    ocp.add_cost("effort", res.JointTorque(), 1e-3).add_cost("v", res.JointVelocity(), 1e-2)
+    ocp.add_constraint("q_limits", res.JointPositionLimits())
+    ocp.add_constraint("v_limits", res.JointVelocityLimits())
+    ocp.add_terminal_constraint("goal", res.JointPosition(qT))
+    ocp.add_terminal_constraint("rest", res.JointVelocity())
+    for method in ("ripm", "ipopt"):
+        plan = mb.plan(ocp, method)
+        assert plan.success, (method, plan.message, plan.violations)
+        assert np.max(np.abs(plan.v[-1])) < 1e-6, method
+        assert mb.verify(plan).passed, method
 
 
 def test_ocp_round_trips_through_json() -> None:

@@ -5,14 +5,16 @@ exp(Δθ a)``:
 
 * joint position: a cost is the chordal distance (eq. 57) ``w (1 - cos Δθ) ≈ ½ w Δθ²`` and a
   constraint ``Δθ = atan2(aᵀ vee(E - Eᵀ)/2, (tr E - 1)/2) = 0``;
-* joint velocity, the step ``θ_{k+1} - θ_k`` over ``Δt`` from ``R_rel,k+1 = F_pᵀ R_rel,k F_c``:
-  a cost (target zero only) ``w (1 - cos(θ_{k+1} - θ_k))/Δt²``, a constraint the ``atan2`` step;
+* joint velocity, from the steps ``θ_{k+1} - θ_k`` (``R_rel,k+1 = F_pᵀ R_rel,k F_c``): a cost
+  (target zero only) ``w (1 - cos(θ_{k+1} - θ_k))/Δt²``, a constraint the central difference
+  ``(θ_{k+1} - θ_{k-1})/(2Δt)`` of ``atan2`` steps (the velocity a plan reports);
 * joint position limits ``cos(θ - θ_mid) ≥ cos(θ_half)`` and velocity limits
   ``cos(θ_{k+1} - θ_k) ≥ cos(v_max Δt)`` (exact for ranges below 2π; symmetric velocity limits).
 
 Prismatic joints, from the displacement ``d = (R_p a_p)ᵀ(pivot_c - pivot_p)``
 (:func:`mbplan.dynamics.joints.prismatic_displacement`): ``½ w (d - d_t)²`` and ``d - d_t``,
-the step ``(d_{k+1} - d_k)/Δt`` for velocities, and the limits ``(lo - x, x - hi) ≤ 0`` of both.
+the step ``(d_{k+1} - d_k)/Δt`` for velocity costs and limits, ``(d_{k+1} - d_{k-1})/(2Δt)`` for
+velocity equalities, and the limits ``(lo - x, x - hi) ≤ 0`` of both.
 """
 
 from __future__ import annotations
@@ -60,9 +62,10 @@ def _velocity_cost(Rp, Fp, Rc, Fc, w):
     return chordal_cost(nxt, rel, 0.5 * w * cs.DM.eye(3))
 
 
-def _velocity_eq(Rp, Fp, Rc, Fc, a, target, dt):
+def _velocity_eq(Rp, Fp, Fp0, Rc, Fc, Fc0, a, target, dt):
     rel, nxt = _relative(Rp, Fp, Rc, Fc)
-    return _angle(rel, nxt, a) / dt - target
+    prev = cs.mtimes([Fp0, rel, Fc0.T])  # R_rel,k-1 = F_p,k-1 R_rel,k F_c,k-1ᵀ
+    return (_angle(prev, rel, a) + _angle(rel, nxt, a)) / (2.0 * dt) - target
 
 
 def _position_limits(Rp, Fp, Rc, Fc, R_mid, cos_half):
@@ -107,9 +110,12 @@ def _slide_velocity_cost(*x, w, **g):
     return 0.5 * w * (d1 - d0) ** 2
 
 
-def _slide_velocity_eq(*x, target, **g):
-    d0, d1 = _displacements(*x, **g)
-    return (d1 - d0) / g["dt"] - target
+def _slide_velocity_eq(Rp, Fp, pp, vp, Fp0, vp0, Rc, Fc, pc, vc, Fc0, vc0, target, **g):
+    dt = g["dt"]
+    prev = (cs.mtimes(Rp, Fp0.T), pp - vp0 * dt, cs.mtimes(Rc, Fc0.T), pc - vc0 * dt)
+    d_prev = prismatic_displacement(prev, g["r_p"], g["r_c"], g["axis_p"])
+    d1 = _displacements(Rp, Fp, pp, vp, Rc, Fc, pc, vc, **g)[1]
+    return (d1 - d_prev) / (2.0 * dt) - target
 
 
 def _slide_position_limits(*x, lo, hi, **g):
@@ -142,26 +148,39 @@ _PRISMATIC_VARS = [
     ("vc", R(3)),
 ]
 _PRISMATIC_GEOMETRY = [("r_p", 3), ("r_c", 3), ("axis_p", 3), ("dt", 1)]
+# A velocity equality is the central difference (θ_{k+1} - θ_{k-1})/(2Δt), the velocity the
+# plan reports and the verifier checks: it also reads the steps of knot k-1 ("…0").
+_CENTRAL = {"revolute": ("F",), "prismatic": ("F", "v")}
+
+
+def _variables(jtype: str, kind: str) -> list:
+    own = _REVOLUTE_VARS if jtype == "revolute" else _PRISMATIC_VARS
+    if kind != "velocity_eq":
+        return own
+    half = own[: len(own) // 2]
+    extra = {"F": SO3, "v": R(3)}
+    prev = [(f"{n}{side}0", extra[n]) for side in "pc" for n in _CENTRAL[jtype]]
+    return half + prev[: len(prev) // 2] + own[len(own) // 2 :] + prev[len(prev) // 2 :]
 
 
 @cache
 def joint_function(jtype: str, kind: str, jit: bool, world: bool) -> RiemannianFunction:
     """The residual ``kind`` of a ``jtype`` joint to a body parent or to the world."""
+    variables = _variables(jtype, kind)
     if jtype == "revolute":
         fn, params = _REVOLUTE[kind]
-        variables = _REVOLUTE_VARS
     else:
         slide, own = _PRISMATIC[kind]
         params = own + _PRISMATIC_GEOMETRY
-        variables = _PRISMATIC_VARS
 
-        def fn(Rp, Fp, pp, vp, Rc, Fc, pc, vc, **p):
-            return slide(Rp, Fp, pp, vp, Rc, Fc, pc, vc, **p)
+        def fn(*x, **p):
+            return slide(*x, **p)
 
     name = f"joint_{kind}" if jtype == "revolute" else f"prismatic_{kind}"
     if not world:
         return RiemannianFunction(name, variables, fn, params, jit=jit)
-    parent = {"Rp": cs.DM.eye(3), "Fp": cs.DM.eye(3), "pp": cs.DM.zeros(3), "vp": cs.DM.zeros(3)}
+    eye, zero = cs.DM.eye(3), cs.DM.zeros(3)
+    parent = {"Rp": eye, "Fp": eye, "pp": zero, "vp": zero, "Fp0": eye, "vp0": zero}
     child = variables[len(variables) // 2 :]
 
     def world_fn(**x):
@@ -200,6 +219,12 @@ def joint_terms(
             bind = {f"{n}c": (n, k * nb + bb) for n in names}
             if not world:
                 bind |= {f"{n}p": (n, k * nb + mm.parent[bb]) for n in names}
+            if kind == "velocity_eq":  # state knots k ≥ 1: knot k-1 exists
+                sides = ("c",) if world else ("c", "p")
+                body = {"c": bb, "p": mm.parent[bb]}
+                bind |= {
+                    f"{n}{s}0": (n, (k - 1) * nb + body[s]) for s in sides for n in _CENTRAL[jtype]
+                }
             params = {n: v[ii[mask]] for n, v in per_body[jtype].items()} | shared[jtype]
             if jtype == "prismatic":
                 params |= {
