@@ -8,6 +8,7 @@ from functools import cache
 import numpy as np
 import pinocchio as pin
 import pytest
+from fd import check_generalized_derivatives
 
 import mbplan as mb
 from mbplan.formulations.generalized import GeneralizedNLP
@@ -110,26 +111,13 @@ def fd_ocp() -> mb.OCP:
     return ocp
 
 
-def _central(fn, x, h):
-    return np.column_stack([(fn(x + h * e) - fn(x - h * e)) / (2 * h) for e in np.eye(x.size)])
-
-
 def test_generalized_continuous_residuals_match_finite_differences() -> None:
     ocp = fd_ocp()
     nlp = GeneralizedNLP(ocp)
     rng = np.random.default_rng(0)
     z = nlp.initial_guess(np.linspace(ocp.q0, [3.0, -2.5], ocp.N + 1))
     z = z + 0.05 * rng.standard_normal(nlp.n)
-    J = nlp.jacobian(z).toarray()
-    np.testing.assert_allclose(J, _central(nlp.constraints, z, 1e-6), atol=2e-5 * np.abs(J).max())
-    grad = nlp.objective_gradient(z)
-    fd = _central(lambda x: np.array([nlp.objective(x)]), z, 1e-6)[0]
-    np.testing.assert_allclose(grad, fd, rtol=1e-6, atol=1e-6)
-    lam = rng.standard_normal(nlp.m)
-    U = nlp.lagrangian_hessian(z, 0.7, lam).toarray()
-    H = U + U.T - np.diag(U.diagonal())
-    fd = _central(lambda x: 0.7 * nlp.objective_gradient(x) + nlp.jacobian(x).T @ lam, z, 1e-5)
-    np.testing.assert_allclose(H, 0.5 * (fd + fd.T), atol=1e-4 * max(1, np.abs(H).max()))
+    check_generalized_derivatives(nlp, z, rng.standard_normal(nlp.m))
 
 
 def test_maximal_continuous_residuals_match_finite_differences_along_the_retraction() -> None:

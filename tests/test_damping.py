@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from fd import central, check_generalized_derivatives
 
 import mbplan as mb
 from mbplan.formulations.generalized import GeneralizedNLP
@@ -30,10 +31,6 @@ def damped_iiwa(damping: np.ndarray = DAMPING) -> mb.Robot:
     model = pin.Model(base.model)
     model.damping[:] = damping
     return load_robot(model, collision_model=base.collision_model)
-
-
-def _central(fn, x, h):
-    return np.column_stack([(fn(x + h * e) - fn(x - h * e)) / (2 * h) for e in np.eye(x.size)])
 
 
 def test_load_robot_reads_and_zeroes_damping() -> None:
@@ -72,13 +69,7 @@ def test_damped_generalized_dynamics_derivatives_match_finite_differences() -> N
     np.testing.assert_allclose(M @ (v2 - v[1]) / ocp.dt, tau[1] - h - DAMPING * v2, atol=1e-8)
     dyn = nlp.constraints(nlp.pack(q, np.vstack([v[:2], v2, v[3:]]), tau))
     np.testing.assert_allclose(dyn[(ocp.N + 1) * 7 : (ocp.N + 2) * 7], 0.0, atol=1e-9)
-    J = nlp.jacobian(z).toarray()
-    np.testing.assert_allclose(J, _central(nlp.constraints, z, 1e-6), atol=2e-5 * np.abs(J).max())
-    lam = rng.standard_normal(nlp.m)
-    U = nlp.lagrangian_hessian(z, 0.7, lam).toarray()
-    H = U + U.T - np.diag(U.diagonal())
-    fd = _central(lambda x: 0.7 * nlp.objective_gradient(x) + nlp.jacobian(x).T @ lam, z, 1e-5)
-    np.testing.assert_allclose(H, 0.5 * (fd + fd.T), atol=1e-4 * max(1, np.abs(H).max()))
+    check_generalized_derivatives(nlp, z, rng.standard_normal(nlp.m))
 
 
 def test_crocoddyl_damped_actuation_matches_damped_aba() -> None:
@@ -111,7 +102,7 @@ def test_crocoddyl_damped_actuation_matches_damped_aba() -> None:
         return data.xout.copy()
 
     Fx = data.Fx.copy()
-    np.testing.assert_allclose(Fx, _central(xout, x, 1e-6), atol=1e-5 * np.abs(Fx).max())
+    np.testing.assert_allclose(Fx, central(xout, x, 1e-6), atol=1e-5 * np.abs(Fx).max())
 
 
 def test_damped_replay_integrates_the_damped_dynamics() -> None:
