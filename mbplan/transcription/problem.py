@@ -125,7 +125,8 @@ class TrajectoryProblem:
             parts.append(np.asarray(a, dtype=float).reshape(-1))
         vec = np.concatenate(parts)
         if not np.isfinite(vec).all():
-            bad = next(n for n, a in zip(self.variables.blocks, parts) if not np.isfinite(a).all())
+            names = self.variables.blocks
+            bad = next(n for n, a in zip(names, parts, strict=True) if not np.isfinite(a).all())
             raise InputError(f"point: block {bad!r} contains NaN or inf")
         return vec
 
