@@ -63,6 +63,8 @@ class Inertia:
 def _csr(a: sp.spmatrix | sp.sparray | None, shape: tuple[int, int]) -> sp.csr_matrix:
     if a is None:
         return sp.csr_matrix(shape)
+    if type(a) is sp.csr_matrix and a.shape == shape and a.has_canonical_format:
+        return a  # read only: no copy needed
     out = sp.csr_matrix(a)
     if out.shape != shape:
         raise InputError(f"KKT block has shape {out.shape}, expected {shape}")
