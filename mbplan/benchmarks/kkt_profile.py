@@ -12,6 +12,7 @@ import numpy as np
 
 from mbplan.solvers import RIPMOptions, RIPMResult, solve_ripm
 from mbplan.solvers import linear_solver as ls
+from mbplan.solvers.ldl_symbolic import Analysis
 from mbplan.solvers.ordering import amd_order, coordinate_dissection_order
 
 
@@ -146,14 +147,14 @@ def ordering_stats(problem: Any, x0: Any) -> dict[str, dict[str, float]]:
         rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
         for name, (major, minor) in (("time-major", keys), ("body-major", keys[::-1])):
             perm = amd[np.lexsort((minor[amd], major[amd]))]
-            a = ls._Analysis(len(indptr) - 1, rows, indices, perm)
+            a = Analysis(len(indptr) - 1, rows, indices, perm)
             out[name] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": len(perm)}
         dense = stage_dense_cost(keys[0], indptr, indices)
         if dense is not None:
             out["stage-dense"] = {**dense, "kkt_dim": len(amd)}
         coords = np.column_stack(keys).astype(float)
         perm = coordinate_dissection_order(indptr, indices, coords)
-        a = ls._Analysis(len(indptr) - 1, rows, indices, perm)
+        a = Analysis(len(indptr) - 1, rows, indices, perm)
         out["grid-nd"] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": len(perm)}
     return out
 
