@@ -37,10 +37,10 @@ class SO3Group(MatrixLieGroup):
         if is_symbolic(xi):
             return cs.skew(xi)
         x, y, z = xi[..., 0], xi[..., 1], xi[..., 2]
-        K = np.zeros((*xi.shape[:-1], 3, 3))
-        K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -z, y, -x
-        K[..., 1, 0], K[..., 2, 0], K[..., 2, 1] = z, -y, x
-        return K
+        o = np.zeros_like(x)
+        return np.stack(
+            [np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2
+        )
 
     def vee(self, A: Array) -> Array:
         if is_symbolic(A):
@@ -63,10 +63,7 @@ class SO3Group(MatrixLieGroup):
         a, b, _ = _coefficients(xi)
         if is_symbolic(xi):
             return cs.DM.eye(3) + a * K + b * cs.mtimes(K, K)
-        # φ^² = φφᵀ - θ² I
-        out = a[..., None, None] * K + b[..., None, None] * (xi[..., :, None] * xi[..., None, :])
-        out += (1.0 - b * np.sum(xi * xi, axis=-1))[..., None, None] * np.eye(3)
-        return out
+        return np.eye(3) + a[..., None, None] * K + b[..., None, None] * (K @ K)
 
     def log(self, X: Array) -> Array:
         """Rotation vector of ``X`` with angle in [0, π], accurate near 0 and near π."""
