@@ -180,3 +180,17 @@ def test_ripm_steps_do_not_depend_on_the_ordering():
     assert runs[0].iterations == runs[1].iterations
     np.testing.assert_allclose(runs[0].history.kkt_error, runs[1].history.kkt_error, rtol=1e-5)
     np.testing.assert_allclose(runs[0].x, runs[1].x, atol=1e-8)
+
+
+@pytest.mark.parametrize("case", [c for c in CASES if c[-1]])
+def test_banded_cases_exercise_the_blocked_kernels(case):
+    """The dense knot-to-knot fronts of the banded cases reach the 4 x 4 kernels (fronts with
+    at least ``_WIDE`` rows below four or more pivot columns), which the test above checks."""
+    from mbplan.solvers.ldl_kernels import _WIDE
+
+    n, me, mi, density, band = case
+    kkt = KKTSystem(n, me, mi)
+    kkt.set_matrices(*_kkt_blocks(np.random.default_rng(n + me), n, me, mi, density, band))
+    a = kkt.analysis
+    k, m = np.diff(a.sfirst), np.diff(a.fptr)
+    assert np.sum((k >= 4) & (m - k >= _WIDE)) >= 10

@@ -90,3 +90,42 @@ def test_bad_points_and_bindings_are_named():
         )
     with pytest.raises(InputError, match="bind"):
         Term("t", "cost", f, {"x": ("u", [0])})
+
+
+def test_packed_point_feeds_each_term_as_its_own_evaluation_would():
+    """The one-gather packing of a whole point (matrices column-major, blocks with several
+    elements per knot) gives every term the inputs ``SiteFunction.value`` packs itself."""
+    import casadi as cs
+
+    from mbplan.engine import RiemannianFunction
+    from mbplan.lie import SO3, R
+
+    A = np.arange(9.0).reshape(3, 3) + np.eye(3)  # not symmetric: a transpose would show
+    f = RiemannianFunction(
+        "mixed",
+        [("Ra", SO3), ("Rb", SO3), ("p", R(3))],
+        lambda Ra, Rb, p, w: cs.vertcat(cs.vec(cs.mtimes([Ra, A, Rb.T])), w * p),
+        [("w", 1)],
+    )
+    variables = TrajectoryVariables([Block("R", SO3, 4, fixed=(0,), count=2), Block("p", R(3), 4)])
+    term = Term(
+        "t",
+        "eq",
+        f,
+        {"Ra": ("R", [2, 4, 6]), "Rb": ("R", [3, 5, 7]), "p": ("p", [1, 2, 3])},
+        {"w": 2.0},
+    )
+    prob = TrajectoryProblem(variables, [term])
+    rng = np.random.default_rng(1)
+    x = {"R": SO3.exp(rng.standard_normal((4, 2, 3))), "p": rng.standard_normal((4, 3))}
+    flat = {"R": x["R"].reshape(8, 3, 3), "p": x["p"]}
+    direct = f.value(term.gather(flat), {"w": 2.0}).ravel()
+    _, h, _ = prob.values(x)
+    np.testing.assert_allclose(h, direct, atol=1e-14)
+    k, Ra, Rb = 1, flat["R"][4], flat["R"][5]
+    np.testing.assert_allclose(h[12 * k : 12 * k + 9], (Ra @ A @ Rb.T).ravel(order="F"))
+    np.testing.assert_allclose(prob.evaluate(x).eq, direct, atol=1e-14)
+    with pytest.raises(InputError, match="block 'p' contains NaN"):
+        prob.values({**x, "p": np.full((4, 3), np.nan)})
+    with pytest.raises(InputError, match="block 'R' must have shape"):
+        prob.evaluate({"p": x["p"]})

@@ -12,6 +12,7 @@ import numpy as np
 
 from mbplan.solvers import RIPMOptions, RIPMResult, solve_ripm
 from mbplan.solvers import linear_solver as ls
+from mbplan.solvers.ldl_symbolic import Analysis
 from mbplan.solvers.ordering import amd_order, coordinate_dissection_order
 
 
@@ -121,9 +122,10 @@ def _grid_keys(problem: Any, ev: Any) -> tuple[np.ndarray, np.ndarray] | None:
         jac = jac.tocsr()
         rows = np.repeat(np.arange(jac.shape[0]), np.diff(jac.indptr))
         for i, key in enumerate((knot, body)):
-            first = np.full(jac.shape[0], np.iinfo(np.int64).max)
+            empty = np.iinfo(np.int64).max
+            first = np.full(jac.shape[0], empty)
             np.minimum.at(first, rows, key[jac.indices])
-            keys[i] = np.concatenate([keys[i], np.where(first == first.max(initial=0), 0, first)])
+            keys[i] = np.concatenate([keys[i], np.where(first == empty, 0, first)])
     return keys[0], keys[1]
 
 
@@ -145,13 +147,37 @@ def ordering_stats(problem: Any, x0: Any) -> dict[str, dict[str, float]]:
         rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
         for name, (major, minor) in (("time-major", keys), ("body-major", keys[::-1])):
             perm = amd[np.lexsort((minor[amd], major[amd]))]
-            a = ls._Analysis(len(indptr) - 1, rows, indices, perm)
+            a = Analysis(len(indptr) - 1, rows, indices, perm)
             out[name] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": len(perm)}
+        dense = stage_dense_cost(keys[0], indptr, indices)
+        if dense is not None:
+            out["stage-dense"] = {**dense, "kkt_dim": len(amd)}
         coords = np.column_stack(keys).astype(float)
         perm = coordinate_dissection_order(indptr, indices, coords)
-        a = ls._Analysis(len(indptr) - 1, rows, indices, perm)
+        a = Analysis(len(indptr) - 1, rows, indices, perm)
         out["grid-nd"] = {"flops": a.flops, "nnz_factor": a.nnz_factor, "kkt_dim": len(perm)}
     return out
+
+
+def stage_dense_cost(
+    knot: np.ndarray, indptr: np.ndarray, indices: np.ndarray
+) -> dict[str, float] | None:
+    """Multiply-adds and stored entries of a block-tridiagonal LDLᵀ with dense knot blocks (a
+    Riccati-like stage-wise recursion: factor knot k's block, ``b³/6``; solve its coupling to
+    the ``c`` unknowns of knot k+1 it touches, ``c b²/2``; update their Schur complement,
+    ``c² b/2``); ``None`` unless every entry couples a knot only to itself or its neighbour."""
+    rows = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+    ki, kj = knot[rows], knot[indices]
+    if np.any(np.abs(ki - kj) > 1):
+        return None
+    knots = int(knot.max()) + 1
+    b = np.bincount(knot, minlength=knots).astype(float)
+    cross = ki != kj
+    later = np.where(ki > kj, rows, indices)[cross]  # the unknown of the later knot
+    c = np.bincount(knot[np.unique(later)], minlength=knots).astype(float)
+    c = np.concatenate([c[1:], [0.0]])  # knot k's coupling into knot k + 1
+    flops = float(np.sum(b**3 / 6 + c * b**2 / 2 + c**2 * b / 2))
+    return {"flops": flops, "nnz_factor": float(np.sum(b * (b + 1) / 2 + c * b))}
 
 
 def kkt_amd_perm(problem: Any, ev: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -155,7 +155,7 @@ def _fmt(v: float | None, scale: float = 1.0, digits: int = 1) -> str:
     return "—" if v is None else f"{scale * v:.{digits}f}"
 
 
-_ORDERS = ("amd", "nested", "grid-nd", "time-major", "body-major")
+_ORDERS = ("amd", "nested", "grid-nd", "time-major", "stage-dense", "body-major")
 
 
 def _markdown(s: dict) -> str:
@@ -249,7 +249,10 @@ def _markdown(s: dict) -> str:
         "Mflop = multiply-adds of the numeric LDLᵀ (supernodal, relaxed amalgamation), fill = "
         "stored factor entries (millions). nested: dissection by BFS levels of the graph; grid-nd: "
         "dissection of the time × body grid by coordinates; time-/body-major: AMD's order made to eliminate the "
-        "time × body grid knot by knot (a stage-wise, Riccati-like elimination) or body by body.",
+        "time × body grid knot by knot (a stage-wise, Riccati-like elimination) or body by body; "
+        "stage-dense: a block-tridiagonal LDLᵀ with dense knot blocks (each knot's unknowns, "
+        "multipliers and condensed slacks one dense block, as a batched-LAPACK Riccati recursion "
+        "would factor them).",
         "",
         "| task | KKT dim | "
         + " | ".join(f"{o} Mflop / fill" for o in _ORDERS)

@@ -119,12 +119,12 @@ class RiemannianFunction(SiteFunction):
         if cached is None:
             fn = self._functions[kind] if K == 1 else self._functions[kind].map(K, "serial")
             buf, evaluate = fn.buffer()
-            cached = (fn, buf, evaluate)
+            cached = (fn, buf, evaluate, [fn.size1_out(i) for i in range(fn.n_out())])
             self._mapped[key] = cached
-        fn, buf, evaluate = cached
+        _, buf, evaluate, sizes = cached
         for i, a in enumerate(inputs):
             buf.set_arg(i, memoryview(a))
-        outs = [np.empty((K, fn.size1_out(i))) for i in range(fn.n_out())]
+        outs = [np.empty((K, size)) for size in sizes]
         for i, o in enumerate(outs):
             buf.set_res(i, memoryview(o))
         evaluate()

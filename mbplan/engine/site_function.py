@@ -147,6 +147,11 @@ class SiteFunction(ABC):
         """``kind`` is ``value``, ``jacobian`` or ``hessian``; ``inputs`` are C-ordered
         ``(K, nz)`` variables, ``(K, np)`` parameters (and ``(K, m)`` multipliers)."""
 
+    def call_packed(self, kind: str, inputs: list[np.ndarray]) -> list[np.ndarray]:
+        """:meth:`_call` on inputs already packed as :meth:`pack` does, without any checks: the
+        fast path for a caller that packs (and validates) a whole point once."""
+        return self._call(kind, inputs)
+
     def _inputs(self, variables, parameters, K: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         z = self.pack(self.variables, variables, self.nz, "variables", K)
         if isinstance(parameters, np.ndarray):

@@ -182,8 +182,13 @@ class MatrixLieGroup:
 
     # ------------------------------------------------------------------ retraction helpers
     def retract(self, X: Array, xi: Array) -> Array:
-        """The exponential retraction ``X exp(ξ)`` (eq. 39)."""
-        return self.compose(X, self.exp(xi))
+        """The exponential retraction ``X exp(ξ)`` (eq. 39). ``X`` is validated; ``exp(ξ)`` is
+        in the group by construction and is not checked again."""
+        X = self._element(X)
+        E = self.exp(xi)
+        if is_symbolic(X, E):
+            return cs.mtimes(X, E)
+        return X @ E
 
     def local(self, X: Array, Y: Array) -> Array:
         """Inverse of :meth:`retract`: ``log(X⁻¹ Y)``."""

@@ -11,7 +11,8 @@ with diagonal blocks ``D_*`` chosen by the caller (``δ_w I``, ``-δ_c I``, ``-(
 The pattern (the union of ``H``'s lower triangle, the Jacobians and the full diagonal) is built
 once by index arrays; each new matrix with the same pattern is a scatter of its values.
 
-The factorization is a supernodal multifrontal ``P K Pᵀ = (I + L) D (I + L)ᵀ`` with a diagonal
+The factorization (symbolic analysis in :mod:`mbplan.solvers.ldl_symbolic`, numeric kernels in
+:mod:`mbplan.solvers.ldl_kernels`) is a supernodal multifrontal ``P K Pᵀ = (I + L) D (I + L)ᵀ`` with a diagonal
 ``D`` and no pivoting, compiled with numba. Its symbolic analysis takes the approximate minimum
 degree ordering qdldl computes (SuiteSparse AMD), postorders the elimination tree, groups
 columns into fundamental supernodes merged by CHOLMOD's relaxed amalgamation rule, and
@@ -42,12 +43,13 @@ import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
-import numba as nb
 import numpy as np
 import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba, numba_cached
 from mbplan.errors import InputError
+from mbplan.solvers.ldl_kernels import NUMERIC_KERNELS, ldl_factor, ldl_solve
+from mbplan.solvers.ldl_symbolic import SYMBOLIC_KERNELS, Analysis
 from mbplan.solvers.ordering import amd_order, nested_dissection_order
 
 
@@ -63,6 +65,8 @@ class Inertia:
 def _csr(a: sp.spmatrix | sp.sparray | None, shape: tuple[int, int]) -> sp.csr_matrix:
     if a is None:
         return sp.csr_matrix(shape)
+    if type(a) is sp.csr_matrix and a.shape == shape and a.has_canonical_format:
+        return a  # read only: no copy needed
     out = sp.csr_matrix(a)
     if out.shape != shape:
         raise InputError(f"KKT block has shape {out.shape}, expected {shape}")
@@ -82,522 +86,13 @@ def _same_pattern(a: sp.csr_matrix, b: sp.csr_matrix | None) -> bool:
     )
 
 
-# ---------------------------------------------------------------------------- symbolic analysis
-# Index conventions: ``perm[i]`` is the original index of the i-th pivot, the permuted pattern is
-# held as "upper CSC" (column k lists the rows i <= k of the lower triangle's row k), and L is
-# stored by supernodes: supernode s owns the pivot columns sfirst[s] .. sfirst[s+1]-1 and the
-# front rows rows[fptr[s]:fptr[s+1]] (its own columns, then the rows below, increasing); its
-# k x m block of L starts at lbuf[loff[s]], front column t at offset t*m.
-
-
-@nb.njit(cache=True)
-def _upper_csc(n, pinv, rows, cols):
-    """The permuted pattern as upper CSC; ``hi``/``lo`` are each entry's permuted row/column."""
-    ne = rows.shape[0]
-    hi = np.empty(ne, np.int64)
-    lo = np.empty(ne, np.int64)
-    ptr = np.zeros(n + 1, np.int64)
-    for e in range(ne):
-        a, b = pinv[rows[e]], pinv[cols[e]]
-        hi[e], lo[e] = max(a, b), min(a, b)
-        ptr[hi[e] + 1] += 1
-    for k in range(n):
-        ptr[k + 1] += ptr[k]
-    idx = np.empty(ne, np.int64)
-    fill = ptr[:n].copy()
-    for e in range(ne):
-        idx[fill[hi[e]]] = lo[e]
-        fill[hi[e]] += 1
-    return ptr, idx, hi, lo
-
-
-@nb.njit(cache=True)
-def _etree(n, ptr, idx):
-    """Elimination tree (Liu's algorithm with path compression); -1 marks a root."""
-    parent = np.full(n, -1, np.int64)
-    ancestor = np.full(n, -1, np.int64)
-    for k in range(n):
-        for q in range(ptr[k], ptr[k + 1]):
-            i = idx[q]
-            while i != -1 and i < k:
-                nxt = ancestor[i]
-                ancestor[i] = k
-                if nxt == -1:
-                    parent[i] = k
-                i = nxt
-    return parent
-
-
-@nb.njit(cache=True)
-def _postorder(n, parent):
-    head = np.full(n, -1, np.int64)
-    nxt = np.full(n, -1, np.int64)
-    for j in range(n - 1, -1, -1):
-        if parent[j] != -1:
-            nxt[j] = head[parent[j]]
-            head[parent[j]] = j
-    post = np.empty(n, np.int64)
-    stack = np.empty(n, np.int64)
-    k = 0
-    for root in range(n):
-        if parent[root] != -1:
-            continue
-        top = 0
-        stack[0] = root
-        while top >= 0:
-            p = stack[top]
-            c = head[p]
-            if c == -1:
-                top -= 1
-                post[k] = p
-                k += 1
-            else:
-                head[p] = nxt[c]
-                top += 1
-                stack[top] = c
-    return post
-
-
-@nb.njit(cache=True)
-def _supernodes(n, ptr, idx, parent):
-    """Fundamental supernodes (column j+1 joins j's when it is j's parent and L's column j is
-    ``{j+1} ∪`` column j+1), then relaxed amalgamation of a supernode into its parent when they
-    are adjacent (CHOLMOD's default rule: few columns, or few explicit zeros added)."""
-    cc = np.zeros(n, np.int64)  # strictly-lower column counts of L (row-subtree traversal)
-    mark = np.full(n, -1, np.int64)
-    for k in range(n):
-        mark[k] = k
-        for q in range(ptr[k], ptr[k + 1]):
-            i = idx[q]
-            while i < k and mark[i] != k:
-                cc[i] += 1
-                mark[i] = k
-                i = parent[i]
-    fund = np.ones(n + 1, np.bool_)
-    for j in range(n - 1):
-        if parent[j] == j + 1 and cc[j] == cc[j + 1] + 1:
-            fund[j + 1] = False
-    first = np.flatnonzero(fund)
-    ns = first.shape[0] - 1
-    snode = np.empty(n, np.int64)
-    for s in range(ns):
-        snode[first[s] : first[s + 1]] = s
-    gfirst = first[:ns].copy()  # first column of the group whose top supernode is s
-    gnnz = np.zeros(ns)  # nonzeros of L in that group
-    for j in range(n):
-        gnnz[snode[j]] += cc[j] + 1
-    keep = np.ones(ns + 1, np.bool_)
-    for s in range(ns - 1):
-        last = first[s + 1] - 1
-        if parent[last] == -1 or snode[parent[last]] != s + 1:
-            continue
-        k = first[s + 2] - gfirst[s]
-        r = cc[first[s + 2] - 1]
-        dense = k * (k + 1) / 2.0 + k * r
-        z = (dense - gnnz[s] - gnnz[s + 1]) / dense
-        if k <= 4 or (k <= 16 and z < 0.8) or (k <= 48 and z < 0.1) or z < 0.05:
-            keep[s] = False
-            gfirst[s + 1] = gfirst[s]
-            gnnz[s + 1] += gnnz[s]
-    out = np.empty(int(keep.sum()), np.int64)
-    out[:-1] = gfirst[keep[:ns]]
-    out[-1] = n
-    return out, int(cc.sum())
-
-
-@nb.njit(cache=True)
-def _front_rows(n, ptr, idx, parent, sfirst):
-    """Front row lists and the supernodal elimination tree."""
-    ns = sfirst.shape[0] - 1
-    snode = np.empty(n, np.int64)
-    for s in range(ns):
-        snode[sfirst[s] : sfirst[s + 1]] = s
-    fptr = np.zeros(ns + 1, np.int64)
-    for s in range(ns):
-        fptr[s + 1] = sfirst[s + 1] - sfirst[s]
-    rows = np.empty(0, np.int64)
-    fill = np.empty(ns, np.int64)
-    for sweep in range(2):  # count the rows below each supernode, then store them
-        if sweep == 1:
-            for s in range(ns):
-                fptr[s + 1] += fptr[s]
-            rows = np.empty(fptr[ns], np.int64)
-            for s in range(ns):
-                k = sfirst[s + 1] - sfirst[s]
-                rows[fptr[s] : fptr[s] + k] = np.arange(sfirst[s], sfirst[s + 1])
-                fill[s] = fptr[s] + k
-        smark = np.full(ns, -1, np.int64)
-        mark = np.full(n, -1, np.int64)
-        for k in range(n):  # row k of L: the etree paths from A's row k (row-subtree)
-            mark[k] = k
-            sk = snode[k]
-            for q in range(ptr[k], ptr[k + 1]):
-                i = idx[q]
-                while i < k and mark[i] != k:
-                    mark[i] = k
-                    s = snode[i]
-                    if s != sk and smark[s] != k:
-                        smark[s] = k
-                        if sweep == 0:
-                            fptr[s + 1] += 1
-                        else:
-                            rows[fill[s]] = k
-                            fill[s] += 1
-                    i = parent[i]
-    sparent = np.full(ns, -1, np.int64)
-    for s in range(ns):
-        k = sfirst[s + 1] - sfirst[s]
-        if fptr[s + 1] - fptr[s] > k:
-            sparent[s] = snode[rows[fptr[s] + k]]
-    return fptr, rows, sparent, snode
-
-
-@nb.njit(cache=True)
-def _assembly_maps(n, sfirst, fptr, rows, sparent, snode, hi, lo):
-    """Storage offsets, where each entry of K lands in L's storage, the children of each
-    supernode and the positions of a child's update rows in its parent's front."""
-    ns = sfirst.shape[0] - 1
-    loff = np.zeros(ns + 1, np.int64)
-    uoff = np.zeros(ns + 1, np.int64)
-    rptr = np.zeros(ns + 1, np.int64)
-    for s in range(ns):
-        k = sfirst[s + 1] - sfirst[s]
-        m = fptr[s + 1] - fptr[s]
-        loff[s + 1] = loff[s] + k * m
-        uoff[s + 1] = uoff[s] + (m - k) * (m - k)
-        rptr[s + 1] = rptr[s] + m - k
-    pos = np.full(n, -1, np.int64)
-    amap = np.empty(hi.shape[0], np.int64)
-    order = np.argsort(snode[lo], kind="mergesort")
-    cur = -1
-    for e in order:
-        s = snode[lo[e]]
-        if s != cur:
-            for q in range(fptr[s], fptr[s + 1]):
-                pos[rows[q]] = q - fptr[s]
-            cur = s
-        amap[e] = loff[s] + (lo[e] - sfirst[s]) * (fptr[s + 1] - fptr[s]) + pos[hi[e]]
-    cptr = np.zeros(ns + 1, np.int64)
-    for s in range(ns):
-        if sparent[s] != -1:
-            cptr[sparent[s] + 1] += 1
-    for s in range(ns):
-        cptr[s + 1] += cptr[s]
-    child = np.empty(cptr[ns], np.int64)
-    cfill = cptr[:ns].copy()
-    for s in range(ns):
-        if sparent[s] != -1:
-            child[cfill[sparent[s]]] = s
-            cfill[sparent[s]] += 1
-    rel = np.empty(rptr[ns], np.int64)
-    for p in range(ns):
-        for q in range(fptr[p], fptr[p + 1]):
-            pos[rows[q]] = q - fptr[p]
-        for c in child[cptr[p] : cptr[p + 1]]:
-            k = sfirst[c + 1] - sfirst[c]
-            for q in range(rptr[c + 1] - rptr[c]):
-                rel[rptr[c] + q] = pos[rows[fptr[c] + k + q]]
-    return loff, uoff, amap, rptr, rel, cptr, child
-
-
-# ---------------------------------------------------------------------------- numeric kernels
-_SMALL = 4  # supernodes with at most this many columns are solved without a gathered copy
-
-
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _schur_update(L, d, k, U):
-    """``U[b, a] -= Σ_t L[t, k+b] d_t L[t, k+a]`` for ``a >= b``: two rows of ``U`` and four
-    pivot columns at a time (``L[t]`` is front column ``t``, ``d`` its pivots)."""
-    r = U.shape[0]
-    k4 = k - k % 4
-    for b in range(0, r - 1, 2):
-        u0 = U[b]
-        u1 = U[b + 1]
-        for t in range(0, k4, 4):
-            l0 = L[t, k:]
-            l1 = L[t + 1, k:]
-            l2 = L[t + 2, k:]
-            l3 = L[t + 3, k:]
-            a0, a1, a2, a3 = l0[b] * d[t], l1[b] * d[t + 1], l2[b] * d[t + 2], l3[b] * d[t + 3]
-            b0, b1 = l0[b + 1] * d[t], l1[b + 1] * d[t + 1]
-            b2, b3 = l2[b + 1] * d[t + 2], l3[b + 1] * d[t + 3]
-            if a0 == 0.0 and a1 == 0.0 and a2 == 0.0 and a3 == 0.0:
-                if b0 == 0.0 and b1 == 0.0 and b2 == 0.0 and b3 == 0.0:
-                    continue
-            for a in range(b, r):
-                x0, x1, x2, x3 = l0[a], l1[a], l2[a], l3[a]
-                u0[a] -= a0 * x0 + a1 * x1 + a2 * x2 + a3 * x3
-                u1[a] -= b0 * x0 + b1 * x1 + b2 * x2 + b3 * x3
-        for t in range(k4, k):
-            lt = L[t, k:]
-            a0, b0 = lt[b] * d[t], lt[b + 1] * d[t]
-            for a in range(b, r):
-                u0[a] -= a0 * lt[a]
-                u1[a] -= b0 * lt[a]
-    if r % 2 == 1:
-        for t in range(k):
-            x = L[t, k + r - 1]
-            U[r - 1, r - 1] -= x * d[t] * x
-
-
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _apply_previous(L, d, t, two):
-    """Front column ``t`` (and ``t+1`` if ``two``), rows ``t..``, minus the contributions of the
-    columns before ``t``, four at a time."""
-    ca = L[t, t:]
-    cb = L[t + 1, t:] if two else ca
-    m = ca.shape[0]
-    t4 = t - t % 4
-    for p in range(0, t4, 4):
-        l0 = L[p, t:]
-        l1 = L[p + 1, t:]
-        l2 = L[p + 2, t:]
-        l3 = L[p + 3, t:]
-        a0, a1, a2, a3 = l0[0] * d[p], l1[0] * d[p + 1], l2[0] * d[p + 2], l3[0] * d[p + 3]
-        if two:
-            b0, b1 = l0[1] * d[p], l1[1] * d[p + 1]
-            b2, b3 = l2[1] * d[p + 2], l3[1] * d[p + 3]
-            for i in range(m):
-                x0, x1, x2, x3 = l0[i], l1[i], l2[i], l3[i]
-                ca[i] -= a0 * x0 + a1 * x1 + a2 * x2 + a3 * x3
-                cb[i] -= b0 * x0 + b1 * x1 + b2 * x2 + b3 * x3
-        elif a0 != 0.0 or a1 != 0.0 or a2 != 0.0 or a3 != 0.0:
-            for i in range(m):
-                ca[i] -= a0 * l0[i] + a1 * l1[i] + a2 * l2[i] + a3 * l3[i]
-    for p in range(t4, t):
-        lp = L[p, t:]
-        a0 = lp[0] * d[p]
-        b0 = lp[1] * d[p] if two else 0.0
-        for i in range(m):
-            ca[i] -= a0 * lp[i]
-            if two:
-                cb[i] -= b0 * lp[i]
-
-
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _factor(vals, amap, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, lbuf, ubuf, d):
-    """Multifrontal ``LDLᵀ`` without pivoting. Returns the numbers of positive and negative
-    pivots and ``False`` on a breakdown (a zero or non-finite pivot)."""
-    lbuf[:] = 0.0
-    for e in range(vals.shape[0]):
-        lbuf[amap[e]] += vals[e]
-    npos = nneg = 0
-    for s in range(sfirst.shape[0] - 1):
-        f = sfirst[s]
-        k = sfirst[s + 1] - f
-        m = fptr[s + 1] - fptr[s]
-        r = m - k
-        lo, uo = loff[s], uoff[s]
-        for i in range(uo, uo + r * r):
-            ubuf[i] = 0.0
-        for ci in range(cptr[s], cptr[s + 1]):  # extend-add the children's update matrices
-            c = child[ci]
-            rc, uc, rp = rptr[c + 1] - rptr[c], uoff[c], rptr[c]
-            for bb in range(rc):
-                col = rel[rp + bb]
-                src = uc + bb * rc
-                if col < k:  # into a pivot column of the front
-                    dst = lo + col * m
-                    for aa in range(bb, rc):
-                        lbuf[dst + rel[rp + aa]] += ubuf[src + aa]
-                else:  # into the front's own update matrix
-                    dst = uo + (col - k) * r - k
-                    for aa in range(bb, rc):
-                        ubuf[dst + rel[rp + aa]] += ubuf[src + aa]
-        if k <= _SMALL:  # few pivot columns: plain loops on flat indices (no array views)
-            for t in range(k):
-                ct = lo + t * m
-                for p in range(t):
-                    cp = lo + p * m
-                    coef = lbuf[cp + t] * d[f + p]
-                    if coef != 0.0:
-                        for i in range(t, m):
-                            lbuf[ct + i] -= coef * lbuf[cp + i]
-                dt = lbuf[ct + t]
-                if dt == 0.0 or not np.isfinite(dt):
-                    return npos, nneg, False
-                d[f + t] = dt
-                if dt > 0.0:
-                    npos += 1
-                else:
-                    nneg += 1
-                inv = 1.0 / dt
-                for i in range(t + 1, m):
-                    lbuf[ct + i] *= inv
-                for b in range(r):
-                    coef = lbuf[ct + k + b] * dt
-                    if coef != 0.0:
-                        ub = uo + b * r
-                        for a in range(b, r):
-                            ubuf[ub + a] -= coef * lbuf[ct + k + a]
-            continue
-        L = lbuf[lo : lo + k * m].reshape(k, m)
-        df = d[f : f + k]
-        t = 0
-        while t < k:  # the k pivot columns, two at a time
-            two = t + 1 < k
-            _apply_previous(L, df, t, two)
-            for step in range(2 if two else 1):
-                col = L[t + step]
-                dt = col[t + step]
-                if dt == 0.0 or not np.isfinite(dt):
-                    return npos, nneg, False
-                df[t + step] = dt
-                if dt > 0.0:
-                    npos += 1
-                else:
-                    nneg += 1
-                inv = 1.0 / dt
-                for i in range(t + step + 1, m):
-                    col[i] *= inv
-                if step == 0 and two:
-                    coef = col[t + 1] * dt
-                    nxt = L[t + 1]
-                    for i in range(t + 1, m):
-                        nxt[i] -= coef * col[i]
-            t += 2
-        if r > 0:
-            _schur_update(L, df, k, ubuf[uo : uo + r * r].reshape(r, r))
-    return npos, nneg, True
-
-
-@nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
-def _forward_front(L, w, k, m):
-    """``w ← (I + L_front)⁻¹ w`` on a gathered front (``L[t]`` is front column ``t``), four
-    columns at a time."""
-    k4 = k - k % 4
-    for t in range(0, k4, 4):
-        l0, l1, l2, l3 = L[t], L[t + 1], L[t + 2], L[t + 3]
-        a0 = w[t]
-        a1 = w[t + 1] - l0[t + 1] * a0
-        a2 = w[t + 2] - l0[t + 2] * a0 - l1[t + 2] * a1
-        a3 = w[t + 3] - l0[t + 3] * a0 - l1[t + 3] * a1 - l2[t + 3] * a2
-        w[t + 1], w[t + 2], w[t + 3] = a1, a2, a3
-        for i in range(t + 4, m):
-            w[i] -= a0 * l0[i] + a1 * l1[i] + a2 * l2[i] + a3 * l3[i]
-    for t in range(k4, k):
-        lt, a0 = L[t], w[t]
-        for i in range(t + 1, m):
-            w[i] -= a0 * lt[i]
-
-
-@nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
-def _backward_front(L, w, k, m):
-    """``w[:k] ← w[:k] - L_frontᵀ w`` solved backwards (``(I + L)ᵀ``), four columns at a time."""
-    k4 = k - k % 4
-    for t in range(k - 1, k4 - 1, -1):
-        lt = L[t]
-        acc = 0.0
-        for i in range(t + 1, m):
-            acc += lt[i] * w[i]
-        w[t] -= acc
-    for t in range(k4 - 4, -1, -4):
-        l0, l1, l2, l3 = L[t], L[t + 1], L[t + 2], L[t + 3]
-        a0 = a1 = a2 = a3 = 0.0
-        for i in range(t + 4, m):
-            x = w[i]
-            a0 += l0[i] * x
-            a1 += l1[i] * x
-            a2 += l2[i] * x
-            a3 += l3[i] * x
-        x3 = w[t + 3] - a3
-        x2 = w[t + 2] - a2 - l2[t + 3] * x3
-        x1 = w[t + 1] - a1 - l1[t + 2] * x2 - l1[t + 3] * x3
-        w[t] -= a0 + l0[t + 1] * x1 + l0[t + 2] * x2 + l0[t + 3] * x3
-        w[t + 1], w[t + 2], w[t + 3] = x1, x2, x3
-
-
-@nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
-def _solve(b, perm, sfirst, fptr, rows, loff, lbuf, d, wmax):
-    """``x = K⁻¹ b`` with the factorization: forward, diagonal and backward substitution (a
-    supernode with many columns works on a gathered copy of its rows of the right-hand side)."""
-    n = b.shape[0]
-    ns = sfirst.shape[0] - 1
-    y = np.empty(n)
-    w = np.empty(wmax)
-    for i in range(n):
-        y[i] = b[perm[i]]
-    for s in range(ns):
-        f, fp, lo = sfirst[s], fptr[s], loff[s]
-        k = sfirst[s + 1] - f
-        m = fptr[s + 1] - fp
-        if k <= _SMALL:  # flat indexing: no array views for the many small supernodes
-            for t in range(k):
-                yt = y[f + t]
-                if yt != 0.0:
-                    c = lo + t * m
-                    for i in range(t + 1, m):
-                        y[rows[fp + i]] -= lbuf[c + i] * yt
-            continue
-        L = lbuf[lo : lo + k * m].reshape(k, m)
-        R = rows[fp : fp + m]
-        w[:k] = y[f : f + k]
-        w[k:m] = 0.0
-        _forward_front(L, w, k, m)
-        y[f : f + k] = w[:k]
-        for i in range(k, m):
-            y[R[i]] += w[i]
-    for i in range(n):
-        y[i] /= d[i]
-    for s in range(ns - 1, -1, -1):
-        f, fp, lo = sfirst[s], fptr[s], loff[s]
-        k = sfirst[s + 1] - f
-        m = fptr[s + 1] - fp
-        if k <= _SMALL:
-            for t in range(k - 1, -1, -1):
-                c = lo + t * m
-                acc = 0.0
-                for i in range(t + 1, m):
-                    acc += lbuf[c + i] * y[rows[fp + i]]
-                y[f + t] -= acc
-            continue
-        L = lbuf[lo : lo + k * m].reshape(k, m)
-        R = rows[fp : fp + m]
-        w[:k] = y[f : f + k]
-        for i in range(k, m):
-            w[i] = y[R[i]]
-        _backward_front(L, w, k, m)
-        y[f : f + k] = w[:k]
-    x = np.empty(n)
-    for i in range(n):
-        x[perm[i]] = y[i]
-    return x
-
-
-class _Analysis:
-    """Symbolic analysis of a pattern (lower entries ``rows >= cols``, full diagonal) for the
-    elimination order ``perm``: read-only arrays shared by every factorization of the pattern."""
-
-    def __init__(self, n: int, rows: np.ndarray, cols: np.ndarray, perm: np.ndarray) -> None:
-        rows = rows.astype(np.int64)
-        cols = cols.astype(np.int64)
-        pinv = np.empty(n, np.int64)
-        pinv[perm] = np.arange(n)
-        ptr, idx, _, _ = _upper_csc(n, pinv, rows, cols)
-        perm = perm[_postorder(n, _etree(n, ptr, idx))]  # same fill, supernodes contiguous
-        pinv[perm] = np.arange(n)
-        ptr, idx, hi, lo = _upper_csc(n, pinv, rows, cols)
-        parent = _etree(n, ptr, idx)
-        self.n, self.perm = n, perm
-        self.sfirst, self.nnz_l = _supernodes(n, ptr, idx, parent)
-        self.fptr, self.rows, sparent, snode = _front_rows(n, ptr, idx, parent, self.sfirst)
-        (self.loff, self.uoff, self.amap, self.rptr, self.rel, self.cptr, self.child) = (
-            _assembly_maps(n, self.sfirst, self.fptr, self.rows, sparent, snode, hi, lo)
-        )
-        self.wmax = int(np.diff(self.fptr).max(initial=1))
-        k, m = np.diff(self.sfirst), np.diff(self.fptr)
-        below = np.repeat(m - k, k) + np.concatenate([np.arange(c)[::-1] for c in k] or [[]])
-        self.flops = float(np.sum(below.astype(float) ** 2))  # multiply-adds of the numeric LDLᵀ
-        self.nnz_factor = int(np.sum(below) + n)  # L's stored entries (supernodal) with D
-
-
-_ANALYSES: OrderedDict[tuple[int, bytes, bytes, str], _Analysis] = OrderedDict()
+_ANALYSES: OrderedDict[tuple[int, bytes, bytes, str], Analysis] = OrderedDict()
 _ANALYSES_KEPT = 8
 _ANALYSES_LOCK = threading.Lock()
 ORDERINGS = ("amd", "nested")
 
 
-def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> _Analysis:
+def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> Analysis:
     """The analysis of the pattern given as lower CSR arrays, memoized per process for the last
     few patterns: the KKT systems of one task family (every case of a benchmark, every solve of
     a receding-horizon loop) share their pattern, and its ordering and symbolic factorization
@@ -615,7 +110,7 @@ def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> 
     n = key[0]
     rows = np.repeat(np.arange(n), np.diff(indptr))
     order = amd_order if ordering == "amd" else nested_dissection_order
-    hit = _Analysis(n, rows, indices, order(indptr, indices))
+    hit = Analysis(n, rows, indices, order(indptr, indices))
     with _ANALYSES_LOCK:
         _ANALYSES[key] = hit
         while len(_ANALYSES) > _ANALYSES_KEPT:
@@ -624,9 +119,9 @@ def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> 
 
 
 class _SupernodalLDL:
-    """Numeric factorization and solves for an :class:`_Analysis` (own work arrays)."""
+    """Numeric factorization and solves for an :class:`Analysis` (own work arrays)."""
 
-    def __init__(self, analysis: _Analysis) -> None:
+    def __init__(self, analysis: Analysis) -> None:
         self.a = analysis
         self.lbuf = np.empty(analysis.loff[-1])
         self.ubuf = np.empty(analysis.uoff[-1])
@@ -634,14 +129,14 @@ class _SupernodalLDL:
 
     def factor(self, vals: np.ndarray) -> tuple[int, int, bool]:
         a = self.a
-        return _factor(
+        return ldl_factor(
             vals, a.amap, a.sfirst, a.fptr, a.loff, a.uoff, a.rptr, a.rel, a.cptr, a.child,
             self.lbuf, self.ubuf, self.d,
         )  # fmt: skip
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         a = self.a
-        return _solve(
+        return ldl_solve(
             np.ascontiguousarray(b, dtype=np.float64), a.perm, a.sfirst, a.fptr, a.rows,
             a.loff, self.lbuf, self.d, a.wmax,
         )  # fmt: skip
@@ -663,7 +158,7 @@ class _KKTPattern:
     full_src: np.ndarray
     full_indptr: np.ndarray
     full_indices: np.ndarray
-    analysis: _Analysis
+    analysis: Analysis
 
 
 _PATTERNS: OrderedDict[tuple, _KKTPattern] = OrderedDict()
@@ -830,7 +325,7 @@ class KKTSystem:
         return Inertia(positive, negative, 0)
 
     @property
-    def analysis(self) -> _Analysis:
+    def analysis(self) -> Analysis:
         """The symbolic analysis in use (elimination order, supernodes, ``flops``,
         ``nnz_factor``); available after the first :meth:`set_matrices`."""
         if self._solver is None:
@@ -873,8 +368,7 @@ class KKTSystem:
         return resid, float(ratio) if np.isfinite(ratio) else np.inf
 
 
-_ENTRY_KERNELS = (_upper_csc, _etree, _postorder, _supernodes, _front_rows, _assembly_maps)
-_ENTRY_KERNELS += (_factor, _solve)
+_ENTRY_KERNELS = SYMBOLIC_KERNELS + NUMERIC_KERNELS
 
 
 def compile_kernels_in_background() -> threading.Thread | None:

@@ -8,7 +8,7 @@ cost of one evaluation is linear in the horizon and in the number of bodies.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +42,7 @@ class _TermLayout:
         self.rows = rows  # (K, m) global rows within the term's kind
         self.parameters = f.pack_parameters(term.parameters, term.sites)
         cols = term.tangent_columns(index)  # (K, n_f)
+        self.z_index = np.zeros((term.sites, f.nz), np.int64)  # set by TrajectoryProblem
         self.jac_rows = rows[:, f.jac_rows]
         self.jac_cols = cols[:, f.jac_cols]
         hr, hc = cols[:, f.hess_rows], cols[:, f.hess_cols]
@@ -89,10 +90,46 @@ class TrajectoryProblem:
         self._jac_patterns = {
             kind: self._jacobian_pattern(kind, sizes[kind]) for kind in ("eq", "ineq")
         }
+        self._packed_layout()
         self._grad_cols, self._grad_mask = self._gradient_columns()
         self._hess_pattern, self._hess_mask = self._hessian_pattern()
 
     # ------------------------------------------------------------------ patterns
+    def _packed_layout(self) -> None:
+        """Where every term input lives in the packed point (all blocks' arrays raveled and
+        concatenated): ``lay.z_index`` is the ``(K, nz)`` gather map that builds the term's
+        CasADi input, packed as :meth:`SiteFunction.pack` does, in one fancy index."""
+        offset = 0
+        flat_index = {}
+        for name, b in self.variables.blocks.items():
+            size = int(np.prod(b.shape))
+            flat_index[name] = b.flat(np.arange(offset, offset + size))
+            offset += size
+        self._packed_size = offset
+        for lays in self._layouts.values():
+            for lay in lays:
+                f, args = lay.term.function, lay.term.gather(flat_index)
+                for sl in f.variables:
+                    a = args[sl.name].reshape(lay.term.sites, *sl.shape)
+                    part = np.swapaxes(a, 1, -1).reshape(lay.term.sites, -1)
+                    lay.z_index[:, sl.offset : sl.offset + sl.size] = part
+
+    def _packed(self, point: Point) -> np.ndarray:
+        """The point's blocks raveled into one vector (shapes and finiteness checked)."""
+        parts = []
+        for name, b in self.variables.blocks.items():
+            a = point.get(name) if isinstance(point, Mapping) else None
+            if a is None or np.shape(a) != b.shape:
+                got = "missing" if a is None else f"shape {np.shape(a)}"
+                raise InputError(f"point: block {name!r} must have shape {b.shape}, got {got}")
+            parts.append(np.asarray(a, dtype=float).reshape(-1))
+        vec = np.concatenate(parts)
+        if not np.isfinite(vec).all():
+            names = self.variables.blocks
+            bad = next(n for n, a in zip(names, parts, strict=True) if not np.isfinite(a).all())
+            raise InputError(f"point: block {bad!r} contains NaN or inf")
+        return vec
+
     def _jacobian_pattern(self, kind: str, m: int) -> tuple[SparsePattern, np.ndarray]:
         rows = [lay.jac_rows.ravel() for lay in self._layouts[kind]]
         cols = [lay.jac_cols.ravel() for lay in self._layouts[kind]]
@@ -122,21 +159,18 @@ class TrajectoryProblem:
         return self.variables.retract(point, dx)
 
     # ------------------------------------------------------------------ evaluation
-    def _flat(self, point: Point) -> Point:
-        return {name: b.flat(point[name]) for name, b in self.variables.blocks.items()}
-
     def _scatter(self, kind: str, parts: list[np.ndarray]) -> np.ndarray:
         size = self.n_eq if kind == "eq" else self.n_ineq
         return np.bincount(self._rows[kind], weights=_cat(parts), minlength=size)
 
     def values(self, point: Point) -> tuple[float, np.ndarray, np.ndarray]:
         """Objective, equality and inequality residuals (for line-search trials)."""
-        flat = self._flat(point)
+        vec = self._packed(point)
         out = {"cost": [], "eq": [], "ineq": []}
         for kind, lays in self._layouts.items():
             for lay in lays:
-                t = lay.term
-                out[kind].append(t.function.value(t.gather(flat), lay.parameters).ravel())
+                r = lay.term.function.call_packed("value", [vec[lay.z_index], lay.parameters])[0]
+                out[kind].append(r.ravel())
         f = float(sum(v.sum() for v in out["cost"]))
         return f, self._scatter("eq", out["eq"]), self._scatter("ineq", out["ineq"])
 
@@ -153,23 +187,25 @@ class TrajectoryProblem:
         z = np.zeros(self.n_ineq) if z is None else np.asarray(z, dtype=float)
         if y.shape != (self.n_eq,) or z.shape != (self.n_ineq,):
             raise InputError(f"multipliers must have shapes ({self.n_eq},), ({self.n_ineq},)")
-        flat = self._flat(point)
+        if not (np.isfinite(obj_factor) and np.isfinite(y).all() and np.isfinite(z).all()):
+            raise InputError("objective factor or multipliers contain NaN or inf")
+        vec = self._packed(point)
         vals = {"cost": [], "eq": [], "ineq": []}
         jacs = {"cost": [], "eq": [], "ineq": []}
         hess = []
         for kind, lays in self._layouts.items():
             for lay in lays:
                 t, f = lay.term, lay.term.function
-                args = t.gather(flat)
+                inputs = [vec[lay.z_index], lay.parameters]
                 if hessian:
                     if kind == "cost":
-                        lam = np.full((t.sites, 1), obj_factor)
+                        lam = np.full((t.sites, 1), float(obj_factor))
                     else:
                         lam = (y if kind == "eq" else z)[lay.rows]
-                    r, j, h = f.hessian(args, lay.parameters, lam)
+                    r, j, h = f.call_packed("hessian", [*inputs, lam])
                     hess.append(h.ravel())
                 else:
-                    r, j = f.jacobian(args, lay.parameters)
+                    r, j = f.call_packed("jacobian", inputs)
                 vals[kind].append(r.ravel())
                 jacs[kind].append(j.ravel())
         grad = np.bincount(

@@ -19,8 +19,11 @@ class SparsePattern:
         unique, self._slot = np.unique(keys, return_inverse=True)
         self.rows, self.cols = unique // shape[1], unique % shape[1]
         self.nnz = len(unique)
-        self._indptr = np.concatenate([[0], np.cumsum(np.bincount(self.rows, minlength=shape[0]))])
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(self.rows, minlength=shape[0]))])
+        # int32 indices when they fit: scipy then skips an index-dtype pass per assembly
+        itype = np.int32 if max(self.nnz, *shape) < np.iinfo(np.int32).max else np.int64
+        self._indptr, self._cols = indptr.astype(itype), self.cols.astype(itype)
 
     def assemble(self, values: np.ndarray) -> sp.csr_matrix:
         data = np.bincount(self._slot, weights=values, minlength=self.nnz)
-        return sp.csr_matrix((data, self.cols, self._indptr), shape=self.shape)
+        return sp.csr_matrix((data, self._cols, self._indptr), shape=self.shape)

@@ -47,6 +47,7 @@ class TrajectoryVariables:
         self.blocks = {b.name: b for b in blocks}
         offset = 0
         self._index: dict[str, np.ndarray] = {}
+        self._free: list[tuple[Block, np.ndarray, np.ndarray]] = []  # blocks with free knots
         for b in self.blocks.values():
             if any(not 0 <= k < b.knots for k in b.fixed):
                 raise InputError(
@@ -60,6 +61,8 @@ class TrajectoryVariables:
             idx[free] = offset + np.arange(nfree * b.group.dim).reshape(nfree, b.group.dim)
             offset += nfree * b.group.dim
             self._index[b.name] = idx
+            if nfree:
+                self._free.append((b, free, idx[free]))
         self.n = offset
 
     def tangent_index(self, name: str) -> np.ndarray:
@@ -87,13 +90,9 @@ class TrajectoryVariables:
     def retract(self, point: Point, dx: np.ndarray) -> Point:
         """``X exp(ξ)`` on every free element (``y + ξ`` for vector blocks)."""
         out = dict(point)
-        for b in self.blocks.values():
-            idx = self._index[b.name]
-            free = idx[:, 0] >= 0
-            if not free.any():
-                continue
+        for b, free, cols in self._free:
             new = b.flat(point[b.name]).copy()
-            new[free] = b.group.retract(new[free], dx[idx[free]])
+            new[free] = b.group.retract(new[free], dx[cols])
             out[b.name] = new.reshape(b.shape)
         return out
 

@@ -1,0 +1,367 @@
+"""Numeric kernels of the supernodal LDLᵀ (:mod:`mbplan.solvers.linear_solver`): the multifrontal
+factorization without pivoting (counting the pivot signs) and the triangular solves, compiled with
+numba; storage as described in :mod:`mbplan.solvers.ldl_symbolic`.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+_SMALL = 4  # supernodes with at most this many columns are solved without a gathered copy
+_WIDE = 24  # fronts with at least this many rows below the pivot get the 4 x 4 kernels
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def _schur_update2(L, d, k, U):
+    """``U[b, a] -= Σ_t L[t, k+b] d_t L[t, k+a]`` for ``a >= b``: two rows of ``U`` and four
+    pivot columns at a time (``L[t]`` is front column ``t``, ``d`` its pivots)."""
+    r = U.shape[0]
+    k4 = k - k % 4
+    for b in range(0, r - 1, 2):
+        u0 = U[b]
+        u1 = U[b + 1]
+        for t in range(0, k4, 4):
+            l0 = L[t, k:]
+            l1 = L[t + 1, k:]
+            l2 = L[t + 2, k:]
+            l3 = L[t + 3, k:]
+            a0, a1, a2, a3 = l0[b] * d[t], l1[b] * d[t + 1], l2[b] * d[t + 2], l3[b] * d[t + 3]
+            b0, b1 = l0[b + 1] * d[t], l1[b + 1] * d[t + 1]
+            b2, b3 = l2[b + 1] * d[t + 2], l3[b + 1] * d[t + 3]
+            if a0 == 0.0 and a1 == 0.0 and a2 == 0.0 and a3 == 0.0:
+                if b0 == 0.0 and b1 == 0.0 and b2 == 0.0 and b3 == 0.0:
+                    continue
+            for a in range(b, r):
+                x0, x1, x2, x3 = l0[a], l1[a], l2[a], l3[a]
+                u0[a] -= a0 * x0 + a1 * x1 + a2 * x2 + a3 * x3
+                u1[a] -= b0 * x0 + b1 * x1 + b2 * x2 + b3 * x3
+        for t in range(k4, k):
+            lt = L[t, k:]
+            a0, b0 = lt[b] * d[t], lt[b + 1] * d[t]
+            for a in range(b, r):
+                u0[a] -= a0 * lt[a]
+                u1[a] -= b0 * lt[a]
+    if r % 2 == 1:
+        for t in range(k):
+            x = L[t, k + r - 1]
+            U[r - 1, r - 1] -= x * d[t] * x
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def _schur_update4(L, d, k, U):
+    """``U[b, a] -= Σ_t L[t, k+b] d_t L[t, k+a]`` for ``a >= b``: four rows of ``U`` and four
+    pivot columns at a time (``L[t]`` is front column ``t``, ``d`` its pivots; entries ``a < b``
+    of the four rows are written too and never read)."""
+    r = U.shape[0]
+    k4, r4 = k - k % 4, r - r % 4
+    c = np.empty((4, 4))
+    for b in range(0, r4, 4):
+        u0, u1, u2, u3 = U[b], U[b + 1], U[b + 2], U[b + 3]
+        for t in range(0, k4, 4):
+            l0, l1, l2, l3 = L[t, k:], L[t + 1, k:], L[t + 2, k:], L[t + 3, k:]
+            nonzero = False
+            for i in range(4):
+                for j in range(4):
+                    c[i, j] = L[t + j, k + b + i] * d[t + j]
+                    nonzero = nonzero or c[i, j] != 0.0
+            if not nonzero:
+                continue
+            c00, c01, c02, c03 = c[0, 0], c[0, 1], c[0, 2], c[0, 3]
+            c10, c11, c12, c13 = c[1, 0], c[1, 1], c[1, 2], c[1, 3]
+            c20, c21, c22, c23 = c[2, 0], c[2, 1], c[2, 2], c[2, 3]
+            c30, c31, c32, c33 = c[3, 0], c[3, 1], c[3, 2], c[3, 3]
+            for a in range(b, r):
+                x0, x1, x2, x3 = l0[a], l1[a], l2[a], l3[a]
+                u0[a] -= c00 * x0 + c01 * x1 + c02 * x2 + c03 * x3
+                u1[a] -= c10 * x0 + c11 * x1 + c12 * x2 + c13 * x3
+                u2[a] -= c20 * x0 + c21 * x1 + c22 * x2 + c23 * x3
+                u3[a] -= c30 * x0 + c31 * x1 + c32 * x2 + c33 * x3
+        for t in range(k4, k):
+            lt = L[t, k:]
+            e0, e1, e2, e3 = lt[b] * d[t], lt[b + 1] * d[t], lt[b + 2] * d[t], lt[b + 3] * d[t]
+            for a in range(b, r):
+                x = lt[a]
+                u0[a] -= e0 * x
+                u1[a] -= e1 * x
+                u2[a] -= e2 * x
+                u3[a] -= e3 * x
+    for b in range(r4, r):
+        ub = U[b]
+        for t in range(k):
+            lt = L[t, k:]
+            e = lt[b] * d[t]
+            if e != 0.0:
+                for a in range(b, r):
+                    ub[a] -= e * lt[a]
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def _apply_previous(L, d, t, two):
+    """Front column ``t`` (and ``t+1`` if ``two``), rows ``t..``, minus the contributions of the
+    columns before ``t``, four at a time."""
+    ca = L[t, t:]
+    cb = L[t + 1, t:] if two else ca
+    m = ca.shape[0]
+    t4 = t - t % 4
+    for p in range(0, t4, 4):
+        l0 = L[p, t:]
+        l1 = L[p + 1, t:]
+        l2 = L[p + 2, t:]
+        l3 = L[p + 3, t:]
+        a0, a1, a2, a3 = l0[0] * d[p], l1[0] * d[p + 1], l2[0] * d[p + 2], l3[0] * d[p + 3]
+        if two:
+            b0, b1 = l0[1] * d[p], l1[1] * d[p + 1]
+            b2, b3 = l2[1] * d[p + 2], l3[1] * d[p + 3]
+            for i in range(m):
+                x0, x1, x2, x3 = l0[i], l1[i], l2[i], l3[i]
+                ca[i] -= a0 * x0 + a1 * x1 + a2 * x2 + a3 * x3
+                cb[i] -= b0 * x0 + b1 * x1 + b2 * x2 + b3 * x3
+        elif a0 != 0.0 or a1 != 0.0 or a2 != 0.0 or a3 != 0.0:
+            for i in range(m):
+                ca[i] -= a0 * l0[i] + a1 * l1[i] + a2 * l2[i] + a3 * l3[i]
+    for p in range(t4, t):
+        lp = L[p, t:]
+        a0 = lp[0] * d[p]
+        b0 = lp[1] * d[p] if two else 0.0
+        for i in range(m):
+            ca[i] -= a0 * lp[i]
+            if two:
+                cb[i] -= b0 * lp[i]
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def _apply_previous4(L, d, t):
+    """Front columns ``t .. t+3``, rows ``t..``, minus the contributions of the columns before
+    ``t``, four at a time (entries above each column's diagonal are written and never read)."""
+    c0, c1, c2, c3 = L[t, t:], L[t + 1, t:], L[t + 2, t:], L[t + 3, t:]
+    m = c0.shape[0]
+    c = np.empty((4, 4))
+    t4 = t - t % 4
+    for p in range(0, t4, 4):
+        l0, l1, l2, l3 = L[p, t:], L[p + 1, t:], L[p + 2, t:], L[p + 3, t:]
+        nonzero = False
+        for i in range(4):
+            for j in range(4):
+                c[i, j] = L[p + j, t + i] * d[p + j]
+                nonzero = nonzero or c[i, j] != 0.0
+        if not nonzero:
+            continue
+        a00, a01, a02, a03 = c[0, 0], c[0, 1], c[0, 2], c[0, 3]
+        a10, a11, a12, a13 = c[1, 0], c[1, 1], c[1, 2], c[1, 3]
+        a20, a21, a22, a23 = c[2, 0], c[2, 1], c[2, 2], c[2, 3]
+        a30, a31, a32, a33 = c[3, 0], c[3, 1], c[3, 2], c[3, 3]
+        for i in range(m):
+            x0, x1, x2, x3 = l0[i], l1[i], l2[i], l3[i]
+            c0[i] -= a00 * x0 + a01 * x1 + a02 * x2 + a03 * x3
+            c1[i] -= a10 * x0 + a11 * x1 + a12 * x2 + a13 * x3
+            c2[i] -= a20 * x0 + a21 * x1 + a22 * x2 + a23 * x3
+            c3[i] -= a30 * x0 + a31 * x1 + a32 * x2 + a33 * x3
+    for p in range(t4, t):
+        lp = L[p, t:]
+        e0, e1, e2, e3 = lp[0] * d[p], lp[1] * d[p], lp[2] * d[p], lp[3] * d[p]
+        for i in range(m):
+            x = lp[i]
+            c0[i] -= e0 * x
+            c1[i] -= e1 * x
+            c2[i] -= e2 * x
+            c3[i] -= e3 * x
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def ldl_factor(vals, amap, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, lbuf, ubuf, d):
+    """Multifrontal ``LDLᵀ`` without pivoting. Returns the numbers of positive and negative
+    pivots and ``False`` on a breakdown (a zero or non-finite pivot)."""
+    lbuf[:] = 0.0
+    for e in range(vals.shape[0]):
+        lbuf[amap[e]] += vals[e]
+    npos = nneg = 0
+    for s in range(sfirst.shape[0] - 1):
+        f = sfirst[s]
+        k = sfirst[s + 1] - f
+        m = fptr[s + 1] - fptr[s]
+        r = m - k
+        lo, uo = loff[s], uoff[s]
+        for i in range(uo, uo + r * r):
+            ubuf[i] = 0.0
+        for ci in range(cptr[s], cptr[s + 1]):  # extend-add the children's update matrices
+            c = child[ci]
+            rc, uc, rp = rptr[c + 1] - rptr[c], uoff[c], rptr[c]
+            for bb in range(rc):
+                col = rel[rp + bb]
+                src = uc + bb * rc
+                if col < k:  # into a pivot column of the front
+                    dst = lo + col * m
+                    for aa in range(bb, rc):
+                        lbuf[dst + rel[rp + aa]] += ubuf[src + aa]
+                else:  # into the front's own update matrix
+                    dst = uo + (col - k) * r - k
+                    for aa in range(bb, rc):
+                        ubuf[dst + rel[rp + aa]] += ubuf[src + aa]
+        if k <= _SMALL:  # few pivot columns: plain loops on flat indices (no array views)
+            for t in range(k):
+                ct = lo + t * m
+                for p in range(t):
+                    cp = lo + p * m
+                    coef = lbuf[cp + t] * d[f + p]
+                    if coef != 0.0:
+                        for i in range(t, m):
+                            lbuf[ct + i] -= coef * lbuf[cp + i]
+                dt = lbuf[ct + t]
+                if dt == 0.0 or not np.isfinite(dt):
+                    return npos, nneg, False
+                d[f + t] = dt
+                if dt > 0.0:
+                    npos += 1
+                else:
+                    nneg += 1
+                inv = 1.0 / dt
+                for i in range(t + 1, m):
+                    lbuf[ct + i] *= inv
+                for b in range(r):
+                    coef = lbuf[ct + k + b] * dt
+                    if coef != 0.0:
+                        ub = uo + b * r
+                        for a in range(b, r):
+                            ubuf[ub + a] -= coef * lbuf[ct + k + a]
+            continue
+        L = lbuf[lo : lo + k * m].reshape(k, m)
+        df = d[f : f + k]
+        t = 0
+        while t < k:  # the k pivot columns, four (at the end two or one) at a time
+            w = 4 if t + 4 <= k and m - t >= _WIDE else min(2, k - t)
+            if w == 4:
+                _apply_previous4(L, df, t)
+            else:
+                _apply_previous(L, df, t, w == 2)
+            for step in range(w):
+                col = L[t + step]
+                dt = col[t + step]
+                if dt == 0.0 or not np.isfinite(dt):
+                    return npos, nneg, False
+                df[t + step] = dt
+                if dt > 0.0:
+                    npos += 1
+                else:
+                    nneg += 1
+                inv = 1.0 / dt
+                for i in range(t + step + 1, m):
+                    col[i] *= inv
+                for j in range(t + step + 1, t + w):  # the group's later columns
+                    coef = col[j] * dt
+                    if coef != 0.0:
+                        nxt = L[j]
+                        for i in range(j, m):
+                            nxt[i] -= coef * col[i]
+            t += w
+        if r >= _WIDE:
+            _schur_update4(L, df, k, ubuf[uo : uo + r * r].reshape(r, r))
+        elif r > 0:
+            _schur_update2(L, df, k, ubuf[uo : uo + r * r].reshape(r, r))
+    return npos, nneg, True
+
+
+@nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
+def _forward_front(L, w, k, m):
+    """``w ← (I + L_front)⁻¹ w`` on a gathered front (``L[t]`` is front column ``t``), four
+    columns at a time."""
+    k4 = k - k % 4
+    for t in range(0, k4, 4):
+        l0, l1, l2, l3 = L[t], L[t + 1], L[t + 2], L[t + 3]
+        a0 = w[t]
+        a1 = w[t + 1] - l0[t + 1] * a0
+        a2 = w[t + 2] - l0[t + 2] * a0 - l1[t + 2] * a1
+        a3 = w[t + 3] - l0[t + 3] * a0 - l1[t + 3] * a1 - l2[t + 3] * a2
+        w[t + 1], w[t + 2], w[t + 3] = a1, a2, a3
+        for i in range(t + 4, m):
+            w[i] -= a0 * l0[i] + a1 * l1[i] + a2 * l2[i] + a3 * l3[i]
+    for t in range(k4, k):
+        lt, a0 = L[t], w[t]
+        for i in range(t + 1, m):
+            w[i] -= a0 * lt[i]
+
+
+@nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
+def _backward_front(L, w, k, m):
+    """``w[:k] ← w[:k] - L_frontᵀ w`` solved backwards (``(I + L)ᵀ``), four columns at a time."""
+    k4 = k - k % 4
+    for t in range(k - 1, k4 - 1, -1):
+        lt = L[t]
+        acc = 0.0
+        for i in range(t + 1, m):
+            acc += lt[i] * w[i]
+        w[t] -= acc
+    for t in range(k4 - 4, -1, -4):
+        l0, l1, l2, l3 = L[t], L[t + 1], L[t + 2], L[t + 3]
+        a0 = a1 = a2 = a3 = 0.0
+        for i in range(t + 4, m):
+            x = w[i]
+            a0 += l0[i] * x
+            a1 += l1[i] * x
+            a2 += l2[i] * x
+            a3 += l3[i] * x
+        x3 = w[t + 3] - a3
+        x2 = w[t + 2] - a2 - l2[t + 3] * x3
+        x1 = w[t + 1] - a1 - l1[t + 2] * x2 - l1[t + 3] * x3
+        w[t] -= a0 + l0[t + 1] * x1 + l0[t + 2] * x2 + l0[t + 3] * x3
+        w[t + 1], w[t + 2], w[t + 3] = x1, x2, x3
+
+
+@nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
+def ldl_solve(b, perm, sfirst, fptr, rows, loff, lbuf, d, wmax):
+    """``x = K⁻¹ b`` with the factorization: forward, diagonal and backward substitution (a
+    supernode with many columns works on a gathered copy of its rows of the right-hand side)."""
+    n = b.shape[0]
+    ns = sfirst.shape[0] - 1
+    y = np.empty(n)
+    w = np.empty(wmax)
+    for i in range(n):
+        y[i] = b[perm[i]]
+    for s in range(ns):
+        f, fp, lo = sfirst[s], fptr[s], loff[s]
+        k = sfirst[s + 1] - f
+        m = fptr[s + 1] - fp
+        if k <= _SMALL:  # flat indexing: no array views for the many small supernodes
+            for t in range(k):
+                yt = y[f + t]
+                if yt != 0.0:
+                    c = lo + t * m
+                    for i in range(t + 1, m):
+                        y[rows[fp + i]] -= lbuf[c + i] * yt
+            continue
+        L = lbuf[lo : lo + k * m].reshape(k, m)
+        R = rows[fp : fp + m]
+        w[:k] = y[f : f + k]
+        w[k:m] = 0.0
+        _forward_front(L, w, k, m)
+        y[f : f + k] = w[:k]
+        for i in range(k, m):
+            y[R[i]] += w[i]
+    for i in range(n):
+        y[i] /= d[i]
+    for s in range(ns - 1, -1, -1):
+        f, fp, lo = sfirst[s], fptr[s], loff[s]
+        k = sfirst[s + 1] - f
+        m = fptr[s + 1] - fp
+        if k <= _SMALL:
+            for t in range(k - 1, -1, -1):
+                c = lo + t * m
+                acc = 0.0
+                for i in range(t + 1, m):
+                    acc += lbuf[c + i] * y[rows[fp + i]]
+                y[f + t] -= acc
+            continue
+        L = lbuf[lo : lo + k * m].reshape(k, m)
+        R = rows[fp : fp + m]
+        w[:k] = y[f : f + k]
+        for i in range(k, m):
+            w[i] = y[R[i]]
+        _backward_front(L, w, k, m)
+        y[f : f + k] = w[:k]
+    x = np.empty(n)
+    for i in range(n):
+        x[perm[i]] = y[i]
+    return x
+
+
+NUMERIC_KERNELS = (ldl_factor, ldl_solve)  # compiled entry points (for the cache check)
