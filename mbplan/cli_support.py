@@ -146,3 +146,13 @@ def _show_warning(
 
 def _say(text: str) -> None:
     print(f"mbplan: {text}", file=sys.stderr, flush=True)
+
+
+def add_constraint_option(parser: argparse.ArgumentParser, default: str | None = "com") -> None:
+    parser.add_argument(
+        "--constraint",
+        default=default,
+        choices=("com", "distance"),
+        help="obstacle constraint: link COMs outside the cylinder (paper eq. 62) or coal "
+        "distances between link collision geometry and obstacles >= margin",
+    )
