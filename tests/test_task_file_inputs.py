@@ -156,8 +156,8 @@ CASES = [
     (_edit('method = "ripm"', 'method = "ripm"\ntol = 0'), r"\[solver\].tol: must be > 0, got 0", None),
     # URDFs named by the task file
     (URDF_TASK, r"\[robot\].urdf: .*joint 'j2' mimics 'j1': mimic joints are not supported yet; lock it", _urdf(extra='<mimic joint="j1"/>')),
-    (URDF_TASK, r"\[robot\].urdf: .*joint 'j2' \(JointModelPlanar\) is not a 1-dof", _urdf("planar")),
-    (URDF_TASK, r"\[robot\].urdf: .*joint 'j2' \(JointModelFreeFlyer\) is not a 1-dof", _urdf("floating")),
+    (URDF_TASK, r"\[robot\].urdf: .*joint 'j2' \(JointModelPlanar\) is not a revolute, continuous or prismatic", _urdf("planar")),
+    (URDF_TASK, r"\[robot\].urdf: .*joint 'j2' \(JointModelFreeFlyer\) is not a revolute, continuous or prismatic", _urdf("floating")),
     (URDF_TASK.replace('urdf"', 'urdf"\nlock = ["j2"]'), r"\[robot\].lock: joint 'j2' has 7 coordinates; only 1-dof joints", _urdf("floating")),
     (URDF_TASK, r"\[constraints\].obstacle: constraint 'clearance': Distance: robot 'r' has no collision geometry", _urdf(collision=False)),
     (URDF_TASK, r"\[robot\].urdf: URDF .*robot.urdf: joint 'j2' <origin xyz='nan 0 0.2'>", _urdf().replace('<origin xyz="0 0 0.2"/><axis', '<origin xyz="nan 0 0.2"/><axis')),
