@@ -1,5 +1,5 @@
 """The drone docking cases through the OCP API and through the task's own transcriptions, side
-by side in one run: per-case convergence and iteration counts of the RIPM (with and without input
+by side in one run: per-case convergence, iteration counts and time per iteration (ratio, same run) of the RIPM (with and without input
 limits) and of the quaternion IPOPT.
 
 Regenerate: ``python benchmarks/drone_docking_side_by_side.py`` (from the repository root)
@@ -32,10 +32,11 @@ def main() -> None:
         for task in tqdm(sample_docking_cases(N_CASES, SEED, with_input_limits=limits), method):
             if method == "ipopt":
                 d = solve_quaternion_ipopt(task, max_iter=1000, tol=TOL)
-                direct.append((bool(d.success), int(d.iterations)))
+                direct.append((bool(d.success), int(d.iterations), d.time_per_iteration))
             else:
                 d = plan_docking(task, RIPMOptions(tol=TOL, max_iter=100))
-                direct.append((d.converged, int(d.result.iterations)))
+                per_iter = d.result.wall_time_s / max(d.result.iterations, 1)
+                direct.append((d.converged, int(d.result.iterations), per_iter))
             max_iter = 1000 if method == "ipopt" else 100
             ocp = paper.drone_docking(task)
             r = mbplan.plan(
@@ -45,7 +46,8 @@ def main() -> None:
                 tol=TOL,
                 max_iter=max_iter,
             )
-            api.append((bool(r.success and mbplan.verify(r).passed), int(r.iterations)))
+            ok = bool(r.success and mbplan.verify(r).passed)
+            api.append((ok, int(r.iterations), r.time_per_iter_s))
         differ = [
             (k, d[1], a[1])
             for k, (d, a) in enumerate(zip(direct, api, strict=True))
@@ -57,6 +59,9 @@ def main() -> None:
             "direct_median_iters": float(np.median([d[1] for d in direct])),
             "api_median_iters": float(np.median([a[1] for a in api])),
             "cases_with_different_iterations": differ,
+            "median_time_per_iter_ratio_api_over_direct": float(
+                np.median([a[2] / d[2] for d, a in zip(direct, api, strict=True)])
+            ),
         }
     (OUT / "side-by-side.json").write_text(json.dumps(rows, indent=1) + "\n")
     lines = [
@@ -66,14 +71,15 @@ def main() -> None:
         f" ({N_CASES} cases, seed {SEED}, tol {TOL:g})",
         "",
         "| method | direct converged | API converged & verified | direct median iters "
-        "| API median iters | cases with other iteration counts |",
-        "|---|---:|---:|---:|---:|---:|",
+        "| API median iters | cases with other iteration counts | time/iter API/direct (median) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for m, r in rows.items():
         lines.append(
             f"| {m} | {r['direct_converged']}/{N_CASES} | {r['api_converged_and_verified']}/"
             f"{N_CASES} | {r['direct_median_iters']:g} | {r['api_median_iters']:g} | "
-            f"{len(r['cases_with_different_iterations'])} |"
+            f"{len(r['cases_with_different_iterations'])} | "
+            f"{r['median_time_per_iter_ratio_api_over_direct']:.2f} |"
         )
     (OUT / "side-by-side.md").write_text("\n".join(lines) + "\n")
 

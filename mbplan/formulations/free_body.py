@@ -5,11 +5,13 @@ Knots ``k = 0..N`` carry ``(R_k, p_k, F_k, v_k)`` (knot 0 fixed to the OCP's ini
 intervals ``k = 0..N-1`` the input ``u_k``; step ``k`` is
 :func:`mbplan.dynamics.free_body_step` (eq. 30–35, 60). Each OCP item is one :class:`Term`: its
 residual (:func:`mbplan.ocp.body_residuals.body_expression`) at its knots, ``½ w ‖r‖²`` as a
-cost.
+cost. The items of one residual kind and role share one :class:`Term`, and the costs of one
+space (state or input) one summed term: fewer kernel calls per iteration, the same sums.
 """
 
 from __future__ import annotations
 
+import hashlib
 import time
 from functools import cache
 
@@ -31,10 +33,18 @@ STATE = (("R", SO3), ("p", R(3)), ("F", SO3), ("v", R(3)))
 
 
 @cache
-def _step_function(nu: int, jit: bool) -> RiemannianFunction:
+def _step_function(actuation: bytes, nu: int, jit: bool) -> RiemannianFunction:
+    """The LGVI step with the actuation map ``B`` a constant (its zeros are structural: the
+    Jacobian and Hessian keep the sparsity of the map, e.g. eq. 60's thrust on ``u_z`` only)."""
+    B = cs.DM(np.frombuffer(actuation).reshape(6, nu))
     variables = [(f"{n}{i}", g) for i in (0, 1) for n, g in STATE] + [("u", R(nu))]
-    params = [("J", (3, 3)), ("mass", 1), ("gravity", 3), ("dt", 1), ("B", (6, nu))]
-    return RiemannianFunction("free_body_step", variables, free_body_step, params, jit=jit)
+    params = [("J", (3, 3)), ("mass", 1), ("gravity", 3), ("dt", 1)]
+
+    def step(**args):
+        return free_body_step(**args, B=cs.sparsify(B))
+
+    name = f"free_body_step_{hashlib.sha1(actuation).hexdigest()[:10]}"
+    return RiemannianFunction(name, variables, step, params, jit=jit)
 
 
 @cache
@@ -53,6 +63,26 @@ def _item_function(kind: type, shapes: tuple, cost: bool, nu: int, jit: bool) ->
     return RiemannianFunction(name, variables, fn, params, jit=jit)
 
 
+@cache
+def _cost_function(slots: tuple, space: str, nu: int, jit: bool) -> RiemannianFunction:
+    """``Σ_j ½ w_j ‖r_j‖²`` of the residual kinds ``slots = ((kind, shapes), …)`` (parameters
+    of slot ``j`` prefixed ``j_``): the costs of one space in one kernel call per iteration."""
+    variables = [("u", R(nu))] if space == "control" else list(STATE)
+
+    def fn(**args):
+        x = {n: args[n] for n, _ in variables}
+        total = 0
+        for j, (kind, shapes) in enumerate(slots):
+            r = body_expression(kind, x, {name: args[f"{j}_{name}"] for name, _ in shapes})
+            total += 0.5 * args[f"{j}_w"] * cs.sumsqr(r)
+        return total
+
+    params = [(f"{j}_{n}", shape) for j, (_, shapes) in enumerate(slots) for n, shape in shapes]
+    params += [(f"{j}_w", 1) for j in range(len(slots))]
+    name = "body_costs_" + "_".join(kind.__name__ for kind, _ in slots)
+    return RiemannianFunction(name, variables, fn, params, jit=jit)
+
+
 class FreeBodyNLP:
     """The TrajectoryProblem of a free-body ``ocp`` (module docstring)."""
 
@@ -68,26 +98,76 @@ class FreeBodyNLP:
             "mass": body.mass,
             "gravity": body.gravity,
             "dt": ocp.dt,
-            "B": body.actuation,
         }
-        step = _step_function(body.nu, jit)
+        step = _step_function(np.ascontiguousarray(body.actuation).tobytes(), body.nu, jit)
         terms = [Term.at_knots("dynamics", "eq", step, bind, range(N), dynamics)]
+        groups: dict[tuple, list[Item]] = {}
         for item in ocp.items:
+            r = item.residual
+            key = (type(r), item.role, tuple(parameter_shapes(r, ocp.scene)))
+            groups.setdefault(key, []).append(item)
+        for space in ("state", "control"):  # the costs of a space as one term
+            costs = [k for k in groups if k[1] == "cost" and k[0].space == space]
+            knots = [np.concatenate([i.knots for i in groups[k]]) for k in costs]
+            if len(costs) > 1 and all(len(np.unique(k)) == len(k) for k in knots):
+                terms.append(self._cost_term(space, [(k, groups.pop(k)) for k in costs]))
+        for (kind, role, shapes), items in groups.items():
             try:
-                terms.append(self._term(item))
+                terms.append(self._term(kind, role == "cost", shapes, items))
             except InputError as err:
-                raise InputError(f"maximal formulation, {item.role} {item.name!r}: {err}") from None
+                names = [i.name for i in items]
+                raise InputError(f"maximal formulation, {role} {names}: {err}") from None
         self.problem = TrajectoryProblem(variables, terms)
 
-    def _term(self, item: Item) -> Term:
-        r, cost = item.residual, item.role == "cost"
-        params = body_parameters(r, self.ocp.scene)
-        shapes = tuple(parameter_shapes(r, self.ocp.scene))
-        fn = _item_function(type(r), shapes, cost, self.ocp.robot.nu, self.jit)
-        names = ["u"] if r.space == "control" else [n for n, _ in STATE]
-        bind = {n: (n, 0) for n in names}
-        params = params | ({"w": item.weight} if cost else {})
-        return Term.at_knots(item.name, "cost" if cost else r.sense, fn, bind, item.knots, params)
+    def _per_site(self, shapes: tuple, items: list[Item]) -> tuple[np.ndarray, dict]:
+        """The knots of ``items`` concatenated and their parameters and weights per site."""
+        knots = np.concatenate([i.knots for i in items])
+        params: dict[str, np.ndarray] = {}
+        for name, shape in shapes:
+            shape = shape if isinstance(shape, tuple) else (shape,)
+            params[name] = np.concatenate(
+                [
+                    np.broadcast_to(
+                        body_parameters(i.residual, self.ocp.scene)[name], (len(i.knots), *shape)
+                    )
+                    for i in items
+                ]
+            )
+        params["w"] = np.concatenate([np.full(len(i.knots), i.weight) for i in items])
+        return knots, params
+
+    def _cost_term(self, space: str, groups: list[tuple[tuple, list[Item]]]) -> Term:
+        """One term for all cost groups of ``space`` at the union of their knots (weight 0 at
+        a knot a group does not cost; the same sums)."""
+        per = [self._per_site(shapes, items) for (_, _, shapes), items in groups]
+        union = np.unique(np.concatenate([k for k, _ in per]))
+        params: dict[str, np.ndarray] = {}
+        for j, (knots, values) in enumerate(per):
+            at = np.searchsorted(union, knots)
+            for name, value in values.items():
+                full = np.repeat(value[:1], len(union), axis=0)
+                full[at] = value
+                if name == "w":
+                    full[np.setdiff1d(np.arange(len(union)), at)] = 0.0
+                params[f"{j}_{name}"] = full
+        slots = tuple((kind, shapes) for (kind, _, shapes), _ in groups)
+        fn = _cost_function(slots, space, self.ocp.robot.nu, self.jit)
+        names = ["u"] if space == "control" else [n for n, _ in STATE]
+        name = "+".join(i.name for _, items in groups for i in items)
+        return Term(name, "cost", fn, {n: (n, union) for n in names}, params)
+
+    def _term(self, kind: type, cost: bool, shapes: tuple, items: list[Item]) -> Term:
+        """One term for the items of one residual kind and role (e.g. a running and a
+        terminal cost): their knots concatenated, targets and weights per site (fewer kernel
+        calls per iteration; the same sums)."""
+        fn = _item_function(kind, shapes, cost, self.ocp.robot.nu, self.jit)
+        knots, params = self._per_site(shapes, items)
+        if not cost:
+            del params["w"]
+        names = ["u"] if kind.space == "control" else [n for n, _ in STATE]
+        bind = {n: (n, knots) for n in names}
+        sense = "cost" if cost else kind.sense
+        return Term("+".join(i.name for i in items), sense, fn, bind, params)
 
     def initial_point(self, q_path: np.ndarray) -> Point:
         """The point along a pose path ``q_path (N+1, 7)`` (:func:`path_state`), hover input."""
