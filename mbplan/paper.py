@@ -233,7 +233,7 @@ def drone_docking(
     return ocp
 
 
-def drone_docking_cases(n: int = 100, seed: int = 0, with_input_limits: bool = False) -> list:
+def drone_docking_cases(n: int = 100, seed: int = 0, with_input_limits: bool = False) -> list[OCP]:
     """:func:`drone_docking` of :func:`~mbplan.tasks.drone.sample_docking_cases` (§VIII.B)."""
     tasks = sample_docking_cases(n, seed, with_input_limits=with_input_limits)
     return [drone_docking(t) for t in tasks]
