@@ -7,7 +7,7 @@ or write it as a task file (:func:`load_task`, ``mbplan plan TASK.toml``).
 
 from mbplan import residuals
 from mbplan.errors import InfeasibleRequestError, InputError, MbplanError, RobotModelError
-from mbplan.ocp import OCP, Robot, Scene, load_robot
+from mbplan.ocp import OCP, FreeBody, Robot, Scene, load_robot
 from mbplan.planning.solve import METHODS, plan
 from mbplan.results import PlanResult, load_npz, save_npz
 from mbplan.taskfile import Task, load_task
@@ -16,6 +16,7 @@ from mbplan.verification import Verification, verify
 __all__ = [
     "METHODS",
     "OCP",
+    "FreeBody",
     "InfeasibleRequestError",
     "InputError",
     "MbplanError",

@@ -20,6 +20,12 @@ displacements of the sampled starts. The target reaches forward-left; :data:`IIW
 stands where the COMs pass when joint 1 sweeps from a start at smaller azimuth (the straight path
 of 48 of 100 sampled starts, seed 0, runs through it); for coal distances the link geometry
 reaches further, so :data:`IIWA_DISTANCE_CYLINDER` is moved 7 cm (57 of 100 blocked).
+
+Drone docking (RIPM paper §VIII.B, Table II): :func:`drone_docking` turns a
+:class:`~mbplan.tasks.drone.DockingTask` (its sampler: :func:`drone_docking_cases`) into an OCP of
+a :class:`~mbplan.ocp.free_body.FreeBody` quadrotor: the costs of Problem 1 (eq. 18, 57, 59) as
+one item per state residual on the running knots and one on the terminal knot (weighted by
+``terminal_factor``), the input cost about hover, optional input limits and its cylinders.
 """
 
 from __future__ import annotations
@@ -31,6 +37,15 @@ import numpy as np
 
 from mbplan.errors import InfeasibleRequestError, InputError
 from mbplan.formulations.joint_space import evaluate
+from mbplan.ocp.body_residuals import (
+    BodyInput,
+    BodyInputLimits,
+    BodyOrientation,
+    BodyPosition,
+    BodyRotationStep,
+    BodyVelocity,
+)
+from mbplan.ocp.free_body import FreeBody, free_flyer_state
 from mbplan.ocp.problem import OCP
 from mbplan.ocp.residuals import (
     ComOutsideCylinder,
@@ -44,6 +59,7 @@ from mbplan.ocp.residuals import (
 )
 from mbplan.ocp.robot import load_robot
 from mbplan.ocp.scene import Scene
+from mbplan.tasks.drone import DockingTask, sample_docking_cases
 from mbplan.validation import as_int
 
 IIWA_TARGET = (1.0, 0.6, 0.0, -1.4, 0.0, 1.0, 0.0)
@@ -181,3 +197,43 @@ def iiwa_obstacle_starts(n: int = 100, seed: int = 0, constraint: str = "com") -
             )
         cases.append(q0)
     return tuple(cases)
+
+
+def drone_docking(
+    case: DockingTask | None = None, margin: float = 0.0, cylinder_height: float = 3.0
+) -> OCP:
+    """The docking task ``case`` (default :class:`~mbplan.tasks.drone.DockingTask`) as an OCP
+    (module docstring). Its cylinders stand in the scene from ``z = -height/2`` to ``height/2``
+    (eq. 62 treats them as infinite) and are kept at the knots only, as in the paper;
+    ``margin`` (m) widens them so that the straight segments between knots clear them too
+    (:func:`mbplan.verify` checks those)."""
+    task = DockingTask() if case is None else case
+    if not isinstance(task, DockingTask):
+        raise InputError(f"drone_docking: expected a DockingTask, got {type(task).__name__}")
+    prm, w = task.params, task.weights
+    body = FreeBody.quadrotor(prm.mass, prm.inertia, prm.gravity)
+    scene = Scene()
+    for i, (xc, yc, r) in enumerate(task.obstacles):
+        scene.add_cylinder(f"cylinder_{i}", r, cylinder_height, (xc, yc, 0.0))
+    q0, v0 = free_flyer_state(task.R0[None], task.p0[None], task.F0[None], task.v0[None], task.dt)
+    ocp = OCP(body, scene, N=task.N, dt=task.dt, q0=q0[0], v0=v0[0])
+    for knots, scale in (("running", 1.0), ("terminal", w.terminal_factor)):
+        tail = "" if knots == "running" else "_terminal"
+        ocp.add_cost(f"orientation{tail}", BodyOrientation(task.R_goal), scale * w.w_R, knots)
+        ocp.add_cost(f"position{tail}", BodyPosition(task.p_goal), scale * w.w_p, knots)
+        ocp.add_cost(f"rotation_step{tail}", BodyRotationStep(), scale * w.w_F, knots)
+        ocp.add_cost(f"velocity{tail}", BodyVelocity(), scale * w.w_v, knots)
+    ocp.add_cost("input", BodyInput(prm.hover_input), w.w_u)
+    if task.with_input_limits:  # u_z ∈ [0, u_lim], τ ∈ [-τ_lim, τ_lim]³
+        tau = prm.torque_limit
+        limits = BodyInputLimits([0.0, -tau, -tau, -tau], [prm.thrust_limit, tau, tau, tau])
+        ocp.add_constraint("input_limits", limits)
+    for name in scene.names:
+        ocp.add_constraint(name, ComOutsideCylinder(name, margin))
+    return ocp
+
+
+def drone_docking_cases(n: int = 100, seed: int = 0, with_input_limits: bool = False) -> list[OCP]:
+    """:func:`drone_docking` of :func:`~mbplan.tasks.drone.sample_docking_cases` (§VIII.B)."""
+    tasks = sample_docking_cases(n, seed, with_input_limits=with_input_limits)
+    return [drone_docking(t) for t in tasks]

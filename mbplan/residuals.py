@@ -1,5 +1,13 @@
 """The residual library of :class:`mbplan.OCP` (defined in :mod:`mbplan.ocp.residuals`)."""
 
+from mbplan.ocp.body_residuals import (
+    BodyInput,
+    BodyInputLimits,
+    BodyOrientation,
+    BodyPosition,
+    BodyRotationStep,
+    BodyVelocity,
+)
 from mbplan.ocp.residuals import (
     ComOutsideCylinder,
     Distance,
@@ -15,6 +23,12 @@ from mbplan.ocp.residuals import (
 )
 
 __all__ = [
+    "BodyInput",
+    "BodyInputLimits",
+    "BodyOrientation",
+    "BodyPosition",
+    "BodyRotationStep",
+    "BodyVelocity",
     "ComOutsideCylinder",
     "Distance",
     "FramePlacement",

@@ -71,6 +71,7 @@ import pinocchio as pin
 
 from mbplan.errors import InputError
 from mbplan.formulations.joint_space import evaluate
+from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.problem import OCP, Item
 from mbplan.ocp.residuals import ComOutsideCylinder, Distance, JointTorqueLimits
 from mbplan.results import PlanResult
@@ -165,8 +166,9 @@ def _open_loop_deviation(ocp: OCP, result: PlanResult) -> float:
 
 
 def _check_shapes(ocp: OCP, result: PlanResult) -> None:
-    nq = ocp.robot.nq
-    expected = {"q": (ocp.N + 1, nq), "v": (ocp.N + 1, nq), "tau": (ocp.N, nq)}
+    robot = ocp.robot
+    nu = robot.nu if isinstance(robot, FreeBody) else robot.nv
+    expected = {"q": (ocp.N + 1, robot.nq), "v": (ocp.N + 1, robot.nv), "tau": (ocp.N, nu)}
     for name, shape in expected.items():
         if getattr(result, name).shape != shape:
             raise InputError(
@@ -190,7 +192,7 @@ def _at_knots(ocp: OCP, item: Item, q, v, tau) -> np.ndarray:
     k = item.knots
     if item.residual.space == "control":
         return evaluate(ocp.robot, ocp.scene, item.residual, None, None, tau[k])
-    return evaluate(ocp.robot, ocp.scene, item.residual, q[k], v[k], None)
+    return evaluate(ocp.robot, ocp.scene, item.residual, q[k], v[k], None, ocp.dt)
 
 
 def constraint_violations(
@@ -217,7 +219,7 @@ def goal_errors(ocp: OCP, q: np.ndarray, v: np.ndarray) -> dict[str, float]:
         if item.tolerance is None or item.residual.space != "state":
             continue
         k = int(item.knots[-1])
-        r = evaluate(ocp.robot, ocp.scene, item.residual, q[k : k + 1], v[k : k + 1], None)
+        r = evaluate(ocp.robot, ocp.scene, item.residual, q[k : k + 1], v[k : k + 1], None, ocp.dt)
         out[item.name] = float(np.max(np.abs(r)))
     return out
 
@@ -276,6 +278,10 @@ def verify(ocp: OCP | PlanResult, result: PlanResult | None = None) -> Verificat
     if not all(np.all(np.isfinite(a)) for a in (result.q, result.v, result.tau, applied)):
         nan = float("nan")
         return Verification(nan, nan, nan, nan, False, ["the trajectory contains NaN or inf"])
+    if isinstance(ocp.robot, FreeBody):
+        from mbplan.verification_free_body import verify_free_body
+
+        return verify_free_body(ocp, result)
     path, q_end, v_end = _interval_replays(ocp, result)
     q_euler, v_euler = _euler_steps(ocp, result)
     dev_q = np.max(np.abs(q_end - result.q[1:]), axis=1)

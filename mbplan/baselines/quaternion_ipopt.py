@@ -28,9 +28,12 @@ from typing import Any
 
 import casadi as cs
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from mbplan.baselines.ipopt import IpoptStats, base_options
+from mbplan.formulations.quaternion import quat_mul as _quat_mul
+from mbplan.formulations.quaternion import quat_to_rot as _quat_to_rot
+from mbplan.formulations.quaternion import to_quaternions as _to_quaternions
+from mbplan.formulations.quaternion import to_rotations as _to_rotations
 from mbplan.lie import SO3
 from mbplan.tasks.drone import DockingTask, geodesic_initial_guess
 from mbplan.validation import as_arrays
@@ -67,39 +70,9 @@ class QuaternionIpoptResult:
     u: np.ndarray
 
 
-def _quat_mul(a: cs.SX, b: cs.SX) -> cs.SX:
-    """Hamilton product ``a ⊗ b`` with ``Rot(a ⊗ b) = Rot(a) Rot(b)``."""
-    aw, av, bw, bv = a[0], a[1:], b[0], b[1:]
-    return cs.vertcat(aw * bw - cs.dot(av, bv), aw * bv + bw * av + cs.cross(av, bv))
-
-
-def _quat_to_rot(q: cs.SX) -> cs.SX:
-    """Homogeneous quadratic map ``(w² - ‖q_v‖²) I + 2 q_v q_vᵀ + 2 w q_v^``."""
-    w, qv = q[0], q[1:]
-    return (w**2 - cs.dot(qv, qv)) * cs.DM.eye(3) + 2 * cs.mtimes(qv, qv.T) + 2 * w * cs.skew(qv)
-
-
 def _chordal(R: cs.SX, R_ref: np.ndarray) -> cs.SX:
     """Eq. (57) with ``W = I``: ``½ ‖R R_refᵀ - I‖_F²``."""
     return 0.5 * cs.sumsqr(cs.mtimes(R, cs.DM(R_ref.T)) - cs.DM.eye(3))
-
-
-def _to_quaternions(R: np.ndarray) -> np.ndarray:
-    """Scalar-first unit quaternions with ``w ≥ 0`` of a stack of rotations."""
-    return Rotation.from_matrix(R).as_quat(canonical=True, scalar_first=True)
-
-
-def _to_rotations(q: np.ndarray) -> np.ndarray:
-    """``Rot(q / ‖q‖)`` of a stack; NaN (not an exception) for a zero or non-finite ``q``."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    w, qv = q[:, 0, None, None], q[:, 1:]
-    x, y, z = qv.T
-    skew = np.zeros((len(q), 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -z, y, -x
-    skew -= np.swapaxes(skew, 1, 2)
-    dot = np.einsum("ki,ki->k", qv, qv)[:, None, None]
-    return (w**2 - dot) * np.eye(3) + 2 * np.einsum("ki,kj->kij", qv, qv) + 2 * w * skew
 
 
 def _transcribe(

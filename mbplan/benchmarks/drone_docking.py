@@ -1,6 +1,7 @@
 """Drone docking benchmark (RIPM paper §VIII.B, Table II, Fig. 4).
 
-Methods on the same seeded cases and the same geodesic initial guess:
+Methods on the same seeded cases and the same geodesic initial guess, each through
+:func:`mbplan.plan` of the OCP :func:`mbplan.paper.drone_docking` (and :func:`mbplan.verify`):
 
 * ``ripm``: RIPM on SO(3)×R³, no input limits;
 * ``ripm-input-limits``: RIPM with ``u_z ∈ [0, u_lim]``, ``τ ∈ [-τ_lim, τ_lim]³``;
@@ -18,15 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
-from mbplan.baselines.quaternion_ipopt import solve_quaternion_ipopt
 from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, write_json
 from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
-from mbplan.planning.drone import plan_docking
-from mbplan.solvers import RIPMOptions
-from mbplan.solvers.dispatch import options_for
-from mbplan.tasks.drone import DockingTask, rotation_angles, sample_docking_cases, simulate
+from mbplan.paper import drone_docking
+from mbplan.planning.solve import plan
+from mbplan.tasks.drone import DockingTask, rotation_angles, sample_docking_cases
 from mbplan.validation import as_int, as_real
+from mbplan.verification import verify
 
 METHODS = ("ripm", "ripm-input-limits", "ipopt-quaternion")  # the default run
 ALL_METHODS = (*METHODS, "mlgipm", "mlgipm-input-limits")
@@ -34,48 +34,44 @@ MAX_ITER = {"ripm": 100, "ripm-input-limits": 100, "ipopt-quaternion": 1000}  # 
 MAX_ITER |= {"mlgipm": 100, "mlgipm-input-limits": 100}
 
 
+_API_METHOD = {"ripm": "ripm", "mlgipm": "mlgipm", "ipopt-quaternion": "ipopt"}
+
+
 def _case(n: int, seed: int, index: int, limits: bool) -> DockingTask:
     return sample_docking_cases(n, seed, with_input_limits=limits)[index]
 
 
 def solve_case(method: str, n: int, seed: int, index: int, tol: float) -> dict:
-    """One (case, method) solve as a JSON-serialisable row."""
+    """One (case, method) solve through :func:`mbplan.plan` of
+    :func:`mbplan.paper.drone_docking`, verified, as a JSON-serialisable row."""
+    if method not in ALL_METHODS:
+        raise InputError(f"unknown method {method!r}; choose from {', '.join(ALL_METHODS)}")
     task = _case(n, seed, index, limits=method.endswith("-input-limits"))
     angle = float(rotation_angles(task.R0[None])[0])
-    if method in ("ripm", "ripm-input-limits", "mlgipm", "mlgipm-input-limits"):
-        solver = method.removesuffix("-input-limits")
-        options = options_for(solver, tol=tol, max_iter=MAX_ITER[method])
-        sol = plan_docking(task, options, method=solver)
-        r = sol.result
-        return {
-            "success": sol.converged,
-            "status": r.status.name,
-            "iterations": r.iterations,
-            "solve_time_s": r.wall_time_s,
-            "time_per_iter_s": r.wall_time_s / max(r.iterations, 1),
-            "kkt_final": r.kkt_error,
-            "kkt_history": [float(e) for e in r.history.kkt_error],
-            "replay_deviation_m": (
-                sol.replay_deviation_m if np.isfinite(sol.replay_deviation_m) else None
-            ),
-            "initial_angle_rad": angle,
-        }
-    if method == "ipopt-quaternion":
-        r = solve_quaternion_ipopt(task, max_iter=MAX_ITER[method], tol=tol)
-        deviation = float(np.max(np.abs(simulate(task, r.u)["p"] - r.p))) if r.success else None
-        return {
-            "success": bool(r.success),
-            "status": r.status,
-            "iterations": int(r.iterations),
-            "solve_time_s": float(r.solve_time),
-            "time_per_iter_s": float(r.time_per_iteration),
-            "solver_time_per_iter_s": float(r.solver_time_per_iteration),
-            "kkt_final": float(r.kkt_history[-1]) if len(r.kkt_history) else None,
-            "kkt_history": [float(e) for e in r.kkt_history],
-            "replay_deviation_m": deviation,
-            "initial_angle_rad": angle,
-        }
-    raise InputError(f"unknown method {method!r}; choose from {', '.join(ALL_METHODS)}")
+    api = _API_METHOD[method.removesuffix("-input-limits")]
+    r = plan(drone_docking(task), api, warm_start="linear", tol=tol, max_iter=MAX_ITER[method])
+    check = verify(r)
+    kkt = np.max(r.kkt_history, axis=1) if len(r.kkt_history) else np.empty(0)
+    row = {
+        "success": bool(r.success),
+        "status": r.status,
+        "iterations": int(r.iterations),
+        "solve_time_s": float(r.solve_time_s),
+        "total_time_s": float(r.total_time_s),
+        "time_per_iter_s": float(r.time_per_iter_s),
+        "kkt_final": float(kkt[-1]) if kkt.size else None,
+        "kkt_history": [float(e) for e in kkt],
+        "verified": bool(check.passed),
+        "replay_deviation": (
+            float(check.max_joint_deviation_rad)
+            if np.isfinite(check.max_joint_deviation_rad)
+            else None
+        ),
+        "initial_angle_rad": angle,
+    }
+    if "solver_time_per_iter_s" in r.extra:
+        row["solver_time_per_iter_s"] = float(r.extra["solver_time_per_iter_s"])
+    return row
 
 
 def horizon_scaling(seed: int, cases: int = 3, horizons: tuple[int, ...] = (40, 160)) -> dict:
@@ -86,8 +82,8 @@ def horizon_scaling(seed: int, cases: int = 3, horizons: tuple[int, ...] = (40, 
         per_iter = []
         for task in base:
             scaled = dataclasses.replace(task, N=N, dt=task.dt * task.N / N)
-            sol = plan_docking(scaled, RIPMOptions(tol=1e-6, max_iter=100))
-            per_iter.append(sol.result.wall_time_s / max(sol.result.iterations, 1))
+            r = plan(drone_docking(scaled), "ripm", warm_start="linear", tol=1e-6, max_iter=100)
+            per_iter.append(r.time_per_iter_s)
         out[str(N)] = float(np.median(per_iter))
     out["ratio"] = out[str(horizons[-1])] / out[str(horizons[0])]
     out["linear_ratio"] = horizons[-1] / horizons[0]
@@ -114,6 +110,7 @@ def run(
     jobs = [Job(i, m, solve_case, (m, n, seed, i, tol)) for m in methods for i in range(n)]
     t0 = time.perf_counter()
     config = {"benchmark": "drone-docking", "seed": seed, "tol": tol, "max_iter": MAX_ITER}
+    config["through"] = "mbplan.plan(mbplan.paper.drone_docking(case))"
     rows = run_jobs(
         jobs,
         out / "results.jsonl",
@@ -152,8 +149,9 @@ def _markdown(s: dict) -> str:
         "",
         f"Command: `{s['command']}`",
         "",
-        "| method | converged | median iters | mean iters | median time/iter [ms] | median solve time [ms] |",
-        "|---|---:|---:|---:|---:|---:|",
+        "| method | converged | verified | median iters | mean iters | median time/iter [ms] "
+        "| median solve time [ms] |",
+        "|---|---:|---:|---:|---:|---:|---:|",
     ]
 
     def fmt(v: float | None, scale: float = 1.0, digits: int = 1) -> str:
@@ -161,7 +159,8 @@ def _markdown(s: dict) -> str:
 
     for name, m in s["methods"].items():
         lines.append(
-            f"| {name} | {m['converged']}/{m['n']} | {fmt(m['median_iters'])} | {fmt(m['mean_iters'])} "
+            f"| {name} | {m['converged']}/{m['n']} | {m.get('verified', '—')}/{m['n']} "
+            f"| {fmt(m['median_iters'])} | {fmt(m['mean_iters'])} "
             f"| {fmt(m['median_time_per_iter_s'], 1e3, 2)} | {fmt(m['median_solve_time_s'], 1e3)} |"
         )
     lines += [
@@ -194,7 +193,7 @@ def _plots(rows: list[dict], methods: tuple[str, ...], out: Path) -> None:
             ax.semilogy(hist, "-" if r["success"] else "--", lw=0.8, alpha=0.7)
         ax.set_title(m)
         ax.set_xlabel("iteration")
-        ax.set_ylabel("KKT error")
+        ax.set_ylabel("max(inf_pr, inf_du)")
         ax.grid(True, alpha=0.3)
     ax = axes[-1]
     for m in methods:

@@ -11,6 +11,7 @@ from mbplan.dynamics.joints import (
 from mbplan.dynamics.rigid_body import (
     body_dynamics,
     body_kinematics,
+    free_body_step,
     quadrotor_step,
     rotational_dynamics,
     rotational_kinematics,
@@ -23,6 +24,7 @@ __all__ = [
     "body_dynamics",
     "body_kinematics",
     "constraint_forces",
+    "free_body_step",
     "kinematic_chain",
     "pivot_constraint",
     "prismatic_constraint",

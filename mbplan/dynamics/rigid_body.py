@@ -95,3 +95,28 @@ def quadrotor_step(
         body_kinematics(R0, R1, F0, p0, p1, v0, dt),
         body_dynamics(F0, F1, v0, v1, J, mass, gravity, dt, u[1:4], thrust),
     )
+
+
+def free_body_step(
+    R0: cs.SX,
+    R1: cs.SX,
+    F0: cs.SX,
+    F1: cs.SX,
+    p0: cs.SX,
+    p1: cs.SX,
+    v0: cs.SX,
+    v1: cs.SX,
+    u: cs.SX,
+    J: cs.SX,
+    mass: cs.SX,
+    gravity: cs.SX,
+    dt: cs.SX,
+    B: cs.SX,
+) -> cs.SX:
+    """One LGVI step of a free body whose input ``u`` gives the body wrench ``(f, τ) = B u``
+    (eq. 30–35 with the forcing of eq. 60: ``f`` rotated to the world by ``R₁``)."""
+    force = cs.mtimes(R1, cs.mtimes(B[:3, :], u))
+    return cs.vertcat(
+        body_kinematics(R0, R1, F0, p0, p1, v0, dt),
+        body_dynamics(F0, F1, v0, v1, J, mass, gravity, dt, cs.mtimes(B[3:, :], u), force),
+    )

@@ -24,6 +24,8 @@ from mbplan.multibody.collision import (
     collision_pairs,
     joint_space_contacts,
 )
+from mbplan.ocp import body_residuals
+from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.residuals import (
     ComOutsideCylinder,
     Distance,
@@ -155,9 +157,12 @@ def evaluate(
     q: np.ndarray | None,
     v: np.ndarray | None,
     tau: np.ndarray | None,
+    dt: float | None = None,
 ) -> np.ndarray:
     """The residual ``(K, m)`` at ``K`` knots: ``q, v (K, nv)`` for state residuals, ``tau`` for
-    control residuals."""
+    control residuals (a free body's: :func:`mbplan.ocp.body_residuals.evaluate`, with ``dt``)."""
+    if isinstance(robot, FreeBody):
+        return body_residuals.evaluate(robot, scene, residual, q, v, tau, dt)
     if isinstance(residual, Distance):
         return distance_values(robot, scene, residual, np.asarray(q))[0]
     x = np.hstack([q, v]) if residual.space == "state" else np.asarray(tau)
@@ -167,6 +172,8 @@ def evaluate(
 
 def row_label(robot: Robot, scene: Scene, residual: Residual, row: int) -> str:
     """What row ``row`` of a residual measures (for messages)."""
+    if isinstance(robot, FreeBody):
+        return f"row {row} of {type(residual).__name__} on the free body {robot.name!r}"
     names = list(robot.model.names[1:])
     if isinstance(residual, Distance):
         pairs = distance_pairs(robot, scene, residual.objects)

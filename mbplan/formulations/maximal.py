@@ -226,6 +226,11 @@ class MaximalNLP:
         point = maximal_warm_start(self.mm, q, self.ocp.dt, jit=self.jit)
         return self.problem.check_point(point)
 
+    def trajectory(self, x: Point) -> dict:
+        """PlanResult fields of a point: :meth:`joint_trajectory`, the bodies' ``R, p``."""
+        bodies = {"R": x["R"], "p": x["p"], "body_names": self.mm.body_names}
+        return bodies | self.joint_trajectory(x)
+
     def joint_trajectory(self, x: Point) -> dict[str, np.ndarray]:
         """Joint-space view of a maximal point: ``q, v (N+1, nq)``, ``tau (N, nv)`` (interval
         means), ``tau_knots (N+1, nv)`` (first-order hold of the LGVI's knot torques, eq. 29).

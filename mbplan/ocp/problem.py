@@ -1,6 +1,7 @@
 """The optimal control problem, described once for every formulation.
 
-An :class:`OCP` holds a robot, a scene, a horizon of ``N`` steps of ``dt`` from the initial state
+An :class:`OCP` holds a robot (a fixed-base :class:`~mbplan.ocp.robot.Robot` or a
+:class:`~mbplan.ocp.free_body.FreeBody`, whose ``q0, v0`` follow Pinocchio's free flyer), a scene, a horizon of ``N`` steps of ``dt`` from the initial state
 ``(q0, v0)`` (knot 0, fixed), and named costs and constraints built from
 :mod:`mbplan.ocp.residuals`. Knots: ``"all"`` (state knots ``1..N``, intervals ``0..N-1``),
 ``"running"`` (state knots ``1..N-1``, intervals ``0..N-1``), ``"terminal"`` (knot ``N``) or a
@@ -19,6 +20,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mbplan.errors import InfeasibleRequestError, InputError
+from mbplan.ocp.body_residuals import FREE_BODY_RESIDUALS
+from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.residuals import Distance, Residual
 from mbplan.ocp.robot import Robot, load_robot, robot_from_source
 from mbplan.ocp.scene import Scene
@@ -60,17 +63,25 @@ class OCP:
         q0: ArrayLike | None = None,
         v0: ArrayLike | None = None,
     ) -> None:
-        self.robot: Robot = load_robot(robot)
+        self.robot: Robot | FreeBody = load_robot(robot)
         if scene is not None and not isinstance(scene, Scene):
             raise InputError(f"scene: expected a Scene, got {type(scene).__name__}")
         self.scene = scene if scene is not None else Scene()
         self.N = as_int(N, "N", minimum=2, what="horizon")
         self.dt = as_real(dt, "dt", positive=True)
-        nq = self.robot.nq
-        default = "default" if "default" in self.robot.model.referenceConfigurations else "neutral"
-        q0 = self.robot.configuration(default) if q0 is None else q0
+        nq, nv = self.robot.nq, self.robot.nv
+        if isinstance(self.robot, FreeBody):
+            q0 = np.r_[np.zeros(6), 1.0] if q0 is None else q0
+        elif q0 is None:
+            refs = self.robot.model.referenceConfigurations
+            q0 = self.robot.configuration("default" if "default" in refs else "neutral")
         self.q0 = as_array(q0, (nq,), "q0")
-        self.v0 = as_array(np.zeros(nq) if v0 is None else v0, (nq,), "v0")
+        if isinstance(self.robot, FreeBody):
+            if abs(np.linalg.norm(self.q0[3:]) - 1.0) > 1e-9:
+                raise InputError(f"q0: quaternion {self.q0[3:]} (x, y, z, w) is not of unit norm")
+            if self.q0[6] < 0.0:  # the plans' sign: w ≥ 0
+                self.q0 = np.r_[self.q0[:3], -self.q0[3:]]
+        self.v0 = as_array(np.zeros(nv) if v0 is None else v0, (nv,), "v0")
         self.items: list[Item] = []
 
     # -- building ------------------------------------------------------------------------------
@@ -97,6 +108,8 @@ class OCP:
             raise InputError(
                 f"constraint {name!r}: expected a residual, got {type(residual).__name__}"
             )
+        if not residual.constraint:
+            raise InputError(f"constraint {name!r}: {type(residual).__name__} can only be a cost")
         tol = None if tolerance is None else as_real(tolerance, f"constraint {name!r} tolerance")
         knots_ = self._knots(name, residual, knots)
         return self._add(Item(name, "constraint", residual, knots_, tolerance=tol))
@@ -112,6 +125,11 @@ class OCP:
             raise InputError(f"name: expected a non-empty string, got {item.name!r}")
         if item.name in self.names:
             raise InputError(f"the OCP already has a cost or constraint named {item.name!r}")
+        if isinstance(self.robot, FreeBody) and type(item.residual) not in FREE_BODY_RESIDUALS:
+            raise InputError(
+                f"{item.role} {item.name!r}: {type(item.residual).__name__} is not a residual "
+                f"of a free body; use {[c.__name__ for c in FREE_BODY_RESIDUALS]}"
+            )
         try:
             resolved = item.residual.resolve(self.robot, self.scene)
         except InputError as err:
@@ -169,7 +187,8 @@ class OCP:
             r = item.residual
             if r.space != "state" or r.sense != "ineq" or 1 not in item.knots:
                 continue
-            value = evaluate(self.robot, self.scene, r, self.q0[None], self.v0[None], None)[0]
+            value = evaluate(self.robot, self.scene, r, self.q0[None], self.v0[None], None, self.dt)
+            value = value[0]
             i = int(np.argmax(value)) if value.size else 0
             if value.size and value[i] > 1e-9:
                 what = row_label(self.robot, self.scene, r, i)

@@ -19,6 +19,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from mbplan.errors import InputError
+from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.robot import Robot
 from mbplan.ocp.scene import Scene
 from mbplan.validation import as_array, as_real, as_rotation
@@ -27,11 +28,12 @@ from mbplan.validation import as_array, as_real, as_rotation
 @dataclass(frozen=True, eq=False)
 class Residual:
     """Base class: ``space`` is ``"state"`` or ``"control"``, ``sense`` the constraint sense,
-    ``cost`` whether it can be a cost."""
+    ``cost``/``constraint`` whether it can be a cost / a constraint."""
 
     space: ClassVar[str] = "state"
     sense: ClassVar[str] = "eq"
     cost: ClassVar[bool] = True
+    constraint: ClassVar[bool] = True
 
     def resolve(self, robot: Robot, scene: Scene) -> Residual:
         return self
@@ -195,7 +197,7 @@ class ComOutsideCylinder(Residual):
         return replace(self, margin=as_real(self.margin, "ComOutsideCylinder.margin"))
 
     def dim(self, robot: Robot, scene: Scene) -> int:
-        return robot.model.njoints - 1
+        return 1 if isinstance(robot, FreeBody) else robot.model.njoints - 1
 
     def circle(self, scene: Scene) -> np.ndarray:
         """``(x_c, y_c, r + margin)``."""

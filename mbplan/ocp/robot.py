@@ -24,6 +24,7 @@ import pinocchio as pin
 
 from mbplan.errors import InputError, RobotModelError
 from mbplan.ocp.continuous import to_angles, unbounded_revolute_model
+from mbplan.ocp.free_body import FreeBody
 from mbplan.robots import RobotDescription, load
 
 
@@ -87,19 +88,22 @@ class Robot:
 
 
 def load_robot(
-    robot: str | os.PathLike[str] | pin.Model | RobotDescription | Robot,
+    robot: str | os.PathLike[str] | pin.Model | RobotDescription | Robot | FreeBody,
     *,
     package_dirs: Sequence[str | os.PathLike[str]] = (),
     lock: Mapping[str, float] | Sequence[str] | None = None,
     collision_model: pin.GeometryModel | None = None,
     visual_model: pin.GeometryModel | None = None,
     damping: bool = True,
-) -> Robot:
+) -> Robot | FreeBody:
     """Load ``robot`` (name, ``.urdf`` or ``.xml`` MJCF path, ``pinocchio.Model``) and lock the
     joints ``lock`` (names at their reference value: the SRDF ``default`` configuration if any,
     else neutral; or a mapping name → value). Continuous joints become unbounded revolute joints
     (one angle each, :mod:`mbplan.ocp.continuous`); every other joint must be 1-dof (nq = nv).
-    ``damping=False``: the robot's ``model.damping`` is zeroed (on a copy of the model)."""
+    ``damping=False``: the robot's ``model.damping`` is zeroed (on a copy of the model).
+    A :class:`~mbplan.ocp.free_body.FreeBody` is returned as is."""
+    if isinstance(robot, FreeBody):
+        return robot
     if isinstance(robot, str | os.PathLike) and collision_model is None and visual_model is None:
         names = dict(lock) if isinstance(lock, Mapping) else dict.fromkeys(lock or ())
         frozen = tuple(sorted(names.items(), key=lambda kv: kv[0])) or None
@@ -168,10 +172,12 @@ def _unbounded(desc: RobotDescription) -> tuple[RobotDescription, tuple[str, ...
     ), names
 
 
-def robot_from_source(source: Mapping[str, Any]) -> Robot:
+def robot_from_source(source: Mapping[str, Any]) -> Robot | FreeBody:
     """Load the robot again from :attr:`Robot.source` (what a saved plan stores). A source
     without ``damping`` is from before mbplan applied joint damping: loaded without it."""
     kind = source.get("kind")
+    if kind == "free_body":
+        return FreeBody.from_source(source)
     lock = source.get("lock") or None
     damping = bool(source.get("damping", False))
     if kind == "name":

@@ -9,6 +9,7 @@
 The goal configuration is the target of a terminal :class:`~mbplan.ocp.residuals.JointPosition`
 (constraint or cost), else the inverse kinematics of a terminal frame goal
 (:func:`inverse_kinematics`, which reports an unreachable goal before any solve), else ``q0``.
+A free body's warm start is the geodesic of :func:`geodesic_path`.
 Continuous joints interpolate in angle (to the target as given, not modulo 2π); via points and
 IK starts sample them within ``± π`` of the midpoint / the IK's start.
 """
@@ -22,7 +23,10 @@ import pinocchio as pin
 
 from mbplan.errors import InfeasibleRequestError, InputError, WarmStartWarning
 from mbplan.formulations.joint_space import evaluate
+from mbplan.lie import SO3
+from mbplan.ocp.body_residuals import BodyOrientation, BodyPosition
 from mbplan.ocp.continuous import joint_ranges
+from mbplan.ocp.free_body import FreeBody, quaternions, rotations
 from mbplan.ocp.problem import OCP
 from mbplan.ocp.residuals import (
     ComOutsideCylinder,
@@ -117,6 +121,8 @@ def initial_path(ocp: OCP, kind: str = "linear") -> np.ndarray:
     """The warm start ``q (N+1, nq)`` of kind ``"linear"`` or ``"via"`` (module docstring)."""
     if kind not in ("linear", "via"):
         raise InputError(f"warm_start: expected 'linear', 'via' or an array, got {kind!r}")
+    if isinstance(ocp.robot, FreeBody):
+        return geodesic_path(ocp)
     q0, q_goal = ocp.q0, goal_configuration(ocp)
     s = np.concatenate([[0.0], np.linspace(0.0, 1.0, ocp.N)])
     linear = q0 + s[:, None] * (q_goal - q0)
@@ -146,3 +152,21 @@ VIA_FALLBACK = (
     "knots; using the linear warm start (make this an error with "
     'warnings.simplefilter("error", mbplan.errors.WarmStartWarning) or --strict-warm-start)'
 )
+
+
+def geodesic_path(ocp: OCP) -> np.ndarray:
+    """A free body's warm start (both kinds; no via-point search): the uniform geodesic
+    ``R_k = R_0 exp(t_k log(R_0ᵀ R_g))``, ``p_k = p_0 + t_k (p_g - p_0)``, ``t_k = k/N``
+    (§VIII.B) to the targets of the terminal :class:`~mbplan.ocp.body_residuals.BodyOrientation`
+    and :class:`~mbplan.ocp.body_residuals.BodyPosition` items (the start if there are none)."""
+    start = rotations(ocp.q0[3:][None])[0]
+    R_goal, p_goal = start, ocp.q0[:3]
+    for item in ocp.items:
+        if item.knots[-1] == ocp.N and isinstance(item.residual, BodyOrientation):
+            R_goal = item.residual.rotation
+        if item.knots[-1] == ocp.N and isinstance(item.residual, BodyPosition):
+            p_goal = item.residual.translation
+    t = np.arange(ocp.N + 1) / ocp.N
+    R = start @ SO3.exp(t[:, None] * SO3.log(start.T @ R_goal))
+    R[-1] = R_goal
+    return np.hstack([ocp.q0[:3] + t[:, None] * (p_goal - ocp.q0[:3]), quaternions(R)])

@@ -20,8 +20,10 @@ import numpy as np
 from mbplan.baselines.ipopt import IpoptStats, base_options
 from mbplan.engine.jit import jit_available
 from mbplan.errors import InputError
-from mbplan.formulations import maximal
+from mbplan.formulations import free_body, maximal
 from mbplan.formulations.generalized import GeneralizedNLP
+from mbplan.formulations.quaternion import QuaternionNLP
+from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.problem import OCP
 from mbplan.results import PlanResult
 from mbplan.solvers import RIPMStatus
@@ -56,13 +58,14 @@ def solve_mlgipm_maximal(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> P
 def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
     """``solver`` (:mod:`mbplan.solvers.dispatch`) on the maximal-coordinate LGVI of ``ocp``."""
     jit = jit_available() if settings.jit is None else settings.jit
-    nlp, build = maximal.build(ocp, jit)
+    formulation = free_body if isinstance(ocp.robot, FreeBody) else maximal
+    nlp, build = formulation.build(ocp, jit)
     t0 = time.perf_counter()
     x0 = nlp.initial_point(q_guess)
     build += time.perf_counter() - t0
     options = options_for(solver, tol=settings.tol, max_iter=settings.max_iter)
     result = solve_with(solver, nlp.problem, x0, options.replace(**settings.options))
-    traj = nlp.joint_trajectory(result.x)
+    traj = nlp.trajectory(result.x)
     h = result.history.arrays()
     return PlanResult(
         method=solver,
@@ -81,9 +84,6 @@ def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Setting
             "n_variables": int(result.y.size),
             "build_time_s": build,
         },
-        R=result.x["R"],
-        p=result.x["p"],
-        body_names=nlp.mm.body_names,
         formulation="maximal",
         **traj,
     )
@@ -108,9 +108,16 @@ def solve_ipopt_generalized(
     reserved = {"output_file", "file_print_level"} & set(settings.options)
     if reserved:
         raise InputError(f"ipopt options: {sorted(reserved)} are used to detect restoration")
-    nlp = GeneralizedNLP(ocp)
-    g_fn, jac_fn, hess_fn = nlp.callbacks()
-    z = cs.MX.sym("z", nlp.n)
+    nlp: GeneralizedNLP | QuaternionNLP
+    if isinstance(ocp.robot, FreeBody):  # unit quaternions in R⁴, CasADi's exact derivatives
+        nlp = QuaternionNLP(ocp)
+        problem, derivatives = nlp.problem, {}
+    else:
+        nlp = GeneralizedNLP(ocp)
+        g_fn, jac_fn, hess_fn = nlp.callbacks()
+        z = cs.MX.sym("z", nlp.n)
+        problem = {"x": z, "f": nlp.symbolic_objective(z), "g": g_fn(z)}
+        derivatives = {"jac_g": jac_fn, "hess_lag": hess_fn, "no_nlp_grad": True}
     fd, log_path = tempfile.mkstemp(prefix="ipopt_", suffix=".log")
     os.close(fd)
     options |= {"output_file": log_path, "file_print_level": 5}
@@ -121,11 +128,9 @@ def solve_ipopt_generalized(
         solver = cs.nlpsol(
             "generalized_ipopt",
             "ipopt",
-            {"x": z, "f": nlp.symbolic_objective(z), "g": g_fn(z)},
+            problem,
             {
-                "jac_g": jac_fn,
-                "hess_lag": hess_fn,
-                "no_nlp_grad": True,
+                **derivatives,
                 "print_time": False,
                 "record_time": True,
                 "ipopt": options,
@@ -140,7 +145,11 @@ def solve_ipopt_generalized(
             resto = _restoration_iterations(fh.read())
     finally:
         os.unlink(log_path)
-    q, v, tau = nlp.unpack(np.asarray(sol["x"]).ravel())
+    z_opt = np.asarray(sol["x"]).ravel()
+    if isinstance(nlp, QuaternionNLP):
+        traj = nlp.trajectory(z_opt)
+    else:
+        traj = dict(zip(("q", "v", "tau"), nlp.unpack(z_opt), strict=True))
     message = stats.status.replace("_", " ")
     if not restoration and resto:
         message = "stopped on entering the restoration phase, which is disabled (max_resto_iter=0)"
@@ -153,9 +162,6 @@ def solve_ipopt_generalized(
         solve_time_s=stats.solve_time,
         total_time_s=time.perf_counter() - start,
         time_per_iter_s=stats.time_per_iteration,
-        q=q,
-        v=v,
-        tau=tau,
         dt=ocp.dt,
         kkt_history=np.column_stack([stats.inf_pr, stats.inf_du]).reshape(-1, 2),
         entered_restoration=resto > 0,
@@ -169,6 +175,7 @@ def solve_ipopt_generalized(
             "n_constraints": nlp.m,
         },
         formulation="generalized",
+        **traj,
     )
 
 

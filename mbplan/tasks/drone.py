@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike
 
 from mbplan.errors import InfeasibleRequestError, InputError
 from mbplan.lie import SO3
+from mbplan.simulation.free_body import lgvi_step
 from mbplan.validation import as_array, as_int, as_real, as_rotation
 
 __all__ = [
@@ -47,9 +48,6 @@ __all__ = [
 ]
 
 E_Z = np.array([0.0, 0.0, 1.0])  # thrust axis in the body frame (eq. 60)
-_HAT_BASIS = SO3.hat(np.eye(3))  # e_i^ for the unit vectors e_i
-_NEWTON_MAX_ITER = 30
-_NEWTON_STEP_TOL = 1e-14  # |ξ| of the last Newton update on SO(3)
 
 
 @dataclass(frozen=True, eq=False)
@@ -237,28 +235,6 @@ def geodesic_initial_guess(task: DockingTask) -> dict[str, np.ndarray]:
     return {"R": R, "p": p, "F": F, "v": v, "u": u}
 
 
-def _solve_rotational_step(target: np.ndarray, J: np.ndarray, F: np.ndarray, k: int) -> np.ndarray:
-    """Newton on SO(3) for ``(F⁺ J - J F⁺ᵀ)^∨ = target`` (eq. 34), started at ``F``.
-
-    The update is ``F ← F exp(ξ^)``; the Jacobian of ``(F exp(ξ^) J - J exp(-ξ^) Fᵀ)^∨`` at
-    ``ξ = 0`` is ``ξ ↦ (F ξ^ J + J ξ^ Fᵀ)^∨``.
-    """
-    for _ in range(_NEWTON_MAX_ITER):
-        residual = SO3.vee(F @ J - J @ F.T) - target
-        jac = np.column_stack([SO3.vee(F @ E @ J + J @ E @ F.T) for E in _HAT_BASIS])
-        try:
-            xi = -np.linalg.solve(jac, residual)
-        except np.linalg.LinAlgError:
-            break
-        F = F @ SO3.exp(xi)
-        if np.linalg.norm(xi) <= _NEWTON_STEP_TOL:
-            return F
-    raise InputError(
-        f"u[{k}]: the implicit rotational equation (34) has no solution near F_{k}; "
-        "angular velocity or torque too large for dt"
-    )
-
-
 def simulate(task: DockingTask, u: ArrayLike) -> dict[str, np.ndarray]:
     """Roll the discrete dynamics (30)–(35), (60) forward from ``(R0, p0, F0, v0)``.
 
@@ -279,11 +255,11 @@ def simulate(task: DockingTask, u: ArrayLike) -> dict[str, np.ndarray]:
     v = np.empty((K + 1, 3))
     R[0], F[0], p[0], v[0] = task.R0, task.F0, task.p0, task.v0
     for k in range(K):
-        R[k + 1] = R[k] @ F[k]
-        p[k + 1] = p[k] + v[k] * dt
-        target = SO3.vee(J @ F[k] - F[k].T @ J) + u[k, 1:] * dt**2
-        F[k + 1] = _solve_rotational_step(target, J, F[k], k)
-        v[k + 1] = v[k] + prm.gravity * dt + R[k + 1] @ E_Z * (u[k, 0] * dt / prm.mass)
+        state = (R[k], p[k], F[k], v[k])
+        thrust = E_Z * u[k, 0]
+        R[k + 1], p[k + 1], F[k + 1], v[k + 1] = lgvi_step(
+            state, u[k, 1:], thrust, J, prm.mass, prm.gravity, dt, k
+        )
     return {"R": R, "p": p, "F": F, "v": v}
 
 

@@ -20,6 +20,7 @@ import pinocchio as pin
 
 from mbplan.errors import InputError, MbplanError, RobotModelError
 from mbplan.multibody import MaximalModel, maximal_model
+from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.robot import load_robot
 from mbplan.results import PlanResult, load_npz
 from mbplan.robots import available_robots
@@ -211,6 +212,8 @@ def _robot_scene(
         ocp = results[0].ocp
     if ocp is not None and robot is not None and robot != ocp.robot.name:
         raise InputError(f"robot {robot!r} differs from the task's robot {ocp.robot.name!r}")
+    if ocp is not None and isinstance(ocp.robot, FreeBody):
+        raise InputError(f"replay: plans of a free body ({ocp.robot.name!r}) are not drawn yet")
     desc = ocp.robot if ocp is not None else load_robot(robot or infer_robot(results))
     if desc.visual_model is None or desc.visual_model.ngeoms == 0:
         raise RobotModelError(f"robot {desc.name!r} has no visual geometry to draw")

@@ -1,0 +1,195 @@
+"""Maximal coordinates of a free body: one rigid body on SO(3)×R³ with the forced LGVI, for the
+RIPM (RIPM paper §VIII.B).
+
+Knots ``k = 0..N`` carry ``(R_k, p_k, F_k, v_k)`` (knot 0 fixed to the OCP's initial state),
+intervals ``k = 0..N-1`` the input ``u_k``; step ``k`` is
+:func:`mbplan.dynamics.free_body_step` (eq. 30–35, 60). Each OCP item is one :class:`Term`: its
+residual (:func:`mbplan.ocp.body_residuals.body_expression`) at its knots, ``½ w ‖r‖²`` as a
+cost. The items of one residual kind and role share one :class:`Term`, and the costs of one
+space (state or input) one summed term: fewer kernel calls per iteration, the same sums.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+from functools import cache
+
+import casadi as cs
+import numpy as np
+
+from mbplan.dynamics import free_body_step
+from mbplan.engine import RiemannianFunction
+from mbplan.errors import InputError
+from mbplan.lie import SO3, R
+from mbplan.ocp.body_residuals import body_expression, body_parameters, parameter_shapes
+from mbplan.ocp.free_body import free_flyer_state, path_state
+from mbplan.ocp.problem import OCP, Item
+from mbplan.transcription.problem import TrajectoryProblem
+from mbplan.transcription.terms import Term
+from mbplan.transcription.variables import Block, Point, TrajectoryVariables
+
+STATE = (("R", SO3), ("p", R(3)), ("F", SO3), ("v", R(3)))
+
+
+@cache
+def _step_function(actuation: bytes, nu: int, jit: bool) -> RiemannianFunction:
+    """The LGVI step with the actuation map ``B`` a constant (its zeros are structural: the
+    Jacobian and Hessian keep the sparsity of the map, e.g. eq. 60's thrust on ``u_z`` only)."""
+    B = cs.DM(np.frombuffer(actuation).reshape(6, nu))
+    variables = [(f"{n}{i}", g) for i in (0, 1) for n, g in STATE] + [("u", R(nu))]
+    params = [("J", (3, 3)), ("mass", 1), ("gravity", 3), ("dt", 1)]
+
+    def step(**args):
+        return free_body_step(**args, B=cs.sparsify(B))
+
+    name = f"free_body_step_{hashlib.sha1(actuation).hexdigest()[:10]}"
+    return RiemannianFunction(name, variables, step, params, jit=jit)
+
+
+@cache
+def _item_function(kind: type, shapes: tuple, cost: bool, nu: int, jit: bool) -> RiemannianFunction:
+    """The residual ``kind`` (or its cost ``½ w ‖r‖²``) on the state or the input."""
+    control = kind.space == "control"
+    variables = [("u", R(nu))] if control else list(STATE)
+
+    def fn(w=None, **args):
+        x = {n: args.pop(n) for n in [v for v, _ in variables]}
+        r = body_expression(kind, x, args)
+        return 0.5 * w * cs.sumsqr(r) if cost else r
+
+    params = list(shapes) + ([("w", 1)] if cost else [])
+    name = f"body_{kind.__name__}_{'cost' if cost else 'constraint'}"
+    return RiemannianFunction(name, variables, fn, params, jit=jit)
+
+
+@cache
+def _cost_function(slots: tuple, space: str, nu: int, jit: bool) -> RiemannianFunction:
+    """``Σ_j ½ w_j ‖r_j‖²`` of the residual kinds ``slots = ((kind, shapes), …)`` (parameters
+    of slot ``j`` prefixed ``j_``): the costs of one space in one kernel call per iteration."""
+    variables = [("u", R(nu))] if space == "control" else list(STATE)
+
+    def fn(**args):
+        x = {n: args[n] for n, _ in variables}
+        total = 0
+        for j, (kind, shapes) in enumerate(slots):
+            r = body_expression(kind, x, {name: args[f"{j}_{name}"] for name, _ in shapes})
+            total += 0.5 * args[f"{j}_w"] * cs.sumsqr(r)
+        return total
+
+    params = [(f"{j}_{n}", shape) for j, (_, shapes) in enumerate(slots) for n, shape in shapes]
+    params += [(f"{j}_w", 1) for j in range(len(slots))]
+    name = "body_costs_" + "_".join(kind.__name__ for kind, _ in slots)
+    return RiemannianFunction(name, variables, fn, params, jit=jit)
+
+
+class FreeBodyNLP:
+    """The TrajectoryProblem of a free-body ``ocp`` (module docstring)."""
+
+    def __init__(self, ocp: OCP, jit: bool):
+        self.ocp, self.jit = ocp, jit
+        body, N = ocp.robot, ocp.N
+        variables = TrajectoryVariables(
+            [Block(n, g, N + 1, fixed=(0,)) for n, g in STATE] + [Block("u", R(body.nu), N)]
+        )
+        bind = {f"{n}{i}": (n, i) for i in (0, 1) for n, _ in STATE} | {"u": ("u", 0)}
+        dynamics = {
+            "J": body.nonstandard_inertia,
+            "mass": body.mass,
+            "gravity": body.gravity,
+            "dt": ocp.dt,
+        }
+        step = _step_function(np.ascontiguousarray(body.actuation).tobytes(), body.nu, jit)
+        terms = [Term.at_knots("dynamics", "eq", step, bind, range(N), dynamics)]
+        groups: dict[tuple, list[Item]] = {}
+        for item in ocp.items:
+            r = item.residual
+            key = (type(r), item.role, tuple(parameter_shapes(r, ocp.scene)))
+            groups.setdefault(key, []).append(item)
+        for space in ("state", "control"):  # the costs of a space as one term
+            costs = [k for k in groups if k[1] == "cost" and k[0].space == space]
+            knots = [np.concatenate([i.knots for i in groups[k]]) for k in costs]
+            if len(costs) > 1 and all(len(np.unique(k)) == len(k) for k in knots):
+                terms.append(self._cost_term(space, [(k, groups.pop(k)) for k in costs]))
+        for (kind, role, shapes), items in groups.items():
+            try:
+                terms.append(self._term(kind, role == "cost", shapes, items))
+            except InputError as err:
+                names = [i.name for i in items]
+                raise InputError(f"maximal formulation, {role} {names}: {err}") from None
+        self.problem = TrajectoryProblem(variables, terms)
+
+    def _per_site(self, shapes: tuple, items: list[Item]) -> tuple[np.ndarray, dict]:
+        """The knots of ``items`` concatenated and their parameters and weights per site."""
+        knots = np.concatenate([i.knots for i in items])
+        params: dict[str, np.ndarray] = {}
+        for name, shape in shapes:
+            shape = shape if isinstance(shape, tuple) else (shape,)
+            params[name] = np.concatenate(
+                [
+                    np.broadcast_to(
+                        body_parameters(i.residual, self.ocp.scene)[name], (len(i.knots), *shape)
+                    )
+                    for i in items
+                ]
+            )
+        params["w"] = np.concatenate([np.full(len(i.knots), i.weight) for i in items])
+        return knots, params
+
+    def _cost_term(self, space: str, groups: list[tuple[tuple, list[Item]]]) -> Term:
+        """One term for all cost groups of ``space`` at the union of their knots (weight 0 at
+        a knot a group does not cost; the same sums)."""
+        per = [self._per_site(shapes, items) for (_, _, shapes), items in groups]
+        union = np.unique(np.concatenate([k for k, _ in per]))
+        params: dict[str, np.ndarray] = {}
+        for j, (knots, values) in enumerate(per):
+            at = np.searchsorted(union, knots)
+            for name, value in values.items():
+                full = np.repeat(value[:1], len(union), axis=0)
+                full[at] = value
+                if name == "w":
+                    full[np.setdiff1d(np.arange(len(union)), at)] = 0.0
+                params[f"{j}_{name}"] = full
+        slots = tuple((kind, shapes) for (kind, _, shapes), _ in groups)
+        fn = _cost_function(slots, space, self.ocp.robot.nu, self.jit)
+        names = ["u"] if space == "control" else [n for n, _ in STATE]
+        name = "+".join(i.name for _, items in groups for i in items)
+        return Term(name, "cost", fn, {n: (n, union) for n in names}, params)
+
+    def _term(self, kind: type, cost: bool, shapes: tuple, items: list[Item]) -> Term:
+        """One term for the items of one residual kind and role (e.g. a running and a
+        terminal cost): their knots concatenated, targets and weights per site (fewer kernel
+        calls per iteration; the same sums)."""
+        fn = _item_function(kind, shapes, cost, self.ocp.robot.nu, self.jit)
+        knots, params = self._per_site(shapes, items)
+        if not cost:
+            del params["w"]
+        names = ["u"] if kind.space == "control" else [n for n, _ in STATE]
+        bind = {n: (n, knots) for n in names}
+        sense = "cost" if cost else kind.sense
+        return Term("+".join(i.name for i in items), sense, fn, bind, params)
+
+    def initial_point(self, q_path: np.ndarray) -> Point:
+        """The point along a pose path ``q_path (N+1, 7)`` (:func:`path_state`), hover input."""
+        ocp = self.ocp
+        point = path_state(q_path, ocp.q0, ocp.v0, ocp.dt)
+        point["u"] = np.tile(ocp.robot.hover_input, (ocp.N, 1))
+        return self.problem.check_point(point)
+
+    def trajectory(self, x: Point) -> dict:
+        """PlanResult fields of a point: ``q, v`` (free flyer), ``tau = u``, ``R, p``."""
+        q, v = free_flyer_state(x["R"], x["p"], x["F"], x["v"], self.ocp.dt)
+        return {
+            "q": q,
+            "v": v,
+            "tau": np.array(x["u"]),
+            "R": x["R"][:, None],
+            "p": x["p"][:, None],
+            "body_names": (self.ocp.robot.name,),
+        }
+
+
+def build(ocp: OCP, jit: bool) -> tuple[FreeBodyNLP, float]:
+    """:class:`FreeBodyNLP` of ``ocp`` and the build time (s)."""
+    t0 = time.perf_counter()
+    return FreeBodyNLP(ocp, jit), time.perf_counter() - t0

@@ -1,0 +1,218 @@
+"""A free body on the OCP API: every body residual × both formulations against finite
+differences (along the retraction on SO(3) in maximal coordinates), the drone docking task as
+an OCP (same objective, same plans as the task's own transcriptions), JSON and npz round trips,
+bad input named before any solve."""
+
+from __future__ import annotations
+
+import json
+
+import casadi as cs
+import numpy as np
+import pytest
+
+import mbplan as mb
+from mbplan import paper
+from mbplan.engine.checks import check_derivatives
+from mbplan.formulations.free_body import FreeBodyNLP
+from mbplan.formulations.quaternion import QuaternionNLP
+from mbplan.lie import SO3
+from mbplan.ocp import body_residuals as br
+from mbplan.ocp import residuals as res
+from mbplan.ocp.free_body import FreeBody, body_state, free_flyer_state, quaternions
+from mbplan.planning.initial_guess import initial_path
+from mbplan.tasks.drone import (
+    cluttered_task,
+    geodesic_initial_guess,
+    sample_docking_cases,
+    trajectory_cost,
+)
+
+GOAL_R = SO3.exp(np.array([0.3, -0.2, 0.5]))
+
+
+def factory_ocp() -> mb.OCP:
+    """Every body residual, as a cost and as a constraint where it can be one, on a free body
+    with a general actuation map (5 inputs)."""
+    B = np.random.default_rng(3).standard_normal((6, 5))
+    body = FreeBody("box", 1.3, np.diag([0.02, 0.03, 0.04]), (0.0, 0.0, -9.81), B)
+    scene = mb.Scene().add_cylinder("post", 0.2, 2.0, (2.0, 0.0, 0.0))
+    q0 = np.r_[0.1, 0.2, 0.3, quaternions(SO3.exp(np.array([[0.1, 0.0, 0.2]])))[0]]
+    ocp = mb.OCP(body, scene, N=3, dt=0.05, q0=q0, v0=[0.1, 0.0, 0.2, 0.3, -0.1, 0.2])
+    ocp.add_cost("R", br.BodyOrientation(GOAL_R), 1.3)
+    ocp.add_cost("p", br.BodyPosition([0.5, 0.1, 0.0]), 0.7)
+    ocp.add_cost("F", br.BodyRotationStep(SO3.exp(np.array([0.0, 0.02, 0.0]))), 2.0)
+    ocp.add_cost("v", br.BodyVelocity([0.1, 0.0, 0.0]), 0.4)
+    ocp.add_cost("u", br.BodyInput(), 0.01)
+    ocp.add_constraint("p_eq", br.BodyPosition([0.2, 0.2, 0.2]), knots=[2])
+    ocp.add_constraint("v_eq", br.BodyVelocity([0.0, 0.1, 0.0]), knots=[1])
+    ocp.add_constraint("u_eq", br.BodyInput(np.ones(5)), knots=[1])
+    ocp.add_constraint("u_limits", br.BodyInputLimits(-20 * np.ones(5), 20 * np.ones(5)))
+    ocp.add_constraint("post", res.ComOutsideCylinder("post", 0.05))
+    return ocp
+
+
+def _start(ocp: mb.OCP) -> np.ndarray:
+    """The geodesic warm start (a free body's ``"linear"``)."""
+    return initial_path(ocp, "linear")
+
+
+def _at_site(term, flat: dict, site: int) -> tuple[dict, dict]:
+    """The variables and parameters of ``term`` at one site (per-site parameters sliced)."""
+    variables = {n: a[site] for n, a in term.gather(flat).items()}
+    sizes = {spec.name: int(np.prod(spec.shape)) for spec in term.function.parameters}
+    params = {}
+    for name, value in term.parameters.items():
+        a = np.asarray(value, dtype=float)
+        per_site = a.ndim >= 1 and a.shape[0] == term.sites and a.size == term.sites * sizes[name]
+        params[name] = a[site] if per_site else a
+    return variables, params
+
+
+def test_maximal_derivatives_match_finite_differences_along_the_retraction() -> None:
+    """Every term (the LGVI step and each item), Jacobian and Hessian at a random point, against
+    central differences along ``X exp(tξ)`` (:func:`mbplan.engine.checks.check_derivatives`)."""
+    ocp = factory_ocp()
+    nlp = FreeBodyNLP(ocp, jit=False)
+    prob = nlp.problem
+    rng = np.random.default_rng(1)
+    x = prob.retract(nlp.initial_point(_start(ocp)), 0.05 * rng.standard_normal(prob.n))
+    flat = {name: b.flat(x[name]) for name, b in prob.variables.blocks.items()}
+    checked = set()
+    for term in prob.terms:
+        variables, params = _at_site(term, flat, term.sites - 1)
+        check = check_derivatives(term.function, variables, params, rng=rng)
+        assert check.ok(1e-5), (term.name, check)
+        checked.update(term.name.split("+"))  # items of one kind or all costs share a term
+    assert checked == {"dynamics", *ocp.names}
+    # every item has its rows: 12 dynamics per step, 3 + 3 + 5 equalities, 2·5·3 + 3 limits
+    assert prob.n_eq == 12 * 3 + 11 and prob.n_ineq == 30 + 3
+
+
+def _central(fn, x, h):
+    return np.column_stack([(fn(x + h * e) - fn(x - h * e)) / (2 * h) for e in np.eye(x.size)])
+
+
+def test_quaternion_derivatives_match_finite_differences() -> None:
+    ocp = factory_ocp()
+    nlp = QuaternionNLP(ocp)
+    z = cs.SX(nlp.problem["x"])
+    rng = np.random.default_rng(2)
+    z0 = nlp.initial_guess(_start(ocp)) + 0.05 * rng.standard_normal(nlp.n)
+    lam = rng.standard_normal(nlp.m)
+    g = cs.Function("g", [z], [nlp.problem["g"]])
+    f = cs.Function("f", [z], [nlp.problem["f"]])
+    jac = cs.Function("J", [z], [cs.jacobian(nlp.problem["g"], z)])
+    lagr = nlp.problem["f"] + cs.dot(cs.DM(lam), nlp.problem["g"])
+    grad = cs.Function("dL", [z], [cs.gradient(lagr, z)])
+    hess = cs.Function("H", [z], [cs.hessian(lagr, z)[0]])
+    J = np.array(jac(z0))
+    np.testing.assert_allclose(J, _central(lambda x: np.array(g(x)).ravel(), z0, 1e-6), atol=2e-5)
+    fd = _central(lambda x: np.array(f(x)).ravel(), z0, 1e-6)[0]
+    np.testing.assert_allclose(
+        np.array(cs.Function("df", [z], [cs.gradient(nlp.problem["f"], z)])(z0)).ravel(),
+        fd,
+        rtol=1e-6,
+        atol=1e-6,
+    )
+    H = np.array(hess(z0))
+    fd = _central(lambda x: np.array(grad(x)).ravel(), z0, 1e-5)
+    np.testing.assert_allclose(H, 0.5 * (fd + fd.T), atol=1e-4 * max(1, np.abs(H).max()))
+    # input limits are bounds; rows: 13 per step, ‖q_2‖, ‖q_3‖, ‖f_3‖, 11 equalities, 3 cylinder
+    assert nlp.m == 13 * 3 + 3 + 11 + 3
+    assert np.all(nlp.lbz[-15:] == -20) and np.all(nlp.ubz[-15:] == 20)
+
+
+def test_both_formulations_and_the_task_have_the_same_objective() -> None:
+    task = sample_docking_cases(2, 0, with_input_limits=True)[1]
+    ocp = paper.drone_docking(task)
+    path = initial_path(ocp, "via")
+    maximal = FreeBodyNLP(ocp, jit=False)
+    x = maximal.initial_point(path)
+    guess = geodesic_initial_guess(task)
+    for key in guess:
+        np.testing.assert_allclose(x[key], guess[key], atol=1e-12)
+    expected = trajectory_cost(task, guess)
+    f_max = maximal.problem.values(x)[0]
+    quat = QuaternionNLP(ocp)
+    f_quat = float(
+        cs.Function("f", [quat.problem["x"]], [quat.problem["f"]])(quat.initial_guess(path))
+    )
+    np.testing.assert_allclose([f_max, f_quat], expected, rtol=1e-12)
+
+
+@pytest.mark.parametrize("method", ["ripm", "ipopt"])
+def test_cluttered_docking_plans_verifies_and_round_trips(method: str, tmp_path) -> None:
+    """Fig. 5: three cylinders and input limits. The paper's constraints hold at the knots
+    only: the RIPM's plan, the task's own, cuts a cylinder between knots, which verify
+    reports; with a 2 cm margin both formulations' plans verify."""
+    task = cluttered_task(with_input_limits=True)
+    if method == "ripm":  # the same NLP and plan as mbplan.transcription.quadrotor
+        from mbplan.planning.drone import plan_docking
+        from mbplan.solvers import RIPMOptions
+
+        at_knots = mb.plan(paper.drone_docking(task), method)
+        direct = plan_docking(task, RIPMOptions(tol=1e-6))
+        assert at_knots.success and direct.result.iterations == at_knots.iterations
+        np.testing.assert_allclose(direct.result.x["p"], at_knots.p[:, 0], atol=1e-9)
+        check = mb.verify(at_knots)
+        assert not check.passed and "enters an obstacle" in check.reasons[0]
+    ocp = paper.drone_docking(task, margin=0.02)
+    result = mb.plan(ocp, method)
+    assert result.success, result.message
+    assert result.q.shape == (41, 7) and result.v.shape == (41, 6) and result.tau.shape == (40, 4)
+    check = mb.verify(result)
+    assert check.passed, check.reasons
+    assert check.min_obstacle_distance_m >= 0.0 and check.torque_limit_violation <= 1e-6
+    assert set(check.violations) == {"input_limits", "cylinder_0", "cylinder_1", "cylinder_2"}
+    loaded = mb.load_npz(result.save(tmp_path / "drone.npz"))
+    assert loaded.ocp.names == ocp.names and isinstance(loaded.ocp.robot, FreeBody)
+    assert mb.verify(loaded).passed
+
+
+def test_ocp_round_trips_through_json() -> None:
+    ocp = factory_ocp()
+    again = mb.OCP.from_dict(json.loads(json.dumps(ocp.to_dict())))
+    assert again.names == ocp.names and again.robot.source == ocp.robot.source
+    np.testing.assert_array_equal(again.q0, ocp.q0)
+    for a, b in zip(ocp.items, again.items, strict=True):
+        assert a.residual.to_dict() == b.residual.to_dict()
+        assert np.array_equal(a.knots, b.knots) and a.weight == b.weight
+
+
+def test_free_flyer_state_round_trip() -> None:
+    rng = np.random.default_rng(5)
+    R = SO3.exp(rng.standard_normal((4, 3)))
+    F = SO3.exp(0.05 * rng.standard_normal((4, 3)))
+    p, v = rng.standard_normal((4, 3)), rng.standard_normal((4, 3))
+    q, vel = free_flyer_state(R, p, F, v, 0.05)
+    back = body_state(q, vel, 0.05)
+    for key, a in (("R", R), ("p", p), ("F", F), ("v", v)):
+        np.testing.assert_allclose(back[key], a, atol=1e-12)
+
+
+def test_bad_input_is_named_before_any_solve() -> None:
+    body = FreeBody.quadrotor(0.5, np.diag([2.3e-3, 2.3e-3, 4e-3]))
+    with pytest.raises(mb.InputError, match=r"FreeBody\.inertia"):
+        FreeBody.quadrotor(0.5, np.diag([1.0, 1.0, 3.0]))
+    with pytest.raises(mb.InputError, match="actuation: expected shape"):
+        FreeBody("x", 1.0, np.eye(3), (0, 0, -9.81), np.ones((5, 2)))
+    with pytest.raises(mb.InputError, match="q0: quaternion"):
+        mb.OCP(body, q0=[0, 0, 0, 0, 0, 0, 2.0])
+    ocp = mb.OCP(body, N=4)
+    with pytest.raises(mb.InputError, match="can only be a cost"):
+        ocp.add_constraint("R", br.BodyOrientation(np.eye(3)))
+    with pytest.raises(mb.InputError, match=r"BodyPosition\.translation: contains NaN"):
+        ocp.add_cost("p", br.BodyPosition([np.nan, 0, 0]))
+    with pytest.raises(mb.InputError, match="lower >= upper for input 0"):
+        ocp.add_constraint("u", br.BodyInputLimits([1, 0, 0, 0], [1, 1, 1, 1]))
+    with pytest.raises(mb.InputError, match=r"BodyInput.target: expected shape \(4,\)"):
+        ocp.add_cost("u", br.BodyInput([1.0, 2.0]))
+    with pytest.raises(mb.InputError, match="robot 'iiwa' is not one"):
+        mb.OCP("iiwa", N=4).add_cost("p", br.BodyPosition([0, 0, 0]))
+    with pytest.raises(mb.InputError, match="JointPosition is not a residual of a free body"):
+        ocp.add_cost("q", res.JointPosition([0.0]))
+    blocked = mb.OCP(body, mb.Scene().add_cylinder("c", 0.3, 1.0, (0.1, 0, 0)), N=4)
+    blocked.add_constraint("c", res.ComOutsideCylinder("c"))
+    with pytest.raises(mb.InfeasibleRequestError, match="'c'"):
+        mb.plan(blocked, "ripm")
