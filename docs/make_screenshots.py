@@ -27,9 +27,7 @@ import panda_between_boxes  # noqa: E402
 from test_browser import screenshot  # noqa: E402
 
 import mbplan as mb  # noqa: E402
-from mbplan.paper import iiwa_obstacle_cases, tracking_ocp  # noqa: E402
-from mbplan.planning.drone import plan_docking  # noqa: E402
-from mbplan.solvers import RIPMOptions  # noqa: E402
+from mbplan.paper import drone_docking, iiwa_obstacle_cases, tracking_ocp  # noqa: E402
 from mbplan.tasks.drone import cluttered_task  # noqa: E402
 from mbplan.viz import drone_replay, static_html  # noqa: E402
 
@@ -69,9 +67,9 @@ def shoot(results: list[mb.PlanResult], task: mb.OCP, name: str, **kwargs: str) 
 
 def drone() -> None:
     task = cluttered_task(with_input_limits=True)
-    x = plan_docking(task, RIPMOptions(tol=1e-8, max_iter=200)).result.x
+    plan = mb.plan(drone_docking(task), "ripm", tol=1e-8, max_iter=200)
     page = drone_replay(
-        x["R"], x["p"], task.obstacles, OUT / "drone.html", dt=task.dt, open_browser=False,
+        plan.R[:, 0], plan.p[:, 0], task.obstacles, OUT / "drone.html", dt=task.dt, open_browser=False,
         frame=task.N // 2,
     )  # fmt: skip
     screenshot(Path(page).resolve().as_uri(), DOCS / "drone.png", budget_ms=10000, timeout_s=180)

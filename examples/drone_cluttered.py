@@ -17,18 +17,18 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from mbplan.planning.drone import plan_docking
-from mbplan.solvers import RIPMOptions
+import mbplan as mb
+from mbplan import paper
 from mbplan.tasks.drone import cluttered_task
 
 
 def main(out: Path, tol: float = 1e-8) -> int:
     task = cluttered_task(with_input_limits=True)
-    sol = plan_docking(task, RIPMOptions(tol=tol, max_iter=200))
-    r = sol.result
-    print(f"RIPM: {r.status.name} in {r.iterations} iterations, {1e3 * r.wall_time_s:.1f} ms")
-    print(f"replay deviation through the LGVI simulator: {sol.replay_deviation_m:.2e} m")
-    p, R = r.x["p"], r.x["R"]
+    r = mb.plan(paper.drone_docking(task), "ripm", tol=tol, max_iter=200)
+    check = mb.verify(r)  # replays the inputs through the NumPy LGVI
+    print(f"RIPM: {r.status} in {r.iterations} iterations, {1e3 * r.solve_time_s:.1f} ms")
+    print(f"replay deviation through the LGVI simulator: {check.max_joint_deviation_rad:.2e}")
+    p, R = r.p[:, 0], r.R[:, 0]
     clearance = min(
         np.hypot(p[1:, 0] - x, p[1:, 1] - y).min() - rad for x, y, rad in task.obstacles
     )
@@ -54,13 +54,13 @@ def main(out: Path, tol: float = 1e-8) -> int:
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(f"Drone through clutter: {r.status.name}, {r.iterations} iterations")
+    ax.set_title(f"Drone through clutter: {r.status}, {r.iterations} iterations")
     ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
     print(f"wrote {out}")
-    return 0 if sol.converged and clearance >= -1e-6 else 1
+    return 0 if r.success and clearance >= -1e-6 else 1
 
 
 if __name__ == "__main__":

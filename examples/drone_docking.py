@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mbplan.planning.drone import plan_docking
+import mbplan as mb
+from mbplan import paper
 from mbplan.tasks.drone import rotation_angles, sample_docking_cases
 from mbplan.viz import drone_replay
 
@@ -19,22 +20,21 @@ from mbplan.viz import drone_replay
 def main(out: Path, seed: int, limits: bool) -> int:
     task = sample_docking_cases(1, seed, with_input_limits=limits)[0]
     angle = float(rotation_angles(task.R0[None])[0])
-    sol = plan_docking(task)
-    r = sol.result
+    r = mb.plan(paper.drone_docking(task), "ripm")
+    check = mb.verify(r)  # replays the inputs through the NumPy LGVI
+    R, p = r.R[:, 0], r.p[:, 0]
     print(
         f"start {np.round(task.p0, 2)} m, rotated {np.degrees(angle):.0f}°; input limits: {limits}"
     )
     print(
-        f"RIPM: {r.status.name}, {r.iterations} iterations, {1e3 * r.wall_time_s:.1f} ms, KKT error {r.kkt_error:.1e}"
+        f"RIPM: {r.status}, {r.iterations} iterations, {1e3 * r.solve_time_s:.1f} ms, KKT error {r.kkt_history[-1].max():.1e}"
     )
     print(
-        f"final position error {np.linalg.norm(r.x['p'][-1]):.3f} m; replay deviation {sol.replay_deviation_m:.1e} m"
+        f"final position error {np.linalg.norm(p[-1]):.3f} m; replay deviation {check.max_joint_deviation_rad:.1e}; verified: {check.passed}"
     )
     out.mkdir(parents=True, exist_ok=True)
-    print(
-        f"wrote {drone_replay(r.x['R'], r.x['p'], html=out / 'docking.html', dt=task.dt, open_browser=False)}"
-    )
-    return 0 if sol.converged else 1
+    print(f"wrote {drone_replay(R, p, html=out / 'docking.html', dt=task.dt, open_browser=False)}")
+    return 0 if r.success and check.passed else 1
 
 
 if __name__ == "__main__":

@@ -1,4 +1,5 @@
-"""Drone docking task (RIPM paper §VIII.B): sampling, initial guess, LGVI simulator (30–35, 60)."""
+"""Drone docking task (RIPM paper §VIII.B): sampling, the geodesic warm start of its OCP, LGVI
+simulator (30–35, 60)."""
 
 from __future__ import annotations
 
@@ -8,13 +9,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from mbplan import paper
 from mbplan.errors import InfeasibleRequestError, InputError
+from mbplan.formulations.free_body import FreeBodyNLP
+from mbplan.planning.initial_guess import initial_path
 from mbplan.tasks import (
     CostWeights,
     DockingTask,
     QuadrotorParams,
     cluttered_task,
-    geodesic_initial_guess,
     rotation_angles,
     sample_docking_cases,
     simulate,
@@ -52,7 +55,9 @@ def test_sampling_is_reproducible_and_within_bounds() -> None:
 
 def test_geodesic_guess_connects_start_and_goal() -> None:
     task = sample_docking_cases(1, seed=3)[0]
-    g = geodesic_initial_guess(task)
+    ocp = paper.drone_docking(task)
+    x = FreeBodyNLP(ocp, jit=False).initial_point(initial_path(ocp, "linear"))
+    g = {key: x[key] for key in ("R", "p", "F", "v", "u")}
     N = task.N
     assert g["R"].shape == (N + 1, 3, 3) and g["F"].shape == (N + 1, 3, 3)
     assert g["p"].shape == g["v"].shape == (N + 1, 3) and g["u"].shape == (N, 4)

@@ -234,15 +234,18 @@ def test_bench_lie_ipm_writes_the_issue_schema_and_resumes(tmp_path) -> None:
         run(tmp_path / "x", problem="so7", n=1, methods=("ipopt",))
 
 
-def test_mlgipm_plans_a_drone_docking_case_through_the_planning_hook() -> None:
-    from mbplan.planning.drone import plan_docking
+def test_mlgipm_plans_a_drone_docking_case_through_the_planning_registry() -> None:
+    import mbplan as mb
+    from mbplan import paper
     from mbplan.solvers.dispatch import options_for, solve_with
-    from mbplan.tasks.drone import sample_docking_cases
 
-    task = sample_docking_cases(1, 0, with_input_limits=True)[0]
-    sol = plan_docking(task, options_for("mlgipm", tol=1e-6, max_iter=100), method="mlgipm")
-    assert sol.converged and sol.result.kkt_error <= 1e-6
-    assert sol.replay_deviation_m < 1e-3  # the inputs replay through the LGVI simulator
+    ocp = paper.drone_docking_cases(1, 0, with_input_limits=True)[0]
+    result = mb.plan(ocp, "mlgipm", tol=1e-6, max_iter=100)
+    assert result.success, result.message
+    assert result.status == "CONVERGED" and result.kkt_history[-1].max() <= 1e-6
+    check = mb.verify(result)  # the inputs replay through the LGVI simulator
+    assert check.passed, check.reasons
+    assert check.max_joint_deviation_rad < 1e-3
     with pytest.raises(InputError, match="MLGIPMOptions"):
         solve_with("mlgipm", hs071(), HS071_X0, options_for("ripm"))
     with pytest.raises(InputError, match="unknown solver"):
@@ -251,6 +254,9 @@ def test_mlgipm_plans_a_drone_docking_case_through_the_planning_hook() -> None:
 
 def test_reduced_sparse_newton_step_equals_the_full_system() -> None:
     """The LDLᵀ of the reduced symmetric system gives the step of the full 𝕵_F (sparse LU)."""
+    from mbplan import paper
+    from mbplan.formulations.free_body import FreeBodyNLP
+    from mbplan.planning.initial_guess import initial_path
     from mbplan.solvers.kkt_field import (
         NewtonSolver,
         evaluate_field,
@@ -258,12 +264,11 @@ def test_reduced_sparse_newton_step_equals_the_full_system() -> None:
         newton_matrix,
         solve_newton,
     )
-    from mbplan.tasks.drone import geodesic_initial_guess, sample_docking_cases
-    from mbplan.transcription.quadrotor import quadrotor_problem
 
-    task = sample_docking_cases(1, 0, with_input_limits=True)[0]
-    p = quadrotor_problem(task)
-    x0 = p.check_point(geodesic_initial_guess(task))
+    ocp = paper.drone_docking_cases(1, 0, with_input_limits=True)[0]
+    nlp = FreeBodyNLP(ocp, jit=False)
+    p = nlp.problem
+    x0 = nlp.initial_point(initial_path(ocp, "linear"))
     it = initial_duals(p, x0, None, None, None, 1e-2, 1.0)
     it.nu = np.random.default_rng(0).uniform(0.5, 2.0, p.n_ineq)
     fv = evaluate_field(p, it)

@@ -1,13 +1,34 @@
 """The assembled trajectory NLP: Riemannian derivatives of the whole problem against finite
 differences along the retraction, fixed sparsity, additive rows and input validation."""
 
+import casadi as cs
 import numpy as np
 import pytest
 
+from mbplan import paper
+from mbplan.engine import RiemannianFunction
 from mbplan.errors import InputError
-from mbplan.tasks.drone import cluttered_task, geodesic_initial_guess
+from mbplan.formulations.free_body import FreeBodyNLP
+from mbplan.lie import R
+from mbplan.planning.initial_guess import initial_path
+from mbplan.tasks.drone import cluttered_task
 from mbplan.transcription import Block, Term, TrajectoryProblem, TrajectoryVariables
-from mbplan.transcription.quadrotor import _input_cost_function, quadrotor_problem
+
+
+def _drone_problem(with_input_limits: bool):
+    """The free-body maximal NLP of the cluttered docking task and its geodesic start."""
+    nlp = FreeBodyNLP(paper.drone_docking(cluttered_task(with_input_limits)), jit=False)
+    return nlp.problem, nlp.initial_point(initial_path(nlp.ocp, "linear"))
+
+
+def _input_cost():
+    """``½ w ‖u - u_ref‖²`` of ``u ∈ R⁴``: a scalar residual."""
+    return RiemannianFunction(
+        "input_cost",
+        [("u", R(4))],
+        lambda u, u_ref, w: 0.5 * w * cs.sumsqr(u - u_ref),
+        [("u_ref", 4), ("w", 1)],
+    )
 
 
 def _lagrangian_checks(prob, x, rng):
@@ -43,15 +64,15 @@ def _lagrangian_checks(prob, x, rng):
         assert abs(fd2 - d @ H @ d) <= 1e-5 * max(1.0, abs(fd2))
 
 
-def test_quadrotor_problem_derivatives_match_finite_differences():
-    task = cluttered_task(with_input_limits=True)
-    prob = quadrotor_problem(task, jit=False)
-    assert (prob.n, prob.n_eq) == (16 * task.N, 12 * task.N)
-    _lagrangian_checks(prob, geodesic_initial_guess(task), np.random.default_rng(0))
+def test_free_body_problem_derivatives_match_finite_differences():
+    prob, x = _drone_problem(with_input_limits=True)
+    N = 40
+    assert (prob.n, prob.n_eq) == (16 * N, 12 * N)
+    _lagrangian_checks(prob, x, np.random.default_rng(0))
 
 
 def test_additive_rows_sum_contributions():
-    f = _input_cost_function(False)  # scalar residual of u ∈ R⁴
+    f = _input_cost()  # scalar residual of u ∈ R⁴
     variables = TrajectoryVariables([Block("u", f.variables[0].group, 3)])
     params = {"u_ref": np.zeros(4), "w": 2.0}
     terms = [
@@ -67,9 +88,7 @@ def test_additive_rows_sum_contributions():
 
 
 def test_bad_points_and_bindings_are_named():
-    task = cluttered_task()
-    prob = quadrotor_problem(task, jit=False)
-    x = geodesic_initial_guess(task)
+    prob, x = _drone_problem(with_input_limits=False)
     with pytest.raises(InputError, match="block 'p'"):
         prob.check_point({**x, "p": x["p"][:-1]})
     bad = dict(x)
@@ -82,7 +101,7 @@ def test_bad_points_and_bindings_are_named():
     bad["R"][2] *= 1.1
     with pytest.raises(InputError, match="orthogonal"):
         prob.check_point(bad)
-    f = _input_cost_function(False)
+    f = _input_cost()
     variables = TrajectoryVariables([Block("u", f.variables[0].group, 3)])
     with pytest.raises(InputError, match="outside block"):
         TrajectoryProblem(

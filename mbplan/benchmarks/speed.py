@@ -18,7 +18,6 @@ from mbplan.benchmarks.speed_tasks import (
     chain_case,
     chain_problem,
     chain_task,
-    drone_ripm_problem,
     drone_task,
     iiwa_task,
     maximal_ripm_problem,
@@ -129,7 +128,7 @@ def run(
     if n_iiwa:
         orderings["iiwa-com"] = ordering_stats(*maximal_ripm_problem(iiwa_task(0)))
     if n_drone:
-        orderings["drone"] = ordering_stats(*drone_ripm_problem(drone_task(0)))
+        orderings["drone"] = ordering_stats(*maximal_ripm_problem(drone_task(0)))
     for k in links:
         orderings[f"chain{k}"] = ordering_stats(*maximal_ripm_problem(chain_task(k), "linear"))
     summary["orderings"] = orderings

@@ -24,28 +24,24 @@ def iiwa_task(index: int, n: int = 100, seed: int = 0, constraint: str = "com"):
 
 
 def maximal_ripm_problem(ocp, warm_start: str = "via") -> tuple[Any, Any]:
-    """The RIPM's problem and warm start for an OCP (as ``plan(ocp, "ripm")`` builds them)."""
+    """The RIPM's problem and warm start for an OCP, as ``plan(ocp, "ripm")`` builds them (the
+    free-body formulation for a :class:`~mbplan.ocp.free_body.FreeBody`)."""
     from mbplan.engine.jit import jit_available
-    from mbplan.formulations import maximal
+    from mbplan.formulations import free_body, maximal
+    from mbplan.ocp.free_body import FreeBody
     from mbplan.planning.initial_guess import initial_path
 
-    nlp, _ = maximal.build(ocp, jit_available())
+    formulation = free_body if isinstance(ocp.robot, FreeBody) else maximal
+    nlp, _ = formulation.build(ocp, jit_available())
     return nlp.problem, nlp.initial_point(initial_path(ocp, warm_start))
 
 
 def drone_task(index: int, n: int = 100, seed: int = 0, limits: bool = False):
-    """Drone docking case ``index`` of ``n`` (RIPM paper §VIII.B)."""
+    """Drone docking case ``index`` of ``n`` (RIPM paper §VIII.B) as an OCP."""
+    from mbplan.paper import drone_docking
     from mbplan.tasks.drone import sample_docking_cases
 
-    return sample_docking_cases(n, seed, with_input_limits=limits)[index]
-
-
-def drone_ripm_problem(task) -> tuple[Any, Any]:
-    from mbplan.tasks.drone import geodesic_initial_guess
-    from mbplan.transcription.quadrotor import quadrotor_problem
-
-    problem = quadrotor_problem(task)
-    return problem, problem.check_point(geodesic_initial_guess(task))
+    return drone_docking(sample_docking_cases(n, seed, with_input_limits=limits)[index])
 
 
 CHAIN_LINKS = (4, 8, 16, 32, 64)
@@ -101,7 +97,10 @@ def _iiwa(i: int):
 
 
 def _drone(i: int, limits: bool = False):
-    return (*drone_ripm_problem(drone_task(i, limits=limits)), RIPMOptions(tol=1e-6, max_iter=100))
+    return (
+        *maximal_ripm_problem(drone_task(i, limits=limits)),
+        RIPMOptions(tol=1e-6, max_iter=100),
+    )
 
 
 def chain_problem(n: int):

@@ -9,9 +9,9 @@ quadratic map ``Rot(q) = (w² - ‖q_v‖²) I + 2 q_v q_vᵀ + 2 w q_v^``; the 
     (Rot(f_{k+1}) J - J Rot(f_{k+1})ᵀ - J Rot(f_k) + Rot(f_k)ᵀ J)^∨ / Δt² = B_τ u_k,
     m (v_{k+1} - v_k) / Δt = m g + Rot(q_{k+1}) B_f u_k,
 
-with ``‖q_k‖² = 1`` (``k ≥ 2``), ``‖f_N‖² = 1``, ``w(q_k), w(f_k) ≥ 0`` (the other norms follow;
-a redundant row would make the Jacobian rank deficient, see
-:mod:`mbplan.baselines.quaternion_ipopt`). Each OCP item is its residual
+with ``‖q_k‖² = 1`` (``k ≥ 2``), ``‖f_N‖² = 1``, ``w(q_k), w(f_k) ≥ 0`` (the other norms follow
+from ``q_{k+1} = q_k ⊗ f_k`` and the fixed unit ``q_0, f_0``; a redundant row would make the
+constraint Jacobian rank deficient). Each OCP item is its residual
 (:func:`mbplan.ocp.body_residuals.body_expression`) on ``Rot(q_k), p_k, Rot(f_k), v_k`` or
 ``u_k``; input limits are variable bounds.
 """

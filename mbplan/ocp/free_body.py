@@ -137,8 +137,7 @@ def free_flyer_state(
 
 def path_state(q_path: np.ndarray, q0: np.ndarray, v0: np.ndarray, dt: float) -> dict:
     """The LGVI state along a pose path ``q_path (N+1, 7)``: ``F_k = R_kᵀ R_{k+1}``,
-    ``v_k = (p_{k+1} - p_k)/Δt`` for ``k < N``, at rest at ``N``; knot 0 keeps ``(q0, v0)``
-    (as :func:`mbplan.tasks.drone.geodesic_initial_guess`)."""
+    ``v_k = (p_{k+1} - p_k)/Δt`` for ``k < N``, at rest at ``N``; knot 0 keeps ``(q0, v0)``."""
     R, p = rotations(q_path[:, 3:]), np.array(q_path[:, :3])
     F = np.repeat(np.eye(3)[None], len(R), axis=0)
     F[:-1] = np.swapaxes(R[:-1], 1, 2) @ R[1:]

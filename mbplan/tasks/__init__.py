@@ -1,4 +1,4 @@
-"""Benchmark tasks of the RIPM paper (§VIII) as plain data, with initial guesses and simulators.
+"""Benchmark tasks of the RIPM paper (§VIII) as plain data, with samplers and simulators.
 
 The package exports the drone docking task (:mod:`mbplan.tasks.drone`, whose ``__all__`` lists
 the names); the iiwa obstacle task is an :class:`mbplan.OCP` of :mod:`mbplan.paper`.

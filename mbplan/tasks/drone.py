@@ -1,4 +1,4 @@
-"""Quadrotor docking task of the RIPM paper §VIII.B as data, its initial guess and a simulator.
+"""Quadrotor docking task of the RIPM paper §VIII.B as data, its sampler and a simulator.
 
 State at knot ``k = 0..N`` is ``x_k = (R_k, p_k, F_k, v_k)`` ∈ SO(3)×R³×SO(3)×R³: orientation,
 position, discrete pose change ``F_k = R_kᵀ R_{k+1}`` and linear velocity over ``[t_k, t_{k+1}]``
@@ -40,7 +40,6 @@ __all__ = [
     "DockingTask",
     "QuadrotorParams",
     "cluttered_task",
-    "geodesic_initial_guess",
     "rotation_angles",
     "sample_docking_cases",
     "simulate",
@@ -104,7 +103,6 @@ class CostWeights:
 
     The paper gives no numbers. Defaults balance a 1 m position error, a chordal orientation error
     of order 1 and an angular rate of ~3 rad/s (``‖F - I‖_F² ≈ 2 Δt² ‖ω‖²``), with cheap inputs.
-    Same fields as :class:`mbplan.transcription.quadrotor.QuadrotorOCP`.
     """
 
     w_R: float = 1.0
@@ -211,30 +209,6 @@ def cluttered_task(
     )
 
 
-def geodesic_initial_guess(task: DockingTask) -> dict[str, np.ndarray]:
-    """Uniform geodesic interpolation from start to goal (§VIII.B), hover thrust, zero torque.
-
-    ``R_k = R0 exp(t_k log(R0ᵀ R_goal))``, ``p_k = p0 + t_k (p_goal - p0)``, ``t_k = k/N``; the
-    twist ``F_k = R_kᵀ R_{k+1}``, ``v_k = (p_{k+1} - p_k)/Δt`` for ``k < N`` and zero at ``k = N``.
-    Knot 0 keeps the initial twist ``(F0, v0)``, as :func:`mbplan.transcription.quadrotor.
-    geodesic_guess` does. Returns ``R (N+1,3,3)``, ``p (N+1,3)``, ``F (N+1,3,3)``, ``v (N+1,3)``
-    and ``u (N,4)``.
-    """
-    N = task.N
-    t = np.arange(N + 1) / N
-    phi = SO3.log(task.R0.T @ task.R_goal)
-    R = task.R0 @ SO3.exp(t[:, None] * phi)
-    R[-1] = task.R_goal
-    p = task.p0 + t[:, None] * (task.p_goal - task.p0)
-    F = np.repeat(np.eye(3)[None], N + 1, axis=0)
-    F[:N] = SO3.exp(phi / N)
-    v = np.zeros((N + 1, 3))
-    v[:N] = (task.p_goal - task.p0) / (N * task.dt)
-    F[0], v[0] = task.F0, task.v0
-    u = np.tile(task.params.hover_input, (N, 1))
-    return {"R": R, "p": p, "F": F, "v": v, "u": u}
-
-
 def simulate(task: DockingTask, u: ArrayLike) -> dict[str, np.ndarray]:
     """Roll the discrete dynamics (30)–(35), (60) forward from ``(R0, p0, F0, v0)``.
 
@@ -272,7 +246,8 @@ def trajectory_cost(task: DockingTask, traj: dict[str, np.ndarray]) -> float:
     """Objective of Problem 1 (eq. 18) for ``traj`` with keys R, p, F, v (N+1 knots) and u (N).
 
     The state terms of the fixed knot 0 are a constant and left out, so the value equals the
-    objective of :func:`mbplan.transcription.quadrotor.quadrotor_problem` and of the baselines.
+    objective of both formulations of :func:`mbplan.paper.drone_docking` (an independent NumPy
+    evaluation, for tests).
     """
     N, w = task.N, task.weights
     shapes = {"R": (N + 1, 3, 3), "p": (N + 1, 3), "F": (N + 1, 3, 3), "v": (N + 1, 3), "u": (N, 4)}
