@@ -205,3 +205,7 @@ def test_bad_input_is_named_before_any_solve() -> None:
     blocked.add_constraint("c", res.ComOutsideCylinder("c"))
     with pytest.raises(mb.InfeasibleRequestError, match="'c'"):
         mb.plan(blocked, "ripm")
+    ocp.add_cost("p", br.BodyPosition([1.0, 0.0, 0.0]))
+    for method in ("ripm", "ipopt"):
+        with pytest.raises(mb.InputError, match="warm_start: knot 0 has a zero quaternion"):
+            mb.plan(ocp, method, warm_start=np.zeros((5, 7)))

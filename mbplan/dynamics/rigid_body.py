@@ -9,6 +9,7 @@ as the ``residual`` of a :class:`mbplan.engine.RiemannianFunction`.
 from __future__ import annotations
 
 import casadi as cs
+import numpy as np
 
 from mbplan.lie import SO3
 
@@ -71,6 +72,10 @@ def body_dynamics(
     )
 
 
+QUADROTOR_ACTUATION = np.eye(6, 4, -2)
+"""``B`` of a quadrotor (eq. 60): ``u = (u_z, τ)`` gives the body wrench ``(0, 0, u_z, τ)``."""
+
+
 def quadrotor_step(
     R0: cs.SX,
     R1: cs.SX,
@@ -86,15 +91,11 @@ def quadrotor_step(
     gravity: cs.SX,
     dt: cs.SX,
 ) -> cs.SX:
-    """One LGVI step of a rigid body with thrust along body z and body torques (eq. 30–35, 60).
-
-    ``u = (u_z, τ)``. The 12 residuals are Table I rows 1–4 with the forcing of eq. (60).
-    """
-    thrust = cs.mtimes(R1, cs.DM([0.0, 0.0, 1.0])) * u[0]
-    return cs.vertcat(
-        body_kinematics(R0, R1, F0, p0, p1, v0, dt),
-        body_dynamics(F0, F1, v0, v1, J, mass, gravity, dt, u[1:4], thrust),
-    )
+    """One LGVI step of a rigid body with thrust along body z and body torques (eq. 30–35, 60):
+    :func:`free_body_step` with :data:`QUADROTOR_ACTUATION`. The 12 residuals are Table I rows
+    1–4 with the forcing of eq. (60)."""
+    B = cs.DM(QUADROTOR_ACTUATION)
+    return free_body_step(R0, R1, F0, F1, p0, p1, v0, v1, u, J, mass, gravity, dt, B)
 
 
 def free_body_step(

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
+from mbplan.dynamics.rigid_body import QUADROTOR_ACTUATION
 from mbplan.errors import InputError
 from mbplan.lie import SO3
 from mbplan.validation import as_array, as_real
@@ -59,10 +60,8 @@ class FreeBody:
         cls, mass: float, inertia: ArrayLike, gravity: ArrayLike = (0.0, 0.0, -9.81)
     ) -> FreeBody:
         """Thrust ``u_z`` along body z and body torques ``τ``: ``u = (u_z, τ)`` (eq. 60)."""
-        B = np.zeros((6, 4))
-        B[2, 0] = 1.0
-        B[3:, 1:] = np.eye(3)
-        return cls("quadrotor", mass, np.asarray(inertia), np.asarray(gravity), B)
+        B = QUADROTOR_ACTUATION
+        return cls("quadrotor", mass, np.asarray(inertia), np.asarray(gravity), B.copy())
 
     @property
     def nq(self) -> int:

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mbplan.errors import InputError
+from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.problem import OCP
 from mbplan.planning import methods as m
 from mbplan.planning.initial_guess import initial_path
@@ -86,6 +87,12 @@ def plan(
         q_guess = initial_path(ocp, warm_start)
     else:
         q_guess = as_array(warm_start, (ocp.N + 1, ocp.robot.nq), "warm_start")
+        if isinstance(ocp.robot, FreeBody):
+            zero = np.flatnonzero(np.linalg.norm(q_guess[:, 3:], axis=1) < 1e-9)
+            if zero.size:
+                raise InputError(
+                    f"warm_start: knot {zero[0]} has a zero quaternion (columns 3:7, x y z w)"
+                )
     guess_time = time.perf_counter() - t0
     result = METHODS[method].solve(ocp, q_guess, settings)
     return finish(ocp, result, guess_time)
