@@ -13,6 +13,7 @@ import pytest
 
 import mbplan as mb
 from mbplan import paper
+from mbplan.cli import main
 from mbplan.engine.checks import check_derivatives
 from mbplan.formulations.free_body import FreeBodyNLP
 from mbplan.formulations.quaternion import QuaternionNLP
@@ -22,6 +23,7 @@ from mbplan.ocp import residuals as res
 from mbplan.ocp.free_body import FreeBody, body_state, free_flyer_state, quaternions
 from mbplan.planning.initial_guess import initial_path
 from mbplan.tasks.drone import cluttered_task, sample_docking_cases, trajectory_cost
+from mbplan.viz.drone import free_body_scene
 
 GOAL_R = SO3.exp(np.array([0.3, -0.2, 0.5]))
 
@@ -157,6 +159,16 @@ def test_cluttered_docking_plans_verifies_and_round_trips(method: str, tmp_path)
     loaded = mb.load_npz(result.save(tmp_path / "drone.npz"))
     assert loaded.ocp.names == ocp.names and isinstance(loaded.ocp.robot, FreeBody)
     assert mb.verify(loaded).passed
+    # `mbplan replay` draws it from the file alone: the flight, the goal, the three cylinders
+    page = tmp_path / "drone.html"
+    assert main(["replay", str(tmp_path / "drone.npz"), "--html", str(page)]) == 0
+    assert "quadrotor docking" in page.read_text()
+    layers = {la.name: la for la in free_body_scene([loaded], loaded.ocp).layers}
+    assert len(layers["obstacles"].objects) == 3
+    flown = layers["drone"].placements[:, 0, :3, 3] - layers["drone"].placements[:1, 0, :3, 3]
+    np.testing.assert_allclose(flown, result.q[:, :3] - result.q[:1, :3], atol=1e-12)
+    with pytest.raises(mb.InputError, match="one at a time"):
+        mb.viz.static_html([loaded, loaded], tmp_path / "two.html")
 
 
 def test_ocp_round_trips_through_json() -> None:

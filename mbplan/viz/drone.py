@@ -63,6 +63,32 @@ def draw_drone(
     _drone_scene(R, p, obstacles, goal, dt, frame)(viewer)
 
 
+def free_body_scene(results: Sequence, ocp, frame: int | None = None) -> Scene:
+    """The :func:`drone_replay` scene of a free-body plan (a :class:`~mbplan.PlanResult` whose
+    OCP's robot is a :class:`~mbplan.FreeBody`): its flight, the terminal orientation and
+    position targets of the OCP as the goal, the OCP's scene cylinders as obstacles."""
+    from mbplan.ocp.body_residuals import BodyOrientation, BodyPosition
+    from mbplan.ocp.free_body import rotations
+
+    if len(results) != 1:
+        raise InputError(f"replay: free-body plans are drawn one at a time, got {len(results)}")
+    q = np.asarray(results[0].q, dtype=float)
+    if q.ndim != 2 or q.shape[1] != 7:
+        raise InputError(f"replay: a free-body plan has q (N+1, 7), got {q.shape}")
+    R_goal, p_goal = np.eye(3), np.zeros(3)
+    for item in ocp.items:
+        if ocp.N in item.knots and isinstance(item.residual, BodyOrientation):
+            R_goal = np.asarray(item.residual.rotation)
+        if ocp.N in item.knots and isinstance(item.residual, BodyPosition):
+            p_goal = np.asarray(item.residual.translation)
+    cylinders = [
+        (o.pose[0, 3], o.pose[1, 3], o.size[0]) for o in ocp.scene if o.shape == "cylinder"
+    ]
+    return _drone_scene(
+        rotations(q[:, 3:]), q[:, :3], cylinders, (R_goal, p_goal), results[0].dt, frame
+    )
+
+
 def _drone_scene(
     R: ArrayLike,
     p: ArrayLike,

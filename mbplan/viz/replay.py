@@ -24,6 +24,7 @@ from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.robot import load_robot
 from mbplan.results import PlanResult, load_npz
 from mbplan.robots import available_robots
+from mbplan.viz.drone import free_body_scene
 from mbplan.viz.page import write_page
 from mbplan.viz.placements import generalized_geometry_placements, maximal_geometry_placements
 from mbplan.viz.plots import result_label
@@ -213,7 +214,7 @@ def _robot_scene(
     if ocp is not None and robot is not None and robot != ocp.robot.name:
         raise InputError(f"robot {robot!r} differs from the task's robot {ocp.robot.name!r}")
     if ocp is not None and isinstance(ocp.robot, FreeBody):
-        raise InputError(f"replay: plans of a free body ({ocp.robot.name!r}) are not drawn yet")
+        return free_body_scene(results, ocp, frame)
     desc = ocp.robot if ocp is not None else load_robot(robot or infer_robot(results))
     if desc.visual_model is None or desc.visual_model.ngeoms == 0:
         raise RobotModelError(f"robot {desc.name!r} has no visual geometry to draw")
