@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mbplan.errors import InputError
 from mbplan.lie import SO3
 from mbplan.ocp.body_residuals import BodyInputLimits
 from mbplan.ocp.free_body import body_state, free_flyer_state
@@ -34,17 +35,23 @@ DEVIATION_TOLERANCE = 1e-5
 SUBSTEPS = 20
 
 
-def replay(ocp: OCP, result: PlanResult) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """The replayed knots ``1..N`` (``R, p, F, v``) and the per-knot deviation ``(N, 4)`` from
-    the plan (``R`` angle, ``p``, ``F`` angle, ``v``)."""
+def replay(ocp: OCP, result: PlanResult) -> tuple[dict[str, np.ndarray], np.ndarray, str | None]:
+    """The replayed knots ``1..N`` (``R, p, F, v``), the per-knot deviation ``(N, 4)`` from
+    the plan (``R`` angle, ``p``, ``F`` angle, ``v``) and why a step could not be replayed
+    (None if all were): from there on the plan's own knots stand in, at infinite deviation."""
     body, dt = ocp.robot, ocp.dt
     x = body_state(result.q, result.v, dt)
     B, J = body.actuation, body.nonstandard_inertia
-    out = {n: np.empty_like(a[1:]) for n, a in x.items()}
+    out = {n: np.array(a[1:]) for n, a in x.items()}
+    failed, why = ocp.N, None
     for k in range(ocp.N):
         wrench = B @ result.tau[k]
         state = tuple(x[n][k] for n in ("R", "p", "F", "v"))
-        step = lgvi_step(state, wrench[3:], wrench[:3], J, body.mass, body.gravity, dt, k)
+        try:
+            step = lgvi_step(state, wrench[3:], wrench[:3], J, body.mass, body.gravity, dt, k)
+        except InputError as err:  # the planned input drives eq. (34) past its roots
+            failed, why = k, f"the LGVI replay fails at step {k}: {err}"
+            break
         for n, a in zip(("R", "p", "F", "v"), step, strict=True):
             out[n][k] = a
     angle = {
@@ -52,7 +59,9 @@ def replay(ocp: OCP, result: PlanResult) -> tuple[dict[str, np.ndarray], np.ndar
         for n in ("R", "F")
     }
     lin = {n: np.max(np.abs(out[n] - x[n][1:]), axis=1) for n in ("p", "v")}
-    return out, np.column_stack([angle["R"], lin["p"], angle["F"], lin["v"]])
+    deviation = np.column_stack([angle["R"], lin["p"], angle["F"], lin["v"]])
+    deviation[failed:] = np.inf
+    return out, deviation, why
 
 
 def clearance(ocp: OCP, result: PlanResult) -> float:
@@ -81,11 +90,12 @@ def final_state(ocp: OCP, result: PlanResult, replayed: dict) -> tuple[np.ndarra
 def verify_free_body(ocp: OCP, result: PlanResult) -> Verification:
     """:func:`mbplan.verify` of a free body (module docstring): the joint rows report the
     replay's pose deviation (rad or m), the velocity rows that of ``F`` and ``v``."""
-    replayed, deviation = replay(ocp, result)
+    replayed, deviation, unreplayable = replay(ocp, result)
     tol = DEVIATION_TOLERANCE
     dev_pose = float(np.max(deviation[:, :2]))
     dev_twist = float(np.max(deviation[:, 2:]))
-    reasons = [
+    reasons = [unreplayable] if unreplayable else []
+    reasons += [
         f"{name} deviation from the LGVI replay is {dev:.3g} (tolerance {tol:g})"
         for name, dev in (("pose", dev_pose), ("twist", dev_twist))
         if dev > tol

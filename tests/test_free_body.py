@@ -221,3 +221,17 @@ def test_bad_input_is_named_before_any_solve() -> None:
     for method in ("ripm", "ipopt"):
         with pytest.raises(mb.InputError, match="warm_start: knot 0 has a zero quaternion"):
             mb.plan(ocp, method, warm_start=np.zeros((5, 7)))
+
+
+def test_a_plan_the_lgvi_cannot_replay_fails_verification() -> None:
+    """Torques that drive eq. (34) past its roots make `verify` fail with the reason (a
+    benchmark of a diverged MLG-IPM plan stopped on this error before)."""
+    import dataclasses
+
+    ocp = paper.drone_docking(sample_docking_cases(1, 0)[0])
+    plan = mb.plan(ocp, "ripm")
+    tau = plan.tau.copy()
+    tau[2, 1:] = 1e6
+    check = mb.verify(dataclasses.replace(plan, tau=tau))
+    assert not check.passed and "the LGVI replay fails at step 2" in check.reasons[0]
+    assert check.max_joint_deviation_rad == np.inf
