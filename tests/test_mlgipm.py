@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
+from mbplan.benchmarks.lie_ipm_stats import SUMMARY_KEYS
 from mbplan.errors import InputError
 from mbplan.lie import SL
 from mbplan.problems import SLTraceProblem, SOLogProblem, make_problem, sample_instance
@@ -214,15 +215,7 @@ def test_bench_lie_ipm_writes_the_issue_schema_and_resumes(tmp_path) -> None:
     run(out, problem="so7", n=3, methods=("mlgipm", "lai-yoshise"))
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary) == {"problem", "methods"} and summary["problem"] == "so7"
-    keys = {
-        "n",
-        "success",
-        "median_iters",
-        "mean_iters",
-        "median_time_s",
-        "mean_time_s",
-        "error_mean",
-    }
+    keys = set(SUMMARY_KEYS)
     for entry in summary["methods"].values():
         assert set(entry) == keys and entry["n"] == 3
     assert summary["methods"]["mlgipm"]["success"] == 3

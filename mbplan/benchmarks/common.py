@@ -74,3 +74,27 @@ def save_plot(fig: Figure, path: Path, dpi: int) -> None:
             fig.savefig(tmp, dpi=dpi)
     finally:
         plt.close(fig)
+
+
+def plan_row(ocp: Any, method: str, **plan_options: Any) -> tuple[dict[str, Any], Any, Any]:
+    """``mbplan.plan(ocp, method, **plan_options)`` verified, as the JSON row every benchmark
+    shares (status, iterations, times — ``total_time_s`` the wall time of ``plan`` — and the
+    verification), with the result and the :class:`~mbplan.verification.Verification`."""
+    from mbplan.planning.solve import plan
+    from mbplan.verification import verify
+
+    t0 = time.perf_counter()
+    result = plan(ocp, method, **plan_options)
+    wall = time.perf_counter() - t0
+    check = verify(ocp, result)
+    row = {
+        "success": bool(result.success),
+        "status": result.status,
+        "iterations": int(result.iterations),
+        "solve_time_s": float(result.solve_time_s),
+        "total_time_s": float(wall),
+        "time_per_iter_s": float(result.time_per_iter_s),
+        "verified": bool(check.passed),
+        "verification_reasons": check.reasons,
+    }
+    return row, result, check

@@ -19,14 +19,19 @@ from pathlib import Path
 
 import numpy as np
 
-from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, write_json
+from mbplan.benchmarks.common import (
+    machine_info,
+    plan_row,
+    save_plot,
+    write_atomic,
+    write_json,
+)
 from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
 from mbplan.paper import drone_docking
 from mbplan.planning.solve import plan
 from mbplan.tasks.drone import DockingTask, rotation_angles, sample_docking_cases
 from mbplan.validation import as_int, as_real
-from mbplan.verification import verify
 
 METHODS = ("ripm", "ripm-input-limits", "ipopt-quaternion")  # the default run
 ALL_METHODS = (*METHODS, "mlgipm", "mlgipm-input-limits")
@@ -49,19 +54,13 @@ def solve_case(method: str, n: int, seed: int, index: int, tol: float) -> dict:
     task = _case(n, seed, index, limits=method.endswith("-input-limits"))
     angle = float(rotation_angles(task.R0[None])[0])
     api = _API_METHOD[method.removesuffix("-input-limits")]
-    r = plan(drone_docking(task), api, warm_start="linear", tol=tol, max_iter=MAX_ITER[method])
-    check = verify(r)
+    row, r, check = plan_row(
+        drone_docking(task), api, warm_start="linear", tol=tol, max_iter=MAX_ITER[method]
+    )
     kkt = np.max(r.kkt_history, axis=1) if len(r.kkt_history) else np.empty(0)
-    row = {
-        "success": bool(r.success),
-        "status": r.status,
-        "iterations": int(r.iterations),
-        "solve_time_s": float(r.solve_time_s),
-        "total_time_s": float(r.total_time_s),
-        "time_per_iter_s": float(r.time_per_iter_s),
+    row |= {
         "kkt_final": float(kkt[-1]) if kkt.size else None,
         "kkt_history": [float(e) for e in kkt],
-        "verified": bool(check.passed),
         "replay_deviation": (
             float(check.max_joint_deviation_rad)
             if np.isfinite(check.max_joint_deviation_rad)

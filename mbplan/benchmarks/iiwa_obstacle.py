@@ -8,17 +8,21 @@ passes.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
 
-from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, write_json
+from mbplan.benchmarks.common import (
+    machine_info,
+    plan_row,
+    save_plot,
+    write_atomic,
+    write_json,
+)
 from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
 from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
-from mbplan.planning.solve import METHODS, check_plan_request, plan
-from mbplan.verification import verify
+from mbplan.planning.solve import METHODS, check_plan_request
 
 
 def solve_case(
@@ -36,20 +40,12 @@ def solve_case(
     OCP (:func:`mbplan.paper.iiwa_obstacle`) planned with :func:`mbplan.plan`."""
     q0 = iiwa_obstacle_starts(n, seed, constraint)[index]
     problem = iiwa_obstacle(q0, N=N, constraint=constraint)
-    t0 = time.perf_counter()
-    result = plan(problem, method, warm_start=warm_start, tol=tol, max_iter=max_iter)
-    wall = time.perf_counter() - t0
-    check = verify(problem, result)
+    row, result, check = plan_row(
+        problem, method, warm_start=warm_start, tol=tol, max_iter=max_iter
+    )
     return {
-        "success": bool(result.success),
-        "status": result.status,
-        "iterations": int(result.iterations),
-        "solve_time_s": float(result.solve_time_s),
-        "total_time_s": float(wall),
-        "time_per_iter_s": float(result.time_per_iter_s),
+        **row,
         "entered_restoration": result.entered_restoration,
-        "verified": bool(check.passed),
-        "verification_reasons": check.reasons,
         "min_obstacle_distance_m": _finite(check.min_obstacle_distance_m),
         "final_goal_error_rad": _finite(check.final_goal_error_rad),
         "kkt_history": np.max(result.kkt_history, axis=1).tolist(),

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from mbplan.benchmarks.common import plan_row
 from mbplan.solvers import RIPMOptions
 
 
@@ -119,24 +120,10 @@ TASKS: dict[str, Callable[[int], tuple]] = {
 def chain_case(method: str, links: int) -> dict:
     """One chain reach solve (``ripm`` or ``ipopt``) with its verification, as a JSON row."""
     from mbplan.planning.solve import plan
-    from mbplan.verification import verify
 
     ocp = chain_task(links)
     t0 = time.perf_counter()
     plan(ocp, method, warm_start="linear")  # cold: compilation, symbolic analysis
     cold = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    result = plan(ocp, method, warm_start="linear", tol=1e-6, max_iter=500)
-    wall = time.perf_counter() - t0
-    check = verify(ocp, result)
-    return {
-        "cold_total_time_s": cold,
-        "success": bool(result.success),
-        "status": result.status,
-        "iterations": int(result.iterations),
-        "solve_time_s": float(result.solve_time_s),
-        "total_time_s": float(wall),
-        "time_per_iter_s": float(result.time_per_iter_s),
-        "verified": bool(check.passed),
-        "verification_reasons": check.reasons,
-    }
+    row, _, _ = plan_row(ocp, method, warm_start="linear", tol=1e-6, max_iter=500)
+    return {"cold_total_time_s": cold, **row}
