@@ -13,18 +13,22 @@ constraints ``h(X_{k+1})`` (5 per joint, on ``s_k`` only). Three exact congruenc
    kinematics rows are replaced by ``M g - h``, rows on ``(R, p)_{k+1}`` alone (the joint
    constraint on the next configuration);
 2. primal, per knot: those rows and ``h`` at knot ``k`` (10 per joint, on ``s_k`` alone) split
-   ``s_k`` into 10 dependent coordinates per body and 2 free ones (tree-ordered variable
-   reduction ``x_dep = u - E x_free``); the pair (dependent coordinates, local rows) is a
+   ``s_k`` into 10 dependent coordinates per body and 2 free ones (knot 1: step 0's six
+   kinematics rows and ``h``, 11 and 1), a tree-ordered variable reduction
+   ``x_dep = u - E x_free``; the pair (dependent coordinates, local rows) is a
    nonsingular saddle block whose multipliers touch nothing else, so the Schur complement of
    the rest is the rest itself;
-3. the pair (``λ_k``, five of each child's LGVI rows of step ``k-1``): their coupling block is
+3. optional (``forces=True``), the pair (``λ_k``, five of each child's LGVI rows of step ``k-1``): their coupling block is
    block-triangular over the tree and nonsingular, ``K_YY = 0``; its Schur complement is
    ``K_rr - K_rλ X - Xᵀ K_λr + Xᵀ G X`` with ``X = B⁻¹ K_Yr``.
 
 Each eliminated pair ``[[G, Bᵀ], [B, 0]]`` with ``B`` square nonsingular has inertia ``(m, m, 0)``
 whatever ``G`` is, so ``inertia(K) = inertia(K_reduced) + (m, m, 0)`` with ``m`` the number of
 eliminated primal coordinates. The eliminated multiplier rows must carry no ``-δ_c`` (the
-default; a ``δ_c > 0`` step is left to the full factorization).
+default; a ``δ_c > 0`` step is left to the full factorization). The reduced matrix is
+factorized by :class:`~mbplan.solvers.linear_solver.KKTSystem` (AMD, static regularization
+``1e-8``: with ``1e-9`` its zero-diagonal ``λ``/``τ`` pivots broke the unpivoted LDLᵀ down on a
+nonsingular matrix), and every solve is refined against the full ``K``.
 """
 
 from __future__ import annotations
