@@ -108,3 +108,14 @@ def test_pattern_check_and_block_scatter():
     kkt.set_matrices(None, jac_e, jac_i)
     kkt.factorize(diag)
     np.testing.assert_array_equal(kkt.matrix().toarray(), _dense(0 * hess, jac_e, jac_i, diag))
+
+
+def test_wrong_lengths_are_input_errors():
+    from mbplan.errors import InputError
+
+    kkt, _, diag, _ = _system(4)
+    with pytest.raises(InputError, match="diagonal has shape"):
+        kkt.factorize(diag[:-1])
+    kkt.factorize(diag, static_reg=1e-9)
+    with pytest.raises(InputError, match="rhs has shape"):
+        kkt.solve(np.ones(kkt.dim + 1))

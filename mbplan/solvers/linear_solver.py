@@ -364,10 +364,7 @@ class KKTSystem:
         return self._full() @ v
 
     def solve(
-        self,
-        rhs: np.ndarray,
-        max_refinement: int = 10,
-        ratio_max: float = 1e-10,
+        self, rhs: np.ndarray, max_refinement: int = 10, ratio_max: float = 1e-10
     ) -> tuple[np.ndarray, float]:
         """Solve ``K x = rhs`` with iterative refinement against ``K``: at least one step
         (IPOPT's default) and at most ``max_refinement``, stopping at a residual ratio
@@ -375,6 +372,7 @@ class KKTSystem:
         solves, residuals with the full symmetric pattern, the loop).
 
         Returns ``x`` and IPOPT's residual ratio ``‖r‖∞ / (min(‖x‖∞, 1e6‖b‖∞) + ‖b‖∞)``."""
+        rhs = np.asarray(rhs, dtype=np.float64)
         if rhs.shape != (self.dim,):
             raise InputError(f"KKTSystem.solve: rhs has shape {rhs.shape}, expected ({self.dim},)")
         return self._solver.refined_solve(
