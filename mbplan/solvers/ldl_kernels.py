@@ -308,13 +308,12 @@ def _backward_front(L, w, k, m):
 
 
 @nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
-def ldl_solve(b, perm, sfirst, fptr, rows, loff, lbuf, d, wmax):
-    """``x = K⁻¹ b`` with the factorization: forward, diagonal and backward substitution (a
-    supernode with many columns works on a gathered copy of its rows of the right-hand side)."""
+def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d):
+    """``x = K⁻¹ b`` with the factorization, into ``x`` (``y``: length ``n``, ``w``: the
+    largest front, work arrays): forward, diagonal and backward substitution; a supernode with
+    many columns works on a gathered copy of its rows of the right-hand side."""
     n = b.shape[0]
     ns = sfirst.shape[0] - 1
-    y = np.empty(n)
-    w = np.empty(wmax)
     for i in range(n):
         y[i] = b[perm[i]]
     for s in range(ns):
@@ -330,13 +329,15 @@ def ldl_solve(b, perm, sfirst, fptr, rows, loff, lbuf, d, wmax):
                         y[rows[fp + i]] -= lbuf[c + i] * yt
             continue
         L = lbuf[lo : lo + k * m].reshape(k, m)
-        R = rows[fp : fp + m]
-        w[:k] = y[f : f + k]
-        w[k:m] = 0.0
-        _forward_front(L, w, k, m)
-        y[f : f + k] = w[:k]
+        for i in range(k):
+            w[i] = y[f + i]
         for i in range(k, m):
-            y[R[i]] += w[i]
+            w[i] = 0.0
+        _forward_front(L, w, k, m)
+        for i in range(k):
+            y[f + i] = w[i]
+        for i in range(k, m):
+            y[rows[fp + i]] += w[i]
     for i in range(n):
         y[i] /= d[i]
     for s in range(ns - 1, -1, -1):
@@ -352,16 +353,91 @@ def ldl_solve(b, perm, sfirst, fptr, rows, loff, lbuf, d, wmax):
                 y[f + t] -= acc
             continue
         L = lbuf[lo : lo + k * m].reshape(k, m)
-        R = rows[fp : fp + m]
-        w[:k] = y[f : f + k]
+        for i in range(k):
+            w[i] = y[f + i]
         for i in range(k, m):
-            w[i] = y[R[i]]
+            w[i] = y[rows[fp + i]]
         _backward_front(L, w, k, m)
-        y[f : f + k] = w[:k]
-    x = np.empty(n)
+        for i in range(k):
+            y[f + i] = w[i]
     for i in range(n):
         x[perm[i]] = y[i]
+
+
+@nb.njit(cache=True, error_model="numpy")
+def ldl_solve(b, perm, sfirst, fptr, rows, loff, lbuf, d, wmax):
+    """``x = K⁻¹ b`` with the factorization (:func:`_solve_into` with its own arrays)."""
+    n = b.shape[0]
+    x = np.empty(n)
+    _solve_into(b, x, np.empty(n), np.empty(wmax), perm, sfirst, fptr, rows, loff, lbuf, d)
     return x
 
 
+@nb.njit(cache=True, error_model="numpy")
+def _residual_into(indptr, indices, data, b, x, r):
+    """``r = b - K x`` with ``K`` in CSR arrays (row sums in SciPy's order, so the same
+    rounding as ``b - K @ x``); returns ``(‖r‖∞, ‖x‖∞)``, NaN if either has a NaN."""
+    for i in range(b.shape[0]):
+        acc = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            acc += data[e] * x[indices[e]]
+        r[i] = b[i] - acc
+    return _max_abs(r), _max_abs(x)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _max_abs(v):
+    """``‖v‖∞``, NaN if ``v`` has a NaN."""
+    out = 0.0
+    for i in range(v.shape[0]):
+        a = abs(v[i])
+        if a > out:
+            out = a
+        elif a != a:
+            return np.nan
+    return out
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _ratio(nrm_r, nrm_x, nrm_b):
+    """IPOPT's residual ratio ``‖r‖∞ / (min(‖x‖∞, 1e6‖b‖∞) + ‖b‖∞)``, ``inf`` if not finite."""
+    denom = min(nrm_x, 1e6 * nrm_b) + nrm_b if nrm_x == nrm_x else nrm_x
+    ratio = nrm_r / denom if denom > 0 else nrm_r
+    return ratio if np.isfinite(ratio) else np.inf
+
+
+@nb.njit(cache=True, error_model="numpy")
+def refined_solve(
+    b, perm, sfirst, fptr, rows, loff, lbuf, d, wmax, indptr, indices, data,
+    max_refinement, ratio_max,
+):  # fmt: skip
+    """Solve ``K x = b`` with the factorization of the regularized ``K`` and iterative
+    refinement against ``K`` (full CSR arrays ``indptr, indices, data``): at least
+    one (IPOPT's default) and at most ``max_refinement`` steps, stopping at a residual ratio
+    ``<= ratio_max`` or when a step does not reduce it. Returns ``x`` and the ratio."""
+    n = b.shape[0]
+    y, w = np.empty(n), np.empty(wmax)
+    sol, cand, dx = np.empty(n), np.empty(n), np.empty(n)
+    resid, cand_resid = np.empty(n), np.empty(n)
+    nrm_b = _max_abs(b)
+    _solve_into(b, sol, y, w, perm, sfirst, fptr, rows, loff, lbuf, d)
+    nrm_r, nrm_x = _residual_into(indptr, indices, data, b, sol, resid)
+    ratio = _ratio(nrm_r, nrm_x, nrm_b)
+    for step in range(max_refinement):
+        if step >= 1 and ratio <= ratio_max:
+            break
+        _solve_into(resid, dx, y, w, perm, sfirst, fptr, rows, loff, lbuf, d)
+        for i in range(n):
+            cand[i] = sol[i] + dx[i]
+        nrm_r, nrm_x = _residual_into(indptr, indices, data, b, cand, cand_resid)
+        cand_ratio = _ratio(nrm_r, nrm_x, nrm_b)
+        if not cand_ratio < ratio:
+            break
+        sol, cand = cand, sol
+        resid, cand_resid = cand_resid, resid
+        ratio = cand_ratio
+    return sol, ratio
+
+
 NUMERIC_KERNELS = (ldl_factor, ldl_solve)  # compiled entry points (for the cache check)
+SOLVE_KERNELS = (refined_solve,)

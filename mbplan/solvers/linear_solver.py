@@ -48,9 +48,18 @@ import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba, numba_cached
 from mbplan.errors import InputError
-from mbplan.solvers.ldl_kernels import NUMERIC_KERNELS, ldl_factor, ldl_solve
+from mbplan.solvers.kkt_scatter import SCATTER_KERNELS, matrix_values, same_arrays, scatter_blocks
+from mbplan.solvers.ldl_kernels import (
+    NUMERIC_KERNELS,
+    SOLVE_KERNELS,
+    ldl_factor,
+    ldl_solve,
+    refined_solve,
+)
 from mbplan.solvers.ldl_symbolic import SYMBOLIC_KERNELS, Analysis
 from mbplan.solvers.ordering import amd_order, nested_dissection_order
+
+_NONE = np.zeros(0, np.int64)
 
 
 @dataclass(frozen=True)
@@ -81,8 +90,8 @@ def _same_pattern(a: sp.csr_matrix, b: sp.csr_matrix | None) -> bool:
         b is not None
         and a.shape == b.shape
         and a.nnz == b.nnz
-        and np.array_equal(a.indptr, b.indptr)
-        and np.array_equal(a.indices, b.indices)
+        and same_arrays(a.indptr, b.indptr)
+        and same_arrays(a.indices, b.indices)
     )
 
 
@@ -141,6 +150,17 @@ class _SupernodalLDL:
             a.loff, self.lbuf, self.d, a.wmax,
         )  # fmt: skip
 
+    def refined_solve(
+        self, b: np.ndarray, indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
+        max_refinement: int, ratio_max: float,
+    ) -> tuple[np.ndarray, float]:  # fmt: skip
+        a = self.a
+        return refined_solve(
+            np.ascontiguousarray(b, dtype=np.float64), a.perm, a.sfirst, a.fptr, a.rows,
+            a.loff, self.lbuf, self.d, a.wmax, indptr, indices, data,
+            max_refinement, ratio_max,
+        )  # fmt: skip
+
 
 @dataclass(frozen=True)
 class _KKTPattern:
@@ -148,7 +168,7 @@ class _KKTPattern:
     refinement residuals and the symbolic analysis: read-only, shared by every KKTSystem of the
     same block patterns."""
 
-    h_mask: np.ndarray
+    h_src: np.ndarray
     h_slot: np.ndarray
     e_slot: np.ndarray
     i_slot: np.ndarray
@@ -211,7 +231,7 @@ def _kkt_pattern(
     f_cols = np.concatenate([cols, rows[off]])
     order = np.lexsort((f_cols, f_rows))
     hit = _KKTPattern(
-        h_mask=h_mask,
+        h_src=np.flatnonzero(h_mask),
         h_slot=h_slot,
         e_slot=e_slot,
         i_slot=i_slot,
@@ -257,18 +277,14 @@ class KKTSystem:
     def _build_pattern(self, hess: sp.csr_matrix, jac_eq: sp.csr_matrix, jac_in: sp.csr_matrix):
         pat = _kkt_pattern(self.n, self.n_eq, self.n_ineq, hess, jac_eq, jac_in, self.ordering)
         self._pattern = pat
-        self._h_mask, self._h_slot, self._e_slot = pat.h_mask, pat.h_slot, pat.e_slot
-        self._i_slot, self._diag_slot, self._full_src = pat.i_slot, pat.diag_slot, pat.full_src
+        self._diag_slot = pat.diag_slot
         self._indptr, self._indices = pat.indptr, pat.indices
         nnz = len(pat.indices)
         self._base = np.zeros(nnz)
         self._data = np.zeros(nnz)
+        self._full_data = np.zeros(len(pat.full_src))  # K in the full symmetric pattern
         # the factorized values, entry by entry of the lower CSR arrays (= upper CSC arrays)
         self._factor_data = np.zeros(nnz)
-        self._full = sp.csr_matrix(
-            (np.zeros(len(pat.full_src)), pat.full_indices, pat.full_indptr),
-            shape=(self.dim, self.dim),
-        )
         self._solver = _SupernodalLDL(pat.analysis)
         self.n_analyses += 1
 
@@ -294,12 +310,12 @@ class KKTSystem:
                 sp.csr_matrix((np.zeros(a.nnz), a.indices.copy(), a.indptr.copy()), shape=a.shape)
                 for a in new
             )
-        base = self._base
-        base[:] = 0.0
-        if not zero_hessian:
-            base[self._h_slot] = hess.data[self._h_mask]
-        base[self._e_slot] = jac_eq.data
-        base[self._i_slot] = jac_ineq.data
+        pat = self._pattern
+        h_src, h_slot = (pat.h_src, pat.h_slot) if not zero_hessian else (_NONE, _NONE)
+        scatter_blocks(
+            self._base, hess.data, h_src, h_slot, jac_eq.data, pat.e_slot, jac_ineq.data,
+            pat.i_slot,
+        )  # fmt: skip
 
     # ------------------------------------------------------------------ factorization
     def factorize(self, diagonal: np.ndarray, static_reg: float = 0.0) -> Inertia | None:
@@ -309,15 +325,15 @@ class KKTSystem:
         *factorized* matrix only (not of ``K``): it keeps the LDLᵀ away from zero pivots of a
         structurally zero diagonal, and :meth:`solve` removes its effect by iterative refinement
         against ``K``. Returns the inertia, or ``None`` when the factorization broke down."""
-        data = self._data
-        np.copyto(data, self._base)
-        data[self._diag_slot] += diagonal
-        self._full.data[:] = data[self._full_src]
+        diagonal = np.asarray(diagonal, dtype=np.float64)
+        if diagonal.shape != (self.dim,):
+            raise InputError(f"KKT diagonal has shape {diagonal.shape}, expected ({self.dim},)")
         values = self._factor_data
-        np.copyto(values, data)
-        if static_reg:
-            values[self._diag_slot[: self.n]] += static_reg
-            values[self._diag_slot[self.n :]] -= static_reg
+        pat = self._pattern
+        matrix_values(
+            self._base, self._diag_slot, diagonal, self.n, float(static_reg), pat.full_src,
+            self._data, self._full_data, values,
+        )  # fmt: skip
         self.n_factorizations += 1
         positive, negative, ok = self._solver.factor(values)
         if not ok:  # a zero or non-finite pivot
@@ -332,43 +348,40 @@ class KKTSystem:
             raise InputError("KKTSystem.analysis: call set_matrices first")
         return self._solver.a
 
+    def _full(self) -> sp.csr_matrix:
+        pat = self._pattern
+        return sp.csr_matrix(
+            (self._full_data, pat.full_indices, pat.full_indptr), shape=(self.dim, self.dim)
+        )
+
     def matrix(self) -> sp.csc_matrix:
         """The last factorized ``K`` (diagonal included, static regularization excluded), full,
         with the fixed pattern (explicit zeros kept)."""
-        return self._full.tocsc(copy=True)
+        return self._full().tocsc(copy=True)
 
     def matvec(self, v: np.ndarray) -> np.ndarray:
         """``K v`` with the last factorized matrix (one SpMV with the full symmetric pattern)."""
-        return self._full @ v
+        return self._full() @ v
 
     def solve(
         self, rhs: np.ndarray, max_refinement: int = 10, ratio_max: float = 1e-10
     ) -> tuple[np.ndarray, float]:
-        """Solve ``K x = rhs`` with iterative refinement (at least one step, IPOPT's default).
+        """Solve ``K x = rhs`` with iterative refinement against ``K``: at least one step
+        (IPOPT's default) and at most ``max_refinement``, stopping at a residual ratio
+        ``<= ratio_max`` or when a step does not reduce it (one compiled kernel: triangular
+        solves, residuals with the full symmetric pattern, the loop).
 
         Returns ``x`` and IPOPT's residual ratio ``‖r‖∞ / (min(‖x‖∞, 1e6‖b‖∞) + ‖b‖∞)``."""
-        sol = self._solver.solve(rhs)
-        nrm_b = np.max(np.abs(rhs), initial=0.0)
-        resid, ratio = self._residual(rhs, sol, nrm_b)
-        for step in range(max_refinement):
-            if step >= 1 and ratio <= ratio_max:
-                break
-            cand = sol + self._solver.solve(resid)
-            cand_resid, cand_ratio = self._residual(rhs, cand, nrm_b)
-            if not cand_ratio < ratio:
-                break
-            sol, resid, ratio = cand, cand_resid, cand_ratio
-        return sol, ratio
-
-    def _residual(self, rhs: np.ndarray, sol: np.ndarray, nrm_b: float) -> tuple[np.ndarray, float]:
-        resid = rhs - self.matvec(sol)
-        denom = min(np.max(np.abs(sol), initial=0.0), 1e6 * nrm_b) + nrm_b
-        nrm_r = np.max(np.abs(resid), initial=0.0)
-        ratio = nrm_r / denom if denom > 0 else nrm_r
-        return resid, float(ratio) if np.isfinite(ratio) else np.inf
+        rhs = np.asarray(rhs, dtype=np.float64)
+        if rhs.shape != (self.dim,):
+            raise InputError(f"KKTSystem.solve: rhs has shape {rhs.shape}, expected ({self.dim},)")
+        return self._solver.refined_solve(
+            rhs, self._pattern.full_indptr, self._pattern.full_indices, self._full_data,
+            max_refinement, ratio_max,
+        )  # fmt: skip
 
 
-_ENTRY_KERNELS = SYMBOLIC_KERNELS + NUMERIC_KERNELS
+_ENTRY_KERNELS = SYMBOLIC_KERNELS + NUMERIC_KERNELS + SOLVE_KERNELS + SCATTER_KERNELS
 
 
 def compile_kernels_in_background() -> threading.Thread | None:

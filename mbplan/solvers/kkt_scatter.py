@@ -1,0 +1,56 @@
+"""Compiled scatters that assemble the reduced KKT matrix of
+:class:`~mbplan.solvers.linear_solver.KKTSystem` into its fixed lower CSR pattern: the blocks'
+values into their precomputed slots, the diagonal and the static regularization on top, and the
+pattern check of a new block against the last one (one pass each, no temporaries)."""
+
+from __future__ import annotations
+
+import numba as nb
+
+
+@nb.njit(cache=True)
+def same_arrays(a, b) -> bool:
+    """``a == b`` elementwise and in length (early exit, no temporary)."""
+    if a.shape[0] != b.shape[0]:
+        return False
+    for i in range(a.shape[0]):
+        if a[i] != b[i]:
+            return False
+    return True
+
+
+@nb.njit(cache=True)
+def scatter_blocks(base, h_data, h_src, h_slot, e_data, e_slot, i_data, i_slot) -> None:
+    """``base = 0``, then ``base[h_slot] = h_data[h_src]``, ``base[e_slot] = e_data``,
+    ``base[i_slot] = i_data``."""
+    base[:] = 0.0
+    for q in range(h_slot.shape[0]):
+        base[h_slot[q]] = h_data[h_src[q]]
+    for q in range(e_slot.shape[0]):
+        base[e_slot[q]] = e_data[q]
+    for q in range(i_slot.shape[0]):
+        base[i_slot[q]] = i_data[q]
+
+
+@nb.njit(cache=True)
+def matrix_values(base, diag_slot, diagonal, n, static_reg, full_src, data, full, values) -> None:
+    """``data = base`` with ``diagonal`` added on the diagonal (the matrix ``K``), ``full =
+    data[full_src]`` (``K`` in its full symmetric CSR pattern), ``values = data`` with
+    ``+static_reg`` on the first ``n`` diagonal entries and ``-static_reg`` on the others (the
+    factorized matrix)."""
+    for e in range(base.shape[0]):
+        data[e] = base[e]
+    for i in range(diag_slot.shape[0]):
+        data[diag_slot[i]] += diagonal[i]
+    for e in range(full_src.shape[0]):
+        full[e] = data[full_src[e]]
+    for e in range(base.shape[0]):
+        values[e] = data[e]
+    if static_reg:
+        for i in range(n):
+            values[diag_slot[i]] += static_reg
+        for i in range(n, diag_slot.shape[0]):
+            values[diag_slot[i]] -= static_reg
+
+
+SCATTER_KERNELS = (same_arrays, scatter_blocks, matrix_values)
