@@ -62,7 +62,7 @@ class TrajectoryVariables:
             offset += nfree * b.group.dim
             self._index[b.name] = idx
             if nfree:
-                self._free.append((b, free, idx[free]))
+                self._free.append((b, _as_slice(free), _as_slice(idx[free])))
         self.n = offset
 
     def tangent_index(self, name: str) -> np.ndarray:
@@ -92,7 +92,7 @@ class TrajectoryVariables:
         out = dict(point)
         for b, free, cols in self._free:
             new = b.flat(point[b.name]).copy()
-            new[free] = b.group.retract(new[free], dx[cols])
+            new[free] = b.group.retract(new[free], dx[cols].reshape(-1, b.group.dim))
             out[b.name] = new.reshape(b.shape)
         return out
 
@@ -107,3 +107,12 @@ class TrajectoryVariables:
                     b.flat(point[b.name])[free], b.flat(other[b.name])[free]
                 )
         return dx
+
+
+def _as_slice(index: np.ndarray) -> slice | np.ndarray:
+    """A boolean mask or an integer index array as the equivalent slice when it selects one
+    contiguous run (``a[slice]`` is a view: no gather on every retraction), else unchanged."""
+    flat = np.flatnonzero(index) if index.dtype == bool else index.ravel()
+    if flat.size and np.array_equal(flat, np.arange(flat[0], flat[0] + flat.size)):
+        return slice(int(flat[0]), int(flat[0]) + flat.size)
+    return index
