@@ -185,7 +185,7 @@ class IterateState:
         """Residuals of (50) (of the restoration problem in that phase) at the current iterate."""
         ev = self.ev
         self.r_d = (
-            self.sigma * ev.gradient
+            (ev.gradient if self.sigma == 1.0 else self.sigma * ev.gradient)
             + transpose_times(ev.eq_jacobian, self.y)
             + transpose_times(ev.ineq_jacobian, self.z)
         )
