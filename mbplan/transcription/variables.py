@@ -64,12 +64,16 @@ class TrajectoryVariables:
             if nfree:
                 self._free.append((b, _as_slice(free), _as_slice(idx[free])))
         self.n = offset
-        # free blocks of one matrix group (e.g. every SO(3) block) retract in one batched call
+        # free blocks of one matrix group (e.g. every SO(3) block) retract in one batched call;
+        # per block: name, flat and point shapes, free elements, their tangent columns
         by_group: dict[int, list] = {}
-        for entry in self._free:
-            key = id(entry[0].group) if len(entry[0].group.element_shape) == 2 else id(entry)
-            by_group.setdefault(key, []).append(entry)
-        self._retract_groups = list(by_group.values())
+        for b, free, cols in self._free:
+            key = id(b.group) if len(b.group.element_shape) == 2 else id(b)
+            flat = (b.knots * b.count, *b.group.element_shape)
+            by_group.setdefault(key, []).append((b.name, flat, b.shape, free, cols))
+        self._retract_groups = [
+            (self.blocks[entries[0][0]].group, entries) for entries in by_group.values()
+        ]
 
     def tangent_index(self, name: str) -> np.ndarray:
         """``(knots * count, dim)`` tangent coordinates of each element; ``-1`` where fixed."""
@@ -96,21 +100,22 @@ class TrajectoryVariables:
     def retract(self, point: Point, dx: np.ndarray) -> Point:
         """``X exp(ξ)`` on every free element (``y + ξ`` for vector blocks)."""
         out = dict(point)
-        for entries in self._retract_groups:
-            flats = [b.flat(point[b.name]) for b, _, _ in entries]
-            group = entries[0][0].group
-            Xs = [f[free] for f, (_, free, _) in zip(flats, entries, strict=True)]
-            xis = [dx[cols].reshape(-1, group.dim) for _, _, cols in entries]
+        for group, entries in self._retract_groups:
+            flats = [point[name].reshape(flat) for name, flat, _, _, _ in entries]
+            Xs = [f[e[3]] for f, e in zip(flats, entries, strict=True)]
+            xis = [dx[e[4]].reshape(-1, group.dim) for e in entries]
             if len(entries) == 1:
                 moved = [group.retract(Xs[0], xis[0])]
             else:
                 Y = group.retract(np.concatenate(Xs), np.concatenate(xis))
-                ends = np.cumsum([len(X) for X in Xs])
-                moved = np.split(Y, ends[:-1])
-            for (b, free, _), flat, Y in zip(entries, flats, moved, strict=True):
+                moved, start = [], 0
+                for X in Xs:
+                    moved.append(Y[start : start + len(X)])
+                    start += len(X)
+            for (name, _, shape, free, _), flat, Y in zip(entries, flats, moved, strict=True):
                 new = flat.copy()
                 new[free] = Y
-                out[b.name] = new.reshape(b.shape)
+                out[name] = new.reshape(shape)
         return out
 
     def local(self, point: Point, other: Point) -> np.ndarray:
