@@ -26,6 +26,8 @@ class SparsePattern:
         itype = np.int32 if max(self.nnz, *shape) < np.iinfo(np.int32).max else np.int64
         self._indptr, self._cols = indptr.astype(itype), self.cols.astype(itype)
         self._template = sp.csr_matrix((np.zeros(self.nnz), self._cols, self._indptr), shape)
+        # canonical by construction (sorted unique keys): scipy's flag, copied with the template
+        self._template.has_canonical_format = True
 
     def assemble(self, values: np.ndarray) -> sp.csr_matrix:
         # a shallow copy of the validated template with new data: scipy's constructor checks
