@@ -12,6 +12,7 @@ Subclasses override the generic formulas with closed forms where those are faste
 from __future__ import annotations
 
 import casadi as cs
+import numba as nb
 import numpy as np
 import scipy.linalg
 
@@ -236,13 +237,36 @@ def _symbolic_expm(A: Array) -> Array:
 
 
 def check_orthogonal(R: np.ndarray, group: str, what: str) -> None:
-    """Raise unless every matrix in ``R`` is a proper rotation."""
+    """Raise unless every matrix in ``R`` (finite) is a proper rotation."""
     n = R.shape[-1]
-    err = np.max(np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(n)), initial=0.0)
+    if n == 3 and R.dtype == np.float64:
+        err, det_min = _rotation_errors(R.reshape(-1, 3, 3))
+    else:
+        err = np.max(np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(n)), initial=0.0)
+        det_min = np.min(np.linalg.det(R), initial=np.inf)
     if err > _MEMBERSHIP_TOL:
         raise InputError(f"{group} {what}: not orthogonal (max |RᵀR - I| = {err:.2e})")
-    if np.any(np.linalg.det(R) <= 0):
+    if det_min <= 0:
         raise InputError(f"{group} {what}: determinant is not +1 (a reflection)")
+
+
+@nb.njit(cache=True)
+def _rotation_errors(R: np.ndarray) -> tuple[float, float]:
+    """``max |RᵀR - I|`` and the smallest determinant over a batch of 3 x 3 matrices."""
+    err, det_min = 0.0, np.inf
+    for k in range(R.shape[0]):
+        for i in range(3):
+            for j in range(3):
+                g = R[k, 0, i] * R[k, 0, j] + R[k, 1, i] * R[k, 1, j] + R[k, 2, i] * R[k, 2, j]
+                err = max(err, abs(g - (1.0 if i == j else 0.0)))
+        a = R[k]
+        det = (
+            a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1])
+            - a[0, 1] * (a[1, 0] * a[2, 2] - a[1, 2] * a[2, 0])
+            + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0])
+        )
+        det_min = min(det_min, det)
+    return err, det_min
 
 
 def check_unit_determinant(X: np.ndarray, group: str, what: str) -> None:

@@ -82,6 +82,14 @@ class RnGroup:
     jac_left = jac_right_inv = jac_left_inv = jac_right
 
     def retract(self, X: Array, xi: Array) -> Array:
+        if type(X) is np.ndarray and type(xi) is np.ndarray and X.shape == xi.shape:
+            out = X + xi  # validated below only when not finite (then as compose does)
+            if (
+                X.shape[-1:] == (self.n,)
+                and X.dtype == xi.dtype == float
+                and np.isfinite(out).all()
+            ):
+                return out
         return self.compose(X, xi)
 
     def local(self, X: Array, Y: Array) -> Array:

@@ -36,11 +36,7 @@ class SO3Group(MatrixLieGroup):
         xi = self._tangent(xi)
         if is_symbolic(xi):
             return cs.skew(xi)
-        x, y, z = xi[..., 0], xi[..., 1], xi[..., 2]
-        o = np.zeros_like(x)
-        return np.stack(
-            [np.stack([o, -z, y], -1), np.stack([z, o, -x], -1), np.stack([-y, x, o], -1)], -2
-        )
+        return _hat_numeric(xi)
 
     def vee(self, A: Array) -> Array:
         if is_symbolic(A):
@@ -59,11 +55,19 @@ class SO3Group(MatrixLieGroup):
     def exp(self, xi: Array) -> Array:
         """Rodrigues' formula ``I + a φ^ + b φ^²``."""
         xi = self._tangent(xi)
-        K = self.hat(xi)
+        if not is_symbolic(xi):
+            return _exp_numeric(xi)
         a, b, _ = _coefficients(xi)
-        if is_symbolic(xi):
-            return cs.DM.eye(3) + a * K + b * cs.mtimes(K, K)
-        return np.eye(3) + a[..., None, None] * K + b[..., None, None] * (K @ K)
+        K = self.hat(xi)
+        return cs.DM.eye(3) + a * K + b * cs.mtimes(K, K)
+
+    def retract(self, X: Array, xi: Array) -> Array:
+        """``X exp(ξ)`` (eq. 39); a numeric ``X`` is validated (finite, rotations), ``exp(ξ)``
+        is a rotation by construction."""
+        if is_symbolic(X, xi):
+            return super().retract(X, xi)
+        X = self._element(X)
+        return X @ _exp_numeric(self._tangent(xi))
 
     def log(self, X: Array) -> Array:
         """Rotation vector of ``X`` with angle in [0, π], accurate near 0 and near π."""
@@ -109,6 +113,36 @@ class SO3Group(MatrixLieGroup):
         if is_symbolic(xi):
             return cs.DM.eye(3) + sign * 0.5 * K + d * cs.mtimes(K, K)
         return np.eye(3) + sign * 0.5 * K + d[..., None, None] * (K @ K)
+
+
+# hat(φ) as a flat 3 x 3: entries (row-major position) taken from φ's components with a sign
+_HAT_DST = np.array([1, 2, 3, 5, 6, 7])
+_HAT_SRC = np.array([2, 1, 2, 0, 1, 0])
+_HAT_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
+_I3 = np.eye(3)
+_I3.flags.writeable = False
+
+
+def _hat_numeric(xi: np.ndarray) -> np.ndarray:
+    K = np.zeros((*xi.shape[:-1], 9))
+    K[..., _HAT_DST] = xi[..., _HAT_SRC] * _HAT_SIGN
+    return K.reshape(*xi.shape[:-1], 3, 3)
+
+
+def _exp_numeric(xi: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula on a batch: the arithmetic of :func:`_coefficients` (the Taylor
+    branch only when some angle is small), in fewer array operations."""
+    t2 = np.sum(xi * xi, axis=-1)
+    small = t2 < _SMALL
+    if small.any():
+        t = np.sqrt(np.where(small, 1.0, t2))
+        a = np.where(small, 1 - t2 / 6 + t2**2 / 120, np.sin(t) / t)
+        b = np.where(small, 0.5 - t2 / 24 + t2**2 / 720, (1 - np.cos(t)) / t**2)
+    else:
+        t = np.sqrt(t2)
+        a, b = np.sin(t) / t, (1 - np.cos(t)) / t**2
+    K = _hat_numeric(xi)
+    return _I3 + a[..., None, None] * K + b[..., None, None] * (K @ K)
 
 
 def _coefficients(xi: Array) -> tuple[Array, Array, Array]:

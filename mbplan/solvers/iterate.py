@@ -11,7 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import numba as nb
 import numpy as np
+import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.solvers.problem import NLPEvaluation, Point
@@ -55,19 +57,40 @@ class Step:
 
 
 def finite(*arrays: Any) -> bool:
-    return all(np.all(np.isfinite(a)) for a in arrays)
+    for a in arrays:
+        if not np.isfinite(a).all():
+            return False
+    return True
 
 
 def amax(v: np.ndarray) -> float:
-    return float(np.max(np.abs(v), initial=0.0))
+    return float(np.abs(v).max()) if v.size else 0.0
 
 
 def frac_to_boundary(v: np.ndarray, dv: np.ndarray, tau: float) -> float:
     """Largest ``α ∈ (0, 1]`` with ``v + α dv ≥ (1 - τ) v`` (WB eq. 15)."""
     neg = dv < 0
-    if not np.any(neg):
+    if not neg.any():
         return 1.0
-    return float(min(1.0, np.min(-tau * v[neg] / dv[neg])))
+    return float(min(1.0, (-tau * v[neg] / dv[neg]).min()))
+
+
+def transpose_times(a: sp.csr_matrix | sp.csr_array, x: np.ndarray) -> np.ndarray:
+    """``aᵀ x`` for a CSR ``a`` without building the transpose (the sums of scipy's
+    ``a.T @ x``, in its order)."""
+    if not (sp.issparse(a) and a.format == "csr" and a.dtype == x.dtype == np.float64):
+        return a.T @ x
+    return _csr_transpose_times(a.indptr, a.indices, a.data, x, a.shape[1])
+
+
+@nb.njit(cache=True)
+def _csr_transpose_times(indptr, indices, data, x, n):  # pragma: no cover - numba
+    out = np.zeros(n)
+    for i in range(len(indptr) - 1):
+        xi = x[i]
+        for k in range(indptr[i], indptr[i + 1]):
+            out[indices[k]] += data[k] * xi
+    return out
 
 
 class IterateState:
@@ -162,7 +185,9 @@ class IterateState:
         """Residuals of (50) (of the restoration problem in that phase) at the current iterate."""
         ev = self.ev
         self.r_d = (
-            self.sigma * ev.gradient + ev.eq_jacobian.T @ self.y + ev.ineq_jacobian.T @ self.z
+            (ev.gradient if self.sigma == 1.0 else self.sigma * ev.gradient)
+            + transpose_times(ev.eq_jacobian, self.y)
+            + transpose_times(ev.ineq_jacobian, self.z)
         )
         if self.zeta:
             self.r_d += self.zeta * self.xi

@@ -31,7 +31,13 @@ import numpy as np
 
 from mbplan.errors import InputError
 from mbplan.solvers.barrier import BarrierStrategy
-from mbplan.solvers.iterate import IterateState, amax, finite, frac_to_boundary
+from mbplan.solvers.iterate import (
+    IterateState,
+    amax,
+    finite,
+    frac_to_boundary,
+    transpose_times,
+)
 from mbplan.solvers.line_search import FilterLineSearch, Search
 from mbplan.solvers.linear_solver import KKTSystem
 from mbplan.solvers.newton import NewtonStep
@@ -165,7 +171,8 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         inertia = kkt.factorize(diag, self.o.static_regularization)
         if inertia is None or inertia.zero or inertia.negative != self.me:
             return np.zeros(self.me)
-        rhs = np.concatenate([-(ev.gradient + ev.ineq_jacobian.T @ self.z), np.zeros(self.me)])
+        grad = ev.gradient + transpose_times(ev.ineq_jacobian, self.z)
+        rhs = np.concatenate([-grad, np.zeros(self.me)])
         sol, _ = kkt.solve(rhs, self.o.max_refinement_steps, self.o.residual_ratio_max)
         y = sol[self.n :]
         return y if finite(y) and np.max(np.abs(y)) <= self.o.constr_mult_init_max else 0 * y
@@ -219,12 +226,14 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
                     "search direction became too small to make progress",
                 )
             self.cur = self._current_trial()
+            mu = self.mu
             computed = self._newton_step()
             if computed is None:
                 self._fail_or_restore("inertia correction failed (δ_w > δ_w,max)")
                 continue
             step, dw = computed
-            self.cur = self._current_trial()  # φ_μ with the step's μ (probing sets it)
+            if self.mu != mu:  # φ_μ with the step's μ (probing sets it)
+                self.cur = self._current_trial()
             tiny_step = (
                 self.inf_pr < 1e-4
                 and max(amax(step.dx), amax(step.ds / (1 + self.s))) < o.tiny_step_tol

@@ -87,6 +87,11 @@ class TrajectoryProblem:
             kind: np.concatenate([lay.rows.ravel() for lay in lays] or [np.zeros(0, np.int64)])
             for kind, lays in self._layouts.items()
         }
+        # kinds whose terms fill the rows in order, once each: the scatter is a concatenation
+        self._rows_in_order = {
+            kind: np.array_equal(rows, np.arange(len(rows))) for kind, rows in self._rows.items()
+        }
+        self._blocks = [(name, b.shape) for name, b in variables.blocks.items()]
         self._jac_patterns = {
             kind: self._jacobian_pattern(kind, sizes[kind]) for kind in ("eq", "ineq")
         }
@@ -117,11 +122,12 @@ class TrajectoryProblem:
     def _packed(self, point: Point) -> np.ndarray:
         """The point's blocks raveled into one vector (shapes and finiteness checked)."""
         parts = []
-        for name, b in self.variables.blocks.items():
-            a = point.get(name) if isinstance(point, Mapping) else None
-            if a is None or np.shape(a) != b.shape:
+        mapping = type(point) is dict or isinstance(point, Mapping)
+        for name, shape in self._blocks:
+            a = point.get(name) if mapping else None
+            if a is None or np.shape(a) != shape:
                 got = "missing" if a is None else f"shape {np.shape(a)}"
-                raise InputError(f"point: block {name!r} must have shape {b.shape}, got {got}")
+                raise InputError(f"point: block {name!r} must have shape {shape}, got {got}")
             parts.append(np.asarray(a, dtype=float).reshape(-1))
         vec = np.concatenate(parts)
         if not np.isfinite(vec).all():
@@ -130,26 +136,26 @@ class TrajectoryProblem:
             raise InputError(f"point: block {bad!r} contains NaN or inf")
         return vec
 
-    def _jacobian_pattern(self, kind: str, m: int) -> tuple[SparsePattern, np.ndarray]:
+    def _jacobian_pattern(self, kind: str, m: int) -> tuple[SparsePattern, _Mask]:
         rows = [lay.jac_rows.ravel() for lay in self._layouts[kind]]
         cols = [lay.jac_cols.ravel() for lay in self._layouts[kind]]
         rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
         cols = np.concatenate(cols) if cols else np.zeros(0, np.int64)
         mask = cols >= 0
-        return SparsePattern(rows[mask], cols[mask], (m, self.n)), mask
+        return SparsePattern(rows[mask], cols[mask], (m, self.n)), _Mask(mask)
 
-    def _gradient_columns(self) -> tuple[np.ndarray, np.ndarray]:
+    def _gradient_columns(self) -> tuple[np.ndarray, _Mask]:
         cols = [lay.jac_cols.ravel() for lay in self._layouts["cost"]]
         cols = np.concatenate(cols) if cols else np.zeros(0, np.int64)
         mask = cols >= 0
-        return cols[mask], mask
+        return cols[mask], _Mask(mask)
 
-    def _hessian_pattern(self) -> tuple[SparsePattern, np.ndarray]:
+    def _hessian_pattern(self) -> tuple[SparsePattern, _Mask]:
         lays = [lay for kind in ("cost", "eq", "ineq") for lay in self._layouts[kind]]
         rows = np.concatenate([lay.hess_rows.ravel() for lay in lays] or [np.zeros(0, np.int64)])
         cols = np.concatenate([lay.hess_cols.ravel() for lay in lays] or [np.zeros(0, np.int64)])
         mask = cols >= 0
-        return SparsePattern(rows[mask], cols[mask], (self.n, self.n)), mask
+        return SparsePattern(rows[mask], cols[mask], (self.n, self.n)), _Mask(mask)
 
     # ------------------------------------------------------------------ manifold
     def check_point(self, point: Point, what: str = "initial guess") -> Point:
@@ -160,6 +166,8 @@ class TrajectoryProblem:
 
     # ------------------------------------------------------------------ evaluation
     def _scatter(self, kind: str, parts: list[np.ndarray]) -> np.ndarray:
+        if self._rows_in_order[kind]:
+            return _cat(parts) + 0.0  # what bincount gives: 0 + v (-0.0 becomes 0.0)
         size = self.n_eq if kind == "eq" else self.n_ineq
         return np.bincount(self._rows[kind], weights=_cat(parts), minlength=size)
 
@@ -209,7 +217,7 @@ class TrajectoryProblem:
                 vals[kind].append(r.ravel())
                 jacs[kind].append(j.ravel())
         grad = np.bincount(
-            self._grad_cols, weights=_cat(jacs["cost"])[self._grad_mask], minlength=self.n
+            self._grad_cols, weights=_masked(_cat(jacs["cost"]), self._grad_mask), minlength=self.n
         )
         eq_pat, eq_mask = self._jac_patterns["eq"]
         in_pat, in_mask = self._jac_patterns["ineq"]
@@ -217,14 +225,27 @@ class TrajectoryProblem:
             objective=float(_cat(vals["cost"]).sum()),
             gradient=grad,
             eq=self._scatter("eq", vals["eq"]),
-            eq_jacobian=eq_pat.assemble(_cat(jacs["eq"])[eq_mask]),
+            eq_jacobian=eq_pat.assemble(_masked(_cat(jacs["eq"]), eq_mask)),
             ineq=self._scatter("ineq", vals["ineq"]),
-            ineq_jacobian=in_pat.assemble(_cat(jacs["ineq"])[in_mask]),
-            hessian_lower=self._hess_pattern.assemble(_cat(hess)[self._hess_mask])
+            ineq_jacobian=in_pat.assemble(_masked(_cat(jacs["ineq"]), in_mask)),
+            hessian_lower=self._hess_pattern.assemble(_masked(_cat(hess), self._hess_mask))
             if hessian
             else None,
         )
 
 
 def _cat(parts: list[np.ndarray]) -> np.ndarray:
+    if len(parts) == 1:
+        return parts[0]
     return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def _masked(values: np.ndarray, mask: _Mask) -> np.ndarray:
+    return values if mask.all_true else values[mask.mask]
+
+
+class _Mask:
+    """A boolean mask that knows whether it keeps everything (then no copy is made)."""
+
+    def __init__(self, mask: np.ndarray) -> None:
+        self.mask, self.all_true = mask, bool(mask.all())

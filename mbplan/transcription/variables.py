@@ -62,8 +62,18 @@ class TrajectoryVariables:
             offset += nfree * b.group.dim
             self._index[b.name] = idx
             if nfree:
-                self._free.append((b, free, idx[free]))
+                self._free.append((b, _as_slice(free), _as_slice(idx[free])))
         self.n = offset
+        # free blocks of one matrix group (e.g. every SO(3) block) retract in one batched call;
+        # per block: name, flat and point shapes, free elements, their tangent columns
+        by_group: dict[int, list] = {}
+        for b, free, cols in self._free:
+            key = id(b.group) if len(b.group.element_shape) == 2 else id(b)
+            flat = (b.knots * b.count, *b.group.element_shape)
+            by_group.setdefault(key, []).append((b.name, flat, b.shape, free, cols))
+        self._retract_groups = [
+            (self.blocks[entries[0][0]].group, entries) for entries in by_group.values()
+        ]
 
     def tangent_index(self, name: str) -> np.ndarray:
         """``(knots * count, dim)`` tangent coordinates of each element; ``-1`` where fixed."""
@@ -90,10 +100,22 @@ class TrajectoryVariables:
     def retract(self, point: Point, dx: np.ndarray) -> Point:
         """``X exp(ξ)`` on every free element (``y + ξ`` for vector blocks)."""
         out = dict(point)
-        for b, free, cols in self._free:
-            new = b.flat(point[b.name]).copy()
-            new[free] = b.group.retract(new[free], dx[cols])
-            out[b.name] = new.reshape(b.shape)
+        for group, entries in self._retract_groups:
+            flats = [point[name].reshape(flat) for name, flat, _, _, _ in entries]
+            Xs = [f[e[3]] for f, e in zip(flats, entries, strict=True)]
+            xis = [dx[e[4]].reshape(-1, group.dim) for e in entries]
+            if len(entries) == 1:
+                moved = [group.retract(Xs[0], xis[0])]
+            else:
+                Y = group.retract(np.concatenate(Xs), np.concatenate(xis))
+                moved, start = [], 0
+                for X in Xs:
+                    moved.append(Y[start : start + len(X)])
+                    start += len(X)
+            for (name, _, shape, free, _), flat, Y in zip(entries, flats, moved, strict=True):
+                new = flat.copy()
+                new[free] = Y
+                out[name] = new.reshape(shape)
         return out
 
     def local(self, point: Point, other: Point) -> np.ndarray:
@@ -107,3 +129,12 @@ class TrajectoryVariables:
                     b.flat(point[b.name])[free], b.flat(other[b.name])[free]
                 )
         return dx
+
+
+def _as_slice(index: np.ndarray) -> slice | np.ndarray:
+    """A boolean mask or an integer index array as the equivalent slice when it selects one
+    contiguous run (``a[slice]`` is a view: no gather on every retraction), else unchanged."""
+    flat = np.flatnonzero(index) if index.dtype == bool else index.ravel()
+    if flat.size and np.array_equal(flat, np.arange(flat[0], flat[0] + flat.size)):
+        return slice(int(flat[0]), int(flat[0]) + flat.size)
+    return index
