@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from mbplan.errors import InputError
+from mbplan.solvers.linear_solver import ORDERINGS
 
 
 @dataclass(frozen=True)
@@ -164,7 +165,7 @@ class RIPMOptions:
             "kappa_w_plus_first": self.kappa_w_plus_first > 1,
             "print_level": self.print_level >= 0,
             "degenerate_iters": self.degenerate_iters >= 0,
-            "kkt_ordering": self.kkt_ordering in ("amd", "nested"),
+            "kkt_ordering": self.kkt_ordering in ORDERINGS,
             "mu_strategy": self.mu_strategy in ("monotone", "adaptive"),
             "mu_oracle": self.mu_oracle in ("loqo", "probing"),
             "resto_penalty": self.resto_penalty > 0,
