@@ -148,8 +148,10 @@ def _markdown(rows: dict, solves: dict, command: str) -> str:
         f"Command: `{command}`",
         "",
         "Factorization times: min / median of the interleaved repetitions (same process, AMD and "
-        "METIS alternating); Gflop/s = multiply-adds / min time. analysis = ordering + symbolic "
-        "analysis (ms).",
+        "METIS alternating); GF/s = multiply-adds / min time; analysis = ordering + symbolic "
+        "analysis (ms); same inertia, step rel. diff: the timed matrix solved with each order. "
+        "First RIPM KKT: the first iteration's matrix (δ_w = 0) factorized with each order, "
+        "(positive, negative) pivots or where the LDLᵀ without pivoting broke down.",
         "",
         "| task | KKT dim | AMD Mflop | METIS Mflop | auto picks | AMD ms (min / med) "
         "| METIS ms (min / med) | METIS / AMD (min) | AMD GF/s | METIS GF/s "
