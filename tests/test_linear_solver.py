@@ -129,18 +129,19 @@ def _grid_blocks(rng, knots, bodies, dim=3):
     return hess, jac_e, jac_i
 
 
+@pytest.mark.parametrize("ordering", ["nested", "metis"])
 @pytest.mark.parametrize("shape", [(12, 5), (30, 2), (4, 16)])
-def test_nested_dissection_and_amd_give_the_same_inertia_and_steps(shape):
-    """The two elimination orders factorize the same matrix: same pivot signs (Sylvester),
+def test_dissection_orders_and_amd_give_the_same_inertia_and_steps(shape, ordering):
+    """Both elimination orders factorize the same matrix: same pivot signs (Sylvester),
     same solutions; a singular matrix (duplicated constraint row) is flagged by both through
     the refinement residual, a wrong inertia is reported by both."""
     rng = np.random.default_rng(sum(shape))
     hess, jac_e, jac_i = _grid_blocks(rng, *shape)
     n, me, mi = hess.shape[0], jac_e.shape[0], jac_i.shape[0]
-    systems = {o: KKTSystem(n, me, mi, ordering=o) for o in ("amd", "nested")}
+    systems = {o: KKTSystem(n, me, mi, ordering=o) for o in ("amd", ordering)}
     for kkt in systems.values():
         kkt.set_matrices(hess, jac_e, jac_i)
-    assert not np.array_equal(systems["amd"].analysis.perm, systems["nested"].analysis.perm)
+    assert not np.array_equal(systems["amd"].analysis.perm, systems[ordering].analysis.perm)
     for shift in (1e-2, 3.0, -0.7):
         diag = np.concatenate([np.full(n, shift), -rng.uniform(0.1, 1, me), -rng.random(mi)])
         eig = np.linalg.eigvalsh(_dense(hess, jac_e, jac_i, diag))
@@ -160,7 +161,7 @@ def test_nested_dissection_and_amd_give_the_same_inertia_and_steps(shape):
     diag = np.concatenate([np.full(n, 20.0), np.zeros(me + 1), -np.ones(mi)])  # H + 20 I > 0
     rhs = rng.normal(size=n + me + 1 + mi)
     found = []
-    for o in ("amd", "nested"):
+    for o in ("amd", ordering):
         kkt = KKTSystem(n, me + 1, mi, ordering=o)
         kkt.set_matrices(hess, jac_s, jac_i)
         inertia = kkt.factorize(diag, static_reg=1e-9)
@@ -170,12 +171,50 @@ def test_nested_dissection_and_amd_give_the_same_inertia_and_steps(shape):
     assert found[0] == found[1]
 
 
-def test_ripm_steps_do_not_depend_on_the_ordering():
+def _laplacian_3d(m):
+    t = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(m, m))
+    eye = sp.eye(m)
+    return sp.tril(
+        sp.kron(sp.kron(t, eye), eye)
+        + sp.kron(sp.kron(eye, t), eye)
+        + sp.kron(eye, sp.kron(eye, t)),
+        format="csr",
+    )
+
+
+@pytest.mark.parametrize(
+    ("blocks", "expected"),
+    [
+        (_grid_blocks(np.random.default_rng(0), 20, 12), "amd"),
+        ((_laplacian_3d(10),), "amd"),  # METIS has fewer flops, AMD's are below the threshold
+        ((_laplacian_3d(14),), "metis"),
+    ],
+)
+def test_auto_ordering_keeps_the_analysis_with_fewer_flops(blocks, expected):
+    """``"auto"`` is AMD's memoized analysis, or METIS's when AMD's factorization reaches
+    ``AUTO_MIN_FLOPS`` and METIS predicts fewer multiply-adds: AMD on a thin time × body grid
+    and on a small 3-D grid, METIS on a larger 3-D grid."""
+    from mbplan.solvers.linear_solver import AUTO_MIN_FLOPS
+
+    hess, *jacs = blocks
+    n = hess.shape[0]
+    me, mi = (j.shape[0] for j in jacs) if jacs else (0, 0)
+    systems = {o: KKTSystem(n, me, mi, ordering=o) for o in ("amd", "metis", "auto")}
+    for kkt in systems.values():
+        kkt.set_matrices(hess, *(jacs or (None, None)))
+    assert systems["auto"].analysis is systems[expected].analysis
+    flops = {o: systems[o].analysis.flops for o in ("amd", "metis")}
+    worth_trying = flops["amd"] >= AUTO_MIN_FLOPS
+    assert (expected == "metis") == (worth_trying and flops["metis"] < flops["amd"])
+
+
+@pytest.mark.parametrize("ordering", ["nested", "metis", "auto"])
+def test_ripm_steps_do_not_depend_on_the_ordering(ordering):
     from mbplan.solvers import solve_ripm
     from mbplan.solvers.examples import BandedControlNLP
 
     prob = BandedControlNLP(nx=4, nu=2, horizon=20)
-    runs = [solve_ripm(prob, prob.initial_guess(), kkt_ordering=o) for o in ("amd", "nested")]
+    runs = [solve_ripm(prob, prob.initial_guess(), kkt_ordering=o) for o in ("amd", ordering)]
     assert runs[0].success and runs[1].success
     assert runs[0].iterations == runs[1].iterations
     np.testing.assert_allclose(runs[0].history.kkt_error, runs[1].history.kkt_error, rtol=1e-5)

@@ -131,12 +131,13 @@ def _grid_keys(problem: Any, ev: Any) -> tuple[np.ndarray, np.ndarray] | None:
 
 def ordering_stats(problem: Any, x0: Any) -> dict[str, dict[str, float]]:
     """Predicted flops (multiply-adds) and stored factor entries of the KKT matrix at ``x0`` for
-    each elimination order: AMD, nested dissection (:mod:`mbplan.solvers.ordering`) and, for a
+    each elimination order: AMD, METIS and BFS nested dissection (:mod:`mbplan.solvers.ordering`)
+    and, for a
     trajectory problem, AMD constrained to eliminate knot by knot (time-major, stage-wise) or
     body by body (body-major)."""
     ev = problem.evaluate(x0, 1.0, np.zeros(problem.n_eq), np.ones(problem.n_ineq))
     out = {}
-    for ordering in ("amd", "nested"):
+    for ordering in ("amd", "metis", "nested"):
         kkt = ls.KKTSystem(problem.n, problem.n_eq, problem.n_ineq, ordering=ordering)
         kkt.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
         a = kkt.analysis

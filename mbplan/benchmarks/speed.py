@@ -154,7 +154,7 @@ def _fmt(v: float | None, scale: float = 1.0, digits: int = 1) -> str:
     return "—" if v is None else f"{scale * v:.{digits}f}"
 
 
-_ORDERS = ("amd", "nested", "grid-nd", "time-major", "stage-dense", "body-major")
+_ORDERS = ("amd", "metis", "nested", "grid-nd", "time-major", "stage-dense", "body-major")
 
 
 def _markdown(s: dict) -> str:
@@ -246,7 +246,10 @@ def _markdown(s: dict) -> str:
         "## Elimination orders: predicted factorization cost",
         "",
         "Mflop = multiply-adds of the numeric LDLᵀ (supernodal, relaxed amalgamation), fill = "
-        "stored factor entries (millions). nested: dissection by BFS levels of the graph; grid-nd: "
+        "stored factor entries (millions). metis: METIS's nested dissection (opt-in "
+        '`kkt_ordering` "metis" or "auto", the cheaper of amd and metis; docs/ripm-speed.md '
+        "session 5: without pivoting it breaks down on the first iterations' KKT matrices); "
+        "nested: dissection by BFS levels of the graph; grid-nd: "
         "dissection of the time × body grid by coordinates; time-/body-major: AMD's order made to eliminate the "
         "time × body grid knot by knot (a stage-wise, Riccati-like elimination) or body by body; "
         "stage-dense: a block-tridiagonal LDLᵀ with dense knot blocks (each knot's unknowns, "

@@ -57,7 +57,7 @@ from mbplan.solvers.ldl_kernels import (
     refined_solve,
 )
 from mbplan.solvers.ldl_symbolic import SYMBOLIC_KERNELS, Analysis
-from mbplan.solvers.ordering import amd_order, nested_dissection_order
+from mbplan.solvers.ordering import amd_order, metis_order, nested_dissection_order
 
 _NONE = np.zeros(0, np.int64)
 
@@ -98,15 +98,21 @@ def _same_pattern(a: sp.csr_matrix, b: sp.csr_matrix | None) -> bool:
 _ANALYSES: OrderedDict[tuple[int, bytes, bytes, str], Analysis] = OrderedDict()
 _ANALYSES_KEPT = 8
 _ANALYSES_LOCK = threading.Lock()
-ORDERINGS = ("amd", "nested")
+ORDERINGS = ("amd", "nested", "metis", "auto")
+_ORDERS = {"amd": amd_order, "nested": nested_dissection_order, "metis": metis_order}
+AUTO_MIN_FLOPS = 1e7
+"""``"auto"`` orders by METIS too only when AMD's factorization needs at least this many
+multiply-adds (~2 ms): below it METIS's ordering costs more than it can save."""
 
 
 def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> Analysis:
     """The analysis of the pattern given as lower CSR arrays, memoized per process for the last
     few patterns: the KKT systems of one task family (every case of a benchmark, every solve of
     a receding-horizon loop) share their pattern, and its ordering and symbolic factorization
-    cost as much as a few numeric factorizations. ``ordering``: ``"amd"`` or ``"nested"``
-    (:mod:`mbplan.solvers.ordering`)."""
+    cost as much as a few numeric factorizations. ``ordering``: ``"amd"``, ``"metis"``,
+    ``"nested"`` (:mod:`mbplan.solvers.ordering`) or ``"auto"``: AMD's analysis, or METIS's if
+    it predicts fewer multiply-adds (:attr:`Analysis.flops`; METIS is tried only when AMD's
+    count reaches :data:`AUTO_MIN_FLOPS`)."""
     if ordering not in ORDERINGS:
         raise InputError(f"ordering: expected one of {ORDERINGS}, got {ordering!r}")
     key = (len(indptr) - 1, indptr.tobytes(), indices.tobytes(), ordering)
@@ -115,11 +121,16 @@ def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> 
         if hit is not None:
             _ANALYSES.move_to_end(key)
             return hit
-    announce_uncached_numba(*_ENTRY_KERNELS)  # first run only
-    n = key[0]
-    rows = np.repeat(np.arange(n), np.diff(indptr))
-    order = amd_order if ordering == "amd" else nested_dissection_order
-    hit = Analysis(n, rows, indices, order(indptr, indices))
+    if ordering == "auto":
+        hit = analysis(indptr, indices, "amd")
+        if hit.flops >= AUTO_MIN_FLOPS:
+            metis = analysis(indptr, indices, "metis")
+            hit = metis if metis.flops < hit.flops else hit
+    else:
+        announce_uncached_numba(*_ENTRY_KERNELS)  # first run only
+        n = key[0]
+        rows = np.repeat(np.arange(n), np.diff(indptr))
+        hit = Analysis(n, rows, indices, _ORDERS[ordering](indptr, indices))
     with _ANALYSES_LOCK:
         _ANALYSES[key] = hit
         while len(_ANALYSES) > _ANALYSES_KEPT:

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from mbplan.errors import InputError
+from mbplan.solvers.linear_solver import ORDERINGS
 
 
 @dataclass(frozen=True)
@@ -100,9 +101,12 @@ class RIPMOptions:
 
     # --- linear solver (IPOPT's PDFullSpaceSolver) ---
     kkt_ordering: str = "amd"
-    """Elimination order of the KKT factorization: ``"amd"`` (approximate minimum degree) or
-    ``"nested"`` (nested dissection along the trajectory's level structure,
-    :mod:`mbplan.solvers.ordering`; more flops than AMD on every benchmark pattern so far)."""
+    """Elimination order of the KKT factorization: ``"amd"`` (approximate minimum degree),
+    ``"metis"`` (METIS nested dissection), ``"auto"`` (the one of the two with fewer predicted
+    flops) or ``"nested"`` (nested dissection along the trajectory's level structure),
+    :mod:`mbplan.solvers.ordering`. METIS needs fewer flops than AMD from 32 chain links on,
+    but the LDLᵀ without pivoting breaks down with its orders at ``δ_w = 0`` on the benchmark
+    KKT matrices, so the inertia correction perturbs more (docs/ripm-speed.md, session 5)."""
     static_regularization: float = 1e-9
     """±ε on the diagonal of the factorized KKT matrix only (removed by iterative refinement),
     so that the LDLᵀ factorization, which does not pivot, never meets an exact zero pivot."""
@@ -164,7 +168,7 @@ class RIPMOptions:
             "kappa_w_plus_first": self.kappa_w_plus_first > 1,
             "print_level": self.print_level >= 0,
             "degenerate_iters": self.degenerate_iters >= 0,
-            "kkt_ordering": self.kkt_ordering in ("amd", "nested"),
+            "kkt_ordering": self.kkt_ordering in ORDERINGS,
             "mu_strategy": self.mu_strategy in ("monotone", "adaptive"),
             "mu_oracle": self.mu_oracle in ("loqo", "probing"),
             "resto_penalty": self.resto_penalty > 0,
