@@ -15,7 +15,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import scipy.linalg as sla
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
@@ -156,6 +156,7 @@ def test_so3_matches_pinocchio(axis, angle):
 
 @SETTINGS
 @given(v=tangents(3, 5.0), axis=unit_axes(), angle=so3_angles)
+@example(v=np.ones(3), axis=np.array([0.0, 0.0, 1.0]), angle=4.25e-4)
 def test_se3_matches_pinocchio(v, axis, angle):
     xi = np.concatenate([v, angle * axis])  # Pinocchio motion ordering (v, ω)
     T = SE3.exp(xi)
@@ -163,9 +164,13 @@ def test_se3_matches_pinocchio(v, axis, angle):
     np.testing.assert_allclose(T, M.homogeneous, rtol=0, atol=1e-12)
     np.testing.assert_allclose(SE3.Ad(T), M.action, rtol=0, atol=1e-12)
     np.testing.assert_allclose(np.linalg.inv(SE3.Ad(T)), M.inverse().action, atol=1e-10)
-    # Pinocchio's Jexp6 loses up to ~1e-8 at small angles (1.1e-8 at angle 2⁻⁹ with v = (1, 1, 1),
-    # found by hypothesis); the series below is the tight check.
-    np.testing.assert_allclose(SE3.jac_right(xi), pin.Jexp6(xi), rtol=0, atol=1e-7)
+    # Pinocchio's Jexp6 cancels in floating point below angle ~1e-2 until it switches to its Taylor
+    # branch (error 8.6e-6 at angle 4.25e-4 with |v| ~ 5, found by hypothesis): compare within that
+    # cancellation bound, eps·|v| / angle³; the series below is the tight check at every angle.
+    cancellation = 1e-15 * (1.0 + np.linalg.norm(v)) / max(angle, 1e-300) ** 3
+    np.testing.assert_allclose(
+        SE3.jac_right(xi), pin.Jexp6(xi), rtol=0, atol=max(1e-10, min(cancellation, 1e-3))
+    )
     ad = np.column_stack([pin.Motion(xi).cross(pin.Motion(e)).vector for e in np.eye(6)])
     np.testing.assert_allclose(SE3.jac_right(xi), right_jacobian_series(ad), rtol=0, atol=1e-13)
     if np.pi - angle > 1e-12:
