@@ -222,6 +222,34 @@ def test_ripm_steps_do_not_depend_on_the_ordering(ordering):
 
 
 @pytest.mark.parametrize("case", [c for c in CASES if c[-1]])
+def test_blas_update_of_large_fronts_matches_the_blocked_kernels(case, monkeypatch):
+    """The BLAS Schur update (fronts with at least ``BLAS_FRONT_ROWS`` update rows, lowered here
+    so that the banded cases reach it) gives the blocked kernels' inertia, pivots and steps, on
+    positive, mixed and wrong inertias."""
+    from mbplan.solvers import linear_solver as ls
+
+    n, me, mi, density, band = case
+    rng = np.random.default_rng(n + me)
+    blocks = _kkt_blocks(rng, n, me, mi, density, band)
+    systems = []
+    for rows in (10**9, 8):
+        monkeypatch.setattr(ls, "BLAS_FRONT_ROWS", rows)
+        kkt = KKTSystem(n, me, mi)
+        kkt.set_matrices(*blocks)
+        systems.append(kkt)
+    assert systems[1]._solver.uses_blas and not systems[0]._solver.uses_blas
+    rhs = rng.normal(size=n + me + mi)
+    for shift in (1e-3, 2.0, -0.5):
+        diag = np.concatenate([np.full(n, shift), -np.linspace(0.1, 1, me), -np.ones(mi)])
+        plain, blas = (kkt.factorize(diag, static_reg=1e-9) for kkt in systems)
+        assert plain == blas
+        d_plain, d_blas = (kkt._solver.d for kkt in systems)
+        np.testing.assert_allclose(d_blas, d_plain, rtol=1e-8, atol=1e-10)
+        steps = [kkt.solve(rhs)[0] for kkt in systems]
+        np.testing.assert_allclose(steps[1], steps[0], rtol=1e-9, atol=1e-10)
+
+
+@pytest.mark.parametrize("case", [c for c in CASES if c[-1]])
 def test_banded_cases_exercise_the_blocked_kernels(case):
     """The dense knot-to-knot fronts of the banded cases reach the 4 x 4 kernels (fronts with
     at least ``_WIDE`` rows below four or more pivot columns), which the test above checks."""

@@ -10,6 +10,7 @@ import numpy as np
 
 _SMALL = 4  # supernodes with at most this many columns are solved without a gathered copy
 _WIDE = 24  # fronts with at least this many rows below the pivot get the 4 x 4 kernels
+BLAS_PIVOTS = 8  # the BLAS update needs at least this many pivot columns to pay for its copy
 
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
@@ -96,6 +97,14 @@ def _schur_update4(L, d, k, U):
                     ub[a] -= e * lt[a]
 
 
+@nb.njit(cache=True, error_model="numpy")
+def _schur_blas(L, d, k, U):
+    """``U -= Bᵀ diag(d) B`` with ``B = L[:, k:]`` as one BLAS ``dgemm`` (both triangles; the
+    entries ``a < b`` are never read): the large fronts' update."""
+    B = np.ascontiguousarray(L[:, k:])
+    U -= (B * d.reshape(-1, 1)).T @ B
+
+
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
 def _apply_previous(L, d, t, two):
     """Front column ``t`` (and ``t+1`` if ``two``), rows ``t..``, minus the contributions of the
@@ -169,9 +178,12 @@ def _apply_previous4(L, d, t):
 
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def ldl_factor(vals, amap, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, lbuf, ubuf, d):
-    """Multifrontal ``LDLᵀ`` without pivoting. Returns the numbers of positive and negative
-    pivots and ``False`` on a breakdown (a zero or non-finite pivot)."""
+def ldl_factor(
+    vals, amap, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, lbuf, ubuf, d, blas_rows
+):
+    """Multifrontal ``LDLᵀ`` without pivoting. Fronts with at least ``blas_rows`` update rows
+    (and ``BLAS_PIVOTS`` pivot columns) get their Schur update from BLAS. Returns the numbers
+    of positive and negative pivots and ``False`` on a breakdown (a zero or non-finite pivot)."""
     lbuf[:] = 0.0
     for e in range(vals.shape[0]):
         lbuf[amap[e]] += vals[e]
@@ -254,7 +266,9 @@ def ldl_factor(vals, amap, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, lbu
                         for i in range(j, m):
                             nxt[i] -= coef * col[i]
             t += w
-        if r >= _WIDE:
+        if r >= blas_rows and k >= BLAS_PIVOTS:
+            _schur_blas(L, df, k, ubuf[uo : uo + r * r].reshape(r, r))
+        elif r >= _WIDE:
             _schur_update4(L, df, k, ubuf[uo : uo + r * r].reshape(r, r))
         elif r > 0:
             _schur_update2(L, df, k, ubuf[uo : uo + r * r].reshape(r, r))

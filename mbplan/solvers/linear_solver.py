@@ -38,6 +38,8 @@ whose smallest eigenvalue magnitude exceeds ``ε``.
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import itertools
 import threading
 from collections import OrderedDict
@@ -45,11 +47,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+import threadpoolctl
 
 from mbplan.engine.jit import announce_uncached_numba, numba_cached
 from mbplan.errors import InputError
 from mbplan.solvers.kkt_scatter import SCATTER_KERNELS, matrix_values, same_arrays, scatter_blocks
 from mbplan.solvers.ldl_kernels import (
+    BLAS_PIVOTS,
     NUMERIC_KERNELS,
     SOLVE_KERNELS,
     ldl_factor,
@@ -138,21 +142,43 @@ def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> 
     return hit
 
 
+BLAS_FRONT_ROWS = 256
+"""Fronts with at least this many update rows get their Schur update from single-threaded BLAS
+(0.79–0.84× the register-blocked kernel’s time on the 32- and 64-link chains, docs/ripm-speed.md;
+multi-threaded OpenBLAS was 3.6× slower on this 2-core machine)."""
+
+
+@functools.cache
+def _blas_controller() -> threadpoolctl.ThreadpoolController:
+    return threadpoolctl.ThreadpoolController()
+
+
+def _one_blas_thread() -> contextlib.AbstractContextManager:
+    return _blas_controller().limit(limits=1, user_api="blas")
+
+
 class _SupernodalLDL:
     """Numeric factorization and solves for an :class:`Analysis` (own work arrays)."""
 
-    def __init__(self, analysis: Analysis) -> None:
+    def __init__(self, analysis: Analysis, blas_rows: int | None = None) -> None:
         self.a = analysis
         self.lbuf = np.empty(analysis.loff[-1])
         self.ubuf = np.empty(analysis.uoff[-1])
         self.d = np.empty(analysis.n)
+        self.blas_rows = BLAS_FRONT_ROWS if blas_rows is None else blas_rows
+        k, m = np.diff(analysis.sfirst), np.diff(analysis.fptr)
+        self.uses_blas = bool(np.any((m - k >= self.blas_rows) & (k >= BLAS_PIVOTS)))
 
     def factor(self, vals: np.ndarray) -> tuple[int, int, bool]:
         a = self.a
-        return ldl_factor(
+        args = (
             vals, a.amap, a.sfirst, a.fptr, a.loff, a.uoff, a.rptr, a.rel, a.cptr, a.child,
-            self.lbuf, self.ubuf, self.d,
+            self.lbuf, self.ubuf, self.d, self.blas_rows,
         )  # fmt: skip
+        if not self.uses_blas:
+            return ldl_factor(*args)
+        with _one_blas_thread():
+            return ldl_factor(*args)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         a = self.a
