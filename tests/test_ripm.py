@@ -447,3 +447,21 @@ def test_kkt_system_inertia_pattern_cache_and_refinement():
     kkt.set_matrices(hess + sp.eye(n, format="csr"), jac_e, jac_i)  # new pattern
     kkt.factorize(diag)
     assert kkt.n_analyses == 2
+
+
+def test_initial_equality_multipliers_option():
+    """``constr_mult_init``: zero (default) or IPOPT's least-squares estimate; both solve HS071
+    and the Wächter–Biegler example to the same point, and only the least-squares start has
+    ``y₀ ≠ 0``; a wrong name is rejected."""
+    wb_x0 = np.array([-2.0, 1.0, 1.0])
+    for kind in ("zero", "least-squares"):
+        res = solve_ripm(hs071(), HS071_X0, constr_mult_init=kind)
+        assert res.success and res.objective == pytest.approx(17.0140173, abs=1e-6)
+        wb = solve_ripm(_wachter_biegler(), wb_x0, constr_mult_init=kind)
+        assert wb.success and np.allclose(wb.x, [1.0, 0.0, 0.5], atol=1e-8)
+    zero = solve_ripm(hs071(), HS071_X0, max_iter=0)
+    ls = solve_ripm(hs071(), HS071_X0, max_iter=0, constr_mult_init="least-squares")
+    assert np.all(zero.y == 0.0) and np.any(ls.y != 0.0)
+    assert RIPMOptions().constr_mult_init == "zero"
+    with pytest.raises(InputError, match="constr_mult_init"):
+        RIPMOptions(constr_mult_init="ones")
