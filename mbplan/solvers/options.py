@@ -81,12 +81,10 @@ class RIPMOptions:
     """Initial slacks s_0 = max(-g(x_0), bound_push)."""
     bound_mult_init_val: float = 1.0
     """Initial multipliers z_0 of the inequalities."""
-    constr_mult_init: str = "zero"
-    """Initial multipliers y_0 of the equalities: ``"zero"`` or ``"least-squares"`` (IPOPT's
-    default: ``y`` minimizing the dual infeasibility at ``x_0``; measured: more inertia
-    corrections and more iterations on the LGVI tasks, docs/ripm-speed.md, session 5)."""
-    constr_mult_init_max: float = 1e3
-    """Least-squares initial y_0 is discarded (y_0 = 0) if larger than this in max norm."""
+    constr_mult_init_max: float = 1.0
+    """Least-squares initial y_0 is discarded (y_0 = 0) if larger than this in max norm
+    (IPOPT: 1e3; measured: large estimates at infeasible LGVI warm starts cost inertia
+    corrections and iterations, docs/ripm-speed.md, session 5; 0: always y_0 = 0)."""
 
     # --- inertia correction (WB Algorithm IC) ---
     delta_w_init: float = 1e-4
@@ -161,6 +159,7 @@ class RIPMOptions:
             "kappa_soc": 0 < self.kappa_soc < 1,
             "kappa_resto": 0 < self.kappa_resto < 1,
             "bound_push": self.bound_push > 0,
+            "constr_mult_init_max": self.constr_mult_init_max >= 0,
             "bound_mult_init_val": self.bound_mult_init_val > 0,
             "delta_w_min": 0 <= self.delta_w_min <= self.delta_w_init <= self.delta_w_max,
             "kappa_w_minus": 0 < self.kappa_w_minus < 1,
@@ -171,7 +170,6 @@ class RIPMOptions:
             "kkt_ordering": self.kkt_ordering in ("amd", "nested"),
             "mu_strategy": self.mu_strategy in ("monotone", "adaptive"),
             "mu_oracle": self.mu_oracle in ("loqo", "probing"),
-            "constr_mult_init": self.constr_mult_init in ("zero", "least-squares"),
             "resto_penalty": self.resto_penalty > 0,
             "resto_proximity_weight": self.resto_proximity_weight >= 0,
         }
