@@ -69,8 +69,16 @@ def test_geodesic_guess_connects_start_and_goal() -> None:
     np.testing.assert_allclose(g["R"][1:-1] @ g["F"][1:-1], g["R"][2:], atol=1e-12)
     np.testing.assert_allclose(g["p"][1:-1] + task.dt * g["v"][1:-1], g["p"][2:], atol=1e-12)
     np.testing.assert_array_equal(g["F"][[0, -1]], np.stack([np.eye(3)] * 2))
-    assert not g["v"][[0, -1]].any() and not g["u"][:, 1:].any()
-    np.testing.assert_allclose(g["u"][:, 0], task.params.mass * 9.81)
+    assert not g["v"][[0, -1]].any()
+    # inputs of the LGVI's inverse dynamics: along the uniform geodesic (steps 1..N-2; the first
+    # and last start and stop it) the constant gyroscopic torque of a steady rotation and the
+    # thrust m g cos(tilt) that holds the altitude
+    inner = slice(1, N - 1)
+    torque = g["u"][inner, 1:]
+    np.testing.assert_allclose(torque, np.broadcast_to(torque[0], torque.shape), atol=1e-12)
+    assert 0.0 < np.max(np.abs(torque)) < 1e-3
+    cos_tilt = g["R"][2:N, 2, 2]
+    np.testing.assert_allclose(g["u"][inner, 0], task.params.mass * 9.81 * cos_tilt, rtol=1e-9)
     # geodesic: equal rotation angle per step
     steps = rotation_angles(g["F"][1:-1])
     np.testing.assert_allclose(steps, rotation_angles(task.R0[None])[0] / N, atol=1e-12)

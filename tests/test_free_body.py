@@ -15,14 +15,14 @@ import mbplan as mb
 from mbplan import paper
 from mbplan.cli import main
 from mbplan.engine.checks import check_derivatives
-from mbplan.formulations.free_body import FreeBodyNLP
+from mbplan.formulations.free_body import FreeBodyNLP, input_bounds, lgvi_inputs
 from mbplan.formulations.quaternion import QuaternionNLP
 from mbplan.lie import SO3
 from mbplan.ocp import body_residuals as br
 from mbplan.ocp import residuals as res
 from mbplan.ocp.free_body import FreeBody, body_state, free_flyer_state, quaternions
 from mbplan.planning.initial_guess import initial_path
-from mbplan.tasks.drone import cluttered_task, sample_docking_cases, trajectory_cost
+from mbplan.tasks.drone import cluttered_task, sample_docking_cases, simulate, trajectory_cost
 from mbplan.viz.drone import free_body_scene
 
 GOAL_R = SO3.exp(np.array([0.3, -0.2, 0.5]))
@@ -235,3 +235,48 @@ def test_a_plan_the_lgvi_cannot_replay_fails_verification() -> None:
     check = mb.verify(dataclasses.replace(plan, tau=tau))
     assert not check.passed and "the LGVI replay fails at step 2" in check.reasons[0]
     assert check.max_joint_deviation_rad == np.inf
+
+
+def test_inverse_dynamics_inputs_reproduce_the_warm_start_under_the_lgvi() -> None:
+    """A path flown by the LGVI (quadrotor, inputs inside the limits): the ``"inverse"`` warm
+    start recovers those inputs, so every dynamics row of the point vanishes; outside the limits
+    the inputs are clipped strictly inside them."""
+    task = sample_docking_cases(1, 0, with_input_limits=True)[0]
+    ocp = paper.drone_docking(task)
+    rng = np.random.default_rng(5)
+    u = ocp.robot.hover_input + rng.uniform(-1.0, 1.0, (ocp.N, 4)) * [1.0, 0.05, 0.05, 0.05]
+    flown = simulate(task, u)
+    q, _ = free_flyer_state(flown["R"], flown["p"], flown["F"], flown["v"], ocp.dt)
+    # the warm start rests at knot N (F_N = I, v_N = 0): the last step is no flight
+    nlp = FreeBodyNLP(ocp, jit=False)
+    x = nlp.initial_point(q, inputs="inverse")
+    np.testing.assert_allclose(x["u"][:-1], u[:-1], atol=1e-9)
+    h = nlp.problem.values(x)[1].reshape(ocp.N, 12)  # the LGVI steps, 12 rows each
+    assert np.max(np.abs(h[:-1])) < 1e-9 and np.max(np.abs(h[-1])) > 1e-3  # stop: not flyable
+    lower, upper = input_bounds(ocp)
+    np.testing.assert_array_equal(lower, [0.0, -0.1, -0.1, -0.1])
+    hover = nlp.initial_point(initial_path(ocp, "linear"), inputs="hover")["u"]
+    np.testing.assert_array_equal(hover, np.tile(ocp.robot.hover_input, (ocp.N, 1)))
+    clipped = nlp.initial_point(initial_path(ocp, "linear"), inputs="inverse")["u"]
+    assert np.all(clipped > lower) and np.all(clipped < upper)
+    with pytest.raises(mb.InputError, match="warm-start inputs"):
+        nlp.initial_point(q, inputs="zero")
+
+
+def test_inverse_dynamics_inputs_are_exact_for_a_fully_actuated_body() -> None:
+    """``B`` of full row rank: the least-squares input gives the wrench eq. (34)–(35) need."""
+    B = np.random.default_rng(4).standard_normal((6, 6))
+    body = FreeBody("box", 1.3, np.diag([0.02, 0.03, 0.04]), (0.0, 0.0, -9.81), B)
+    factory = factory_ocp()
+    ocp = mb.OCP(body, mb.Scene(), N=4, dt=0.05, q0=factory.q0, v0=factory.v0)
+    ocp.add_cost("R", br.BodyOrientation(GOAL_R), 1.0)
+    ocp.add_cost("p", br.BodyPosition([0.5, 0.1, 0.0]), 1.0)
+    point = FreeBodyNLP(ocp, jit=False).initial_point(_start(ocp), inputs="hover")
+    u = lgvi_inputs(body, ocp.dt, point)
+    R, F, v = point["R"], point["F"], point["v"]
+    J = body.nonstandard_inertia
+    for k in range(ocp.N):
+        wrench = body.actuation @ u[k]
+        torque = SO3.vee(F[k + 1] @ J - J @ F[k + 1].T - J @ F[k] + F[k].T @ J) / ocp.dt**2
+        force = R[k + 1].T @ (body.mass * ((v[k + 1] - v[k]) / ocp.dt - body.gravity))
+        np.testing.assert_allclose(wrench, np.r_[force, torque], atol=1e-9)

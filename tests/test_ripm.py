@@ -447,3 +447,26 @@ def test_kkt_system_inertia_pattern_cache_and_refinement():
     kkt.set_matrices(hess + sp.eye(n, format="csr"), jac_e, jac_i)  # new pattern
     kkt.factorize(diag)
     assert kkt.n_analyses == 2
+
+
+def test_initial_equality_multipliers_option():
+    """``constr_mult_init_max``: the least-squares ``y₀`` is kept only up to it in max norm
+    (default 1; IPOPT's 1e3; 0: always ``y₀ = 0``); every choice solves HS071 and the
+    Wächter–Biegler example to the same point; a negative bound is rejected."""
+    wb_x0 = np.array([-2.0, 1.0, 1.0])
+    for bound in (0.0, 1.0, 1e3):
+        res = solve_ripm(hs071(), HS071_X0, constr_mult_init_max=bound)
+        assert res.success and res.objective == pytest.approx(17.0140173, abs=1e-6)
+        wb = solve_ripm(_wachter_biegler(), wb_x0, constr_mult_init_max=bound)
+        assert wb.success and np.allclose(wb.x, [1.0, 0.0, 0.5], atol=1e-8)
+    ls = solve_ripm(hs071(), HS071_X0, max_iter=0, constr_mult_init_max=1e3).y
+    assert np.any(ls != 0.0)
+    big = float(np.max(np.abs(ls)))
+    kept = solve_ripm(hs071(), HS071_X0, max_iter=0, constr_mult_init_max=big).y
+    dropped = solve_ripm(hs071(), HS071_X0, max_iter=0, constr_mult_init_max=0.5 * big).y
+    np.testing.assert_array_equal(kept, ls)
+    assert np.all(dropped == 0.0)
+    assert np.all(solve_ripm(hs071(), HS071_X0, max_iter=0, constr_mult_init_max=0.0).y == 0.0)
+    assert RIPMOptions().constr_mult_init_max == 1.0
+    with pytest.raises(InputError, match="constr_mult_init_max"):
+        RIPMOptions(constr_mult_init_max=-1.0)

@@ -22,8 +22,13 @@ from mbplan.dynamics import free_body_step
 from mbplan.engine import RiemannianFunction
 from mbplan.errors import InputError
 from mbplan.lie import SO3, R
-from mbplan.ocp.body_residuals import body_expression, body_parameters, parameter_shapes
-from mbplan.ocp.free_body import free_flyer_state, path_state
+from mbplan.ocp.body_residuals import (
+    BodyInputLimits,
+    body_expression,
+    body_parameters,
+    parameter_shapes,
+)
+from mbplan.ocp.free_body import FreeBody, free_flyer_state, path_state
 from mbplan.ocp.problem import OCP, Item
 from mbplan.transcription.problem import TrajectoryProblem
 from mbplan.transcription.terms import Term
@@ -169,11 +174,12 @@ class FreeBodyNLP:
         sense = "cost" if cost else kind.sense
         return Term("+".join(i.name for i in items), sense, fn, bind, params)
 
-    def initial_point(self, q_path: np.ndarray) -> Point:
-        """The point along a pose path ``q_path (N+1, 7)`` (:func:`path_state`), hover input."""
+    def initial_point(self, q_path: np.ndarray, inputs: str | None = None) -> Point:
+        """The point along a pose path ``q_path (N+1, 7)`` (:func:`path_state`) with the
+        :func:`warm_start_inputs` of kind ``inputs``."""
         ocp = self.ocp
         point = path_state(q_path, ocp.q0, ocp.v0, ocp.dt)
-        point["u"] = np.tile(ocp.robot.hover_input, (ocp.N, 1))
+        point["u"] = warm_start_inputs(ocp, point, inputs)
         return self.problem.check_point(point)
 
     def trajectory(self, x: Point) -> dict:
@@ -187,6 +193,56 @@ class FreeBodyNLP:
             "p": x["p"][:, None],
             "body_names": (self.ocp.robot.name,),
         }
+
+
+WARM_START_INPUTS = "inverse"
+"""The default kind of :func:`warm_start_inputs` (measured in docs/ripm-speed.md, session 5)."""
+BOUND_PUSH = BOUND_FRAC = 0.01
+"""How far inside the input limits warm-start inputs stay: ``min(BOUND_FRAC (upper - lower),
+BOUND_PUSH max(1, |bound|))`` (IPOPT's ``bound_push``/``bound_frac`` rule)."""
+
+
+def warm_start_inputs(ocp: OCP, point: Point, inputs: str | None = None) -> np.ndarray:
+    """Inputs ``(N, nu)`` of a warm start ``point`` (its state): ``"hover"`` (the hover input
+    everywhere) or ``"inverse"`` (:func:`lgvi_inputs`, clipped strictly inside the tightest
+    input limits of :func:`input_bounds`); default :data:`WARM_START_INPUTS`."""
+    inputs = WARM_START_INPUTS if inputs is None else inputs
+    if inputs == "hover":
+        return np.tile(ocp.robot.hover_input, (ocp.N, 1))
+    if inputs != "inverse":
+        raise InputError(f"warm-start inputs: expected 'hover' or 'inverse', got {inputs!r}")
+    lower, upper = input_bounds(ocp)
+    push = np.minimum(BOUND_FRAC * (upper - lower), BOUND_PUSH * np.maximum(1.0, np.abs(lower)))
+    push = np.where(np.isfinite(push), push, 0.0)
+    return np.clip(lgvi_inputs(ocp.robot, ocp.dt, point), lower + push, upper - push)
+
+
+def lgvi_inputs(body: FreeBody, dt: float, point: Point) -> np.ndarray:
+    """Inputs ``u_k`` (``k < N``) of the forced LGVI steps between the knots of ``point``: the
+    least-squares ``u`` of ``B u = (f, τ)`` with the body wrench that eq. (34)–(35), (60) need,
+    ``τ_k = (F_{k+1}J - JF_{k+1}ᵀ - JF_k + F_kᵀJ)^∨ / Δt²`` and
+    ``f_k = R_{k+1}ᵀ (m (v_{k+1} - v_k) / Δt - m g)`` (exact where ``B`` spans the wrench)."""
+    R, F, v = (np.asarray(point[n], dtype=float) for n in ("R", "F", "v"))
+    J = body.nonstandard_inertia
+    F0, F1 = F[:-1], F[1:]
+    skew = F1 @ J - J @ np.swapaxes(F1, 1, 2) - J @ F0 + np.swapaxes(F0, 1, 2) @ J
+    torque = np.stack([skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0]], axis=1) / dt**2
+    world = body.mass * (np.diff(v, axis=0) / dt - body.gravity)
+    force = np.einsum("kji,kj->ki", R[1:], world)
+    wrench = np.hstack([force, torque])
+    return np.linalg.lstsq(body.actuation, wrench.T, rcond=None)[0].T
+
+
+def input_bounds(ocp: OCP) -> tuple[np.ndarray, np.ndarray]:
+    """The tightest ``lower, upper`` (nu,) of the OCP's input-limit constraints (±inf without)."""
+    nu = ocp.robot.nu
+    lower, upper = np.full(nu, -np.inf), np.full(nu, np.inf)
+    for item in ocp.items:
+        r = item.residual
+        if isinstance(r, BodyInputLimits) and item.role == "constraint":
+            r = r.resolve(ocp.robot, ocp.scene)
+            lower, upper = np.maximum(lower, r.lower), np.minimum(upper, r.upper)
+    return lower, upper
 
 
 def build(ocp: OCP, jit: bool) -> tuple[FreeBodyNLP, float]:

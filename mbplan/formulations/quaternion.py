@@ -22,6 +22,7 @@ import casadi as cs
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from mbplan.formulations.free_body import warm_start_inputs
 from mbplan.lie import SO3
 from mbplan.ocp.body_residuals import BodyInputLimits, body_expression, body_parameters
 from mbplan.ocp.free_body import body_state, free_flyer_state, path_state
@@ -133,10 +134,12 @@ class QuaternionNLP:
         return np.concatenate([np.ravel(a, order="F") for a in arrays])
 
     def initial_guess(self, q_path: np.ndarray) -> np.ndarray:
-        """``z`` along a pose path ``q_path (N+1, 7)`` (:func:`path_state`), hover input."""
+        """``z`` along a pose path ``q_path (N+1, 7)`` (:func:`path_state`) with the inputs
+        of the maximal formulation's warm start
+        (:func:`~mbplan.formulations.free_body.warm_start_inputs`)."""
         ocp = self.ocp
         s = path_state(q_path, ocp.q0, ocp.v0, ocp.dt)
-        u = np.tile(ocp.robot.hover_input, (ocp.N, 1))
+        u = warm_start_inputs(ocp, s)
         parts = [to_quaternions(s["R"][1:]), to_quaternions(s["F"][1:]), s["p"][1:], s["v"][1:]]
         return self._flat([a.T for a in [*parts, u]])
 

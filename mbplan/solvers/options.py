@@ -82,8 +82,10 @@ class RIPMOptions:
     """Initial slacks s_0 = max(-g(x_0), bound_push)."""
     bound_mult_init_val: float = 1.0
     """Initial multipliers z_0 of the inequalities."""
-    constr_mult_init_max: float = 1e3
-    """Least-squares initial y_0 is discarded (y_0 = 0) if larger than this in max norm."""
+    constr_mult_init_max: float = 1.0
+    """Least-squares initial y_0 is discarded (y_0 = 0) if larger than this in max norm
+    (IPOPT: 1e3; measured: large estimates at infeasible LGVI warm starts cost inertia
+    corrections and iterations, docs/ripm-speed.md, session 5; 0: always y_0 = 0)."""
 
     # --- inertia correction (WB Algorithm IC) ---
     delta_w_init: float = 1e-4
@@ -161,6 +163,7 @@ class RIPMOptions:
             "kappa_soc": 0 < self.kappa_soc < 1,
             "kappa_resto": 0 < self.kappa_resto < 1,
             "bound_push": self.bound_push > 0,
+            "constr_mult_init_max": self.constr_mult_init_max >= 0,
             "bound_mult_init_val": self.bound_mult_init_val > 0,
             "delta_w_min": 0 <= self.delta_w_min <= self.delta_w_init <= self.delta_w_max,
             "kappa_w_minus": 0 < self.kappa_w_minus < 1,

@@ -146,7 +146,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
             self.z = np.asarray(z0, dtype=float)
         if y0 is not None:
             self.y = np.asarray(y0, dtype=float)
-        elif self.me:
+        elif self.me and o.constr_mult_init_max > 0:
             self.y = self._least_squares_y(ev)
         shapes = (self.y.shape, self.z.shape, self.s.shape)
         if shapes != ((self.me,), (self.mi,), (self.mi,)):
