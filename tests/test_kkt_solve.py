@@ -55,7 +55,10 @@ def test_refined_solve_matches_dense_and_its_fronts_use_the_blocked_kernels(seed
     np.testing.assert_allclose(sol, exact, atol=1e-9 * np.abs(exact).max())
     # without refinement the solve is the factorization's (regularized) one
     unrefined, _ = kkt.solve(rhs, max_refinement=0)
-    np.testing.assert_array_equal(unrefined, kkt._solver.solve(rhs))
+    reg = np.concatenate([np.full(kkt.n, 1e-9), np.full(kkt.dim - kkt.n, -1e-9)])
+    np.testing.assert_allclose(
+        (k_dense + np.diag(reg)) @ unrefined, rhs, atol=1e-9 * (1 + np.abs(unrefined).max())
+    )
 
 
 def test_refinement_reports_a_singular_matrix():
@@ -119,3 +122,34 @@ def test_wrong_lengths_are_input_errors():
     kkt.factorize(diag, static_reg=1e-9)
     with pytest.raises(InputError, match="rhs has shape"):
         kkt.solve(np.ones(kkt.dim + 1))
+
+
+def test_factorize_or_solve_before_set_matrices_is_an_input_error():
+    from mbplan.errors import InputError
+
+    kkt = KKTSystem(2, 1, 0)
+    with pytest.raises(InputError, match="call set_matrices"):
+        kkt.factorize(np.zeros(3))
+    with pytest.raises(InputError, match="call set_matrices"):
+        kkt.solve(np.zeros(3))
+
+
+def test_blas_thread_limit_is_restored_by_the_last_of_nested_users():
+    """The BLAS thread limit is process-wide: nested (or concurrent) users share one limit,
+    taken by the first and restored by the last."""
+    import threadpoolctl
+
+    from mbplan.solvers.linear_solver import _OneBlasThread
+
+    def blas_threads() -> list[int]:
+        return [
+            i["num_threads"] for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"
+        ]
+
+    before = blas_threads()
+    limit = _OneBlasThread()
+    with limit:
+        with limit:
+            assert all(n == 1 for n in blas_threads())
+        assert all(n == 1 for n in blas_threads())  # the outer user still holds the limit
+    assert blas_threads() == before

@@ -198,8 +198,9 @@ class FreeBodyNLP:
 WARM_START_INPUTS = "inverse"
 """The default kind of :func:`warm_start_inputs` (measured in docs/ripm-speed.md, session 5)."""
 BOUND_PUSH = BOUND_FRAC = 0.01
-"""How far inside the input limits warm-start inputs stay: ``min(BOUND_FRAC (upper - lower),
-BOUND_PUSH max(1, |bound|))`` (IPOPT's ``bound_push``/``bound_frac`` rule)."""
+"""How far inside the input limits warm-start inputs stay, at both bounds:
+``min(BOUND_FRAC (upper - lower), BOUND_PUSH max(1, |lower|))`` (IPOPT's
+``bound_push``/``bound_frac`` rule, scaled by the lower bound's magnitude at both ends)."""
 
 
 def warm_start_inputs(ocp: OCP, point: Point, inputs: str | None = None) -> np.ndarray:

@@ -61,14 +61,6 @@ class SO3Group(MatrixLieGroup):
         K = self.hat(xi)
         return cs.DM.eye(3) + a * K + b * cs.mtimes(K, K)
 
-    def retract(self, X: Array, xi: Array) -> Array:
-        """``X exp(ξ)`` (eq. 39); a numeric ``X`` is validated (finite, rotations), ``exp(ξ)``
-        is a rotation by construction."""
-        if is_symbolic(X, xi):
-            return super().retract(X, xi)
-        X = self._element(X)
-        return X @ _exp_numeric(self._tangent(xi))
-
     def log(self, X: Array) -> Array:
         """Rotation vector of ``X`` with angle in [0, π], accurate near 0 and near π."""
         X = self._element(X)

@@ -78,8 +78,10 @@ def frac_to_boundary(v: np.ndarray, dv: np.ndarray, tau: float) -> float:
 def transpose_times(a: sp.csr_matrix | sp.csr_array, x: np.ndarray) -> np.ndarray:
     """``aᵀ x`` for a CSR ``a`` without building the transpose (the sums of scipy's
     ``a.T @ x``, in its order)."""
-    if not (sp.issparse(a) and a.format == "csr" and a.dtype == x.dtype == np.float64):
-        return a.T @ x
+    if not (
+        sp.issparse(a) and a.format == "csr" and a.dtype == x.dtype == np.float64
+    ) or x.shape != (a.shape[0],):
+        return a.T @ x  # scipy's product (and its error for a wrong length)
     return _csr_transpose_times(a.indptr, a.indices, a.data, x, a.shape[1])
 
 

@@ -379,15 +379,6 @@ def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def ldl_solve(b, perm, sfirst, fptr, rows, loff, lbuf, d, wmax):
-    """``x = K⁻¹ b`` with the factorization (:func:`_solve_into` with its own arrays)."""
-    n = b.shape[0]
-    x = np.empty(n)
-    _solve_into(b, x, np.empty(n), np.empty(wmax), perm, sfirst, fptr, rows, loff, lbuf, d)
-    return x
-
-
-@nb.njit(cache=True, error_model="numpy")
 def _residual_into(indptr, indices, data, b, x, r):
     """``r = b - K x`` with ``K`` in CSR arrays (row sums in SciPy's order, so the same
     rounding as ``b - K @ x``); returns ``(‖r‖∞, ‖x‖∞)``, NaN if either has a NaN."""
@@ -453,5 +444,5 @@ def refined_solve(
     return sol, ratio
 
 
-NUMERIC_KERNELS = (ldl_factor, ldl_solve)  # compiled entry points (for the cache check)
+NUMERIC_KERNELS = (ldl_factor,)  # compiled entry points (for the cache check)
 SOLVE_KERNELS = (refined_solve,)

@@ -38,12 +38,12 @@ whose smallest eigenvalue magnitude exceeds ``ε``.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import itertools
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -57,7 +57,6 @@ from mbplan.solvers.ldl_kernels import (
     NUMERIC_KERNELS,
     SOLVE_KERNELS,
     ldl_factor,
-    ldl_solve,
     refined_solve,
 )
 from mbplan.solvers.ldl_symbolic import SYMBOLIC_KERNELS, Analysis
@@ -106,7 +105,7 @@ ORDERINGS = ("amd", "nested", "metis", "auto")
 _ORDERS = {"amd": amd_order, "nested": nested_dissection_order, "metis": metis_order}
 AUTO_MIN_FLOPS = 1e7
 """``"auto"`` orders by METIS too only when AMD's factorization needs at least this many
-multiply-adds (~2 ms): below it METIS's ordering costs more than it can save."""
+multiply-adds: below it METIS's ordering costs more than it can save (docs/ripm-speed.md)."""
 
 
 def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> Analysis:
@@ -144,8 +143,30 @@ def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> 
 
 BLAS_FRONT_ROWS = 256
 """Fronts with at least this many update rows get their Schur update from single-threaded BLAS
-(0.79–0.84× the register-blocked kernel’s time on the 32- and 64-link chains, docs/ripm-speed.md;
-multi-threaded OpenBLAS was 3.6× slower on this 2-core machine)."""
+(measured in docs/ripm-speed.md, session 5)."""
+
+
+class _OneBlasThread:
+    """Limits BLAS to one thread while any factorization with BLAS updates runs (threadpoolctl's
+    limit is process-wide: the first entering thread sets it, the last leaving one restores it)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._users = 0
+        self._limiter: Any = None  # threadpoolctl's limiter while some factorization runs
+
+    def __enter__(self) -> None:
+        with self._lock:
+            if self._users == 0:
+                self._limiter = _blas_controller().limit(limits=1, user_api="blas")
+            self._users += 1
+
+    def __exit__(self, *exc: object) -> None:
+        with self._lock:
+            self._users -= 1
+            if self._users == 0 and self._limiter is not None:
+                self._limiter.restore_original_limits()
+                self._limiter = None
 
 
 @functools.cache
@@ -153,8 +174,7 @@ def _blas_controller() -> threadpoolctl.ThreadpoolController:
     return threadpoolctl.ThreadpoolController()
 
 
-def _one_blas_thread() -> contextlib.AbstractContextManager:
-    return _blas_controller().limit(limits=1, user_api="blas")
+_ONE_BLAS_THREAD = _OneBlasThread()
 
 
 class _SupernodalLDL:
@@ -177,15 +197,8 @@ class _SupernodalLDL:
         )  # fmt: skip
         if not self.uses_blas:
             return ldl_factor(*args)
-        with _one_blas_thread():
+        with _ONE_BLAS_THREAD:
             return ldl_factor(*args)
-
-    def solve(self, b: np.ndarray) -> np.ndarray:
-        a = self.a
-        return ldl_solve(
-            np.ascontiguousarray(b, dtype=np.float64), a.perm, a.sfirst, a.fptr, a.rows,
-            a.loff, self.lbuf, self.d, a.wmax,
-        )  # fmt: skip
 
     def refined_solve(
         self, b: np.ndarray, indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
@@ -306,7 +319,6 @@ class KKTSystem:
         self.dim = n + n_eq + n_ineq
         self._patterns: tuple[sp.csr_matrix | None, ...] = (None, None, None)
         self._solver: _SupernodalLDL | None = None
-        self._matrix: sp.csr_matrix | None = None
         self.n_factorizations = 0
         self.n_analyses = 0
 
@@ -362,6 +374,8 @@ class KKTSystem:
         *factorized* matrix only (not of ``K``): it keeps the LDLᵀ away from zero pivots of a
         structurally zero diagonal, and :meth:`solve` removes its effect by iterative refinement
         against ``K``. Returns the inertia, or ``None`` when the factorization broke down."""
+        if self._solver is None:
+            raise InputError("KKTSystem.factorize: call set_matrices first")
         diagonal = np.asarray(diagonal, dtype=np.float64)
         if diagonal.shape != (self.dim,):
             raise InputError(f"KKT diagonal has shape {diagonal.shape}, expected ({self.dim},)")
@@ -409,6 +423,8 @@ class KKTSystem:
         solves, residuals with the full symmetric pattern, the loop).
 
         Returns ``x`` and IPOPT's residual ratio ``‖r‖∞ / (min(‖x‖∞, 1e6‖b‖∞) + ‖b‖∞)``."""
+        if self._solver is None:
+            raise InputError("KKTSystem.solve: call set_matrices and factorize first")
         rhs = np.asarray(rhs, dtype=np.float64)
         if rhs.shape != (self.dim,):
             raise InputError(f"KKTSystem.solve: rhs has shape {rhs.shape}, expected ({self.dim},)")
@@ -432,6 +448,7 @@ def compile_kernels_in_background() -> threading.Thread | None:
         kkt = KKTSystem(2, 1, 1)
         one = sp.csr_matrix(np.ones((1, 2)))
         kkt.set_matrices(sp.eye(2, format="csr"), one, one)
+        kkt.set_matrices(sp.eye(2, format="csr"), one, one)  # same pattern: compiles the check
         kkt.factorize(np.array([0.0, 0.0, -1.0, -1.0]), 1e-9)
         kkt.solve(np.ones(4))
 

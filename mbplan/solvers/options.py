@@ -84,8 +84,7 @@ class RIPMOptions:
     """Initial multipliers z_0 of the inequalities."""
     constr_mult_init_max: float = 1.0
     """Least-squares initial y_0 is discarded (y_0 = 0) if larger than this in max norm
-    (IPOPT: 1e3; measured: large estimates at infeasible LGVI warm starts cost inertia
-    corrections and iterations, docs/ripm-speed.md, session 5; 0: always y_0 = 0)."""
+    (IPOPT: 1e3; the choice is measured in docs/ripm-speed.md, session 5; 0: always y_0 = 0)."""
 
     # --- inertia correction (WB Algorithm IC) ---
     delta_w_init: float = 1e-4
@@ -104,11 +103,11 @@ class RIPMOptions:
     # --- linear solver (IPOPT's PDFullSpaceSolver) ---
     kkt_ordering: str = "amd"
     """Elimination order of the KKT factorization: ``"amd"`` (approximate minimum degree),
-    ``"metis"`` (METIS nested dissection), ``"auto"`` (the one of the two with fewer predicted
-    flops) or ``"nested"`` (nested dissection along the trajectory's level structure),
-    :mod:`mbplan.solvers.ordering`. METIS needs fewer flops than AMD from 32 chain links on,
-    but the LDLᵀ without pivoting breaks down with its orders at ``δ_w = 0`` on the benchmark
-    KKT matrices, so the inertia correction perturbs more (docs/ripm-speed.md, session 5)."""
+    ``"metis"`` (METIS nested dissection), ``"auto"`` (AMD, or METIS when AMD needs at least
+    ``AUTO_MIN_FLOPS`` multiply-adds and METIS predicts fewer) or ``"nested"`` (nested
+    dissection along the trajectory's level structure), :mod:`mbplan.solvers.ordering`. AMD is
+    the default: the LDLᵀ without pivoting breaks down more often with METIS orders
+    (docs/ripm-speed.md, session 5)."""
     static_regularization: float = 1e-9
     """±ε on the diagonal of the factorized KKT matrix only (removed by iterative refinement),
     so that the LDLᵀ factorization, which does not pivot, never meets an exact zero pivot."""

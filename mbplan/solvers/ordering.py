@@ -10,10 +10,9 @@ longest extent, the thinnest level near the middle (shrunk to the vertices that 
 level) separates the two halves, which are ordered first, the separator last. Pieces below
 ``leaf`` vertices are ordered by AMD. No coordinates are needed: the level structure finds the
 time (or body) direction by itself. :func:`coordinate_dissection_order` cuts by given
-coordinates (knot, body) instead. On the benchmark KKT matrices both need more flops than AMD
-(docs/ripm-speed.md). :func:`metis_order` (Karypis & Kumar 1998, ``METIS_NodeND`` through
-pymetis: multilevel vertex separators, supervariable compression, minimum degree on the small
-pieces) needs fewer than AMD from 32 chain links on.
+coordinates (knot, body) instead. :func:`metis_order` is Karypis & Kumar's (1998)
+``METIS_NodeND`` through pymetis (multilevel vertex separators, supervariable compression,
+minimum degree on the small pieces). Their flop counts against AMD: docs/ripm-speed.md.
 """
 
 from __future__ import annotations
