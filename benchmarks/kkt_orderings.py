@@ -29,6 +29,7 @@ from mbplan.solvers import linear_solver as ls
 from mbplan.solvers import solve_ripm
 from mbplan.solvers.ldl_symbolic import Analysis
 from mbplan.solvers.ordering import amd_order, metis_order
+from mbplan.solvers.supernodal_ldl import SupernodalLDL
 
 ORDERS = {"amd": amd_order, "metis": metis_order}
 
@@ -56,7 +57,7 @@ def _first_ripm_kkt(problem, x0, options) -> np.ndarray:
 def _stability(systems: dict, values: np.ndarray) -> dict[str, str]:
     out = {}
     for o in ("amd", "metis"):
-        solver = ls._SupernodalLDL(systems[o].analysis)
+        solver = SupernodalLDL(systems[o].analysis)
         solver.d[:] = 0.0
         npos, nneg, ok = solver.factor(values)
         where = int(np.flatnonzero(solver.d == 0.0)[0]) if not ok else -1

@@ -139,7 +139,7 @@ def test_blas_thread_limit_is_restored_by_the_last_of_nested_users():
     taken by the first and restored by the last."""
     import threadpoolctl
 
-    from mbplan.solvers.linear_solver import _OneBlasThread
+    from mbplan.solvers.supernodal_ldl import OneBlasThread
 
     def blas_threads() -> list[int]:
         return [
@@ -147,7 +147,7 @@ def test_blas_thread_limit_is_restored_by_the_last_of_nested_users():
         ]
 
     before = blas_threads()
-    limit = _OneBlasThread()
+    limit = OneBlasThread()
     with limit:
         with limit:
             assert all(n == 1 for n in blas_threads())

@@ -226,14 +226,14 @@ def test_blas_update_of_large_fronts_matches_the_blocked_kernels(case, monkeypat
     """The BLAS Schur update (fronts with at least ``BLAS_FRONT_ROWS`` update rows, lowered here
     so that the banded cases reach it) gives the blocked kernels' inertia, pivots and steps, on
     positive, mixed and wrong inertias."""
-    from mbplan.solvers import linear_solver as ls
+    from mbplan.solvers import supernodal_ldl
 
     n, me, mi, density, band = case
     rng = np.random.default_rng(n + me)
     blocks = _kkt_blocks(rng, n, me, mi, density, band)
     systems = []
     for rows in (10**9, 8):
-        monkeypatch.setattr(ls, "BLAS_FRONT_ROWS", rows)
+        monkeypatch.setattr(supernodal_ldl, "BLAS_FRONT_ROWS", rows)
         kkt = KKTSystem(n, me, mi)
         kkt.set_matrices(*blocks)
         systems.append(kkt)

@@ -12,8 +12,8 @@ The pattern (the union of ``H``'s lower triangle, the Jacobians and the full dia
 once by index arrays; each new matrix with the same pattern is a scatter of its values.
 
 The factorization (symbolic analysis in :mod:`mbplan.solvers.ldl_symbolic`, numeric kernels in
-:mod:`mbplan.solvers.ldl_kernels`) is a supernodal multifrontal ``P K Pᵀ = (I + L) D (I + L)ᵀ`` with a diagonal
-``D`` and no pivoting, compiled with numba. Its symbolic analysis takes the approximate minimum
+:mod:`mbplan.solvers.ldl_kernels`, work arrays in :mod:`mbplan.solvers.supernodal_ldl`) is a
+supernodal multifrontal ``P K Pᵀ = (I + L) D (I + L)ᵀ`` with a diagonal ``D`` and no pivoting, compiled with numba. Its symbolic analysis takes the approximate minimum
 degree ordering qdldl computes (SuiteSparse AMD), postorders the elimination tree, groups
 columns into fundamental supernodes merged by CHOLMOD's relaxed amalgamation rule, and
 precomputes where every entry of ``K`` and every child's update matrix lands; it is memoized per
@@ -38,29 +38,24 @@ whose smallest eigenvalue magnitude exceeds ``ε``.
 
 from __future__ import annotations
 
-import functools
 import itertools
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-import threadpoolctl
 
 from mbplan.engine.jit import announce_uncached_numba, numba_cached
 from mbplan.errors import InputError
 from mbplan.solvers.kkt_scatter import SCATTER_KERNELS, matrix_values, same_arrays, scatter_blocks
 from mbplan.solvers.ldl_kernels import (
-    BLAS_PIVOTS,
     NUMERIC_KERNELS,
     SOLVE_KERNELS,
-    ldl_factor,
-    refined_solve,
 )
 from mbplan.solvers.ldl_symbolic import SYMBOLIC_KERNELS, Analysis
 from mbplan.solvers.ordering import amd_order, metis_order, nested_dissection_order
+from mbplan.solvers.supernodal_ldl import SupernodalLDL
 
 _NONE = np.zeros(0, np.int64)
 
@@ -139,77 +134,6 @@ def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> 
         while len(_ANALYSES) > _ANALYSES_KEPT:
             _ANALYSES.popitem(last=False)
     return hit
-
-
-BLAS_FRONT_ROWS = 256
-"""Fronts with at least this many update rows get their Schur update from single-threaded BLAS
-(measured in docs/ripm-speed.md, session 5)."""
-
-
-class _OneBlasThread:
-    """Limits BLAS to one thread while any factorization with BLAS updates runs (threadpoolctl's
-    limit is process-wide: the first entering thread sets it, the last leaving one restores it)."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._users = 0
-        self._limiter: Any = None  # threadpoolctl's limiter while some factorization runs
-
-    def __enter__(self) -> None:
-        with self._lock:
-            if self._users == 0:
-                self._limiter = _blas_controller().limit(limits=1, user_api="blas")
-            self._users += 1
-
-    def __exit__(self, *exc: object) -> None:
-        with self._lock:
-            self._users -= 1
-            if self._users == 0 and self._limiter is not None:
-                self._limiter.restore_original_limits()
-                self._limiter = None
-
-
-@functools.cache
-def _blas_controller() -> threadpoolctl.ThreadpoolController:
-    return threadpoolctl.ThreadpoolController()
-
-
-_ONE_BLAS_THREAD = _OneBlasThread()
-
-
-class _SupernodalLDL:
-    """Numeric factorization and solves for an :class:`Analysis` (own work arrays)."""
-
-    def __init__(self, analysis: Analysis, blas_rows: int | None = None) -> None:
-        self.a = analysis
-        self.lbuf = np.empty(analysis.loff[-1])
-        self.ubuf = np.empty(analysis.uoff[-1])
-        self.d = np.empty(analysis.n)
-        self.blas_rows = BLAS_FRONT_ROWS if blas_rows is None else blas_rows
-        k, m = np.diff(analysis.sfirst), np.diff(analysis.fptr)
-        self.uses_blas = bool(np.any((m - k >= self.blas_rows) & (k >= BLAS_PIVOTS)))
-
-    def factor(self, vals: np.ndarray) -> tuple[int, int, bool]:
-        a = self.a
-        args = (
-            vals, a.amap, a.sfirst, a.fptr, a.loff, a.uoff, a.rptr, a.rel, a.cptr, a.child,
-            self.lbuf, self.ubuf, self.d, self.blas_rows,
-        )  # fmt: skip
-        if not self.uses_blas:
-            return ldl_factor(*args)
-        with _ONE_BLAS_THREAD:
-            return ldl_factor(*args)
-
-    def refined_solve(
-        self, b: np.ndarray, indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
-        max_refinement: int, ratio_max: float,
-    ) -> tuple[np.ndarray, float]:  # fmt: skip
-        a = self.a
-        return refined_solve(
-            np.ascontiguousarray(b, dtype=np.float64), a.perm, a.sfirst, a.fptr, a.rows,
-            a.loff, self.lbuf, self.d, a.wmax, indptr, indices, data,
-            max_refinement, ratio_max,
-        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -318,7 +242,7 @@ class KKTSystem:
         self.n, self.n_eq, self.n_ineq = n, n_eq, n_ineq
         self.dim = n + n_eq + n_ineq
         self._patterns: tuple[sp.csr_matrix | None, ...] = (None, None, None)
-        self._solver: _SupernodalLDL | None = None
+        self._solver: SupernodalLDL | None = None
         self.n_factorizations = 0
         self.n_analyses = 0
 
@@ -334,7 +258,7 @@ class KKTSystem:
         self._full_data = np.zeros(len(pat.full_src))  # K in the full symmetric pattern
         # the factorized values, entry by entry of the lower CSR arrays (= upper CSC arrays)
         self._factor_data = np.zeros(nnz)
-        self._solver = _SupernodalLDL(pat.analysis)
+        self._solver = SupernodalLDL(pat.analysis)
         self.n_analyses += 1
 
     def set_matrices(

@@ -1,0 +1,85 @@
+"""Numeric supernodal LDLᵀ of one :class:`~mbplan.solvers.ldl_symbolic.Analysis`: work arrays, the
+factorization (large fronts' Schur updates by single-threaded BLAS) and the refined solve, over
+the compiled kernels of :mod:`mbplan.solvers.ldl_kernels`."""
+
+from __future__ import annotations
+
+import functools
+import threading
+from typing import Any
+
+import numpy as np
+import threadpoolctl
+
+from mbplan.solvers.ldl_kernels import BLAS_PIVOTS, ldl_factor, refined_solve
+from mbplan.solvers.ldl_symbolic import Analysis
+
+BLAS_FRONT_ROWS = 256
+"""Fronts with at least this many update rows get their Schur update from single-threaded BLAS
+(measured in docs/ripm-speed.md, session 5)."""
+
+
+class OneBlasThread:
+    """Limits BLAS to one thread while any factorization with BLAS updates runs (threadpoolctl's
+    limit is process-wide: the first entering thread sets it, the last leaving one restores it)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._users = 0
+        self._limiter: Any = None  # threadpoolctl's limiter while some factorization runs
+
+    def __enter__(self) -> None:
+        with self._lock:
+            if self._users == 0:
+                self._limiter = _blas_controller().limit(limits=1, user_api="blas")
+            self._users += 1
+
+    def __exit__(self, *exc: object) -> None:
+        with self._lock:
+            self._users -= 1
+            if self._users == 0 and self._limiter is not None:
+                self._limiter.restore_original_limits()
+                self._limiter = None
+
+
+@functools.cache
+def _blas_controller() -> threadpoolctl.ThreadpoolController:
+    return threadpoolctl.ThreadpoolController()
+
+
+_ONE_BLAS_THREAD = OneBlasThread()
+
+
+class SupernodalLDL:
+    """Numeric factorization and solves for an :class:`Analysis` (own work arrays)."""
+
+    def __init__(self, analysis: Analysis, blas_rows: int | None = None) -> None:
+        self.a = analysis
+        self.lbuf = np.empty(analysis.loff[-1])
+        self.ubuf = np.empty(analysis.uoff[-1])
+        self.d = np.empty(analysis.n)
+        self.blas_rows = BLAS_FRONT_ROWS if blas_rows is None else blas_rows
+        k, m = np.diff(analysis.sfirst), np.diff(analysis.fptr)
+        self.uses_blas = bool(np.any((m - k >= self.blas_rows) & (k >= BLAS_PIVOTS)))
+
+    def factor(self, vals: np.ndarray) -> tuple[int, int, bool]:
+        a = self.a
+        args = (
+            vals, a.amap, a.sfirst, a.fptr, a.loff, a.uoff, a.rptr, a.rel, a.cptr, a.child,
+            self.lbuf, self.ubuf, self.d, self.blas_rows,
+        )  # fmt: skip
+        if not self.uses_blas:
+            return ldl_factor(*args)
+        with _ONE_BLAS_THREAD:
+            return ldl_factor(*args)
+
+    def refined_solve(
+        self, b: np.ndarray, indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
+        max_refinement: int, ratio_max: float,
+    ) -> tuple[np.ndarray, float]:  # fmt: skip
+        a = self.a
+        return refined_solve(
+            np.ascontiguousarray(b, dtype=np.float64), a.perm, a.sfirst, a.fptr, a.rows,
+            a.loff, self.lbuf, self.d, a.wmax, indptr, indices, data,
+            max_refinement, ratio_max,
+        )  # fmt: skip
