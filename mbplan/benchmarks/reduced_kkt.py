@@ -40,102 +40,26 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from mbplan.benchmarks.maximal_layout import MaximalLayout
 from mbplan.errors import InputError
 from mbplan.solvers.linear_solver import Inertia, KKTSystem
 
 
-@dataclass(frozen=True)
-class MaximalLayout:
-    """Where the state, joint forces and multibody rows of every knot and body sit in the KKT
-    of a maximal-coordinate problem (``-1`` where a knot is data)."""
+class _Entries:
+    """Dense values ``a[rows[..., :, None], cols[..., None, :]]`` of a sparse matrix ``a`` (a
+    canonical CSR copy and its sorted entry keys, computed once)."""
 
-    n: int
-    n_eq: int
-    n_ineq: int
-    parent: np.ndarray  # (nb,) parent body, -1 for the world; parent < child
-    s_cols: np.ndarray  # (N+1, nb, 12) R, F, p, v tangent coordinates
-    lam_cols: np.ndarray  # (N+1, nb, 5)
-    kin_rows: np.ndarray  # (N, nb, 6) equality rows of step k
-    dyn_rows: np.ndarray  # (N, nb, 6)
-    con_rows: np.ndarray  # (N+1, nb, 5) joint constraint h(X_{k+1}) of the body's joint, on s_k
+    def __init__(self, a: sp.spmatrix) -> None:
+        a = sp.csr_matrix(a, copy=True)
+        a.sum_duplicates()
+        self.a, self.n = a, a.shape[1]
+        self.keys = np.repeat(np.arange(a.shape[0], dtype=np.int64), np.diff(a.indptr)) * self.n
+        self.keys += a.indices
 
-    @property
-    def N(self) -> int:
-        return self.kin_rows.shape[0]
-
-    @property
-    def nb(self) -> int:
-        return self.kin_rows.shape[1]
-
-
-def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
-    """The :class:`MaximalLayout` of the RIPM problem of :mod:`mbplan.formulations.maximal`
-    (revolute and prismatic joints with a constraint row group on every body) from the
-    pattern of its equality Jacobian."""
-    v = problem.variables
-    nb = v.blocks["R"].count
-    knots = v.blocks["R"].knots
-
-    def cols(name: str) -> np.ndarray:
-        idx = v.tangent_index(name)
-        return idx.reshape(knots, nb, idx.shape[1])
-
-    s_cols = np.concatenate([cols(n) for n in ("R", "F", "p", "v")], axis=2)
-    lam_cols = cols("lam")
-    body_of_col = np.full(problem.n, -1, np.int64)
-    knot_of_col = np.full(problem.n, -1, np.int64)
-    kk, bb = np.meshgrid(np.arange(knots), np.arange(nb), indexing="ij")
-    for c in (s_cols, lam_cols):
-        free = c >= 0
-        body_of_col[c[free]] = np.broadcast_to(bb[..., None], c.shape)[free]
-        knot_of_col[c[free]] = np.broadcast_to(kk[..., None], c.shape)[free]
-    layouts = {lay.term.name: lay for lay in problem._layouts["eq"]}
-    N = knots - 1
-    kin_rows = layouts["body_kinematics"].rows.reshape(N, nb, 6)
-    dyn_rows = layouts["body_dynamics"].rows.reshape(N, nb, 6)
-    con_rows = -np.ones((knots, nb, 5), np.int64)
-    parent = np.full(nb, -2, np.int64)
-    jac = sp.csr_matrix(eq_jacobian)
-    for name, lay in layouts.items():
-        if "joint_constraints" not in name:
-            continue
-        for rows in lay.rows:
-            support = np.concatenate([jac.indices[jac.indptr[r] : jac.indptr[r + 1]] for r in rows])
-            bodies = np.unique(body_of_col[support])
-            k = np.unique(knot_of_col[support])
-            if len(k) != 1 or bodies.min() < 0:
-                raise InputError(f"{name}: a joint constraint row outside one knot's bodies")
-            child = int(bodies.max())
-            con_rows[k[0], child] = rows
-            parent[child] = int(bodies.min()) if len(bodies) > 1 else -1
-    if np.any(parent == -2) or np.any(con_rows[1:] < 0):
-        raise InputError("maximal_layout: every body needs a joint constraint at every knot")
-    if np.any(parent >= np.arange(nb)):
-        raise InputError("maximal_layout: bodies must be numbered parents first")
-    return MaximalLayout(
-        problem.n, problem.n_eq, problem.n_ineq, parent, s_cols, lam_cols, kin_rows, dyn_rows,
-        con_rows,
-    )  # fmt: skip
-
-
-_KEYS: dict[int, tuple[sp.csr_matrix, np.ndarray]] = {}
-
-
-def _gather(a: sp.csr_matrix, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """Dense values ``a[rows[..., :, None], cols[..., None, :]]`` of a canonical CSR matrix."""
-    n = a.shape[1]
-    hit = _KEYS.get(id(a))
-    if hit is None or hit[0] is not a:
-        if not a.has_canonical_format:
-            a.sum_duplicates()  # sorts the indices in place
-        keys = np.repeat(np.arange(a.shape[0], dtype=np.int64), np.diff(a.indptr)) * n + a.indices
-        _KEYS.clear()
-        _KEYS[id(a)] = (a, keys)
-    else:
-        keys = hit[1]
-    want = rows[..., :, None].astype(np.int64) * n + cols[..., None, :]
-    pos = np.minimum(np.searchsorted(keys, want), len(keys) - 1)
-    return np.where(keys[pos] == want, a.data[pos], 0.0)
+    def __call__(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        want = rows[..., :, None].astype(np.int64) * self.n + cols[..., None, :]
+        pos = np.minimum(np.searchsorted(self.keys, want), len(self.keys) - 1)
+        return np.where(self.keys[pos] == want, self.a.data[pos], 0.0)
 
 
 def product_flops(a: sp.spmatrix, b: sp.spmatrix) -> float:
@@ -212,17 +136,17 @@ class ReducedKKT:
             P, orig = Kr, keep1
         self.reduced = P
         self._factor_setup(P, orig < n)
-        _KEYS.clear()
 
     def _eliminate_forces(self, K1, Kr, keep1) -> tuple[sp.csr_matrix, np.ndarray]:
         """Stage 3: the pairs (``λ_k``, five LGVI rows of step k-1 per body) out of ``Kr``."""
         lay, n = self.layout, self.layout.n
+        K1_at = _Entries(K1)
         pos1 = np.full(self.n_dim, -1, np.int64)
         pos1[keep1] = np.arange(len(keep1))
         lam = lay.lam_cols[1:]
         sel_rows = np.empty(lam.shape, np.int64)
         for k in range(lay.N):
-            Bk = _gather(K1, n + lay.dyn_rows[k], lay.lam_cols[k + 1])  # (nb, 6, 5)
+            Bk = K1_at(n + lay.dyn_rows[k], lay.lam_cols[k + 1])  # (nb, 6, 5)
             for c in range(lay.nb):
                 sel_rows[k, c] = lay.dyn_rows[k, c][np.sort(_pivots(Bk[c].T)[:5])]
         U2 = pos1[lam.reshape(-1)]
@@ -287,22 +211,23 @@ class ReducedKKT:
         all six kinematics rows stay, ``-1``)."""
         lay = self.layout
         me, nb, N = lay.n_eq, lay.nb, lay.N
+        AE_at = _Entries(AE)
         replaced = -np.ones((N, nb, 5), np.int64)
         r_i, r_j, r_v = [], [], []
         flops = 0.0
         for k in range(1, N):
             s = lay.s_cols[k]
-            Kb = _gather(AE, lay.kin_rows[k], s)  # (nb, 6, 12)
+            Kb = AE_at(lay.kin_rows[k], s)  # (nb, 6, 12)
             pinv = np.linalg.pinv(Kb)  # (nb, 12, 6)
             flops += nb * (6 * 6 * 12 * 2 + 6**3)
             for c in range(nb):
                 p = lay.parent[c]
-                Cc = _gather(AE, lay.con_rows[k, c], s[c])
+                Cc = AE_at(lay.con_rows[k, c], s[c])
                 Mc = Cc @ pinv[c]
                 parts = [(lay.kin_rows[k, c], Mc)]
                 res = np.abs(Mc @ Kb[c] - Cc).max() / max(np.abs(Cc).max(), 1e-300)
                 if p >= 0:
-                    Cp = _gather(AE, lay.con_rows[k, c], s[p])
+                    Cp = AE_at(lay.con_rows[k, c], s[p])
                     Mp = Cp @ pinv[p]
                     parts.append((lay.kin_rows[k, p], Mp))
                     res = max(res, np.abs(Mp @ Kb[p] - Cp).max() / max(np.abs(Cp).max(), 1e-300))
@@ -371,6 +296,7 @@ class ReducedKKT:
         """``T`` (``x_dep = u - E x_free``, identity elsewhere), the local rows and ``x_dep``."""
         lay = self.layout
         n = lay.n
+        AE2_at = _Entries(AE2)
         t_i, t_j, t_v = [], [], []
         local_all, dep_all = [], []
         flops = 0.0
@@ -378,7 +304,7 @@ class ReducedKKT:
             s = lay.s_cols[k]
             dep, free, E = [], [], []
             for c, rows in enumerate(groups):
-                Lc = _gather(AE2, rows, s[c])
+                Lc = AE2_at(rows, s[c])
                 piv = _pivots(Lc)
                 r = len(rows)
                 dep.append(s[c][np.sort(piv[:r])])
@@ -387,13 +313,13 @@ class ReducedKKT:
             fpos = {int(col): i for i, col in enumerate(free_all)}
             for c, rows in enumerate(groups):
                 p = lay.parent[c]
-                Ld = _gather(AE2, rows, dep[c])
+                Ld = AE2_at(rows, dep[c])
                 rhs = np.zeros((len(rows), len(free_all)))
                 for b in (c, p) if p >= 0 else (c,):
-                    Lf = _gather(AE2, rows, free[b])
+                    Lf = AE2_at(rows, free[b])
                     rhs[:, [fpos[int(x)] for x in free[b]]] += Lf
                 if p >= 0:
-                    Lp = _gather(AE2, rows, dep[p])
+                    Lp = AE2_at(rows, dep[p])
                     rhs -= Lp @ E[p]
                     nz = np.count_nonzero(np.any(E[p] != 0, axis=0))
                     flops += len(rows) * len(dep[p]) * nz

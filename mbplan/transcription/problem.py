@@ -158,6 +158,11 @@ class TrajectoryProblem:
         return SparsePattern(rows[mask], cols[mask], (self.n, self.n)), _Mask(mask)
 
     # ------------------------------------------------------------------ manifold
+    def term_rows(self, kind: str) -> dict[str, np.ndarray]:
+        """Rows ``(sites, m)`` of every term of ``kind`` (``"cost"``, ``"eq"``, ``"ineq"``) in
+        its residual vector, by term name."""
+        return {lay.term.name: lay.rows for lay in self._layouts[kind]}
+
     def check_point(self, point: Point, what: str = "initial guess") -> Point:
         return self.variables.check_point(point, what)
 
