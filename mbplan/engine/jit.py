@@ -1,12 +1,14 @@
 """Compile CasADi Functions to C with the system compiler, cached on disk by content hash.
 
-A second run with the same Function (same expression graph, compiler and flags) loads the
-shared object from the cache instead of recompiling. The cache directory is
-``$MBPLAN_CACHE_DIR`` or ``~/.cache/mbplan/jit``.
+A second run with the same Function (same expression graph, compiler, flags and the site-loop
+source below) loads the shared object from the cache instead of recompiling. The cache
+directory is ``$MBPLAN_CACHE_DIR`` or ``~/.cache/mbplan/jit``. Every shared object also holds
+``<name>_sites``, the function evaluated at ``K`` sites in one C loop (:class:`SiteLoop`).
 """
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import shutil
@@ -14,15 +16,16 @@ import subprocess
 import sys
 import tempfile
 import threading
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import casadi as cs
+import numpy as np
 
-from mbplan.errors import MbplanError
+from mbplan.errors import InputError, MbplanError
 
-DEFAULT_FLAGS = ("-O2", "-fPIC", "-shared", "-march=native")
+DEFAULT_FLAGS = ("-O2", "-fno-math-errno", "-fPIC", "-shared", "-march=native")
 
 
 def cache_dir() -> Path:
@@ -39,6 +42,90 @@ def compiler() -> str:
     return cc
 
 
+# argument i and result i of site k at arg[i] + k * nnz_in(i), res[i] + k * nnz_out(i)
+_SITE_LOOP = """
+int {name}_sites(casadi_int K, const casadi_real** arg, casadi_real** res) {{
+  static const casadi_int nnz_in[] = {{{nnz_in}}}, nnz_out[] = {{{nnz_out}}};
+  casadi_int sz_arg, sz_res, sz_iw, sz_w, i, k;
+  {name}_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
+  const casadi_real* a[sz_arg + 1];
+  casadi_real* r[sz_res + 1];
+  casadi_int iw[sz_iw + 1];
+  casadi_real w[sz_w + 1];
+  for (i = 0; i < sz_arg; ++i) a[i] = 0;
+  for (i = 0; i < sz_res; ++i) r[i] = 0;
+  for (k = 0; k < K; ++k) {{
+    for (i = 0; i < {n_in}; ++i) a[i] = arg[i] + k * nnz_in[i];
+    for (i = 0; i < {n_out}; ++i) r[i] = res[i] + k * nnz_out[i];
+    if ({name}(a, r, iw, w, 0)) return 1;
+  }}
+  return 0;
+}}
+"""
+
+
+def _site_loop_source(fn: cs.Function) -> str:
+    def sizes(n: int, nnz) -> str:
+        return ", ".join(str(nnz(i)) for i in range(n)) or "0"
+
+    return _SITE_LOOP.format(
+        name=fn.name(),
+        n_in=fn.n_in(),
+        n_out=fn.n_out(),
+        nnz_in=sizes(fn.n_in(), fn.nnz_in),
+        nnz_out=sizes(fn.n_out(), fn.nnz_out),
+    )
+
+
+class SiteLoop:
+    """A compiled function evaluated at ``K`` sites by one C call: each input and output is a
+    C-ordered float ``(K, nnz)`` array, row ``k`` the site's argument or result."""
+
+    def __init__(self, fn: cs.Function, path: Path) -> None:
+        self.name = fn.name()
+        self._nnz_in = [fn.nnz_in(i) for i in range(fn.n_in())]
+        self._nnz_out = [fn.nnz_out(i) for i in range(fn.n_out())]
+        self._loop = ctypes.CDLL(str(path))[f"{self.name}_sites"]
+        self._loop.argtypes = [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p]
+        self._loop.restype = ctypes.c_int
+
+    def bind(self, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]) -> _BoundLoop:
+        """The evaluation at the sites of these arrays, bound to their memory: every call reads
+        the inputs' current values and overwrites the outputs."""
+        K = inputs[0].shape[0] if inputs else 0
+        for what, arrays, widths in (
+            ("input", inputs, self._nnz_in),
+            ("output", outputs, self._nnz_out),
+        ):
+            if len(arrays) != len(widths):
+                raise InputError(f"{self.name}: {len(widths)} {what}s expected, got {len(arrays)}")
+            for a, width in zip(arrays, widths, strict=True):
+                if a.dtype != np.float64 or a.shape != (K, width) or not a.flags.c_contiguous:
+                    raise InputError(
+                        f"{self.name}: {what} must be a C-ordered float array of shape "
+                        f"{(K, width)}, got {a.dtype} {a.shape}"
+                    )
+        return _BoundLoop(self, K, inputs, outputs)
+
+
+class _BoundLoop:
+    """:meth:`SiteLoop.bind`'s call; holds the arrays whose memory it reads and writes."""
+
+    __slots__ = ("_args", "_keep", "_loop", "_name", "_res", "_sites")
+
+    def __init__(
+        self, loop: SiteLoop, K: int, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]
+    ) -> None:
+        self._loop, self._name, self._sites = loop._loop, loop.name, ctypes.c_longlong(K)
+        self._keep = (tuple(inputs), tuple(outputs))
+        self._args = (ctypes.c_void_p * max(len(inputs), 1))(*[a.ctypes.data for a in inputs])
+        self._res = (ctypes.c_void_p * max(len(outputs), 1))(*[o.ctypes.data for o in outputs])
+
+    def __call__(self) -> None:
+        if self._loop(self._sites, self._args, self._res):
+            raise MbplanError(f"{self._name}: compiled evaluation failed")
+
+
 def compile_function(fn: cs.Function, flags: tuple[str, ...] = DEFAULT_FLAGS) -> cs.Function:
     """Return ``fn`` compiled to native code (loaded with ``casadi.external``)."""
     return compile_functions({"fn": fn}, flags)["fn"]
@@ -48,11 +135,27 @@ def compile_functions(
     fns: Mapping[str, cs.Function], flags: tuple[str, ...] = DEFAULT_FLAGS
 ) -> dict[str, cs.Function]:
     """:func:`compile_function` of each value; the C compilers of uncached ones run in parallel."""
+    paths = _compiled(fns, flags)
+    return {k: cs.external(fn.name(), str(paths[k])) for k, fn in fns.items()}
+
+
+def compile_site_loops(
+    fns: Mapping[str, cs.Function], flags: tuple[str, ...] = DEFAULT_FLAGS
+) -> dict[str, tuple[cs.Function, SiteLoop]]:
+    """Each value compiled, as :func:`compile_functions` gives it and as a :class:`SiteLoop`."""
+    paths = _compiled(fns, flags)
+    return {
+        k: (cs.external(fn.name(), str(paths[k])), SiteLoop(fn, paths[k])) for k, fn in fns.items()
+    }
+
+
+def _compiled(fns: Mapping[str, cs.Function], flags: tuple[str, ...]) -> dict[str, Path]:
+    """The cached shared object of each function, compiling the missing ones."""
     cc = compiler()
     targets = {}
     for key, fn in fns.items():
         digest = hashlib.sha256(
-            "\0".join([fn.serialize(), cc, *flags, cs.__version__]).encode()
+            "\0".join([fn.serialize(), cc, *flags, cs.__version__, _SITE_LOOP]).encode()
         ).hexdigest()[:24]
         targets[key] = cache_dir() / f"{fn.name()}_{digest}.so"
     missing = [k for k in fns if not targets[k].exists()]
@@ -62,7 +165,7 @@ def compile_functions(
             sources = {k: _generate(fns[k], Path(tmp)) for k in missing}  # CasADi: one thread
             with ThreadPoolExecutor(max_workers=min(len(missing), os.cpu_count() or 1)) as pool:
                 list(pool.map(lambda k: _build(cc, flags, sources[k], targets[k]), missing))
-    return {k: cs.external(fn.name(), str(targets[k])) for k, fn in fns.items()}
+    return targets
 
 
 def _generate(fn: cs.Function, folder: Path) -> Path:
@@ -70,6 +173,8 @@ def _generate(fn: cs.Function, folder: Path) -> Path:
     cg = cs.CodeGenerator(src.name, {"with_header": False})
     cg.add(fn)
     cg.generate(str(folder) + os.sep)
+    with src.open("a") as out:
+        out.write(_site_loop_source(fn))
     return src
 
 

@@ -26,7 +26,7 @@ from typing import Any
 import casadi as cs
 import numpy as np
 
-from mbplan.engine.jit import compile_functions
+from mbplan.engine.jit import SiteLoop, compile_site_loops
 from mbplan.engine.site_function import SiteFunction, Slot
 
 
@@ -101,9 +101,13 @@ class RiemannianFunction(SiteFunction):
             "jacobian": cs.Function(f"{name}_jacobian", [z, p], [r0, jac_nz]),
             "hessian": cs.Function(f"{name}_hessian", [z, p, lam], [r0, jac_nz, hess_nz]),
         }
+        self._loops: dict[str, SiteLoop] = {}
         if jit:
-            self._functions = compile_functions(self._functions)
-        self._mapped: dict[tuple[str, int], tuple] = {}
+            compiled = compile_site_loops(self._functions)
+            self._functions = {k: fn for k, (fn, _) in compiled.items()}
+            self._loops = {k: loop for k, (_, loop) in compiled.items()}
+        self._maps: dict[tuple[str, int], cs.Function] = {}
+        self._buffers: dict[tuple[str, int], tuple] = {}
 
     def __repr__(self) -> str:
         return (
@@ -111,17 +115,25 @@ class RiemannianFunction(SiteFunction):
             f"nnz_jac={self.jac_nnz}, nnz_hess={self.hess_nnz}, jit={self.jit})"
         )
 
+    def _mapped(self, kind: str, K: int) -> cs.Function:
+        """The ``K``-fold map of a function (the function itself for ``K = 1``), cached."""
+        fn = self._maps.get((kind, K))
+        if fn is None:
+            fn = self._functions[kind] if K == 1 else self._functions[kind].map(K, "serial")
+            self._maps[(kind, K)] = fn
+        return fn
+
     def _call(self, kind: str, inputs: list[np.ndarray]) -> list[np.ndarray]:
         """Evaluate the ``K``-fold map of a function on C-ordered ``(K, ·)`` arrays, zero-copy."""
         K = inputs[0].shape[0]
         key = (kind, K)
-        cached = self._mapped.get(key)
+        cached = self._buffers.get(key)
         if cached is None:
-            fn = self._functions[kind] if K == 1 else self._functions[kind].map(K, "serial")
+            fn = self._mapped(kind, K)
             buf, evaluate = fn.buffer()
-            cached = (fn, buf, evaluate, [fn.size1_out(i) for i in range(fn.n_out())])
-            self._mapped[key] = cached
-        _, buf, evaluate, sizes = cached
+            cached = (buf, evaluate, [fn.size1_out(i) for i in range(fn.n_out())])
+            self._buffers[key] = cached
+        buf, evaluate, sizes = cached
         for i, a in enumerate(inputs):
             buf.set_arg(i, memoryview(a))
         outs = [np.empty((K, size)) for size in sizes]
@@ -129,3 +141,30 @@ class RiemannianFunction(SiteFunction):
             buf.set_res(i, memoryview(o))
         evaluate()
         return outs
+
+    def bind(
+        self, kind: str, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]
+    ) -> Callable[[], None]:
+        """:meth:`SiteFunction.bind`: compiled, one C loop over the sites (:class:`SiteLoop`);
+        else a CasADi buffer of its own pointing at the arrays once."""
+        if kind in self._loops:
+            return self._loops[kind].bind(inputs, outputs)
+        fn = self._mapped(kind, inputs[0].shape[0])
+        buf, evaluate = fn.buffer()
+        for i, a in enumerate(inputs):
+            buf.set_arg(i, memoryview(a))
+        for i, o in enumerate(outputs):
+            buf.set_res(i, memoryview(o))
+        return _BoundCall(evaluate, (buf, tuple(inputs), tuple(outputs)))
+
+
+class _BoundCall:
+    """A CasADi buffer's evaluation, holding the buffer and the arrays it points into."""
+
+    __slots__ = ("_evaluate", "_keep")
+
+    def __init__(self, evaluate: Callable[[], None], keep: tuple) -> None:
+        self._evaluate, self._keep = evaluate, keep
+
+    def __call__(self) -> None:
+        self._evaluate()

@@ -12,7 +12,7 @@ hand-derived derivatives, e.g. distances computed by coal).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -151,6 +151,20 @@ class SiteFunction(ABC):
         """:meth:`_call` on inputs already packed as :meth:`pack` does, without any checks: the
         fast path for a caller that packs (and validates) a whole point once."""
         return self._call(kind, inputs)
+
+    def bind(
+        self, kind: str, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]
+    ) -> Callable[[], None]:
+        """A call of ``kind`` bound to fixed arrays: every call reads ``inputs`` (packed as for
+        :meth:`call_packed`) and writes the results into ``outputs`` (C-ordered ``(K, ·)``), so a
+        caller refills the inputs in place and evaluates with no allocation or argument
+        handling per call."""
+
+        def call() -> None:
+            for out, res in zip(outputs, self._call(kind, list(inputs)), strict=True):
+                out[...] = res
+
+        return call
 
     def _inputs(self, variables, parameters, K: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         z = self.pack(self.variables, variables, self.nz, "variables", K)

@@ -8,7 +8,8 @@ cost of one evaluation is linear in the horizon and in the number of bodies.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import itertools
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,6 +48,21 @@ class _TermLayout:
         self.jac_cols = cols[:, f.jac_cols]
         hr, hc = cols[:, f.hess_rows], cols[:, f.hess_cols]
         self.hess_rows, self.hess_cols = np.maximum(hr, hc), np.minimum(hr, hc)
+        # evaluation buffers: inputs refilled in place, outputs views of the problem's
+        # per-kind arrays (set by TrajectoryProblem), compiled calls bound to them on first use
+        self.z = np.empty((term.sites, f.nz))
+        self.lam = np.empty((term.sites, f.m))
+        self.outputs: dict[str, list[np.ndarray]] = {}
+        self._calls: dict[str, Callable[[], None]] = {}
+
+    def call(self, kind: str) -> Callable[[], None]:
+        """The term's ``value``/``jacobian``/``hessian`` bound to its buffers."""
+        bound = self._calls.get(kind)
+        if bound is None:
+            inputs = [self.z, self.parameters] + ([self.lam] if kind == "hessian" else [])
+            bound = self.term.function.bind(kind, inputs, self.outputs[kind])
+            self._calls[kind] = bound
+        return bound
 
 
 class TrajectoryProblem:
@@ -96,8 +112,10 @@ class TrajectoryProblem:
             kind: self._jacobian_pattern(kind, sizes[kind]) for kind in ("eq", "ineq")
         }
         self._packed_layout()
-        self._grad_cols, self._grad_mask = self._gradient_columns()
-        self._hess_pattern, self._hess_mask = self._hessian_pattern()
+        self._all_layouts = [lay for kind in ("cost", "eq", "ineq") for lay in self._layouts[kind]]
+        self._grad_cols = self._gradient_columns()
+        self._hess_pattern = self._hessian_pattern()
+        self._output_buffers()
 
     # ------------------------------------------------------------------ patterns
     def _packed_layout(self) -> None:
@@ -136,26 +154,49 @@ class TrajectoryProblem:
             raise InputError(f"point: block {bad!r} contains NaN or inf")
         return vec
 
-    def _jacobian_pattern(self, kind: str, m: int) -> tuple[SparsePattern, _Mask]:
-        rows = [lay.jac_rows.ravel() for lay in self._layouts[kind]]
-        cols = [lay.jac_cols.ravel() for lay in self._layouts[kind]]
-        rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
-        cols = np.concatenate(cols) if cols else np.zeros(0, np.int64)
-        mask = cols >= 0
-        return SparsePattern(rows[mask], cols[mask], (m, self.n)), _Mask(mask)
+    def _jacobian_pattern(self, kind: str, m: int) -> SparsePattern:
+        rows = _cat_index([lay.jac_rows.ravel() for lay in self._layouts[kind]])
+        cols = _cat_index([lay.jac_cols.ravel() for lay in self._layouts[kind]])
+        return SparsePattern(rows, cols, (m, self.n))  # fixed columns (-1) dropped
 
-    def _gradient_columns(self) -> tuple[np.ndarray, _Mask]:
-        cols = [lay.jac_cols.ravel() for lay in self._layouts["cost"]]
-        cols = np.concatenate(cols) if cols else np.zeros(0, np.int64)
-        mask = cols >= 0
-        return cols[mask], _Mask(mask)
+    def _gradient_columns(self) -> np.ndarray:
+        """Gradient column of every cost Jacobian nonzero, ``n`` (a bin cut off) where fixed."""
+        cols = _cat_index([lay.jac_cols.ravel() for lay in self._layouts["cost"]])
+        return np.where(cols >= 0, cols, self.n)
 
-    def _hessian_pattern(self) -> tuple[SparsePattern, _Mask]:
-        lays = [lay for kind in ("cost", "eq", "ineq") for lay in self._layouts[kind]]
-        rows = np.concatenate([lay.hess_rows.ravel() for lay in lays] or [np.zeros(0, np.int64)])
-        cols = np.concatenate([lay.hess_cols.ravel() for lay in lays] or [np.zeros(0, np.int64)])
-        mask = cols >= 0
-        return SparsePattern(rows[mask], cols[mask], (self.n, self.n)), _Mask(mask)
+    def _hessian_pattern(self) -> SparsePattern:
+        rows = _cat_index([lay.hess_rows.ravel() for lay in self._all_layouts])
+        cols = _cat_index([lay.hess_cols.ravel() for lay in self._all_layouts])
+        return SparsePattern(rows, cols, (self.n, self.n))
+
+    def _output_buffers(self) -> None:
+        """One array per kind for the residuals and for the Jacobian nonzeros, one for all
+        Hessian nonzeros, in term order: each term's outputs are ``(K, ·)`` views into them, so
+        the evaluated nonzeros are assembled without concatenating per-term arrays."""
+
+        def views(sizes: list[int]) -> tuple[np.ndarray, list[np.ndarray]]:
+            flat = np.empty(sum(sizes))
+            starts = np.cumsum([0, *sizes])
+            return flat, [flat[a:b] for a, b in itertools.pairwise(starts)]
+
+        self._residuals, self._jacobians, self._cost_residuals = {}, {}, []
+        for kind, lays in self._layouts.items():
+            self._residuals[kind], res = views(
+                [lay.term.sites * lay.term.function.m for lay in lays]
+            )
+            jac_sizes = [lay.term.sites * lay.term.function.jac_nnz for lay in lays]
+            self._jacobians[kind], jac = views(jac_sizes)
+            for lay, r, j in zip(lays, res, jac, strict=True):
+                K = lay.term.sites
+                r2, j2 = r.reshape(K, -1), j.reshape(K, -1)
+                lay.outputs = {"value": [r2], "jacobian": [r2, j2], "hessian": [r2, j2]}
+            if kind == "cost":
+                self._cost_residuals = res
+        self._hessians, hess = views(
+            [lay.term.sites * lay.term.function.hess_nnz for lay in self._all_layouts]
+        )
+        for lay, h in zip(self._all_layouts, hess, strict=True):
+            lay.outputs["hessian"].append(h.reshape(lay.term.sites, -1))
 
     # ------------------------------------------------------------------ manifold
     def term_rows(self, kind: str) -> dict[str, np.ndarray]:
@@ -170,22 +211,27 @@ class TrajectoryProblem:
         return self.variables.retract(point, dx)
 
     # ------------------------------------------------------------------ evaluation
-    def _scatter(self, kind: str, parts: list[np.ndarray]) -> np.ndarray:
+    def _scatter(self, kind: str) -> np.ndarray:
+        """The residual vector of ``kind`` from the terms' residuals (a fresh array)."""
+        parts = self._residuals[kind]
         if self._rows_in_order[kind]:
-            return _cat(parts) + 0.0  # what bincount gives: 0 + v (-0.0 becomes 0.0)
+            return parts + 0.0  # what bincount gives: 0 + v (-0.0 becomes 0.0)
         size = self.n_eq if kind == "eq" else self.n_ineq
-        return np.bincount(self._rows[kind], weights=_cat(parts), minlength=size)
+        return np.bincount(self._rows[kind], weights=parts, minlength=size)
+
+    def _gather(self, point: Point) -> None:
+        """Every term's packed variables from the point, into the term's input buffer."""
+        vec = self._packed(point)
+        for lay in self._all_layouts:
+            np.take(vec, lay.z_index, out=lay.z, mode="clip")  # indices in range by construction
 
     def values(self, point: Point) -> tuple[float, np.ndarray, np.ndarray]:
         """Objective, equality and inequality residuals (for line-search trials)."""
-        vec = self._packed(point)
-        out = {"cost": [], "eq": [], "ineq": []}
-        for kind, lays in self._layouts.items():
-            for lay in lays:
-                r = lay.term.function.call_packed("value", [vec[lay.z_index], lay.parameters])[0]
-                out[kind].append(r.ravel())
-        f = float(sum(v.sum() for v in out["cost"]))
-        return f, self._scatter("eq", out["eq"]), self._scatter("ineq", out["ineq"])
+        self._gather(point)
+        for lay in self._all_layouts:
+            lay.call("value")()
+        f = float(sum(r.sum() for r in self._cost_residuals))
+        return f, self._scatter("eq"), self._scatter("ineq")
 
     def evaluate(
         self,
@@ -202,55 +248,28 @@ class TrajectoryProblem:
             raise InputError(f"multipliers must have shapes ({self.n_eq},), ({self.n_ineq},)")
         if not (np.isfinite(obj_factor) and np.isfinite(y).all() and np.isfinite(z).all()):
             raise InputError("objective factor or multipliers contain NaN or inf")
-        vec = self._packed(point)
-        vals = {"cost": [], "eq": [], "ineq": []}
-        jacs = {"cost": [], "eq": [], "ineq": []}
-        hess = []
+        self._gather(point)
+        kind_of_call = "hessian" if hessian else "jacobian"
+        multipliers = {"eq": y, "ineq": z}
         for kind, lays in self._layouts.items():
             for lay in lays:
-                t, f = lay.term, lay.term.function
-                inputs = [vec[lay.z_index], lay.parameters]
                 if hessian:
                     if kind == "cost":
-                        lam = np.full((t.sites, 1), float(obj_factor))
+                        lay.lam.fill(float(obj_factor))
                     else:
-                        lam = (y if kind == "eq" else z)[lay.rows]
-                    r, j, h = f.call_packed("hessian", [*inputs, lam])
-                    hess.append(h.ravel())
-                else:
-                    r, j = f.call_packed("jacobian", inputs)
-                vals[kind].append(r.ravel())
-                jacs[kind].append(j.ravel())
-        grad = np.bincount(
-            self._grad_cols, weights=_masked(_cat(jacs["cost"]), self._grad_mask), minlength=self.n
-        )
-        eq_pat, eq_mask = self._jac_patterns["eq"]
-        in_pat, in_mask = self._jac_patterns["ineq"]
+                        np.take(multipliers[kind], lay.rows, out=lay.lam, mode="clip")
+                lay.call(kind_of_call)()
+        grad = np.bincount(self._grad_cols, weights=self._jacobians["cost"], minlength=self.n + 1)
         return Evaluation(
-            objective=float(_cat(vals["cost"]).sum()),
-            gradient=grad,
-            eq=self._scatter("eq", vals["eq"]),
-            eq_jacobian=eq_pat.assemble(_masked(_cat(jacs["eq"]), eq_mask)),
-            ineq=self._scatter("ineq", vals["ineq"]),
-            ineq_jacobian=in_pat.assemble(_masked(_cat(jacs["ineq"]), in_mask)),
-            hessian_lower=self._hess_pattern.assemble(_masked(_cat(hess), self._hess_mask))
-            if hessian
-            else None,
+            objective=float(self._residuals["cost"].sum()),
+            gradient=grad[: self.n],
+            eq=self._scatter("eq"),
+            eq_jacobian=self._jac_patterns["eq"].assemble(self._jacobians["eq"]),
+            ineq=self._scatter("ineq"),
+            ineq_jacobian=self._jac_patterns["ineq"].assemble(self._jacobians["ineq"]),
+            hessian_lower=self._hess_pattern.assemble(self._hessians) if hessian else None,
         )
 
 
-def _cat(parts: list[np.ndarray]) -> np.ndarray:
-    if len(parts) == 1:
-        return parts[0]
-    return np.concatenate(parts) if parts else np.zeros(0)
-
-
-def _masked(values: np.ndarray, mask: _Mask) -> np.ndarray:
-    return values if mask.all_true else values[mask.mask]
-
-
-class _Mask:
-    """A boolean mask that knows whether it keeps everything (then no copy is made)."""
-
-    def __init__(self, mask: np.ndarray) -> None:
-        self.mask, self.all_true = mask, bool(mask.all())
+def _cat_index(parts: list[np.ndarray]) -> np.ndarray:
+    return np.concatenate(parts) if parts else np.zeros(0, np.int64)

@@ -11,16 +11,21 @@ import scipy.sparse as sp
 class SparsePattern:
     """Sums values given at (possibly repeated) ``(rows, cols)`` into a CSR matrix.
 
-    The pattern is computed once; each :meth:`assemble` is one ``np.bincount``: no Python loop
-    over knots, bodies or terms.
+    Entries with a negative column (a fixed coordinate) are dropped. The pattern is computed
+    once; each :meth:`assemble` is one ``np.bincount``: no Python loop over knots, bodies or
+    terms.
     """
 
     def __init__(self, rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> None:
         self.shape = shape
-        keys = rows.astype(np.int64) * shape[1] + cols.astype(np.int64)
-        unique, self._slot = np.unique(keys, return_inverse=True)
+        kept = cols >= 0
+        keys = rows[kept].astype(np.int64) * shape[1] + cols[kept].astype(np.int64)
+        unique, slot = np.unique(keys, return_inverse=True)
         self.rows, self.cols = unique // shape[1], unique % shape[1]
         self.nnz = len(unique)
+        # dropped entries go to one extra bin past the matrix's, cut off after the sum
+        self._slot = np.full(len(cols), self.nnz, np.int64)
+        self._slot[kept] = slot.ravel()
         indptr = np.concatenate([[0], np.cumsum(np.bincount(self.rows, minlength=shape[0]))])
         # int32 indices when they fit: scipy then skips an index-dtype pass per assembly
         itype = np.int32 if max(self.nnz, *shape) < np.iinfo(np.int32).max else np.int64
@@ -33,5 +38,5 @@ class SparsePattern:
         # a shallow copy of the validated template with new data: scipy's constructor checks
         # the (fixed) index arrays again on every call, ~5x the cost of the copy
         out = copy.copy(self._template)
-        out.data = np.bincount(self._slot, weights=values, minlength=self.nnz)
+        out.data = np.bincount(self._slot, weights=values, minlength=self.nnz + 1)[: self.nnz]
         return out
