@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import casadi as cs
+import numba as nb
 import numpy as np
 
 from mbplan.lie.backend import Array, as_numeric, check_symbolic_shape, is_symbolic
@@ -111,8 +112,6 @@ class SO3Group(MatrixLieGroup):
 _HAT_DST = np.array([1, 2, 3, 5, 6, 7])
 _HAT_SRC = np.array([2, 1, 2, 0, 1, 0])
 _HAT_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
-_I3 = np.eye(3)
-_I3.flags.writeable = False
 
 
 def _hat_numeric(xi: np.ndarray) -> np.ndarray:
@@ -122,19 +121,43 @@ def _hat_numeric(xi: np.ndarray) -> np.ndarray:
 
 
 def _exp_numeric(xi: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula on a batch: the arithmetic of :func:`_coefficients` (the Taylor
-    branch only when some angle is small), in fewer array operations."""
-    t2 = np.sum(xi * xi, axis=-1)
-    small = t2 < _SMALL
-    if small.any():
-        t = np.sqrt(np.where(small, 1.0, t2))
-        a = np.where(small, 1 - t2 / 6 + t2**2 / 120, np.sin(t) / t)
-        b = np.where(small, 0.5 - t2 / 24 + t2**2 / 720, (1 - np.cos(t)) / t**2)
-    else:
-        t = np.sqrt(t2)
-        a, b = np.sin(t) / t, (1 - np.cos(t)) / t**2
-    K = _hat_numeric(xi)
-    return _I3 + a[..., None, None] * K + b[..., None, None] * (K @ K)
+    """Rodrigues' formula ``I + a φ^ + b φ^²`` on a batch: ``φ^``, ``a`` and ``b`` (the
+    arithmetic of :func:`_coefficients`) in one compiled pass, the product ``φ^ φ^`` by NumPy."""
+    flat = np.ascontiguousarray(xi.reshape(-1, 3), dtype=np.float64)
+    K, a, b = _hat_coefficients(flat)
+    return _rodrigues(K, a, b, K @ K).reshape(*xi.shape[:-1], 3, 3)
+
+
+@nb.njit(cache=True)
+def _hat_coefficients(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``φ^``, ``a = sinθ/θ`` and ``b = (1-cosθ)/θ²`` (Taylor series for θ² < _SMALL) of each
+    row of ``xi``, with the operations in the order of :func:`_coefficients`."""
+    n = xi.shape[0]
+    K, a, b = np.zeros((n, 3, 3)), np.empty(n), np.empty(n)
+    for k in range(n):
+        x, y, z = xi[k, 0], xi[k, 1], xi[k, 2]
+        K[k, 0, 1], K[k, 0, 2], K[k, 1, 2] = -z, y, -x
+        K[k, 1, 0], K[k, 2, 0], K[k, 2, 1] = z, -y, x
+        t2 = x * x + y * y + z * z
+        if t2 < _SMALL:
+            a[k] = 1 - t2 / 6 + t2 * t2 / 120
+            b[k] = 0.5 - t2 / 24 + t2 * t2 / 720
+        else:
+            t = np.sqrt(t2)
+            a[k] = np.sin(t) / t
+            b[k] = (1 - np.cos(t)) / (t * t)
+    return K, a, b
+
+
+@nb.njit(cache=True)
+def _rodrigues(K: np.ndarray, a: np.ndarray, b: np.ndarray, KK: np.ndarray) -> np.ndarray:
+    """``(I + a K) + b K²`` per matrix of the batch."""
+    E = np.empty_like(K)
+    for k in range(K.shape[0]):
+        for i in range(3):
+            for j in range(3):
+                E[k, i, j] = ((1.0 if i == j else 0.0) + a[k] * K[k, i, j]) + b[k] * KK[k, i, j]
+    return E
 
 
 def _coefficients(xi: Array) -> tuple[Array, Array, Array]:
