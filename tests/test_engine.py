@@ -627,6 +627,46 @@ def test_jit_matches_interpreted_and_reuses_the_cache(tmp_path, monkeypatch):
     np.testing.assert_allclose(compiled.value(stack, params), interpreted.value(stack, params))
 
 
+@pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None, reason="no C compiler")
+def test_bound_calls_equal_the_mapped_evaluation(tmp_path, monkeypatch):
+    """``bind`` (compiled: one C loop over the sites; interpreted: a CasADi buffer) gives the
+    mapped evaluation bit for bit, and reads inputs refilled in place."""
+    monkeypatch.setenv("MBPLAN_CACHE_DIR", str(tmp_path))
+    case = CASE["rotational_dynamics_torque"]
+    rng = np.random.default_rng(11)
+    for fn in (case.build(name="bind_probe"), case.build(jit=True, name="bind_probe")):
+        z, p, lam = (np.empty((5, width)) for width in (fn.nz, fn.np, fn.m))
+        outs = {
+            kind: [np.empty((5, w)) for w in (fn.m, fn.jac_nnz, fn.hess_nnz)[:n]]
+            for kind, n in (("value", 1), ("jacobian", 2), ("hessian", 3))
+        }
+        calls = {k: fn.bind(k, [z, p, lam][: 2 + (k == "hessian")], o) for k, o in outs.items()}
+        for _ in range(2):
+            pts = [case.sample(rng) for _ in range(5)]
+            variables = {s.name: np.stack([pt[0][s.name] for pt in pts]) for s in fn.variables}
+            params = {s.name: np.stack([pt[1][s.name] for pt in pts]) for s in fn.parameters}
+            z[...], p[...] = (
+                fn.pack(fn.variables, variables, fn.nz, "variables"),
+                fn.pack(fn.parameters, params, fn.np, "parameters"),
+            )
+            lam[...] = rng.standard_normal(lam.shape)
+            for call in calls.values():
+                call()
+            expected = {
+                "value": [fn.value(variables, params)],
+                "jacobian": list(fn.jacobian(variables, params)),
+                "hessian": list(fn.hessian(variables, params, lam)),
+            }
+            for kind, arrays in outs.items():
+                for a, b in zip(arrays, expected[kind], strict=True):
+                    np.testing.assert_array_equal(a, b)
+    loop = fn._loops["value"]
+    with pytest.raises(InputError, match="shape"):
+        loop.bind([z[:, :-1], p], outs["value"])
+    with pytest.raises(InputError, match="C-ordered"):
+        loop.bind([np.asfortranarray(z), p], outs["value"])
+
+
 # ---------------------------------------------------------------------------------------------
 # Input validation
 # ---------------------------------------------------------------------------------------------

@@ -32,6 +32,14 @@ def test_sparse_pattern_assembles_independent_matrices():
     assert a.has_canonical_format and a.shape == (2, 3)
 
 
+def test_sparse_pattern_drops_entries_of_fixed_columns():
+    pattern = SparsePattern(np.array([0, 1, 1, 0, 1]), np.array([1, -1, 0, 1, -1]), (2, 3))
+    a = pattern.assemble(np.array([1.0, 7.0, 3.0, 4.0, 9.0]))
+    assert pattern.nnz == 2
+    assert np.array_equal(a.toarray(), [[0, 5, 0], [3, 0, 0]])
+    assert a.data.shape == (2,) and a.has_canonical_format
+
+
 def test_so3_batched_retraction_equals_one_by_one():
     """One call on a batch mixing tiny (Taylor branch) and large angles gives each element's
     own result exactly (the line search retracts all knots of all SO(3) blocks at once)."""
