@@ -25,7 +25,7 @@ import numpy as np
 
 from mbplan.errors import InputError, MbplanError
 
-DEFAULT_FLAGS = ("-O2", "-fno-math-errno", "-fPIC", "-shared", "-march=native")
+DEFAULT_FLAGS = ("-O2", "-fPIC", "-shared", "-march=native")
 
 
 def cache_dir() -> Path:
