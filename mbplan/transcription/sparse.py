@@ -4,16 +4,19 @@ from __future__ import annotations
 
 import copy
 
+import numba as nb
 import numpy as np
 import scipy.sparse as sp
+
+from mbplan.errors import InputError
 
 
 class SparsePattern:
     """Sums values given at (possibly repeated) ``(rows, cols)`` into a CSR matrix.
 
     Entries with a negative column (a fixed coordinate) are dropped. The pattern is computed
-    once; each :meth:`assemble` is one ``np.bincount``: no Python loop over knots, bodies or
-    terms.
+    once; each :meth:`assemble` is one compiled pass summing into the slots: no Python loop
+    over knots, bodies or terms.
     """
 
     def __init__(self, rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> None:
@@ -38,5 +41,18 @@ class SparsePattern:
         # a shallow copy of the validated template with new data: scipy's constructor checks
         # the (fixed) index arrays again on every call, ~5x the cost of the copy
         out = copy.copy(self._template)
-        out.data = np.bincount(self._slot, weights=values, minlength=self.nnz + 1)[: self.nnz]
+        values = np.asarray(values, dtype=float)
+        if values.shape != self._slot.shape:
+            raise InputError(f"{len(self._slot)} values expected, got shape {values.shape}")
+        out.data = _accumulate(self._slot, values, self.nnz + 1)[: self.nnz]
         return out
+
+
+@nb.njit(cache=True)
+def _accumulate(slot: np.ndarray, values: np.ndarray, bins: int) -> np.ndarray:
+    """``np.bincount(slot, weights=values, minlength=bins)`` (the same additions in the same
+    order) in one pass, without bincount's pass for the largest index."""
+    out = np.zeros(bins)
+    for i in range(slot.size):
+        out[slot[i]] += values[i]
+    return out
