@@ -38,6 +38,8 @@ def test_sparse_pattern_drops_entries_of_fixed_columns():
     assert pattern.nnz == 2
     assert np.array_equal(a.toarray(), [[0, 5, 0], [3, 0, 0]])
     assert a.data.shape == (2,) and a.has_canonical_format
+    with pytest.raises(InputError, match="5 values expected"):
+        pattern.assemble(np.ones(4))
 
 
 def test_so3_batched_retraction_equals_one_by_one():
