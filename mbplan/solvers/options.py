@@ -114,6 +114,10 @@ class RIPMOptions:
     max_refinement_steps: int = 10
     residual_ratio_max: float = 1e-10
     residual_ratio_singular: float = 1e-5
+    kkt_pivot_threshold: float = 0.0
+    """Threshold ``u`` of 1 × 1 / 2 × 2 pivoting inside each supernode of the KKT
+    factorization (MA57's test ``|d| >= u · max |column|``; tiny pivots without an acceptable
+    replacement perturbed, :class:`~mbplan.solvers.linear_solver.KKTSystem`); 0: no pivoting."""
 
     # --- feasibility restoration (WB §3.3) ---
     restoration: bool = True
@@ -171,6 +175,7 @@ class RIPMOptions:
             "print_level": self.print_level >= 0,
             "degenerate_iters": self.degenerate_iters >= 0,
             "kkt_ordering": self.kkt_ordering in ORDERINGS,
+            "kkt_pivot_threshold": 0 <= self.kkt_pivot_threshold <= 1,
             "mu_strategy": self.mu_strategy in ("monotone", "adaptive"),
             "mu_oracle": self.mu_oracle in ("loqo", "probing"),
             "resto_penalty": self.resto_penalty > 0,
