@@ -194,13 +194,12 @@ def _scale_checked(col, lo, hi, dt, u):
     return big * u <= 1.0
 
 
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
 def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta):
-    """The front's ``k <= _SMALL`` pivot columns, unpivoted, and its Schur update, on flat
-    indices (no array views). Returns the pivot counts and 0 (done), 1 (breakdown: a zero or
-    non-finite pivot) or 2 (a pivot failed the threshold test ``u`` or ``|d| <= delta``: the
-    Schur update is not done)."""
-    r = m - k
+    """The front's ``k <= _SMALL`` pivot columns, unpivoted, and its Schur update (column by
+    column; for ``u > 0`` after all pivots), on flat indices (no array views). Returns the
+    pivot counts and 0 (done), 1 (breakdown: a zero or non-finite pivot) or 2 (a pivot failed
+    the threshold test ``u`` or ``|d| <= delta``: the Schur update is not done)."""
     npos = nneg = 0
     for t in range(k):
         ct = lo + t * m
@@ -223,20 +222,27 @@ def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta):
         if u > 0.0:
             if not _scale_checked(lbuf[ct + t + 1 : ct + m], 0, m - t - 1, dt, u):
                 return npos, nneg, 2
-        else:
-            inv = 1.0 / dt
-            for i in range(t + 1, m):
-                lbuf[ct + i] *= inv
-    for t in range(k):  # the Schur update, column by column
-        ct = lo + t * m
-        dt = d[f + t]
-        for b in range(r):
-            coef = lbuf[ct + k + b] * dt
-            if coef != 0.0:
-                ub = uo + b * r
-                for a in range(b, r):
-                    ubuf[ub + a] -= coef * lbuf[ct + k + a]
+            continue
+        inv = 1.0 / dt
+        for i in range(t + 1, m):
+            lbuf[ct + i] *= inv
+        _small_update(lbuf, ubuf, k, m, ct, uo, dt)
+    if u > 0.0:  # the Schur update once every pivot has passed
+        for t in range(k):
+            _small_update(lbuf, ubuf, k, m, lo + t * m, uo, d[f + t])
     return npos, nneg, 0
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
+def _small_update(lbuf, ubuf, k, m, ct, uo, dt):
+    """The Schur update of the front's pivot column at ``lbuf[ct]`` (pivot ``dt``)."""
+    r = m - k
+    for b in range(r):
+        coef = lbuf[ct + k + b] * dt
+        if coef != 0.0:
+            ub = uo + b * r
+            for a in range(b, r):
+                ubuf[ub + a] -= coef * lbuf[ct + k + a]
 
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
@@ -292,7 +298,7 @@ def _schur(L, df, k, U, blas_rows):
         _schur_update2(L, df, k, U)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", inline="always")
 def _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, pivot_only):
     """Add the children's update matrices into front ``s`` (its pivot columns in ``lbuf``, its
     own update matrix in ``ubuf``; ``pivot_only``: the pivot columns only)."""
