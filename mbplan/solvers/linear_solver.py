@@ -13,7 +13,9 @@ once by index arrays; each new matrix with the same pattern is a scatter of its 
 
 The factorization (symbolic analysis in :mod:`mbplan.solvers.ldl_symbolic`, numeric kernels in
 :mod:`mbplan.solvers.ldl_kernels`, work arrays in :mod:`mbplan.solvers.supernodal_ldl`) is a
-supernodal multifrontal ``P K Pᵀ = (I + L) D (I + L)ᵀ`` with a diagonal ``D`` and no pivoting, compiled with numba. Its symbolic analysis takes the approximate minimum
+supernodal multifrontal ``P K Pᵀ = (I + L) D (I + L)ᵀ`` with a diagonal ``D`` and no pivoting
+(optionally 1 × 1 / 2 × 2 threshold pivoting inside each supernode, ``D`` block diagonal:
+:mod:`mbplan.solvers.ldl_pivot`), compiled with numba. Its symbolic analysis takes the approximate minimum
 degree ordering qdldl computes (SuiteSparse AMD), postorders the elimination tree, groups
 columns into fundamental supernodes merged by CHOLMOD's relaxed amalgamation rule, and
 precomputes where every entry of ``K`` and every child's update matrix lands; it is memoized per

@@ -107,7 +107,8 @@ class RIPMOptions:
     ``AUTO_MIN_FLOPS`` multiply-adds and METIS predicts fewer) or ``"nested"`` (nested
     dissection along the trajectory's level structure), :mod:`mbplan.solvers.ordering`. AMD is
     the default: the LDLᵀ without pivoting breaks down more often with METIS orders
-    (docs/ripm-speed.md, session 5)."""
+    (docs/ripm-speed.md, session 5; with ``kkt_pivot_threshold = 1e-10`` it does not on the
+    benchmark tasks, session 6)."""
     static_regularization: float = 1e-9
     """±ε on the diagonal of the factorized KKT matrix only (removed by iterative refinement),
     so that the LDLᵀ factorization, which does not pivot, never meets an exact zero pivot."""
