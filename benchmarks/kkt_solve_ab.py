@@ -1,5 +1,6 @@
 """A/B of the KKT solve path inside RIPM solves: a baseline commit's ``KKTSystem`` (its
-``linear_solver.py`` and ``ldl_kernels.py``, loaded from git) against the working tree's, on
+``linear_solver.py``, ``ldl_kernels.py`` and, where they exist, ``supernodal_ldl.py`` and
+``ldl_pivot.py``, loaded from git) against the working tree's, on
 the same problems, interleaved in one process (the machine is shared: only ratios count).
 
 Per task: ms per call of ``set_matrices`` (assembly), ``factorize`` and ``solve`` (triangular
@@ -34,28 +35,45 @@ MAX_SYSTEMS = 6  # captured KKT systems timed per case (evenly spaced over the s
 METHODS = {"set_matrices": "assembly", "factorize": "factorize", "solve": "solve"}
 
 
+BASELINE_MODULES = ("ldl_pivot", "ldl_kernels", "supernodal_ldl", "linear_solver")
+
+
 def baseline_kkt(rev: str) -> type:
-    """``KKTSystem`` of commit ``rev`` (its linear_solver.py and ldl_kernels.py; the rest of
-    the package from the working tree), compiled in a per-commit temporary directory."""
+    """``KKTSystem`` of commit ``rev`` (those of its modules :data:`BASELINE_MODULES` that exist
+    at ``rev``; the rest of the package from the working tree), compiled in a per-commit
+    temporary directory."""
     folder = Path(tempfile.gettempdir()) / f"mbplan-kkt-baseline-{rev}"
     folder.mkdir(exist_ok=True)
-    for name in ("ldl_kernels", "linear_solver"):
-        src = subprocess.run(
+    sources = {}
+    for name in BASELINE_MODULES:
+        out = subprocess.run(
             ["git", "show", f"{rev}:mbplan/solvers/{name}.py"],
             cwd=ROOT,
-            check=True,
             capture_output=True,
             text=True,
-        ).stdout
-        src = src.replace(
-            "from mbplan.solvers.ldl_kernels import", "from baseline_ldl_kernels import"
         )
+        if out.returncode == 0:
+            sources[name] = out.stdout
+    for name, src in sources.items():
+        for other in sources:
+            src = src.replace(
+                f"from mbplan.solvers.{other} import", f"from baseline_{other} import"
+            )
         path = folder / f"baseline_{name}.py"
         if not path.exists() or path.read_text() != src:
             path.write_text(src)
     sys.path.insert(0, str(folder))
     module = importlib.import_module("baseline_linear_solver")
-    return module.KKTSystem
+
+    class Baseline(module.KKTSystem):
+        """The baseline, accepting the RIPM's ``pivot_threshold`` (0 only: no pivoting)."""
+
+        def __init__(self, *args: Any, pivot_threshold: float = 0.0, **kw: Any) -> None:
+            if pivot_threshold:
+                raise ValueError("the baseline KKTSystem does not pivot")
+            super().__init__(*args, **kw)
+
+    return Baseline
 
 
 def timed_solve(kkt_class: type, problem: Any, x0: Any, options: Any) -> tuple[Any, dict]:

@@ -1,12 +1,15 @@
 """Numeric kernels of the supernodal LDLᵀ (:mod:`mbplan.solvers.linear_solver`): the multifrontal
-factorization without pivoting (counting the pivot signs) and the triangular solves, compiled with
-numba; storage as described in :mod:`mbplan.solvers.ldl_symbolic`.
+factorization (counting the pivot signs), unpivoted or with threshold pivoting inside each
+supernode (:mod:`mbplan.solvers.ldl_pivot`), and the triangular solves, compiled with numba;
+storage as described in :mod:`mbplan.solvers.ldl_symbolic`.
 """
 
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
+
+from mbplan.solvers.ldl_pivot import pivoted_front, rotate_pairs
 
 _SMALL = 4  # supernodes with at most this many columns are solved without a gathered copy
 _WIDE = 24  # fronts with at least this many rows below the pivot get the 4 x 4 kernels
@@ -177,17 +180,169 @@ def _apply_previous4(L, d, t):
             c3[i] -= e3 * x
 
 
+@nb.njit(cache=True, error_model="numpy")
+def _scale_checked(col, lo, hi, dt, u):
+    """``col[lo:hi] /= dt``; returns ``False`` when a scaled entry exceeds ``1/u`` (the
+    threshold test ``|dt| >= u max |col|`` fails; ``u = 0``: no test)."""
+    inv = 1.0 / dt
+    big = 0.0
+    for i in range(lo, hi):
+        col[i] *= inv
+        a = abs(col[i])
+        if a > big:
+            big = a
+    return big * u <= 1.0
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
+def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta):
+    """The front's ``k <= _SMALL`` pivot columns, unpivoted, and its Schur update (column by
+    column; for ``u > 0`` after all pivots), on flat indices (no array views). Returns the
+    pivot counts and 0 (done), 1 (breakdown: a zero or non-finite pivot) or 2 (a pivot failed
+    the threshold test ``u`` or ``|d| <= delta``: the Schur update is not done)."""
+    npos = nneg = 0
+    for t in range(k):
+        ct = lo + t * m
+        for p in range(t):
+            cp = lo + p * m
+            coef = lbuf[cp + t] * d[f + p]
+            if coef != 0.0:
+                for i in range(t, m):
+                    lbuf[ct + i] -= coef * lbuf[cp + i]
+        dt = lbuf[ct + t]
+        if not np.isfinite(dt):
+            return npos, nneg, 1
+        if abs(dt) <= delta:
+            return npos, nneg, 2 if u > 0.0 else 1
+        d[f + t] = dt
+        if dt > 0.0:
+            npos += 1
+        else:
+            nneg += 1
+        if u > 0.0:
+            if not _scale_checked(lbuf[ct + t + 1 : ct + m], 0, m - t - 1, dt, u):
+                return npos, nneg, 2
+            continue
+        inv = 1.0 / dt
+        for i in range(t + 1, m):
+            lbuf[ct + i] *= inv
+        _small_update(lbuf, ubuf, k, m, ct, uo, dt)
+    if u > 0.0:  # the Schur update once every pivot has passed
+        for t in range(k):
+            _small_update(lbuf, ubuf, k, m, lo + t * m, uo, d[f + t])
+    return npos, nneg, 0
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
+def _small_update(lbuf, ubuf, k, m, ct, uo, dt):
+    """The Schur update of the front's pivot column at ``lbuf[ct]`` (pivot ``dt``)."""
+    r = m - k
+    for b in range(r):
+        coef = lbuf[ct + k + b] * dt
+        if coef != 0.0:
+            ub = uo + b * r
+            for a in range(b, r):
+                ubuf[ub + a] -= coef * lbuf[ct + k + a]
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def _front_columns(L, df, k, m, u, delta):
+    """The front's pivot columns, unpivoted, four (at the end two or one) at a time; return
+    values as :func:`_small_front` (the Schur update is the caller's)."""
+    npos = nneg = 0
+    t = 0
+    while t < k:
+        w = 4 if t + 4 <= k and m - t >= _WIDE else min(2, k - t)
+        if w == 4:
+            _apply_previous4(L, df, t)
+        else:
+            _apply_previous(L, df, t, w == 2)
+        for step in range(w):
+            col = L[t + step]
+            dt = col[t + step]
+            if not np.isfinite(dt):
+                return npos, nneg, 1
+            if abs(dt) <= delta:
+                return npos, nneg, 2 if u > 0.0 else 1
+            df[t + step] = dt
+            if dt > 0.0:
+                npos += 1
+            else:
+                nneg += 1
+            if u > 0.0:
+                if not _scale_checked(col, t + step + 1, m, dt, u):
+                    return npos, nneg, 2
+            else:
+                inv = 1.0 / dt
+                for i in range(t + step + 1, m):
+                    col[i] *= inv
+            for j in range(t + step + 1, t + w):  # the group's later columns
+                coef = col[j] * dt
+                if coef != 0.0:
+                    nxt = L[j]
+                    for i in range(j, m):
+                        nxt[i] -= coef * col[i]
+        t += w
+    return npos, nneg, 0
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _schur(L, df, k, U, blas_rows):
+    """``U -= Σ_t d_t l_t l_tᵀ`` over the front's update rows, by the kernel for its size."""
+    r = U.shape[0]
+    if r >= blas_rows and k >= BLAS_PIVOTS:
+        _schur_blas(L, df, k, U)
+    elif r >= _WIDE:
+        _schur_update4(L, df, k, U)
+    elif r > 0:
+        _schur_update2(L, df, k, U)
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, pivot_only):
+    """Add the children's update matrices into front ``s`` (its pivot columns in ``lbuf``, its
+    own update matrix in ``ubuf``; ``pivot_only``: the pivot columns only)."""
+    r = m - k
+    for ci in range(cptr[s], cptr[s + 1]):
+        c = child[ci]
+        rc, uc, rp = rptr[c + 1] - rptr[c], uoff[c], rptr[c]
+        for bb in range(rc):
+            col = rel[rp + bb]
+            src = uc + bb * rc
+            if col < k:  # into a pivot column of the front
+                dst = lo + col * m
+                for aa in range(bb, rc):
+                    lbuf[dst + rel[rp + aa]] += ubuf[src + aa]
+            elif not pivot_only:  # into the front's own update matrix
+                dst = uo + (col - k) * r - k
+                for aa in range(bb, rc):
+                    ubuf[dst + rel[rp + aa]] += ubuf[src + aa]
+
+
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
 def ldl_factor(
-    vals, amap, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, lbuf, ubuf, d, blas_rows
-):
-    """Multifrontal ``LDLᵀ`` without pivoting. Fronts with at least ``blas_rows`` update rows
-    (and ``BLAS_PIVOTS`` pivot columns) get their Schur update from BLAS. Returns the numbers
-    of positive and negative pivots and ``False`` on a breakdown (a zero or non-finite pivot)."""
+    vals, amap, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, lbuf, ubuf, d, blas_rows,
+    u, delta, sign, piv, e, spiv, eptr, eidx, save, stats,
+):  # fmt: skip
+    """Multifrontal ``LDLᵀ``. Fronts with at least ``blas_rows`` update rows (and
+    ``BLAS_PIVOTS`` pivot columns) get their Schur update from BLAS. ``u = 0``: no pivoting, a
+    zero or non-finite pivot is a breakdown. ``u > 0``: a front whose unpivoted pivots fail the
+    threshold test (or ``|d| <= delta``) is assembled again (``eidx[eptr[s]:eptr[s+1]]``: the
+    entries of K in front s) and refactorized (``save``: work array) by
+    :func:`~mbplan.solvers.ldl_pivot.pivoted_front`: 1 × 1 / 2 × 2 pivots among its own columns
+    (``piv``: local order, ``e``: 2 × 2 off-diagonals, ``spiv[s]``: supernode s pivoted), tiny
+    pivots perturbed to ``sign · delta`` (``sign``: expected pivot signs, pivot order). ``stats``: pivoted fronts, 2 × 2 pivots, perturbed pivots,
+    pivots accepted below the threshold. Returns the numbers of positive, negative and
+    perturbed pivots and ``False`` on a breakdown."""
     lbuf[:] = 0.0
-    for e in range(vals.shape[0]):
-        lbuf[amap[e]] += vals[e]
-    npos = nneg = 0
+    for q in range(vals.shape[0]):
+        lbuf[amap[q]] += vals[q]
+    stats[:] = 0
+    npos = nneg = npert = 0
+    kmax = 1
+    for s in range(sfirst.shape[0] - 1):
+        kmax = max(kmax, sfirst[s + 1] - sfirst[s])
+    rest, v1, v2 = np.empty(kmax, np.int64), np.empty(kmax), np.empty(kmax)
     for s in range(sfirst.shape[0] - 1):
         f = sfirst[s]
         k = sfirst[s + 1] - f
@@ -196,83 +351,69 @@ def ldl_factor(
         lo, uo = loff[s], uoff[s]
         for i in range(uo, uo + r * r):
             ubuf[i] = 0.0
-        for ci in range(cptr[s], cptr[s + 1]):  # extend-add the children's update matrices
-            c = child[ci]
-            rc, uc, rp = rptr[c + 1] - rptr[c], uoff[c], rptr[c]
-            for bb in range(rc):
-                col = rel[rp + bb]
-                src = uc + bb * rc
-                if col < k:  # into a pivot column of the front
-                    dst = lo + col * m
-                    for aa in range(bb, rc):
-                        lbuf[dst + rel[rp + aa]] += ubuf[src + aa]
-                else:  # into the front's own update matrix
-                    dst = uo + (col - k) * r - k
-                    for aa in range(bb, rc):
-                        ubuf[dst + rel[rp + aa]] += ubuf[src + aa]
+        _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, False)
+        spiv[s] = False
         if k <= _SMALL:  # few pivot columns: plain loops on flat indices (no array views)
-            for t in range(k):
-                ct = lo + t * m
-                for p in range(t):
-                    cp = lo + p * m
-                    coef = lbuf[cp + t] * d[f + p]
-                    if coef != 0.0:
-                        for i in range(t, m):
-                            lbuf[ct + i] -= coef * lbuf[cp + i]
-                dt = lbuf[ct + t]
-                if dt == 0.0 or not np.isfinite(dt):
-                    return npos, nneg, False
-                d[f + t] = dt
-                if dt > 0.0:
-                    npos += 1
-                else:
-                    nneg += 1
-                inv = 1.0 / dt
-                for i in range(t + 1, m):
-                    lbuf[ct + i] *= inv
-                for b in range(r):
-                    coef = lbuf[ct + k + b] * dt
-                    if coef != 0.0:
-                        ub = uo + b * r
-                        for a in range(b, r):
-                            ubuf[ub + a] -= coef * lbuf[ct + k + a]
+            ip, ineg, status = _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta)
+        else:
+            L = lbuf[lo : lo + k * m].reshape(k, m)
+            ip, ineg, status = _front_columns(L, d[f : f + k], k, m, u, delta)
+            if status == 0:
+                _schur(L, d[f : f + k], k, ubuf[uo : uo + r * r].reshape(r, r), blas_rows)
+        if status == 1:
+            return npos, nneg, npert, False
+        if status == 0:
+            npos += ip
+            nneg += ineg
             continue
+        # threshold pivoting inside the front: its pivot columns assembled again (the
+        # children's update matrices are kept, the front's own is untouched)
+        lbuf[lo : lo + k * m] = 0.0
+        for q in eidx[eptr[s] : eptr[s + 1]]:
+            lbuf[amap[q]] += vals[q]
+        _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, True)
         L = lbuf[lo : lo + k * m].reshape(k, m)
-        df = d[f : f + k]
-        t = 0
-        while t < k:  # the k pivot columns, four (at the end two or one) at a time
-            w = 4 if t + 4 <= k and m - t >= _WIDE else min(2, k - t)
-            if w == 4:
-                _apply_previous4(L, df, t)
-            else:
-                _apply_previous(L, df, t, w == 2)
-            for step in range(w):
-                col = L[t + step]
-                dt = col[t + step]
-                if dt == 0.0 or not np.isfinite(dt):
-                    return npos, nneg, False
-                df[t + step] = dt
-                if dt > 0.0:
-                    npos += 1
-                else:
-                    nneg += 1
-                inv = 1.0 / dt
-                for i in range(t + step + 1, m):
-                    col[i] *= inv
-                for j in range(t + step + 1, t + w):  # the group's later columns
-                    coef = col[j] * dt
-                    if coef != 0.0:
-                        nxt = L[j]
-                        for i in range(j, m):
-                            nxt[i] -= coef * col[i]
-            t += w
-        if r >= blas_rows and k >= BLAS_PIVOTS:
-            _schur_blas(L, df, k, ubuf[uo : uo + r * r].reshape(r, r))
-        elif r >= _WIDE:
-            _schur_update4(L, df, k, ubuf[uo : uo + r * r].reshape(r, r))
-        elif r > 0:
-            _schur_update2(L, df, k, ubuf[uo : uo + r * r].reshape(r, r))
-    return npos, nneg, True
+        out = save[: k * m].reshape(k, m)
+        ip, ineg, ipert, weak, ok = pivoted_front(
+            L,
+            k,
+            m,
+            u,
+            delta,
+            sign[f : f + k],
+            out,
+            rest,
+            v1,
+            v2,
+            piv[f : f + k],
+            d[f : f + k],
+            e[f : f + k],
+        )
+        if not ok:
+            return npos, nneg, npert, False
+        spiv[s] = True
+        npos += ip
+        nneg += ineg
+        npert += ipert
+        stats[0] += 1
+        stats[2] += ipert
+        stats[3] += weak
+        ef = e[f : f + k]
+        pairs = 0
+        for q in range(k):
+            if ef[q] != 0.0:
+                pairs += 1
+        stats[1] += pairs
+        if r == 0:
+            continue
+        U = ubuf[uo : uo + r * r].reshape(r, r)
+        if pairs:
+            lam = v1[:k]
+            rotate_pairs(L, k, m, d[f : f + k], ef, out, lam)
+            _schur(out, lam, k, U, blas_rows)
+        else:
+            _schur(L, d[f : f + k], k, U, blas_rows)
+    return npos, nneg, npert, True
 
 
 @nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
@@ -322,10 +463,12 @@ def _backward_front(L, w, k, m):
 
 
 @nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
-def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d):
+def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv):
     """``x = K⁻¹ b`` with the factorization, into ``x`` (``y``: length ``n``, ``w``: the
-    largest front, work arrays): forward, diagonal and backward substitution; a supernode with
-    many columns works on a gathered copy of its rows of the right-hand side."""
+    largest front, work arrays): forward, (block) diagonal and backward substitution; a
+    supernode with many columns, or pivoted inside (``spiv``; ``piv``: its local order, ``e``:
+    its 2 × 2 blocks), works on a gathered copy of its rows of the right-hand side. ``y`` holds
+    a pivoted supernode's own entries in pivot order from its forward to its backward pass."""
     n = b.shape[0]
     ns = sfirst.shape[0] - 1
     for i in range(n):
@@ -334,7 +477,7 @@ def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d):
         f, fp, lo = sfirst[s], fptr[s], loff[s]
         k = sfirst[s + 1] - f
         m = fptr[s + 1] - fp
-        if k <= _SMALL:  # flat indexing: no array views for the many small supernodes
+        if k <= _SMALL and not spiv[s]:  # flat indexing: no views for the many small ones
             for t in range(k):
                 yt = y[f + t]
                 if yt != 0.0:
@@ -343,8 +486,12 @@ def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d):
                         y[rows[fp + i]] -= lbuf[c + i] * yt
             continue
         L = lbuf[lo : lo + k * m].reshape(k, m)
-        for i in range(k):
-            w[i] = y[f + i]
+        if spiv[s]:
+            for i in range(k):
+                w[i] = y[f + piv[f + i]]
+        else:
+            for i in range(k):
+                w[i] = y[f + i]
         for i in range(k, m):
             w[i] = 0.0
         _forward_front(L, w, k, m)
@@ -352,13 +499,23 @@ def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d):
             y[f + i] = w[i]
         for i in range(k, m):
             y[rows[fp + i]] += w[i]
-    for i in range(n):
-        y[i] /= d[i]
+    i = 0
+    while i < n:
+        if e[i] == 0.0:
+            y[i] /= d[i]
+            i += 1
+            continue
+        a, c, g = d[i], e[i], d[i + 1]  # the 2 × 2 block [[a, c], [c, g]]
+        det = a * g - c * c
+        y0, y1 = y[i], y[i + 1]
+        y[i] = (g * y0 - c * y1) / det
+        y[i + 1] = (a * y1 - c * y0) / det
+        i += 2
     for s in range(ns - 1, -1, -1):
         f, fp, lo = sfirst[s], fptr[s], loff[s]
         k = sfirst[s + 1] - f
         m = fptr[s + 1] - fp
-        if k <= _SMALL:
+        if k <= _SMALL and not spiv[s]:
             for t in range(k - 1, -1, -1):
                 c = lo + t * m
                 acc = 0.0
@@ -372,8 +529,12 @@ def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d):
         for i in range(k, m):
             w[i] = y[rows[fp + i]]
         _backward_front(L, w, k, m)
-        for i in range(k):
-            y[f + i] = w[i]
+        if spiv[s]:
+            for i in range(k):
+                y[f + piv[f + i]] = w[i]
+        else:
+            for i in range(k):
+                y[f + i] = w[i]
     for i in range(n):
         x[perm[i]] = y[i]
 
@@ -413,7 +574,7 @@ def _ratio(nrm_r, nrm_x, nrm_b):
 
 @nb.njit(cache=True, error_model="numpy")
 def refined_solve(
-    b, perm, sfirst, fptr, rows, loff, lbuf, d, wmax, indptr, indices, data,
+    b, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv, wmax, indptr, indices, data,
     max_refinement, ratio_max,
 ):  # fmt: skip
     """Solve ``K x = b`` with the factorization of the regularized ``K`` and iterative
@@ -425,13 +586,13 @@ def refined_solve(
     sol, cand, dx = np.empty(n), np.empty(n), np.empty(n)
     resid, cand_resid = np.empty(n), np.empty(n)
     nrm_b = _max_abs(b)
-    _solve_into(b, sol, y, w, perm, sfirst, fptr, rows, loff, lbuf, d)
+    _solve_into(b, sol, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv)
     nrm_r, nrm_x = _residual_into(indptr, indices, data, b, sol, resid)
     ratio = _ratio(nrm_r, nrm_x, nrm_b)
     for step in range(max_refinement):
         if step >= 1 and ratio <= ratio_max:
             break
-        _solve_into(resid, dx, y, w, perm, sfirst, fptr, rows, loff, lbuf, d)
+        _solve_into(resid, dx, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv)
         for i in range(n):
             cand[i] = sol[i] + dx[i]
         nrm_r, nrm_x = _residual_into(indptr, indices, data, b, cand, cand_resid)

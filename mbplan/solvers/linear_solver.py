@@ -13,7 +13,9 @@ once by index arrays; each new matrix with the same pattern is a scatter of its 
 
 The factorization (symbolic analysis in :mod:`mbplan.solvers.ldl_symbolic`, numeric kernels in
 :mod:`mbplan.solvers.ldl_kernels`, work arrays in :mod:`mbplan.solvers.supernodal_ldl`) is a
-supernodal multifrontal ``P K Pᵀ = (I + L) D (I + L)ᵀ`` with a diagonal ``D`` and no pivoting, compiled with numba. Its symbolic analysis takes the approximate minimum
+supernodal multifrontal ``P K Pᵀ = (I + L) D (I + L)ᵀ`` with a diagonal ``D`` and no pivoting
+(optionally 1 × 1 / 2 × 2 threshold pivoting inside each supernode, ``D`` block diagonal:
+:mod:`mbplan.solvers.ldl_pivot`), compiled with numba. Its symbolic analysis takes the approximate minimum
 degree ordering qdldl computes (SuiteSparse AMD), postorders the elimination tree, groups
 columns into fundamental supernodes merged by CHOLMOD's relaxed amalgamation rule, and
 precomputes where every entry of ``K`` and every child's update matrix lands; it is memoized per
@@ -98,6 +100,10 @@ _ANALYSES_KEPT = 8
 _ANALYSES_LOCK = threading.Lock()
 ORDERINGS = ("amd", "nested", "metis", "auto")
 _ORDERS = {"amd": amd_order, "nested": nested_dissection_order, "metis": metis_order}
+PERTURBATION = 1e-14
+"""With pivoting, a pivot of magnitude at most this times ``max |K|`` (and below a tenth of the
+static regularization) is perturbed to that magnitude (PARDISO-style static pivoting;
+refinement against ``K`` corrects the solve)."""
 AUTO_MIN_FLOPS = 1e7
 """``"auto"`` orders by METIS too only when AMD's factorization needs at least this many
 multiply-adds: below it METIS's ordering costs more than it can save (docs/ripm-speed.md)."""
@@ -232,13 +238,20 @@ class KKTSystem:
 
     Typical use per Newton step: :meth:`set_matrices` once, then :meth:`factorize` for each trial
     perturbation of the diagonal (inertia correction) and :meth:`solve` for each right-hand side.
-    ``ordering`` selects the elimination order (:func:`analysis`).
+    ``ordering`` selects the elimination order (:func:`analysis`). ``pivot_threshold`` ``u > 0``
+    turns on threshold 1 × 1 / 2 × 2 pivoting inside each supernode (a pivot ``|d| < u`` times
+    its column's largest entry is replaced); ``0``: no pivoting.
     """
 
-    def __init__(self, n: int, n_eq: int, n_ineq: int, *, ordering: str = "amd") -> None:
+    def __init__(
+        self, n: int, n_eq: int, n_ineq: int, *, ordering: str = "amd", pivot_threshold: float = 0.0
+    ) -> None:
         if ordering not in ORDERINGS:
             raise InputError(f"ordering: expected one of {ORDERINGS}, got {ordering!r}")
+        if not 0.0 <= pivot_threshold <= 1.0:
+            raise InputError(f"pivot_threshold: expected a value in [0, 1], got {pivot_threshold}")
         self.ordering = ordering
+        self.pivot_threshold = float(pivot_threshold)
         self.n, self.n_eq, self.n_ineq = n, n_eq, n_ineq
         self.dim = n + n_eq + n_ineq
         self._patterns: tuple[sp.csr_matrix | None, ...] = (None, None, None)
@@ -259,6 +272,8 @@ class KKTSystem:
         # the factorized values, entry by entry of the lower CSR arrays (= upper CSC arrays)
         self._factor_data = np.zeros(nnz)
         self._solver = SupernodalLDL(pat.analysis)
+        # expected pivot signs in pivot order (perturbed pivots get them): + primal, - dual
+        self._sign = np.where(pat.analysis.perm < self.n, 1.0, -1.0)
         self.n_analyses += 1
 
     def set_matrices(
@@ -297,7 +312,14 @@ class KKTSystem:
         ``static_reg`` is added to the primal and subtracted from the dual diagonal of the
         *factorized* matrix only (not of ``K``): it keeps the LDLᵀ away from zero pivots of a
         structurally zero diagonal, and :meth:`solve` removes its effect by iterative refinement
-        against ``K``. Returns the inertia, or ``None`` when the factorization broke down."""
+        against ``K``. Returns the inertia, or ``None`` when the factorization broke down.
+
+        With pivoting, a pivot of magnitude ``<= δ = min(PERTURBATION · max|K|, static_reg / 10)``
+        that no pivot of its supernode can replace is perturbed to ``δ`` with the sign of the static
+        regularization (``+`` primal, ``-`` dual) and counted with it: the inertia is the
+        perturbed matrix's, as the static regularization's is; refinement against ``K``
+        decides whether the factorization solves ``K`` (:meth:`solve`'s ratio, which the
+        Newton step checks). :attr:`pivot_stats` says what the last factorization did."""
         if self._solver is None:
             raise InputError("KKTSystem.factorize: call set_matrices first")
         diagonal = np.asarray(diagonal, dtype=np.float64)
@@ -310,10 +332,27 @@ class KKTSystem:
             self._data, self._full_data, values,
         )  # fmt: skip
         self.n_factorizations += 1
-        positive, negative, ok = self._solver.factor(values)
-        if not ok:  # a zero or non-finite pivot
+        u = self.pivot_threshold
+        delta = 0.0
+        if u > 0.0:  # tiny: at round-off level of K, and below the static regularization
+            delta = PERTURBATION * float(np.max(np.abs(values), initial=0.0))
+            if static_reg > 0.0:
+                delta = min(delta, 0.1 * float(static_reg))
+        positive, negative, _, ok = self._solver.factor(values, u, delta, self._sign)
+        if not ok:  # a non-finite pivot, or a zero one without pivoting
             return None
         return Inertia(positive, negative, 0)
+
+    @property
+    def pivot_stats(self) -> dict[str, int]:
+        """What pivoting did in the last factorization: fronts refactorized with pivoting,
+        2 × 2 pivots, perturbed pivots, 1 × 1 pivots accepted below the threshold (none
+        acceptable in their supernode)."""
+        if self._solver is None:
+            raise InputError("KKTSystem.pivot_stats: call set_matrices first")
+        st = self._solver.stats
+        keys = ("pivoted_fronts", "two_by_two", "perturbed", "below_threshold")
+        return {k: int(v) for k, v in zip(keys, st, strict=True)}
 
     @property
     def analysis(self) -> Analysis:

@@ -107,13 +107,18 @@ class RIPMOptions:
     ``AUTO_MIN_FLOPS`` multiply-adds and METIS predicts fewer) or ``"nested"`` (nested
     dissection along the trajectory's level structure), :mod:`mbplan.solvers.ordering`. AMD is
     the default: the LDLᵀ without pivoting breaks down more often with METIS orders
-    (docs/ripm-speed.md, session 5)."""
+    (docs/ripm-speed.md, session 5; with ``kkt_pivot_threshold = 1e-10`` it does not on the
+    benchmark tasks, session 6)."""
     static_regularization: float = 1e-9
     """±ε on the diagonal of the factorized KKT matrix only (removed by iterative refinement),
     so that the LDLᵀ factorization, which does not pivot, never meets an exact zero pivot."""
     max_refinement_steps: int = 10
     residual_ratio_max: float = 1e-10
     residual_ratio_singular: float = 1e-5
+    kkt_pivot_threshold: float = 0.0
+    """Threshold ``u`` of 1 × 1 / 2 × 2 pivoting inside each supernode of the KKT
+    factorization (MA57's test ``|d| >= u · max |column|``; tiny pivots without an acceptable
+    replacement perturbed, :class:`~mbplan.solvers.linear_solver.KKTSystem`); 0: no pivoting."""
 
     # --- feasibility restoration (WB §3.3) ---
     restoration: bool = True
@@ -171,6 +176,7 @@ class RIPMOptions:
             "print_level": self.print_level >= 0,
             "degenerate_iters": self.degenerate_iters >= 0,
             "kkt_ordering": self.kkt_ordering in ORDERINGS,
+            "kkt_pivot_threshold": 0 <= self.kkt_pivot_threshold <= 1,
             "mu_strategy": self.mu_strategy in ("monotone", "adaptive"),
             "mu_oracle": self.mu_oracle in ("loqo", "probing"),
             "resto_penalty": self.resto_penalty > 0,

@@ -99,7 +99,13 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.resto = parent is not None
         if parent is None:
             out = (lambda line: print(line, file=sys.stdout)) if options.print_level > 0 else None
-            kkt = KKTSystem(self.n, self.me, self.mi, ordering=options.kkt_ordering)
+            kkt = KKTSystem(
+                self.n,
+                self.me,
+                self.mi,
+                ordering=options.kkt_ordering,
+                pivot_threshold=options.kkt_pivot_threshold,
+            )
             self.sh = _Shared(kkt, IterationHistory(), out)
         else:
             self.sh = parent.sh
@@ -165,7 +171,13 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
 
     def _least_squares_y(self, ev: NLPEvaluation) -> np.ndarray:
         """``y`` minimizing ``‖grad f + A_Eᵀy + A_Iᵀz‖`` (WB), or 0 if it is large."""
-        kkt = KKTSystem(self.n, self.me, 0, ordering=self.o.kkt_ordering)
+        kkt = KKTSystem(
+            self.n,
+            self.me,
+            0,
+            ordering=self.o.kkt_ordering,
+            pivot_threshold=self.o.kkt_pivot_threshold,
+        )
         kkt.set_matrices(None, ev.eq_jacobian, None)
         diag = np.concatenate([np.ones(self.n), np.zeros(self.me)])
         inertia = kkt.factorize(diag, self.o.static_regularization)

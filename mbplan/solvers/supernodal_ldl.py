@@ -58,15 +58,43 @@ class SupernodalLDL:
         self.lbuf = np.empty(analysis.loff[-1])
         self.ubuf = np.empty(analysis.uoff[-1])
         self.d = np.empty(analysis.n)
+        self.e = np.zeros(analysis.n)  # 2 × 2 pivots' off-diagonals (pivoted supernodes)
+        self.piv = np.zeros(analysis.n, np.int64)  # local pivot order (pivoted supernodes)
+        self.spiv = np.zeros(len(analysis.sfirst) - 1, np.bool_)
+        self.stats = np.zeros(4, np.int64)  # see ldl_factor
+        self._save = np.empty(0)  # work array of pivoted fronts, and the entries of each front:
+        self._eptr = np.zeros(len(analysis.loff), np.int64)
+        self._eidx = np.zeros(0, np.int64)
         self.blas_rows = BLAS_FRONT_ROWS if blas_rows is None else blas_rows
         k, m = np.diff(analysis.sfirst), np.diff(analysis.fptr)
         self.uses_blas = bool(np.any((m - k >= self.blas_rows) & (k >= BLAS_PIVOTS)))
 
-    def factor(self, vals: np.ndarray) -> tuple[int, int, bool]:
+    def factor(
+        self,
+        vals: np.ndarray,
+        pivot_threshold: float = 0.0,
+        delta: float = 0.0,
+        sign: np.ndarray | None = None,
+    ) -> tuple[int, int, int, bool]:
+        """Numeric factorization of the values ``vals`` (the analysis' entry order): the
+        numbers of positive, negative and perturbed pivots and ``False`` on a breakdown.
+        ``pivot_threshold > 0``: threshold pivoting inside each supernode, pivots with
+        ``|d| <= delta`` perturbed to ``sign · delta`` (``sign``: the expected pivot signs in
+        pivot order, default +1; :func:`~mbplan.solvers.ldl_kernels.ldl_factor`)."""
         a = self.a
+        if pivot_threshold > 0.0 and self._save.size == 0:
+            self._save = np.empty(int(np.max(np.diff(a.loff), initial=1)))
+            front = np.searchsorted(a.loff, a.amap, side="right") - 1  # each entry's front
+            self._eidx = np.argsort(front, kind="stable")
+            self._eptr = np.searchsorted(front[self._eidx], np.arange(len(a.loff)))
+        self.e[:] = 0.0
+        if sign is None:
+            sign = np.ones(a.n)
         args = (
             vals, a.amap, a.sfirst, a.fptr, a.loff, a.uoff, a.rptr, a.rel, a.cptr, a.child,
-            self.lbuf, self.ubuf, self.d, self.blas_rows,
+            self.lbuf, self.ubuf, self.d, self.blas_rows, float(pivot_threshold), float(delta),
+            sign, self.piv, self.e, self.spiv, self._eptr, self._eidx,
+            self._save if self._save.size else self.d, self.stats,
         )  # fmt: skip
         if not self.uses_blas:
             return ldl_factor(*args)
@@ -80,6 +108,6 @@ class SupernodalLDL:
         a = self.a
         return refined_solve(
             np.ascontiguousarray(b, dtype=np.float64), a.perm, a.sfirst, a.fptr, a.rows,
-            a.loff, self.lbuf, self.d, a.wmax, indptr, indices, data,
+            a.loff, self.lbuf, self.d, self.piv, self.e, self.spiv, a.wmax, indptr, indices, data,
             max_refinement, ratio_max,
         )  # fmt: skip
