@@ -11,6 +11,7 @@ import numpy as np
 
 from mbplan.errors import InputError
 from mbplan.solvers.linear_solver import ORDERINGS
+from mbplan.solvers.reduced_step import KKT_METHODS
 
 
 @dataclass(frozen=True)
@@ -114,6 +115,11 @@ class RIPMOptions:
     max_refinement_steps: int = 10
     residual_ratio_max: float = 1e-10
     residual_ratio_singular: float = 1e-5
+    kkt_method: str = "full"
+    """``"full"``: factorize the whole KKT matrix; ``"reduced"``: eliminate the pairs of the
+    problem's ``elimination_plan`` first (:mod:`mbplan.solvers.reduced_step`; the full
+    factorization where it does not apply, e.g. ``δ_c > 0``); ``"auto"``: reduced when the
+    problem has a plan."""
 
     # --- feasibility restoration (WB §3.3) ---
     restoration: bool = True
@@ -171,6 +177,7 @@ class RIPMOptions:
             "print_level": self.print_level >= 0,
             "degenerate_iters": self.degenerate_iters >= 0,
             "kkt_ordering": self.kkt_ordering in ORDERINGS,
+            "kkt_method": self.kkt_method in KKT_METHODS,
             "mu_strategy": self.mu_strategy in ("monotone", "adaptive"),
             "mu_oracle": self.mu_oracle in ("loqo", "probing"),
             "resto_penalty": self.resto_penalty > 0,

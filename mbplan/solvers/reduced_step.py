@@ -18,6 +18,10 @@ breakdown in the reduction or in ``K_r``, or a refined solve that does not conve
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+import threading
+from collections import OrderedDict
 from collections.abc import Callable
 
 import numpy as np
@@ -40,6 +44,39 @@ from mbplan.solvers.reduced_kernels import (
 REDUCED_STATIC_REG = 1e-8
 """Static regularization of ``K_r`` (at least): its zero-diagonal multiplier-like columns break
 the unpivoted LDLᵀ down with ``1e-9`` (docs/ripm-speed.md, session 5)."""
+
+
+_REDUCTIONS: OrderedDict[tuple, _Reduction] = OrderedDict()
+_REDUCTIONS_KEPT = 8
+_REDUCTIONS_LOCK = threading.Lock()
+
+
+def reduction(
+    plan: EliminationPlan,
+    hess: sp.csr_matrix,
+    ae: sp.csr_matrix,
+    ai: sp.csr_matrix,
+    ordering: str,
+) -> _Reduction:
+    """A :class:`_Reduction` of its own for ``plan`` and the blocks' patterns; the symbolic
+    phase is memoized per process for the last few (the solves of one task family share it,
+    with the replaced rows and dependent columns picked on the first one's values)."""
+    key = (
+        ordering,
+        *(getattr(plan, f.name).tobytes() for f in dataclasses.fields(plan)),
+        *(a.tobytes() for m in (hess, ae, ai) for a in (m.indptr, m.indices)),
+    )
+    with _REDUCTIONS_LOCK:
+        hit = _REDUCTIONS.get(key)
+        if hit is not None:
+            _REDUCTIONS.move_to_end(key)
+            return hit.fresh()
+    hit = _Reduction(plan, hess, ae, ai, ordering)
+    with _REDUCTIONS_LOCK:
+        _REDUCTIONS[key] = hit
+        while len(_REDUCTIONS) > _REDUCTIONS_KEPT:
+            _REDUCTIONS.popitem(last=False)
+    return hit.fresh()
 
 
 class _Slots:
@@ -96,8 +133,24 @@ class _Reduction:
         self._blocks(plan, ae, slots)
         self._transform()
         self._products(hess, ae, ai)
+        self.ordering = ordering
         self.kkt = KKTSystem(self.nr, len(self.kept), self.mi, ordering=ordering)
         self.ok = False
+
+    _WORK = ("M", "new_rows", "lbuf", "ebuf", "lu", "piv", "work", "hr_base", "dt_data", "ttt")
+    _MATRICES = ("T", "Tt", "hs", "W", "Hr", "ak", "Ar", "AIr")
+
+    def fresh(self) -> _Reduction:
+        """A copy sharing the symbolic arrays, with its own work arrays and ``K_r`` system."""
+        new = copy.copy(self)
+        for name in self._WORK:
+            setattr(new, name, getattr(self, name).copy())
+        for name in self._MATRICES:
+            m = getattr(self, name)
+            setattr(new, name, sp.csr_matrix((m.data.copy(), m.indices, m.indptr), shape=m.shape))
+        new.kkt = KKTSystem(self.nr, len(self.kept), self.mi, ordering=self.ordering)
+        new.ok = False
+        return new
 
     # ------------------------------------------------------------------ symbolic
     def _groups(self, plan: EliminationPlan, ae: sp.csr_matrix, slots: _Slots) -> None:
@@ -307,11 +360,11 @@ class _Reduction:
         self.ak = sp.csr_matrix((np.zeros(sub.nnz), ae_pos.indices, ae_pos.indptr), shape=sub.shape)
         self.ak_src = ae_pos.data.astype(np.int64) - 1
         self.Ar = _product_pattern(self.ak, self.T)
-        self.ai = ai
         self.AIr = _product_pattern(ai, self.T)
         self.work = np.zeros(max(self.nr, 1))
         self.hr_base = np.zeros(self.Hr.nnz)
         self.dt_data = np.zeros(self.T.nnz)
+        self.ttt = np.zeros(self.Hr.nnz)  # TᵀT in Hr's pattern
 
     # ------------------------------------------------------------------ numeric
     def set_values(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> bool:
@@ -338,6 +391,8 @@ class _Reduction:
         self._product(self.hs, T, self.W)
         self._product(Tt, self.W, self.Hr)
         self.hr_base[:] = self.Hr.data
+        self._product(Tt, T, self.Hr)
+        self.ttt[:] = self.Hr.data
         self.ak.data[:] = ae.data[self.ak_src]
         self._product(self.ak, T, self.Ar)
         self._product(ai, T, self.AIr)
@@ -350,16 +405,21 @@ class _Reduction:
                c.data, self.work)  # fmt: skip
 
     def factorize(self, diagonal: np.ndarray, static_reg: float) -> Inertia | None:
-        """Factorize ``K_r`` for ``K``'s diagonal; the inertia of ``K`` (``None``: a nonzero
+        """Factorize ``K_r`` for ``K``'s diagonal (``Tᵀ D_x T`` added to ``Tᵀ H T``); the inertia of ``K`` (``None``: a nonzero
         diagonal on a local row, or a breakdown)."""
         n, me = self.n, self.me
         if not self.ok or np.any(diagonal[n + self.y_rows] != 0.0):
             return None
-        T = self.T
-        self.dt_data[:] = T.data * diagonal[:n][self.t_rows]
-        self.Hr.data[:] = self.hr_base
-        spgemm(self.Tt.indptr, self.Tt.indices, self.Tt.data, T.indptr, T.indices, self.dt_data,
-               self.Hr.indptr, self.Hr.indices, self.Hr.data, self.work)  # fmt: skip
+        dx = diagonal[:n]
+        if np.all(dx == dx[0]):  # δ_w (+ζ) I: Tᵀ D T = d TᵀT
+            np.multiply(self.ttt, dx[0], out=self.Hr.data)
+            self.Hr.data += self.hr_base
+        else:
+            T = self.T
+            self.dt_data[:] = T.data * dx[self.t_rows]
+            self.Hr.data[:] = self.hr_base
+            spgemm(self.Tt.indptr, self.Tt.indices, self.Tt.data, T.indptr, T.indices,
+                   self.dt_data, self.Hr.indptr, self.Hr.indices, self.Hr.data, self.work)  # fmt: skip
         self.kkt.set_matrices(self.Hr, self.Ar, self.AIr)
         diag_r = np.concatenate([np.zeros(self.nr), diagonal[n + self.kept], diagonal[n + me :]])
         inertia = self.kkt.factorize(diag_r, max(static_reg, REDUCED_STATIC_REG))
@@ -404,7 +464,8 @@ def _ratio(res: np.ndarray, x: np.ndarray, b: np.ndarray) -> float:
 class ReducedKKTSystem:
     """:class:`KKTSystem`'s interface, factorizing through the plan ``plan_of(A_E)`` returns
     for each new pattern (module docstring); the full factorization when the plan is ``None``
-    or the reduction does not apply. ``n_reduced``: factorizations through the reduction;
+    or the reduction does not apply (``strict``: an invalid plan raises instead).
+    ``n_reduced``: factorizations through the reduction;
     ``n_fallbacks``: refined solves that missed ``ratio_max`` and were redone in full."""
 
     def __init__(
@@ -415,14 +476,15 @@ class ReducedKKTSystem:
         plan_of: Callable[[sp.csr_matrix], EliminationPlan | None],
         *,
         ordering: str = "amd",
+        strict: bool = False,
     ) -> None:
         self.full = KKTSystem(n, n_eq, n_ineq, ordering=ordering)
         self.n, self.n_eq, self.n_ineq, self.dim = n, n_eq, n_ineq, self.full.dim
         self.ordering = ordering
-        self.plan_of = plan_of
+        self.plan_of, self.strict = plan_of, strict
         self._red: _Reduction | None = None
         self._seen = -1  # full.n_analyses the reduction was built for
-        self._active = False
+        self._active = self._values = False
         self._diag = np.zeros(0)
         self._reg = 0.0
         self.n_reduced = 0
@@ -438,20 +500,26 @@ class ReducedKKTSystem:
         return self._red
 
     def set_matrices(self, hessian, jac_eq, jac_ineq) -> None:
-        """As :meth:`KKTSystem.set_matrices` (``hessian`` may not be ``None`` here)."""
-        if hessian is None:
-            raise InputError("ReducedKKTSystem.set_matrices: needs the Hessian")
+        """As :meth:`KKTSystem.set_matrices` (``hessian=None``: the full factorization)."""
         self.full.set_matrices(hessian, jac_eq, jac_ineq)
+        self._active = False
+        if hessian is None:
+            self._values = False
+            return
         hess = _csr(hessian, (self.n, self.n))
         ae = _csr(jac_eq, (self.n_eq, self.n))
         ai = _csr(jac_ineq, (self.n_ineq, self.n))
         if self._seen != self.full.n_analyses:
             self._seen = self.full.n_analyses
-            plan = self.plan_of(ae)
-            self._red = None if plan is None else _Reduction(plan, hess, ae, ai, self.ordering)
-        if self._red is not None:
-            self._red.set_values(hess, ae, ai)
-        self._active = False
+            self._red = None
+            try:
+                plan = self.plan_of(ae)
+                if plan is not None:
+                    self._red = reduction(plan, hess, ae, ai, self.ordering)
+            except InputError:
+                if self.strict:
+                    raise
+        self._values = self._red is not None and self._red.set_values(hess, ae, ai)
 
     def factorize(self, diagonal: np.ndarray, static_reg: float = 0.0) -> Inertia | None:
         """As :meth:`KKTSystem.factorize`: the inertia of the full ``K``."""
@@ -459,7 +527,7 @@ class ReducedKKTSystem:
         if diagonal.shape != (self.dim,):
             raise InputError(f"KKT diagonal has shape {diagonal.shape}, expected ({self.dim},)")
         self._diag, self._reg = diagonal, static_reg
-        inertia = None if self._red is None else self._red.factorize(diagonal, static_reg)
+        inertia = self._red.factorize(diagonal, static_reg) if self._values else None
         self._active = inertia is not None
         if not self._active:
             return self.full.factorize(diagonal, static_reg)
@@ -510,3 +578,21 @@ class ReducedKKTSystem:
         self._active = False
         self.full.factorize(self._diag, self._reg)
         return self.full.solve(rhs, max_refinement, ratio_max)
+
+
+KKT_METHODS = ("full", "reduced", "auto")
+
+
+def kkt_system(problem, method: str, ordering: str) -> KKTSystem | ReducedKKTSystem:
+    """The RIPM's KKT system for ``problem``: ``"full"``, ``"reduced"`` (through the problem's
+    ``elimination_plan(A_E)``, an :class:`InputError` if it has none or it is invalid) or
+    ``"auto"`` (reduced when the problem has a valid plan)."""
+    if method not in KKT_METHODS:
+        raise InputError(f"kkt_method: expected one of {KKT_METHODS}, got {method!r}")
+    n, me, mi = int(problem.n), int(problem.n_eq), int(problem.n_ineq)
+    plan_of = getattr(problem, "elimination_plan", None)
+    if method == "full" or (method == "auto" and plan_of is None):
+        return KKTSystem(n, me, mi, ordering=ordering)
+    if plan_of is None:
+        raise InputError("kkt_method='reduced': the problem provides no elimination_plan")
+    return ReducedKKTSystem(n, me, mi, plan_of, ordering=ordering, strict=method == "reduced")
