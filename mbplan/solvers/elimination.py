@@ -54,9 +54,7 @@ class EliminationPlan:
         r = (self.group_subtract >= 0).sum(axis=1)
         if np.any(r > (self.group_targets >= 0).sum(axis=1)):
             raise InputError("EliminationPlan: a group replaces more rows than it targets")
-        local = (self.block_rows >= 0).sum(axis=1) + np.where(
-            self.block_groups >= 0, r[np.maximum(self.block_groups, 0)], 0
-        )
+        local = (self.block_rows >= 0).sum(axis=1) + np.append(r, 0)[self.block_groups]
         if np.any(local > (self.block_cols >= 0).sum(axis=1)):
             raise InputError("EliminationPlan: a block has more local rows than columns")
 
