@@ -13,7 +13,7 @@ item, each residual kind written once on the bodies' poses:
 from __future__ import annotations
 
 import time
-from functools import cache, lru_cache, partial
+from functools import cache, lru_cache
 
 import casadi as cs
 import numpy as np
@@ -23,7 +23,7 @@ from mbplan.engine import RiemannianFunction
 from mbplan.errors import InputError
 from mbplan.formulations.joint_space import distance_pairs, frame_error
 from mbplan.formulations.maximal_joints import joint_terms
-from mbplan.formulations.maximal_layout import joint_elimination_plan
+from mbplan.formulations.maximal_layout import JointEliminationPlans
 from mbplan.lie import SO3, R
 from mbplan.multibody import MaximalModel, joint_positions, maximal_model
 from mbplan.ocp.problem import OCP, Item
@@ -97,7 +97,7 @@ class MaximalNLP:
                 raise InputError(f"maximal formulation, {item.role} {item.name!r}: {err}") from None
         self.problem = TrajectoryProblem(TrajectoryVariables(layout.blocks), terms)
         # the RIPM's kkt_method="reduced" eliminates the joints through this plan
-        self.problem.elimination_plan = partial(joint_elimination_plan, self.problem)
+        self.problem.elimination_plan = JointEliminationPlans(self.problem)
 
     # -- item translations ---------------------------------------------------------------------
     def _bodies(self, item: Item) -> np.ndarray:

@@ -123,3 +123,21 @@ def joint_elimination_plan(problem, eq_jacobian: sp.spmatrix) -> EliminationPlan
         stack(targets, 6), stack(sources, 12), stack(subtract, 5), stack(cancel, 24),
         np.asarray(groups, np.int64), stack(rows, 11), stack(cols, 12),
     )  # fmt: skip
+
+
+class JointEliminationPlans:
+    """``problem.elimination_plan`` of a maximal-coordinate problem: the
+    :func:`joint_elimination_plan` of the equality Jacobian's pattern, kept for the last
+    pattern (every solve of the problem asks for it)."""
+
+    def __init__(self, problem) -> None:
+        self.problem = problem
+        self._key: tuple[bytes, bytes] | None = None
+        self._plan: EliminationPlan | None = None
+
+    def __call__(self, eq_jacobian: sp.spmatrix) -> EliminationPlan:
+        jac = sp.csr_matrix(eq_jacobian)
+        key = (jac.indptr.tobytes(), jac.indices.tobytes())
+        if key != self._key or self._plan is None:
+            self._plan, self._key = joint_elimination_plan(self.problem, jac), key
+        return self._plan

@@ -14,13 +14,11 @@ block's largest entry: the caller then factorizes the full matrix."""
 
 
 @nb.njit(cache=True)
-def _gather(data, slot):
-    out = np.zeros(slot.shape)
-    flat_out, flat_slot = out.reshape(-1), slot.reshape(-1)
-    for e in range(flat_slot.shape[0]):
-        if flat_slot[e] >= 0:
-            flat_out[e] = data[flat_slot[e]]
-    return out
+def _gather(data, slot, out) -> None:
+    """``out = data[slot]`` (``0`` where ``slot < 0``), 2-D."""
+    for a in range(slot.shape[0]):
+        for q in range(slot.shape[1]):
+            out[a, q] = data[slot[a, q]] if slot[a, q] >= 0 else 0.0
 
 
 @nb.njit(cache=True)
@@ -29,34 +27,53 @@ def group_values(ae, g_cancel, h_cancel, g_outer, h_outer, M, new_rows) -> bool:
     rows, ``A_h``: the subtracted rows) and the new rows ``M_j A[sources] - A[subtract]`` on the
     outer columns. ``g_cancel`` ``(J, g, c)``, ``h_cancel`` ``(J, r, c)``, ``g_outer``
     ``(J, g, o)``, ``h_outer`` ``(J, r, o)``: slots of the entries in ``ae`` (``-1``: zero;
-    a padded source row is all ``-1`` and gets a unit Gram pivot). False on a breakdown."""
-    J, g = g_cancel.shape[0], g_cancel.shape[1]
+    a padded source row is all ``-1`` and gets a unit Gram pivot). Products skip the zeros
+    column by column. False on a breakdown."""
+    J, g, c = g_cancel.shape
+    r, o = h_cancel.shape[1], g_outer.shape[2]
+    G, Hc = np.empty((g, c)), np.empty((r, c))
+    Go, Ho = np.empty((g, o)), np.empty((r, o))
+    gram, C, X = np.empty((g, g)), np.zeros((g, g)), np.empty((r, g))
+    gi, hi = np.empty(g, np.int64), np.empty(r, np.int64)
     for j in range(J):
-        G = _gather(ae, g_cancel[j])
-        Hc = _gather(ae, h_cancel[j])
-        gram = G @ G.T
+        _gather(ae, g_cancel[j], G)
+        _gather(ae, h_cancel[j], Hc)
+        gram[:, :] = 0.0
+        X[:, :] = 0.0
+        for q in range(c):  # gram = G Gᵀ, X = Hc Gᵀ over each column's nonzeros
+            ng = nh = 0
+            for a in range(g):
+                if G[a, q] != 0.0:
+                    gi[ng] = a
+                    ng += 1
+            for a in range(r):
+                if Hc[a, q] != 0.0:
+                    hi[nh] = a
+                    nh += 1
+            for u in range(ng):
+                ga = G[gi[u], q]
+                for v in range(u + 1):
+                    gram[gi[u], gi[v]] += ga * G[gi[v], q]
+                for v in range(nh):
+                    X[hi[v], gi[u]] += Hc[hi[v], q] * ga
         scale = 0.0
         for a in range(g):
             scale = max(scale, gram[a, a])
         for a in range(g):
             if gram[a, a] == 0.0:
                 gram[a, a] = 1.0  # a padded row
-        # Cholesky gram = C Cᵀ, then M = Hc Gᵀ gram⁻¹
-        C = np.zeros((g, g))
-        for a in range(g):
-            s = gram[a, a]
-            for q in range(a):
-                s -= C[a, q] * C[a, q]
-            if s <= PIVOT_TOL * scale:
-                return False
-            C[a, a] = np.sqrt(s)
-            for b in range(a + 1, g):
+        for a in range(g):  # Cholesky gram = C Cᵀ (gram's lower triangle)
+            for b in range(a, g):
                 t = gram[b, a]
                 for q in range(a):
                     t -= C[b, q] * C[a, q]
-                C[b, a] = t / C[a, a]
-        X = Hc @ G.T  # (r, g): solve X gram⁻¹ row by row
-        for i in range(X.shape[0]):
+                if b == a:
+                    if not t > PIVOT_TOL * scale:
+                        return False
+                    C[a, a] = np.sqrt(t)
+                else:
+                    C[b, a] = t / C[a, a]
+        for i in range(r):  # X gram⁻¹, row by row
             for a in range(g):
                 t = X[i, a]
                 for q in range(a):
@@ -68,7 +85,17 @@ def group_values(ae, g_cancel, h_cancel, g_outer, h_outer, M, new_rows) -> bool:
                     t -= C[q, a] * X[i, q]
                 X[i, a] = t / C[a, a]
         M[j] = X
-        new_rows[j] = X @ _gather(ae, g_outer[j]) - _gather(ae, h_outer[j])
+        _gather(ae, g_outer[j], Go)
+        _gather(ae, h_outer[j], Ho)
+        for i in range(r):
+            for q in range(o):
+                new_rows[j, i, q] = -Ho[i, q]
+        for a in range(g):
+            for q in range(o):
+                v = Go[a, q]
+                if v != 0.0:
+                    for i in range(r):
+                        new_rows[j, i, q] += X[i, a] * v
     return True
 
 
@@ -158,10 +185,12 @@ def block_values(
     flat_new = new_rows.reshape(-1)
     for e in range(l_dst_n.shape[0]):
         lbuf[l_dst_n[e]] = flat_new[l_src_n[e]]
+    work = np.empty(np.max(shape[:, 0] * shape[:, 2]) if shape.shape[0] else 0)
     for b in range(shape.shape[0]):
         r, w, nr, f = shape[b, 0], shape[b, 1], shape[b, 2], shape[b, 3]
         L = lbuf[loff[b] : loff[b] + r * w].reshape(r, w)
-        rhs = np.zeros((r, nr))
+        rhs = work[: r * nr].reshape(r, nr)
+        rhs[:, :] = 0.0
         rhs[:, :f] = L[:, r : r + f]
         for k in range(cptr[b], cptr[b + 1]):
             i, co = cblk[k], ccol[k]
@@ -172,10 +201,11 @@ def block_values(
             for a in range(r):
                 for q in range(fi):
                     rhs[a, fm[q]] += L[a, co + ri + q]
-            prod = np.ascontiguousarray(L[:, co : co + ri]) @ Ei
-            for a in range(r):
-                for q in range(nri):
-                    rhs[a, rm[q]] -= prod[a, q]
+                for p in range(ri):
+                    v = L[a, co + p]
+                    if v != 0.0:
+                        for q in range(nri):
+                            rhs[a, rm[q]] -= v * Ei[p, q]
         A = lu[lu_off[b] : lu_off[b] + r * r].reshape(r, r)
         A[:, :] = L[:, :r]
         if not _lu(A, piv[uoff[b] : uoff[b] + r]):
