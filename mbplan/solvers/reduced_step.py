@@ -365,6 +365,7 @@ class _Reduction:
         self.hr_base = np.zeros(self.Hr.nnz)
         self.dt_data = np.zeros(self.T.nnz)
         self.ttt = np.zeros(self.Hr.nnz)  # TᵀT in Hr's pattern
+        self.ttt_ok = False
 
     # ------------------------------------------------------------------ numeric
     def set_values(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> bool:
@@ -391,8 +392,7 @@ class _Reduction:
         self._product(self.hs, T, self.W)
         self._product(Tt, self.W, self.Hr)
         self.hr_base[:] = self.Hr.data
-        self._product(Tt, T, self.Hr)
-        self.ttt[:] = self.Hr.data
+        self.ttt_ok = False
         self.ak.data[:] = ae.data[self.ak_src]
         self._product(self.ak, T, self.Ar)
         self._product(ai, T, self.AIr)
@@ -411,7 +411,13 @@ class _Reduction:
         if not self.ok or np.any(diagonal[n + self.y_rows] != 0.0):
             return None
         dx = diagonal[:n]
-        if np.all(dx == dx[0]):  # δ_w (+ζ) I: Tᵀ D T = d TᵀT
+        if not dx.any():
+            self.Hr.data[:] = self.hr_base
+        elif np.all(dx == dx[0]):  # δ_w (+ζ) I: Tᵀ D T = d TᵀT, TᵀT once per matrix
+            if not self.ttt_ok:
+                self._product(self.Tt, self.T, self.Hr)
+                self.ttt[:] = self.Hr.data
+                self.ttt_ok = True
             np.multiply(self.ttt, dx[0], out=self.Hr.data)
             self.Hr.data += self.hr_base
         else:
