@@ -8,8 +8,10 @@ Part 2, whole solves: every case solved with both methods alternating, ``--repea
 min total time per case, time per iteration, the KKT's share of it (outermost
 ``set_matrices`` + ``factorize`` + ``solve`` calls), iterations, objectives, and how many
 factorizations went through the reduction and how many solves fell back to the full one.
+Part 3 (``--sweep N``): iiwa-com cases ``0…N-1``, each solved once per method (alternating):
+statuses, iterations, objectives, and the total time ratio over cases ``1…N-1``.
 
-    python benchmarks/reduced_solve.py [--repeats 3] [--out benchmarks/results/reduced-step]
+    python benchmarks/reduced_solve.py [--repeats 3] [--sweep 12] [--out benchmarks/results/reduced-step]
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from mbplan.solvers import solve_ripm
 from mbplan.solvers.linear_solver import KKTSystem
 from mbplan.solvers.reduced_step import ReducedKKTSystem
 
-COMMAND = "python benchmarks/reduced_solve.py --out benchmarks/results/reduced-step"
+COMMAND = "python benchmarks/reduced_solve.py --sweep 12 --out benchmarks/results/reduced-step"
 SOLVE_TASKS = [("iiwa-com", 3), *((f"chain{n}", 1) for n in (4, 8, 16, 32))]
 METHODS = ("full", "reduced")
 _KKT_CALLS = ("set_matrices", "factorize", "solve")
@@ -166,6 +168,52 @@ def _fraction_reduced(task: str, case: int) -> tuple[int, int, int]:
     return k.n_reduced, k.n_factorizations, k.n_fallbacks
 
 
+def sweep(cases: int) -> list[dict]:
+    """Part 3 (module docstring): one row per iiwa-com case."""
+    rows = []
+    for case in range(cases):
+        problem, x0, opts = TASKS["iiwa-com"](case)
+        row: dict = {"case": case}
+        for m in METHODS:
+            t0 = time.perf_counter()
+            res = solve_ripm(problem, x0, opts.replace(kkt_method=m))
+            row[m] = {
+                "status": res.status.name,
+                "iterations": res.iterations,
+                "objective": res.objective,
+                "total_ms": 1e3 * (time.perf_counter() - t0),
+            }
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    return rows
+
+
+def sweep_markdown(rows: list[dict]) -> list[str]:
+    if not rows:
+        return []
+    same = sum(
+        r["full"]["status"] == r["reduced"]["status"]
+        and r["full"]["iterations"] == r["reduced"]["iterations"]
+        for r in rows
+    )
+    dobj = max(
+        abs(r["full"]["objective"] - r["reduced"]["objective"])
+        / max(1.0, abs(r["full"]["objective"]))
+        for r in rows
+    )
+    conv = {m: sum(r[m]["status"] == "CONVERGED" for r in rows) for m in METHODS}
+    t = {m: sum(r[m]["total_ms"] for r in rows[1:]) for m in METHODS}
+    ratio = t["reduced"] / t["full"] if t["full"] else float("nan")
+    return [
+        "",
+        f"## iiwa-com cases 0…{len(rows) - 1}, one solve per method",
+        "",
+        f"Same status and iterations: {same}/{len(rows)}; converged full / reduced: "
+        f"{conv['full']} / {conv['reduced']}; max objective rel. diff {dobj:.1e}; total time "
+        f"(cases 1…) reduced / full: {ratio:.2f}.",
+    ]
+
+
 def markdown(parts: list[dict], rows: list[dict], load: str) -> str:
     lines = [
         '# RIPM with the joints eliminated (`kkt_method="reduced"`) vs the full KKT',
@@ -214,6 +262,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--kkt-tasks", nargs="*", default=["iiwa-com", "chain4", "chain8", "chain16"])
     ap.add_argument("--solve-tasks", nargs="*", default=[t for t, _ in SOLVE_TASKS])
+    ap.add_argument("--sweep", type=int, default=0)
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     load = " ".join(Path("/proc/loadavg").read_text().split()[:3])
@@ -227,14 +276,15 @@ def main() -> None:
         for row in solves(task, cases.get(task, 1), args.repeats):
             row["reduced_counts"] = _fraction_reduced(task, row["case"])
             rows.append(row)
-    text = markdown(parts, rows, load)
+    swept = sweep(args.sweep)
+    text = markdown(parts, rows, load) + "\n".join(sweep_markdown(swept)) + "\n"
     print(text)
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         (out / "ripm-solves.md").write_text(text)
         (out / "ripm-solves.json").write_text(
-            json.dumps({"kkt": parts, "solves": rows}, indent=1, default=str)
+            json.dumps({"kkt": parts, "solves": rows, "sweep": swept}, indent=1, default=str)
         )
 
 
