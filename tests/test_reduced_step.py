@@ -103,7 +103,10 @@ def test_ripm_reduced_solve_equals_full():
     assert abs(full.objective - red.objective) <= 1e-6 * max(1.0, abs(full.objective))
 
 
-def test_kkt_method_choice_and_errors():
+def test_kkt_method_choice_and_errors(systems):
+    problem = systems[0]
+    assert type(kkt_system(problem, "auto", "amd")) is ReducedKKTSystem
+    assert type(kkt_system(problem, "full", "amd")) is KKTSystem
     with pytest.raises(InputError, match="kkt_method"):
         RIPMOptions(kkt_method="cholesky")
     nlp = hs071()
