@@ -11,7 +11,8 @@ factorizations went through the reduction and how many solves fell back to the f
 Part 3 (``--sweep N``): iiwa-com cases ``0…N-1``, each solved once per method (alternating):
 statuses, iterations, objectives, and the total time ratio over cases ``1…N-1``.
 
-    python benchmarks/reduced_solve.py [--repeats 3] [--sweep 12] [--out benchmarks/results/reduced-step]
+    python benchmarks/reduced_solve.py [--repeats 3] [--sweep 12] \
+        [--out benchmarks/results/reduced-step]
 """
 
 from __future__ import annotations

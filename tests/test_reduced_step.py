@@ -1,6 +1,6 @@
 """The KKT factorized through the joint elimination plan (mbplan.solvers.reduced_step) against
-the full LDLᵀ and the dense eigenvalues: same inertia (also wrong and singular), same steps, the cases it leaves to the
-full factorization, and a RIPM solve with kkt_method="reduced"."""
+the full LDLᵀ and the dense eigenvalues: same inertia (also wrong and singular), same steps,
+the cases it leaves to the full factorization, and a RIPM solve with kkt_method="reduced"."""
 
 import numpy as np
 import pytest

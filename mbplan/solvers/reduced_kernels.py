@@ -178,7 +178,8 @@ def block_values(
     over its reach ``R_b`` (own free columns first), coupled blocks ``i`` from
     ``cblk[cptr[b]:cptr[b+1]]`` (columns from ``ccol``, positions of their free columns and
     reach in ``R_b`` from ``fmap`` / ``rmap``). ``shape[b] = (r, w, |R_b|, f)``; LU factors of
-    ``L_b[:, dep]`` kept in ``lu`` / ``piv`` (at ``lu_off`` / ``uoff``) for the solves. False on a breakdown."""
+    ``L_b[:, dep]`` kept in ``lu`` / ``piv`` (at ``lu_off`` / ``uoff``) for the solves. False
+    on a breakdown."""
     lbuf[:] = 0.0
     for e in range(l_dst_a.shape[0]):
         lbuf[l_dst_a[e]] = ae[l_src_a[e]]
@@ -223,6 +224,22 @@ def spgemm(ap, ai, ax, bp, bi, bx, cp, ci, cx, work) -> None:
         for ka in range(ap[i], ap[i + 1]):
             k, a = ai[ka], ax[ka]
             for kb in range(bp[k], bp[k + 1]):
+                work[bi[kb]] += a * bx[kb]
+        for kc in range(cp[i], cp[i + 1]):
+            cx[kc] += work[ci[kc]]
+            work[ci[kc]] = 0.0
+
+
+@nb.njit(cache=True)
+def spgemm_lower(ap, ai, ax, bp, bi, bx, cp, ci, cx, work) -> None:
+    """``C += tril(A B)`` into ``C``'s fixed lower CSR pattern (``B`` with sorted column
+    indices; :func:`spgemm`'s other conventions)."""
+    for i in range(ap.shape[0] - 1):
+        for ka in range(ap[i], ap[i + 1]):
+            k, a = ai[ka], ax[ka]
+            for kb in range(bp[k], bp[k + 1]):
+                if bi[kb] > i:
+                    break
                 work[bi[kb]] += a * bx[kb]
         for kc in range(cp[i], cp[i + 1]):
             cx[kc] += work[ci[kc]]
@@ -302,4 +319,4 @@ def s_apply(b, tgt, src, sub, M, transpose: bool) -> np.ndarray:
     return out
 
 
-REDUCED_KERNELS = (group_values, block_values, spgemm, b_solve, bt_solve, s_apply)
+REDUCED_KERNELS = (group_values, block_values, spgemm, spgemm_lower, b_solve, bt_solve, s_apply)

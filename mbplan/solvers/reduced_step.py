@@ -11,7 +11,8 @@ dependent, rest, local rows) with ``B`` square lower block triangular. Then
 factorized by a :class:`KKTSystem` of its own; every solve is refined against the full ``K``.
 The symbolic phase (once per pattern) picks the replaced rows and dependent columns by QR
 with column pivoting on the first matrix's values and builds every index array; the numeric
-phase (:mod:`mbplan.solvers.reduction`, kernels in :mod:`mbplan.solvers.reduced_kernels`) is compiled. The full factorization is the
+phase is compiled (:mod:`mbplan.solvers.reduction`, :mod:`mbplan.solvers.reduced_kernels`).
+The full factorization is the
 fallback: a nonzero diagonal on an eliminated row (``δ_c > 0``, restoration), a pivot
 breakdown in the reduction or in ``K_r``, or a refined solve that does not converge.
 """

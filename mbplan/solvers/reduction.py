@@ -27,6 +27,7 @@ from mbplan.solvers.reduced_kernels import (
     group_values,
     s_apply,
     spgemm,
+    spgemm_lower,
 )
 
 REDUCED_STATIC_REG = 1e-8
@@ -91,7 +92,10 @@ def _pivots(m: np.ndarray) -> np.ndarray:
 
 def _product_pattern(a: sp.csr_matrix, b: sp.csr_matrix) -> sp.csr_matrix:
     """The structural pattern of ``a @ b`` (values of ones: no cancellation), zero values."""
-    one = lambda m: sp.csr_matrix((np.ones(m.nnz), m.indices, m.indptr), shape=m.shape)  # noqa: E731
+
+    def one(m: sp.csr_matrix) -> sp.csr_matrix:
+        return sp.csr_matrix((np.ones(m.nnz), m.indices, m.indptr), shape=m.shape)
+
     p = sp.csr_matrix(one(a) @ one(b))
     p.sort_indices()
     p.data[:] = 0.0
@@ -332,7 +336,8 @@ class Reduction:
         )
         self.hs_slot, self.hs_src = inv[src >= 0], src[src >= 0]
         self.W = _product_pattern(self.hs, self.T)
-        self.Hr = _product_pattern(self.Tt, self.W)
+        self.Hr = sp.csr_matrix(sp.tril(_product_pattern(self.Tt, self.W), format="csr"))
+        self.Hr.sort_indices()
         is_y = np.zeros(me, bool)
         is_y[self.y_rows] = True
         self.kept = np.flatnonzero(~is_y)
@@ -375,7 +380,7 @@ class Reduction:
         self.hs.data[:] = 0.0
         self.hs.data[self.hs_slot] = hess.data[self.hs_src]
         self._product(self.hs, T, self.W)
-        self._product(Tt, self.W, self.Hr)
+        self._product(Tt, self.W, self.Hr, lower=True)
         self.hr_base[:] = self.Hr.data
         self.ttt_ok = False
         self.ak.data[:] = ae.data[self.ak_src]
@@ -384,14 +389,19 @@ class Reduction:
         self.ok = bool(np.isfinite(self.hr_base).all())
         return self.ok
 
-    def _product(self, a: sp.csr_matrix, b: sp.csr_matrix, c: sp.csr_matrix) -> None:
+    def _product(
+        self, a: sp.csr_matrix, b: sp.csr_matrix, c: sp.csr_matrix, lower: bool = False
+    ) -> None:
+        """``c = a @ b`` (``lower``: its lower triangle) in ``c``'s pattern."""
         c.data[:] = 0.0
-        spgemm(a.indptr, a.indices, a.data, b.indptr, b.indices, b.data, c.indptr, c.indices,
+        kernel = spgemm_lower if lower else spgemm
+        kernel(a.indptr, a.indices, a.data, b.indptr, b.indices, b.data, c.indptr, c.indices,
                c.data, self.work)  # fmt: skip
 
     def factorize(self, diagonal: np.ndarray, static_reg: float) -> Inertia | None:
-        """Factorize ``K_r`` for ``K``'s diagonal (``Tᵀ D_x T`` added to ``Tᵀ H T``); the inertia of ``K`` (``None``: a nonzero
-        diagonal on a local row, or a breakdown)."""
+        """Factorize ``K_r`` for ``K``'s diagonal (``Tᵀ D_x T`` added to ``Tᵀ H T``, lower
+        triangles); the inertia of ``K`` (``None``: a nonzero diagonal on a local row, or a
+        breakdown)."""
         n, me = self.n, self.me
         if not self.ok or np.any(diagonal[n + self.y_rows] != 0.0):
             return None
@@ -400,7 +410,7 @@ class Reduction:
             self.Hr.data[:] = self.hr_base
         elif np.all(dx == dx[0]):  # δ_w (+ζ) I: Tᵀ D T = d TᵀT, TᵀT once per matrix
             if not self.ttt_ok:
-                self._product(self.Tt, self.T, self.Hr)
+                self._product(self.Tt, self.T, self.Hr, lower=True)
                 self.ttt[:] = self.Hr.data
                 self.ttt_ok = True
             np.multiply(self.ttt, dx[0], out=self.Hr.data)
@@ -409,8 +419,9 @@ class Reduction:
             T = self.T
             self.dt_data[:] = T.data * dx[self.t_rows]
             self.Hr.data[:] = self.hr_base
-            spgemm(self.Tt.indptr, self.Tt.indices, self.Tt.data, T.indptr, T.indices,
-                   self.dt_data, self.Hr.indptr, self.Hr.indices, self.Hr.data, self.work)  # fmt: skip
+            tt, hr = self.Tt, self.Hr
+            spgemm_lower(tt.indptr, tt.indices, tt.data, T.indptr, T.indices, self.dt_data,
+                         hr.indptr, hr.indices, hr.data, self.work)  # fmt: skip
         self.kkt.set_matrices(self.Hr, self.Ar, self.AIr)
         diag_r = np.concatenate([np.zeros(self.nr), diagonal[n + self.kept], diagonal[n + me :]])
         inertia = self.kkt.factorize(diag_r, max(static_reg, REDUCED_STATIC_REG))
