@@ -261,7 +261,9 @@ def markdown(parts: list[dict], rows: list[dict], load: str) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--kkt-tasks", nargs="*", default=["iiwa-com", "chain4", "chain8", "chain16"])
+    ap.add_argument(
+        "--kkt-tasks", nargs="*", default=["iiwa-com", *(f"chain{n}" for n in (4, 8, 16, 32))]
+    )
     ap.add_argument("--solve-tasks", nargs="*", default=[t for t, _ in SOLVE_TASKS])
     ap.add_argument("--sweep", type=int, default=0)
     ap.add_argument("--out", default=None)

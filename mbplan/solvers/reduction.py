@@ -17,10 +17,12 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
+from mbplan.engine.jit import announce_uncached_numba
 from mbplan.errors import InputError
 from mbplan.solvers.elimination import EliminationPlan
 from mbplan.solvers.linear_solver import Inertia, KKTSystem
 from mbplan.solvers.reduced_kernels import (
+    REDUCED_KERNELS,
     b_solve,
     block_values,
     bt_solve,
@@ -60,6 +62,7 @@ def reduction(
         if hit is not None:
             _REDUCTIONS.move_to_end(key)
             return hit.fresh()
+    announce_uncached_numba(*REDUCED_KERNELS)  # first run only
     hit = Reduction(plan, hess, ae, ai, ordering)
     with _REDUCTIONS_LOCK:
         _REDUCTIONS[key] = hit
