@@ -118,3 +118,28 @@ def test_kkt_method_choice_and_errors(systems):
         EliminationPlan(
             one[:0], one[:0], one[:0], one[:0], np.array([-1]), np.array([[0, 1, 2]]), one[:, :1]
         )
+
+
+def test_breakdown_and_invalid_plan_fall_back_to_the_full_factorization(systems):
+    problem, x0 = systems[:2]
+    full, red, sigma, rng = _kkt(problem, x0, 2)  # own systems: the fixture's stay as they are
+    ev = problem.evaluate(x0, 1.0, rng.normal(size=problem.n_eq), np.ones(problem.n_ineq))
+    dead = ev.eq_jacobian.copy()
+    dead.data[:] = 0.0  # same pattern, every local row zero: the reduction breaks down
+    diag = _diag(problem, 1.0, 0.0, sigma)
+    for kkt in (full, red):
+        kkt.set_matrices(ev.hessian_lower, dead, ev.ineq_jacobian)
+    assert red.factorize(diag, 1e-9) == full.factorize(diag, 1e-9)
+    assert not red._active and red.reduction is not None
+
+    def invalid(_jac):
+        raise InputError("no plan here")
+
+    lenient = ReducedKKTSystem(problem.n, problem.n_eq, problem.n_ineq, invalid)
+    lenient.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+    full.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+    assert lenient.reduction is None
+    assert lenient.factorize(diag, 1e-9) == full.factorize(diag, 1e-9)
+    strict = ReducedKKTSystem(problem.n, problem.n_eq, problem.n_ineq, invalid, strict=True)
+    with pytest.raises(InputError, match="no plan here"):
+        strict.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
