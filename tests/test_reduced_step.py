@@ -72,7 +72,8 @@ def test_reduced_inertia_and_step_equal_the_full_factorization(systems, delta_w)
 def test_singular_matrix_is_rejected_by_both(systems):
     """``H = 0``, ``A_I = 0``: the matrix is singular on ``A_E``'s null space; each method either
     reports a wrong inertia or a solve whose residual refinement cannot reduce."""
-    problem, x0, full, red, sigma, rng = systems
+    problem, x0 = systems[:2]
+    full, red, sigma, rng = _kkt(problem, x0, 3)
     ev = problem.evaluate(x0, 0.0)
     for kkt in (full, red):
         kkt.set_matrices(ev.hessian_lower * 0.0, ev.eq_jacobian, ev.ineq_jacobian * 0.0)
