@@ -247,6 +247,18 @@ def spgemm_lower(ap, ai, ax, bp, bi, bx, cp, ci, cx, work) -> None:
 
 
 @nb.njit(cache=True)
+def csr_matvec(indptr, indices, data, x) -> np.ndarray:
+    """``A x`` for CSR arrays (one pass, no scipy call overhead)."""
+    y = np.zeros(indptr.shape[0] - 1)
+    for i in range(y.shape[0]):
+        t = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            t += data[e] * x[indices[e]]
+        y[i] = t
+    return y
+
+
+@nb.njit(cache=True)
 def b_solve(rhs, lbuf, shape, loff, cptr, cblk, ccol, lu, lu_off, piv, uoff) -> np.ndarray:
     """``B⁻¹ rhs``, ``B`` lower block triangular: per block ``L_b[:, dep]`` on the diagonal and
     ``L_b[:, dep_i]`` below (``rhs``, result: blocks' local rows / dependent columns at
@@ -319,4 +331,13 @@ def s_apply(b, tgt, src, sub, M, transpose: bool) -> np.ndarray:
     return out
 
 
-REDUCED_KERNELS = (group_values, block_values, spgemm, spgemm_lower, b_solve, bt_solve, s_apply)
+REDUCED_KERNELS = (
+    group_values,
+    block_values,
+    spgemm,
+    spgemm_lower,
+    csr_matvec,
+    b_solve,
+    bt_solve,
+    s_apply,
+)

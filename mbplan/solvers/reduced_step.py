@@ -89,6 +89,11 @@ class ReducedKKTSystem:
         ai = _csr(jac_ineq, (self.n_ineq, self.n))
         if self._seen != self.full.n_analyses:
             self._seen = self.full.n_analyses
+            f = self.full
+            self._k = sp.csr_matrix(
+                (f._full_data, f._pattern.full_indices, f._pattern.full_indptr),
+                shape=(self.dim, self.dim),
+            )
             self._red = None
             try:
                 plan = self.plan_of(ae)
@@ -137,7 +142,7 @@ class ReducedKKTSystem:
         rhs = np.asarray(rhs, dtype=np.float64)
         if rhs.shape != (self.dim,):
             raise InputError(f"KKTSystem.solve: rhs has shape {rhs.shape}, expected ({self.dim},)")
-        red, matvec = self._red, self.full.matvec
+        red, matvec = self._red, self._k.dot  # K over the full system's value array
         x = red.solve_once(rhs, matvec)
         res = rhs - matvec(x)
         ratio = _ratio(res, x, rhs)

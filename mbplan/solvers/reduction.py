@@ -26,6 +26,7 @@ from mbplan.solvers.reduced_kernels import (
     b_solve,
     block_values,
     bt_solve,
+    csr_matvec,
     group_values,
     s_apply,
     spgemm,
@@ -433,6 +434,9 @@ class Reduction:
         m = len(self.dep)
         return Inertia(inertia.positive + m, inertia.negative + m, 0)
 
+    def _tt_times(self, x: np.ndarray) -> np.ndarray:
+        return csr_matvec(self.Tt.indptr, self.Tt.indices, self.Tt.data, x)
+
     def solve_once(self, b: np.ndarray, matvec: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
         """``K⁻¹ b`` through the reduction (module docstring), ``matvec``: ``v ↦ K v``."""
         n, me, nr, nk = self.n, self.me, self.nr, len(self.kept)
@@ -444,11 +448,11 @@ class Reduction:
         v[self.dep] = xu
         kv = matvec(v)
         rr = np.concatenate(
-            [self.Tt @ (bx - kv[:n]), (be - kv[n : n + me])[self.kept], bi - kv[n + me :]]
+            [self._tt_times(bx - kv[:n]), (be - kv[n : n + me])[self.kept], bi - kv[n + me :]]
         )
         xr = self.kkt.solve(rr, 1, 0.0)[0]
         w = np.zeros(len(b))
-        w[:n] = self.T @ xr[:nr]
+        w[:n] = csr_matvec(self.T.indptr, self.T.indices, self.T.data, xr[:nr])
         w[self.dep] += xu
         w[n + self.kept] = xr[nr : nr + nk]
         w[n + me :] = xr[nr + nk :]
