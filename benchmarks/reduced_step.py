@@ -25,9 +25,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.maximal_layout import maximal_layout
 from mbplan.benchmarks.reduced_kkt import ReducedKKT
 from mbplan.benchmarks.speed_tasks import TASKS
+from mbplan.formulations.maximal_layout import maximal_layout
 from mbplan.solvers.linear_solver import KKTSystem
 
 COMMAND = "python benchmarks/reduced_step.py --out benchmarks/results/reduced-step"

@@ -4,10 +4,10 @@ same inertia (also of an indefinite matrix), and the cases it refuses."""
 import numpy as np
 import pytest
 
-from mbplan.benchmarks.maximal_layout import maximal_layout
 from mbplan.benchmarks.reduced_kkt import ReducedKKT
 from mbplan.benchmarks.speed_tasks import chain_task, maximal_ripm_problem
 from mbplan.errors import InputError
+from mbplan.formulations.maximal_layout import maximal_layout
 from mbplan.solvers.linear_solver import KKTSystem
 
 

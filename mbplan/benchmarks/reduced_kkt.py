@@ -40,8 +40,8 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from mbplan.benchmarks.maximal_layout import MaximalLayout
 from mbplan.errors import InputError
+from mbplan.formulations.maximal_layout import MaximalLayout
 from mbplan.solvers.linear_solver import Inertia, KKTSystem
 
 

@@ -23,6 +23,7 @@ from mbplan.engine import RiemannianFunction
 from mbplan.errors import InputError
 from mbplan.formulations.joint_space import distance_pairs, frame_error
 from mbplan.formulations.maximal_joints import joint_terms
+from mbplan.formulations.maximal_layout import JointEliminationPlans
 from mbplan.lie import SO3, R
 from mbplan.multibody import MaximalModel, joint_positions, maximal_model
 from mbplan.ocp.problem import OCP, Item
@@ -95,6 +96,8 @@ class MaximalNLP:
             except InputError as err:
                 raise InputError(f"maximal formulation, {item.role} {item.name!r}: {err}") from None
         self.problem = TrajectoryProblem(TrajectoryVariables(layout.blocks), terms)
+        # the RIPM's kkt_method="reduced" eliminates the joints through this plan
+        self.problem.elimination_plan = JointEliminationPlans(self.problem)
 
     # -- item translations ---------------------------------------------------------------------
     def _bodies(self, item: Item) -> np.ndarray:

@@ -11,6 +11,7 @@ import numpy as np
 
 from mbplan.errors import InputError
 from mbplan.solvers.linear_solver import ORDERINGS
+from mbplan.solvers.reduced_step import KKT_METHODS
 
 
 @dataclass(frozen=True)
@@ -119,6 +120,11 @@ class RIPMOptions:
     """Threshold ``u`` of 1 × 1 / 2 × 2 pivoting inside each supernode of the KKT
     factorization (MA57's test ``|d| >= u · max |column|``; tiny pivots without an acceptable
     replacement perturbed, :class:`~mbplan.solvers.linear_solver.KKTSystem`); 0: no pivoting."""
+    kkt_method: str = "full"
+    """``"full"``: factorize the whole KKT matrix; ``"reduced"``: eliminate the pairs of the
+    problem's ``elimination_plan`` first (:mod:`mbplan.solvers.reduced_step`; the full
+    factorization where it does not apply, e.g. ``δ_c > 0``); ``"auto"``: reduced when the
+    problem has a plan."""
 
     # --- feasibility restoration (WB §3.3) ---
     restoration: bool = True
@@ -177,6 +183,7 @@ class RIPMOptions:
             "degenerate_iters": self.degenerate_iters >= 0,
             "kkt_ordering": self.kkt_ordering in ORDERINGS,
             "kkt_pivot_threshold": 0 <= self.kkt_pivot_threshold <= 1,
+            "kkt_method": self.kkt_method in KKT_METHODS,
             "mu_strategy": self.mu_strategy in ("monotone", "adaptive"),
             "mu_oracle": self.mu_oracle in ("loqo", "probing"),
             "resto_penalty": self.resto_penalty > 0,

@@ -51,7 +51,9 @@ class NLPEvaluation:
 class RIPMProblem(Protocol):
     """What :func:`~mbplan.solvers.ripm.solve_ripm` calls (structural type).
 
-    ``evaluate`` is called once per iterate; ``values`` once per line-search trial.
+    ``evaluate`` is called once per iterate; ``values`` once per line-search trial. A problem
+    may also provide ``elimination_plan(eq_jacobian) -> EliminationPlan | None``
+    (:mod:`mbplan.solvers.elimination`), used by ``RIPMOptions.kkt_method``.
     """
 
     n: int

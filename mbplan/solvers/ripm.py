@@ -43,6 +43,7 @@ from mbplan.solvers.linear_solver import KKTSystem
 from mbplan.solvers.newton import NewtonStep
 from mbplan.solvers.options import RIPMOptions
 from mbplan.solvers.problem import NLPEvaluation, Point, RIPMProblem
+from mbplan.solvers.reduced_step import ReducedKKTSystem, kkt_system
 from mbplan.solvers.restoration import Restoration, Stop
 from mbplan.solvers.result import IterationHistory, RIPMResult, RIPMStatus
 
@@ -76,7 +77,7 @@ def solve_ripm(
 class _Shared:
     """What the main phase and a restoration phase share: counters, log, KKT system."""
 
-    kkt: KKTSystem
+    kkt: KKTSystem | ReducedKKTSystem
     history: IterationHistory
     out: Callable[[str], None] | None
     t0: float = 0.0
@@ -99,12 +100,8 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.resto = parent is not None
         if parent is None:
             out = (lambda line: print(line, file=sys.stdout)) if options.print_level > 0 else None
-            kkt = KKTSystem(
-                self.n,
-                self.me,
-                self.mi,
-                ordering=options.kkt_ordering,
-                pivot_threshold=options.kkt_pivot_threshold,
+            kkt = kkt_system(
+                problem, options.kkt_method, options.kkt_ordering, options.kkt_pivot_threshold
             )
             self.sh = _Shared(kkt, IterationHistory(), out)
         else:
@@ -125,7 +122,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.probe_pending = False  # Mehrotra's μ is due once the step's matrix is factorized
 
     @property
-    def kkt(self) -> KKTSystem:
+    def kkt(self) -> KKTSystem | ReducedKKTSystem:
         return self.sh.kkt
 
     @property

@@ -1,6 +1,6 @@
 """Where a maximal-coordinate RIPM problem keeps each knot's and body's state, joint forces and
-multibody rows in its KKT matrix (for the joint-eliminated KKT study,
-:mod:`mbplan.benchmarks.reduced_kkt`)."""
+multibody rows in its KKT matrix, and the joint elimination plan built from it
+(:mod:`mbplan.solvers.elimination`; the study :mod:`mbplan.benchmarks.reduced_kkt`)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mbplan.errors import InputError
+from mbplan.solvers.elimination import EliminationPlan
 
 
 @dataclass(frozen=True)
@@ -84,3 +85,59 @@ def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
         problem.n, problem.n_eq, problem.n_ineq, parent, s_cols, lam_cols, kin_rows, dyn_rows,
         con_rows,
     )  # fmt: skip
+
+
+def joint_elimination_plan(problem, eq_jacobian: sp.spmatrix) -> EliminationPlan:
+    """The joints eliminated knot by knot (:mod:`mbplan.benchmarks.reduced_kkt`, stage 1): for
+    steps ``k = 1…N-1`` five of each body's kinematics rows become ``M g - h`` (``h`` its joint
+    constraint on ``s_k``, cancelling ``s_k`` of the body and its parent); at knots ``1…N`` the
+    block of a body is its state ``s_k`` with those rows of step ``k-1`` (step 0: its six
+    kinematics rows) and ``h`` at knot ``k`` as local rows."""
+    lay = maximal_layout(problem, eq_jacobian)
+    N, nb, parent = lay.N, lay.nb, lay.parent
+    pad6 = -np.ones(6, np.int64)
+    pad12 = -np.ones(12, np.int64)
+    targets, sources, subtract, cancel = [], [], [], []
+    for k in range(1, N):
+        for c in range(nb):
+            p = parent[c]
+            targets.append(lay.kin_rows[k, c])
+            sources.append(
+                np.concatenate([lay.kin_rows[k, c], lay.kin_rows[k, p] if p >= 0 else pad6])
+            )
+            subtract.append(lay.con_rows[k, c])
+            cancel.append(np.concatenate([lay.s_cols[k, c], lay.s_cols[k, p] if p >= 0 else pad12]))
+    groups, rows, cols = [], [], []
+    for k in range(1, N + 1):
+        for c in range(nb):
+            groups.append(-1 if k == 1 else (k - 2) * nb + c)
+            rows.append(
+                np.concatenate([lay.kin_rows[0, c] if k == 1 else pad6, lay.con_rows[k, c]])
+            )
+            cols.append(lay.s_cols[k, c])
+
+    def stack(a: list, width: int) -> np.ndarray:
+        return np.asarray(a, np.int64).reshape(len(a), width)
+
+    return EliminationPlan(
+        stack(targets, 6), stack(sources, 12), stack(subtract, 5), stack(cancel, 24),
+        np.asarray(groups, np.int64), stack(rows, 11), stack(cols, 12),
+    )  # fmt: skip
+
+
+class JointEliminationPlans:
+    """``problem.elimination_plan`` of a maximal-coordinate problem: the
+    :func:`joint_elimination_plan` of the equality Jacobian's pattern, kept for the last
+    pattern (every solve of the problem asks for it)."""
+
+    def __init__(self, problem) -> None:
+        self.problem = problem
+        self._key: tuple[bytes, bytes] | None = None
+        self._plan: EliminationPlan | None = None
+
+    def __call__(self, eq_jacobian: sp.spmatrix) -> EliminationPlan:
+        jac = sp.csr_matrix(eq_jacobian)
+        key = (jac.indptr.tobytes(), jac.indices.tobytes())
+        if key != self._key or self._plan is None:
+            self._plan, self._key = joint_elimination_plan(self.problem, jac), key
+        return self._plan

@@ -1,0 +1,343 @@
+"""Compiled kernels of :class:`~mbplan.solvers.reduced_step.ReducedKKTSystem`: the row groups'
+combinations ``M_j``, the blocks' null-space coefficients ``E`` (small dense LU with partial
+pivoting, block by block in plan order), products with fixed sparsity patterns, and the solves
+with the eliminated pairs' block-triangular ``B`` (:mod:`mbplan.solvers.elimination`)."""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+PIVOT_TOL = 1e-12
+"""A block's LU (or a group's Gram Cholesky) breaks down on a pivot below this times the
+block's largest entry: the caller then factorizes the full matrix."""
+
+
+@nb.njit(cache=True)
+def _gather(data, slot, out) -> None:
+    """``out = data[slot]`` (``0`` where ``slot < 0``), 2-D."""
+    for a in range(slot.shape[0]):
+        for q in range(slot.shape[1]):
+            out[a, q] = data[slot[a, q]] if slot[a, q] >= 0 else 0.0
+
+
+@nb.njit(cache=True)
+def group_values(ae, g_cancel, h_cancel, g_outer, h_outer, M, new_rows) -> bool:
+    """Per group ``j``: ``M_j = A_h Gᵀ (G Gᵀ)⁻¹`` on the cancelled columns (``G``: the source
+    rows, ``A_h``: the subtracted rows) and the new rows ``M_j A[sources] - A[subtract]`` on the
+    outer columns. ``g_cancel`` ``(J, g, c)``, ``h_cancel`` ``(J, r, c)``, ``g_outer``
+    ``(J, g, o)``, ``h_outer`` ``(J, r, o)``: slots of the entries in ``ae`` (``-1``: zero;
+    a padded source row is all ``-1`` and gets a unit Gram pivot). Products skip the zeros
+    column by column. False on a breakdown."""
+    J, g, c = g_cancel.shape
+    r, o = h_cancel.shape[1], g_outer.shape[2]
+    G, Hc = np.empty((g, c)), np.empty((r, c))
+    Go, Ho = np.empty((g, o)), np.empty((r, o))
+    gram, C, X = np.empty((g, g)), np.zeros((g, g)), np.empty((r, g))
+    gi, hi = np.empty(g, np.int64), np.empty(r, np.int64)
+    for j in range(J):
+        _gather(ae, g_cancel[j], G)
+        _gather(ae, h_cancel[j], Hc)
+        gram[:, :] = 0.0
+        X[:, :] = 0.0
+        for q in range(c):  # gram = G Gᵀ, X = Hc Gᵀ over each column's nonzeros
+            ng = nh = 0
+            for a in range(g):
+                if G[a, q] != 0.0:
+                    gi[ng] = a
+                    ng += 1
+            for a in range(r):
+                if Hc[a, q] != 0.0:
+                    hi[nh] = a
+                    nh += 1
+            for u in range(ng):
+                ga = G[gi[u], q]
+                for v in range(u + 1):
+                    gram[gi[u], gi[v]] += ga * G[gi[v], q]
+                for v in range(nh):
+                    X[hi[v], gi[u]] += Hc[hi[v], q] * ga
+        scale = 0.0
+        for a in range(g):
+            scale = max(scale, gram[a, a])
+        for a in range(g):
+            if gram[a, a] == 0.0:
+                gram[a, a] = 1.0  # a padded row
+        for a in range(g):  # Cholesky gram = C Cᵀ (gram's lower triangle)
+            for b in range(a, g):
+                t = gram[b, a]
+                for q in range(a):
+                    t -= C[b, q] * C[a, q]
+                if b == a:
+                    if not t > PIVOT_TOL * scale:
+                        return False
+                    C[a, a] = np.sqrt(t)
+                else:
+                    C[b, a] = t / C[a, a]
+        for i in range(r):  # X gram⁻¹, row by row
+            for a in range(g):
+                t = X[i, a]
+                for q in range(a):
+                    t -= C[a, q] * X[i, q]
+                X[i, a] = t / C[a, a]
+            for a in range(g - 1, -1, -1):
+                t = X[i, a]
+                for q in range(a + 1, g):
+                    t -= C[q, a] * X[i, q]
+                X[i, a] = t / C[a, a]
+        M[j] = X
+        _gather(ae, g_outer[j], Go)
+        _gather(ae, h_outer[j], Ho)
+        for i in range(r):
+            for q in range(o):
+                new_rows[j, i, q] = -Ho[i, q]
+        for a in range(g):
+            for q in range(o):
+                v = Go[a, q]
+                if v != 0.0:
+                    for i in range(r):
+                        new_rows[j, i, q] += X[i, a] * v
+    return True
+
+
+@nb.njit(cache=True)
+def _lu(A, piv) -> bool:
+    """In-place LU with partial pivoting (``piv``: row swaps); False on a tiny pivot."""
+    r = A.shape[0]
+    scale = 0.0
+    for a in range(r):
+        for b in range(r):
+            scale = max(scale, abs(A[a, b]))
+    for k in range(r):
+        p = k
+        for a in range(k + 1, r):
+            if abs(A[a, k]) > abs(A[p, k]):
+                p = a
+        if not abs(A[p, k]) > PIVOT_TOL * scale:
+            return False
+        piv[k] = p
+        if p != k:
+            for b in range(r):
+                A[k, b], A[p, b] = A[p, b], A[k, b]
+        for a in range(k + 1, r):
+            A[a, k] /= A[k, k]
+            f = A[a, k]
+            for b in range(k + 1, r):
+                A[a, b] -= f * A[k, b]
+    return True
+
+
+@nb.njit(cache=True)
+def _lu_solve(A, piv, X) -> None:
+    """``X ← A⁻¹ X`` with the factors of :func:`_lu` (``X``: ``(r, q)``)."""
+    r = A.shape[0]
+    for k in range(r):
+        p = piv[k]
+        if p != k:
+            for c in range(X.shape[1]):
+                X[k, c], X[p, c] = X[p, c], X[k, c]
+    for c in range(X.shape[1]):
+        for a in range(r):
+            t = X[a, c]
+            for b in range(a):
+                t -= A[a, b] * X[b, c]
+            X[a, c] = t
+        for a in range(r - 1, -1, -1):
+            t = X[a, c]
+            for b in range(a + 1, r):
+                t -= A[a, b] * X[b, c]
+            X[a, c] = t / A[a, a]
+
+
+@nb.njit(cache=True)
+def _lu_solve_t(A, piv, x) -> None:
+    """``x ← A⁻ᵀ x`` with the factors of :func:`_lu`."""
+    r = A.shape[0]
+    for a in range(r):  # Uᵀ
+        t = x[a]
+        for b in range(a):
+            t -= A[b, a] * x[b]
+        x[a] = t / A[a, a]
+    for a in range(r - 1, -1, -1):  # Lᵀ (unit)
+        t = x[a]
+        for b in range(a + 1, r):
+            t -= A[b, a] * x[b]
+        x[a] = t
+    for k in range(r - 1, -1, -1):
+        p = piv[k]
+        if p != k:
+            x[k], x[p] = x[p], x[k]
+
+
+@nb.njit(cache=True)
+def block_values(
+    ae, new_rows, l_dst_a, l_src_a, l_dst_n, l_src_n, lbuf, shape, loff, eoff, cptr, cblk,
+    ccol, fmap_off, fmap, rmap_off, rmap, lu, lu_off, piv, uoff, ebuf,
+) -> bool:  # fmt: skip
+    """Local rows ``L_b`` (scattered from ``ae`` and the groups' new rows), then per block in
+    plan order ``E_b = L_b[:, dep]⁻¹ (L_b[:, free] + Σ_i (L_b[:, free_i] - L_b[:, dep_i] E_i))``
+    over its reach ``R_b`` (own free columns first), coupled blocks ``i`` from
+    ``cblk[cptr[b]:cptr[b+1]]`` (columns from ``ccol``, positions of their free columns and
+    reach in ``R_b`` from ``fmap`` / ``rmap``). ``shape[b] = (r, w, |R_b|, f)``; LU factors of
+    ``L_b[:, dep]`` kept in ``lu`` / ``piv`` (at ``lu_off`` / ``uoff``) for the solves. False
+    on a breakdown."""
+    lbuf[:] = 0.0
+    for e in range(l_dst_a.shape[0]):
+        lbuf[l_dst_a[e]] = ae[l_src_a[e]]
+    flat_new = new_rows.reshape(-1)
+    for e in range(l_dst_n.shape[0]):
+        lbuf[l_dst_n[e]] = flat_new[l_src_n[e]]
+    work = np.empty(np.max(shape[:, 0] * shape[:, 2]) if shape.shape[0] else 0)
+    for b in range(shape.shape[0]):
+        r, w, nr, f = shape[b, 0], shape[b, 1], shape[b, 2], shape[b, 3]
+        L = lbuf[loff[b] : loff[b] + r * w].reshape(r, w)
+        rhs = work[: r * nr].reshape(r, nr)
+        rhs[:, :] = 0.0
+        rhs[:, :f] = L[:, r : r + f]
+        for k in range(cptr[b], cptr[b + 1]):
+            i, co = cblk[k], ccol[k]
+            ri, nri, fi = shape[i, 0], shape[i, 2], shape[i, 3]
+            Ei = ebuf[eoff[i] : eoff[i] + ri * nri].reshape(ri, nri)
+            fm = fmap[fmap_off[k] : fmap_off[k] + fi]
+            rm = rmap[rmap_off[k] : rmap_off[k] + nri]
+            for a in range(r):
+                for q in range(fi):
+                    rhs[a, fm[q]] += L[a, co + ri + q]
+                for p in range(ri):
+                    v = L[a, co + p]
+                    if v != 0.0:
+                        for q in range(nri):
+                            rhs[a, rm[q]] -= v * Ei[p, q]
+        A = lu[lu_off[b] : lu_off[b] + r * r].reshape(r, r)
+        A[:, :] = L[:, :r]
+        if not _lu(A, piv[uoff[b] : uoff[b] + r]):
+            return False
+        _lu_solve(A, piv[uoff[b] : uoff[b] + r], rhs)
+        ebuf[eoff[b] : eoff[b] + r * nr] = rhs.reshape(-1)
+    return True
+
+
+@nb.njit(cache=True)
+def spgemm(ap, ai, ax, bp, bi, bx, cp, ci, cx, work) -> None:
+    """``C += A B`` into ``C``'s fixed CSR pattern, a superset of the product's (``work``: zeros
+    of length ``B``'s columns, left zero)."""
+    for i in range(ap.shape[0] - 1):
+        for ka in range(ap[i], ap[i + 1]):
+            k, a = ai[ka], ax[ka]
+            for kb in range(bp[k], bp[k + 1]):
+                work[bi[kb]] += a * bx[kb]
+        for kc in range(cp[i], cp[i + 1]):
+            cx[kc] += work[ci[kc]]
+            work[ci[kc]] = 0.0
+
+
+@nb.njit(cache=True)
+def spgemm_lower(ap, ai, ax, bp, bi, bx, cp, ci, cx, work) -> None:
+    """``C += tril(A B)`` into ``C``'s fixed lower CSR pattern (``B`` with sorted column
+    indices; :func:`spgemm`'s other conventions)."""
+    for i in range(ap.shape[0] - 1):
+        for ka in range(ap[i], ap[i + 1]):
+            k, a = ai[ka], ax[ka]
+            for kb in range(bp[k], bp[k + 1]):
+                if bi[kb] > i:
+                    break
+                work[bi[kb]] += a * bx[kb]
+        for kc in range(cp[i], cp[i + 1]):
+            cx[kc] += work[ci[kc]]
+            work[ci[kc]] = 0.0
+
+
+@nb.njit(cache=True)
+def csr_matvec(indptr, indices, data, x) -> np.ndarray:
+    """``A x`` for CSR arrays (one pass, no scipy call overhead)."""
+    y = np.zeros(indptr.shape[0] - 1)
+    for i in range(y.shape[0]):
+        t = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            t += data[e] * x[indices[e]]
+        y[i] = t
+    return y
+
+
+@nb.njit(cache=True)
+def b_solve(rhs, lbuf, shape, loff, cptr, cblk, ccol, lu, lu_off, piv, uoff) -> np.ndarray:
+    """``B⁻¹ rhs``, ``B`` lower block triangular: per block ``L_b[:, dep]`` on the diagonal and
+    ``L_b[:, dep_i]`` below (``rhs``, result: blocks' local rows / dependent columns at
+    ``uoff``)."""
+    x = rhs.copy()
+    for b in range(shape.shape[0]):
+        r, w = shape[b, 0], shape[b, 1]
+        L = lbuf[loff[b] : loff[b] + r * w].reshape(r, w)
+        xb = x[uoff[b] : uoff[b] + r].reshape(r, 1)
+        for k in range(cptr[b], cptr[b + 1]):
+            i, co = cblk[k], ccol[k]
+            ri = shape[i, 0]
+            xi = x[uoff[i] : uoff[i] + ri]
+            for a in range(r):
+                t = 0.0
+                for q in range(ri):
+                    t += L[a, co + q] * xi[q]
+                xb[a, 0] -= t
+        A = lu[lu_off[b] : lu_off[b] + r * r].reshape(r, r)
+        _lu_solve(A, piv[uoff[b] : uoff[b] + r], xb)
+    return x
+
+
+@nb.njit(cache=True)
+def bt_solve(rhs, lbuf, shape, loff, cptr, cblk, ccol, lu, lu_off, piv, uoff) -> np.ndarray:
+    """``B⁻ᵀ rhs`` (:func:`b_solve`'s ``B``), blocks in reverse order."""
+    x = rhs.copy()
+    for b in range(shape.shape[0] - 1, -1, -1):
+        r, w = shape[b, 0], shape[b, 1]
+        xb = x[uoff[b] : uoff[b] + r]
+        A = lu[lu_off[b] : lu_off[b] + r * r].reshape(r, r)
+        _lu_solve_t(A, piv[uoff[b] : uoff[b] + r], xb)
+        L = lbuf[loff[b] : loff[b] + r * w].reshape(r, w)
+        for k in range(cptr[b], cptr[b + 1]):
+            i, co = cblk[k], ccol[k]
+            ri = shape[i, 0]
+            for q in range(ri):
+                t = 0.0
+                for a in range(r):
+                    t += L[a, co + q] * xb[a]
+                x[uoff[i] + q] -= t
+    return x
+
+
+@nb.njit(cache=True)
+def s_apply(b, tgt, src, sub, M, transpose: bool) -> np.ndarray:
+    """``S b`` (row ``tgt[j, i]`` becomes ``Σ_g M[j, i, g] b[src[j, g]] - b[sub[j, i]]``) or
+    ``Sᵀ b``."""
+    out = b.copy()
+    J, r, g = M.shape
+    if not transpose:
+        for j in range(J):
+            for i in range(r):
+                t = -b[sub[j, i]]
+                for q in range(g):
+                    if src[j, q] >= 0:
+                        t += M[j, i, q] * b[src[j, q]]
+                out[tgt[j, i]] = t
+        return out
+    for j in range(J):
+        for i in range(r):
+            out[tgt[j, i]] -= b[tgt[j, i]]
+    for j in range(J):
+        for i in range(r):
+            v = b[tgt[j, i]]
+            out[sub[j, i]] -= v
+            for q in range(g):
+                if src[j, q] >= 0:
+                    out[src[j, q]] += M[j, i, q] * v
+    return out
+
+
+REDUCED_KERNELS = (
+    group_values,
+    block_values,
+    spgemm,
+    spgemm_lower,
+    csr_matvec,
+    b_solve,
+    bt_solve,
+    s_apply,
+)

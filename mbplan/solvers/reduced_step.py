@@ -1,0 +1,192 @@
+"""The KKT system of :mod:`mbplan.solvers.linear_solver` factorized through an
+:class:`~mbplan.solvers.elimination.EliminationPlan`: two congruences
+``K₁ = diag(T̃ᵀ, S, I) K diag(T̃, Sᵀ, I)`` (``S`` the row groups' combinations, ``T̃`` the
+blocks' variable reduction ``x_dep = u - E x_free``) make the local rows touch only the
+dependent columns, so ``K₁ = [[G, Cᵀ, Bᵀ], [C, K_r, 0], [B, 0, 0]]`` (unknowns ordered
+dependent, rest, local rows) with ``B`` square lower block triangular. Then
+``inertia(K) = inertia(K_r) + (m, m, 0)`` (``m`` dependent columns) and ``K x = b`` takes
+``x_U = B⁻¹ b_Y``, ``x_R = K_r⁻¹ (b_R - C x_U)``, ``x_Y = B⁻ᵀ (b_U - G x_U - Cᵀ x_R)``.
+
+``K_r = [[Tᵀ (H + D_x) T, (A_E,kept T)ᵀ, (A_I T)ᵀ], [·, D_kept, 0], [·, 0, D_I]]`` is
+factorized by a :class:`KKTSystem` of its own; every solve is refined against the full ``K``.
+The symbolic phase (once per pattern) picks the replaced rows and dependent columns by QR
+with column pivoting on the first matrix's values and builds every index array; the numeric
+phase is compiled (:mod:`mbplan.solvers.reduction`, :mod:`mbplan.solvers.reduced_kernels`).
+The full factorization is the
+fallback: a nonzero diagonal on an eliminated row (``δ_c > 0``, restoration), a pivot
+breakdown in the reduction or in ``K_r``, or a refined solve that does not converge.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from mbplan.errors import InputError
+from mbplan.solvers.elimination import EliminationPlan
+from mbplan.solvers.kkt_scatter import matrix_values
+from mbplan.solvers.linear_solver import Inertia, KKTSystem, _csr
+from mbplan.solvers.reduction import Reduction, reduction
+
+
+def _ratio(res: np.ndarray, x: np.ndarray, b: np.ndarray) -> float:
+    """IPOPT's residual ratio ``‖r‖∞ / (min(‖x‖∞, 1e6‖b‖∞) + ‖b‖∞)``."""
+    nb = float(np.max(np.abs(b), initial=0.0))
+    den = min(float(np.max(np.abs(x), initial=0.0)), 1e6 * nb) + nb
+    nr = float(np.max(np.abs(res), initial=0.0))
+    return nr / den if den > 0 else (0.0 if nr == 0 else np.inf)
+
+
+class ReducedKKTSystem:
+    """:class:`KKTSystem`'s interface, factorizing through the plan ``plan_of(A_E)`` returns
+    for each new pattern (module docstring); the full factorization when the plan is ``None``
+    or the reduction does not apply (``strict``: an invalid plan raises instead).
+    ``n_reduced``: factorizations through the reduction;
+    ``n_fallbacks``: refined solves that missed ``ratio_max`` and were redone in full."""
+
+    def __init__(
+        self,
+        n: int,
+        n_eq: int,
+        n_ineq: int,
+        plan_of: Callable[[sp.csr_matrix], EliminationPlan | None],
+        *,
+        ordering: str = "amd",
+        pivot_threshold: float = 0.0,
+        strict: bool = False,
+    ) -> None:
+        self.full = KKTSystem(n, n_eq, n_ineq, ordering=ordering, pivot_threshold=pivot_threshold)
+        self.n, self.n_eq, self.n_ineq, self.dim = n, n_eq, n_ineq, self.full.dim
+        self.ordering = ordering
+        self.plan_of, self.strict = plan_of, strict
+        self._red: Reduction | None = None
+        self._seen = -1  # full.n_analyses the reduction was built for
+        self._active = self._values = False
+        self._diag = np.zeros(0)
+        self._reg = 0.0
+        self.n_reduced = 0
+        self.n_fallbacks = 0
+
+    @property
+    def n_factorizations(self) -> int:
+        return self.full.n_factorizations + self.n_reduced
+
+    @property
+    def reduction(self) -> Reduction | None:
+        """The reduction of the current pattern (``None``: no plan)."""
+        return self._red
+
+    def set_matrices(self, hessian, jac_eq, jac_ineq) -> None:
+        """As :meth:`KKTSystem.set_matrices` (``hessian=None``: the full factorization)."""
+        self.full.set_matrices(hessian, jac_eq, jac_ineq)
+        self._active = False
+        if hessian is None:
+            self._values = False
+            return
+        hess = _csr(hessian, (self.n, self.n))
+        ae = _csr(jac_eq, (self.n_eq, self.n))
+        ai = _csr(jac_ineq, (self.n_ineq, self.n))
+        if self._seen != self.full.n_analyses:
+            self._seen = self.full.n_analyses
+            f = self.full
+            self._k = sp.csr_matrix(
+                (f._full_data, f._pattern.full_indices, f._pattern.full_indptr),
+                shape=(self.dim, self.dim),
+            )
+            self._red = None
+            try:
+                plan = self.plan_of(ae)
+                if plan is not None:
+                    self._red = reduction(plan, hess, ae, ai, self.ordering)
+            except InputError:
+                if self.strict:
+                    raise
+        self._values = self._red is not None and self._red.set_values(hess, ae, ai)
+
+    def factorize(self, diagonal: np.ndarray, static_reg: float = 0.0) -> Inertia | None:
+        """As :meth:`KKTSystem.factorize`: the inertia of the full ``K``."""
+        diagonal = np.asarray(diagonal, dtype=np.float64)
+        if diagonal.shape != (self.dim,):
+            raise InputError(f"KKT diagonal has shape {diagonal.shape}, expected ({self.dim},)")
+        self._diag, self._reg = diagonal, static_reg
+        inertia = self._red.factorize(diagonal, static_reg) if self._values else None
+        self._active = inertia is not None
+        if not self._active:
+            return self.full.factorize(diagonal, static_reg)
+        self.n_reduced += 1
+        f = self.full
+        matrix_values(
+            f._base,
+            f._diag_slot,
+            diagonal,
+            self.n,
+            0.0,
+            f._pattern.full_src,
+            f._data,
+            f._full_data,
+            f._factor_data,
+        )  # fmt: skip  (K itself, for the refinement residuals)
+        return inertia
+
+    def matvec(self, v: np.ndarray) -> np.ndarray:
+        return self.full.matvec(v)
+
+    def solve(
+        self, rhs: np.ndarray, max_refinement: int = 10, ratio_max: float = 1e-10
+    ) -> tuple[np.ndarray, float]:
+        """As :meth:`KKTSystem.solve`: refinement against ``K`` (a solve through the reduction
+        that misses ``ratio_max`` is redone with the full factorization)."""
+        if not self._active:
+            return self.full.solve(rhs, max_refinement, ratio_max)
+        rhs = np.asarray(rhs, dtype=np.float64)
+        if rhs.shape != (self.dim,):
+            raise InputError(f"KKTSystem.solve: rhs has shape {rhs.shape}, expected ({self.dim},)")
+        red, matvec = self._red, self._k.dot  # K over the full system's value array
+        x = red.solve_once(rhs, matvec)
+        res = rhs - matvec(x)
+        ratio = _ratio(res, x, rhs)
+        for _ in range(max_refinement):
+            if ratio <= ratio_max:
+                break
+            x_new = x + red.solve_once(res, matvec)
+            res_new = rhs - matvec(x_new)
+            ratio_new = _ratio(res_new, x_new, rhs)
+            if not ratio_new < ratio:
+                break
+            x, res, ratio = x_new, res_new, ratio_new
+        if ratio <= ratio_max and np.isfinite(x).all():
+            return x, ratio
+        self.n_fallbacks += 1
+        self._active = False
+        self.full.factorize(self._diag, self._reg)
+        return self.full.solve(rhs, max_refinement, ratio_max)
+
+
+KKT_METHODS = ("full", "reduced", "auto")
+
+
+def kkt_system(
+    problem, method: str, ordering: str, pivot_threshold: float = 0.0
+) -> KKTSystem | ReducedKKTSystem:
+    """The RIPM's KKT system for ``problem``: ``"full"``, ``"reduced"`` (through the problem's
+    ``elimination_plan(A_E)``, an :class:`InputError` if it has none or it is invalid) or
+    ``"auto"`` (reduced when the problem has a valid plan)."""
+    if method not in KKT_METHODS:
+        raise InputError(f"kkt_method: expected one of {KKT_METHODS}, got {method!r}")
+    n, me, mi = int(problem.n), int(problem.n_eq), int(problem.n_ineq)
+    plan_of = getattr(problem, "elimination_plan", None)
+    if method == "full" or (method == "auto" and plan_of is None):
+        return KKTSystem(n, me, mi, ordering=ordering, pivot_threshold=pivot_threshold)
+    if plan_of is None:
+        raise InputError("kkt_method='reduced': the problem provides no elimination_plan")
+    return ReducedKKTSystem(
+        n,
+        me,
+        mi,
+        plan_of,
+        ordering=ordering,
+        pivot_threshold=pivot_threshold,
+        strict=method == "reduced",
+    )

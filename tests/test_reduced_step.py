@@ -1,0 +1,146 @@
+"""The KKT factorized through the joint elimination plan (mbplan.solvers.reduced_step) against
+the full LDLᵀ and the dense eigenvalues: same inertia (also wrong and singular), same steps,
+the cases it leaves to the full factorization, and a RIPM solve with kkt_method="reduced"."""
+
+import numpy as np
+import pytest
+
+from mbplan.benchmarks.speed_tasks import chain_task, maximal_ripm_problem
+from mbplan.errors import InputError
+from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
+from mbplan.solvers import RIPMOptions, solve_ripm
+from mbplan.solvers.elimination import EliminationPlan
+from mbplan.solvers.examples import hs071
+from mbplan.solvers.linear_solver import Inertia, KKTSystem
+from mbplan.solvers.reduced_step import ReducedKKTSystem, kkt_system
+
+
+def _kkt(problem, x0, seed):
+    rng = np.random.default_rng(seed)
+    z = rng.uniform(0.5, 2.0, problem.n_ineq)
+    ev = problem.evaluate(x0, 1.0, rng.normal(size=problem.n_eq), z)
+    blocks = (ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+    full = KKTSystem(problem.n, problem.n_eq, problem.n_ineq)
+    full.set_matrices(*blocks)
+    red = ReducedKKTSystem(
+        problem.n, problem.n_eq, problem.n_ineq, problem.elimination_plan, strict=True
+    )
+    red.set_matrices(*blocks)
+    return full, red, -rng.uniform(0.5, 2.0, problem.n_ineq) / z, rng
+
+
+@pytest.fixture(scope="module", params=["chain4", "chain8", "iiwa"])
+def systems(request):
+    if request.param == "iiwa":
+        ocp = iiwa_obstacle(iiwa_obstacle_starts(3, 0, "com")[1], N=6, constraint="com")
+        problem, x0 = maximal_ripm_problem(ocp)
+    else:
+        problem, x0 = maximal_ripm_problem(chain_task(int(request.param[5:]), N=5), "linear")
+    return problem, x0, *_kkt(problem, x0, 1)
+
+
+def _diag(problem, primal, dual_eq, sigma):
+    return np.concatenate(
+        [np.broadcast_to(primal, (problem.n,)), np.full(problem.n_eq, dual_eq), sigma]
+    )
+
+
+@pytest.mark.parametrize("delta_w", [0.0, 1e-4, "varying", -3.0])
+def test_reduced_inertia_and_step_equal_the_full_factorization(systems, delta_w):
+    problem, _, full, red, sigma, rng = systems
+    primal = rng.uniform(0.0, 1e-2, problem.n) if delta_w == "varying" else delta_w
+    diag = _diag(problem, primal, 0.0, sigma)
+    inertia, full_inertia = red.factorize(diag, 1e-9), full.factorize(diag, 1e-9)
+    eig = np.linalg.eigvalsh(full.matrix().toarray())
+    assert inertia == Inertia(int(np.sum(eig > 0)), int(np.sum(eig < 0)), 0)
+    if np.abs(eig).min() > 1e-7:  # else ±1e-9 on the full matrix's pivots may flip a sign
+        assert full_inertia == inertia
+    assert red.reduction.nr + len(red.reduction.kept) < 0.6 * problem.n + problem.n_eq
+    m = problem.n_eq + problem.n_ineq
+    if delta_w == -3.0:  # wrong inertia: the correction rejects both
+        assert inertia.negative > m
+        return
+    assert inertia.negative == m
+    b = rng.normal(size=full.dim)
+    x_full, (x_red, r_red) = full.solve(b)[0], red.solve(b)
+    assert red.n_fallbacks == 0 and r_red <= 1e-10
+    assert np.abs(x_red - x_full).max() <= 1e-6 * np.abs(x_full).max()  # both backward stable
+    scale = np.abs(x_red).max() + np.abs(b).max()
+    assert np.abs(full.matvec(x_red) - b).max() <= 1e-10 * scale
+
+
+def test_singular_matrix_is_rejected_by_both(systems):
+    """``H = 0``, ``A_I = 0``: the matrix is singular on ``A_E``'s null space; each method either
+    reports a wrong inertia or a solve whose residual refinement cannot reduce."""
+    problem, x0 = systems[:2]
+    full, red, sigma, rng = _kkt(problem, x0, 3)
+    ev = problem.evaluate(x0, 0.0)
+    for kkt in (full, red):
+        kkt.set_matrices(ev.hessian_lower * 0.0, ev.eq_jacobian, ev.ineq_jacobian * 0.0)
+    diag = _diag(problem, 0.0, 0.0, sigma)
+    b = rng.normal(size=full.dim)
+    m = problem.n_eq + problem.n_ineq
+    for kkt in (full, red):
+        inertia = kkt.factorize(diag, 1e-9)
+        wrong = inertia is None or inertia.negative != m
+        assert wrong or kkt.solve(b)[1] > 1e-5
+
+
+def test_regularized_jacobian_block_goes_to_the_full_factorization(systems):
+    problem, _, full, red, sigma, rng = systems
+    diag = _diag(problem, 1e-4, -1e-8, sigma)  # δ_c > 0
+    assert red.factorize(diag, 1e-9) == full.factorize(diag, 1e-9)
+    b = rng.normal(size=full.dim)
+    assert np.abs(red.solve(b)[0] - full.solve(b)[0]).max() == 0.0
+
+
+def test_ripm_reduced_solve_equals_full():
+    problem, x0 = maximal_ripm_problem(chain_task(4, N=8), "linear")
+    opts = RIPMOptions(tol=1e-6, max_iter=100)
+    full = solve_ripm(problem, x0, opts)
+    red = solve_ripm(problem, x0, opts.replace(kkt_method="reduced"))
+    assert full.status.name == red.status.name == "CONVERGED"
+    assert abs(full.iterations - red.iterations) <= 1
+    assert abs(full.objective - red.objective) <= 1e-6 * max(1.0, abs(full.objective))
+
+
+def test_kkt_method_choice_and_errors(systems):
+    problem = systems[0]
+    assert type(kkt_system(problem, "auto", "amd")) is ReducedKKTSystem
+    assert type(kkt_system(problem, "full", "amd")) is KKTSystem
+    with pytest.raises(InputError, match="kkt_method"):
+        RIPMOptions(kkt_method="cholesky")
+    nlp = hs071()
+    assert type(kkt_system(nlp, "auto", "amd")) is KKTSystem
+    with pytest.raises(InputError, match="no elimination_plan"):
+        kkt_system(nlp, "reduced", "amd")
+    one = np.zeros((1, 2), np.int64)
+    with pytest.raises(InputError, match="more local rows than columns"):
+        EliminationPlan(
+            one[:0], one[:0], one[:0], one[:0], np.array([-1]), np.array([[0, 1, 2]]), one[:, :1]
+        )
+
+
+def test_breakdown_and_invalid_plan_fall_back_to_the_full_factorization(systems):
+    problem, x0 = systems[:2]
+    full, red, sigma, rng = _kkt(problem, x0, 2)  # own systems: the fixture's stay as they are
+    ev = problem.evaluate(x0, 1.0, rng.normal(size=problem.n_eq), np.ones(problem.n_ineq))
+    dead = ev.eq_jacobian.copy()
+    dead.data[:] = 0.0  # same pattern, every local row zero: the reduction breaks down
+    diag = _diag(problem, 1.0, 0.0, sigma)
+    for kkt in (full, red):
+        kkt.set_matrices(ev.hessian_lower, dead, ev.ineq_jacobian)
+    assert red.factorize(diag, 1e-9) == full.factorize(diag, 1e-9)
+    assert not red._active and red.reduction is not None
+
+    def invalid(_jac):
+        raise InputError("no plan here")
+
+    lenient = ReducedKKTSystem(problem.n, problem.n_eq, problem.n_ineq, invalid)
+    lenient.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+    full.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+    assert lenient.reduction is None
+    assert lenient.factorize(diag, 1e-9) == full.factorize(diag, 1e-9)
+    strict = ReducedKKTSystem(problem.n, problem.n_eq, problem.n_ineq, invalid, strict=True)
+    with pytest.raises(InputError, match="no plan here"):
+        strict.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
