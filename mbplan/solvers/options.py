@@ -61,6 +61,14 @@ class RIPMOptions:
     acceptable_iter: int = 15
     constr_viol_tol: float = 1e-4
     """A point with ‖h, g + s‖∞ above it that minimizes the infeasibility is locally infeasible."""
+    corrector: bool = False
+    """Mehrotra's second-order corrector: the complementarity row's right-hand side
+    ``μe - (α_s ΔS_aff)(α_z Δz_aff)`` from the affine-scaling step (the probing oracle's when it
+    runs), kept unless the uncorrected step reaches farther before the boundary; two more solves
+    with the step's factorization (one with ``mu_oracle="probing"``). Main phase only."""
+    mu_max_fact: float = 1e3
+    """Upper bound of the adaptive μ: ``max(μ_init, mu_max_fact · sᵀz/m)`` at the start (IPOPT's
+    ``mu_max_fact``); 0 caps it at ``μ_init``."""
 
     # --- filter line search (WB) ---
     theta_max_fact: float = 1e4
@@ -156,6 +164,7 @@ class RIPMOptions:
             "tau_min": 0 < self.tau_min < 1,
             "beta": 0 < self.beta < 1,
             "mu_init": self.mu_init > 0,
+            "mu_max_fact": self.mu_max_fact >= 0,
             "gamma_theta": 0 < self.gamma_theta < 1,
             "gamma_phi": 0 < self.gamma_phi < 1,
             "eta_phi": 0 < self.eta_phi < 0.5,
