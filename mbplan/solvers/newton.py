@@ -68,13 +68,13 @@ class NewtonStep:
         a_d = frac_to_boundary(self.z, aff.dz, self.tau)
         return (a_p * a_d) * (aff.ds * aff.dz)
 
-    def _safeguarded_corrector(self, corrected: np.ndarray) -> Step:
-        """The corrected step, or the uncorrected one (one more solve, unless the corrected step
-        is a full step) when its fraction-to-boundary step ``min(α_s, α_z)`` (WB eq. 15) is
-        longer."""
+    def _safeguarded_corrector(self, corrected: np.ndarray, aff: Step) -> Step:
+        """The corrected step if its fraction-to-boundary step ``min(α_s, α_z)`` (WB eq. 15) is
+        at least the affine step's; otherwise the uncorrected step (one more solve) if that one
+        reaches farther."""
         step = self._split(corrected)
         reach = self._boundary_step(step)
-        if reach == 1.0:
+        if reach >= self._boundary_step(aff):
             return step
         shift, self.compl_shift = self.compl_shift, None
         plain = self._split(self._solve(self._rhs(self.r_c)))
@@ -138,7 +138,7 @@ class NewtonStep:
                     else:
                         self.n_perturbed = 0
                     if self.compl_shift is not None:
-                        return self._safeguarded_corrector(sol), dw
+                        return self._safeguarded_corrector(sol, aff), dw
                     return self._split(sol), dw
                 pretend_singular = singular = True  # IPOPT: refinement failed
             if singular and dc == 0.0 and m > 0:

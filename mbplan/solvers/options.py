@@ -64,8 +64,10 @@ class RIPMOptions:
     corrector: bool = False
     """Mehrotra's second-order corrector: the complementarity row's right-hand side
     ``μe - (α_s ΔS_aff)(α_z Δz_aff)`` from the affine-scaling step (the probing oracle's when it
-    runs), kept unless the uncorrected step reaches farther before the boundary; two more solves
-    with the step's factorization (one with ``mu_oracle="probing"``). Main phase only."""
+    runs), kept if it reaches as far before the boundary as the affine step, else unless the
+    uncorrected step reaches farther. Costs the affine solve (shared with the probing oracle) and,
+    where the corrected step falls short of the affine one, a solve of the uncorrected step; all
+    with the step's factorization. Main phase only."""
     mu_max_fact: float = 1e3
     """Upper bound of the adaptive μ: ``max(μ_init, mu_max_fact · sᵀz/m)`` at the start (IPOPT's
     ``mu_max_fact``); 0 caps it at ``μ_init``."""
