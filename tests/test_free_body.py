@@ -280,3 +280,20 @@ def test_inverse_dynamics_inputs_are_exact_for_a_fully_actuated_body() -> None:
         torque = SO3.vee(F[k + 1] @ J - J @ F[k + 1].T - J @ F[k] + F[k].T @ J) / ocp.dt**2
         force = R[k + 1].T @ (body.mass * ((v[k + 1] - v[k]) / ocp.dt - body.gravity))
         np.testing.assert_allclose(wrench, np.r_[force, torque], atol=1e-9)
+
+
+def test_mehrotra_barrier_options_plan_the_docking_with_input_limits() -> None:
+    """The drone docking with input limits (bang-bang torques) planned with Mehrotra's probing
+    μ capped at μ_init and the corrector: converges, verifies, and reaches the default options'
+    trajectory along different iterates."""
+    ocp = paper.drone_docking(sample_docking_cases(2, 0, with_input_limits=True)[0])
+    options = {"mu_strategy": "adaptive", "mu_oracle": "probing", "mu_max_fact": 0.0}
+    default = mb.plan(ocp, "ripm", warm_start="linear")
+    mehrotra = mb.plan(ocp, "ripm", warm_start="linear", options=options | {"corrector": True})
+    assert default.success and mehrotra.success
+    assert mb.verify(ocp, mehrotra).passed
+    np.testing.assert_allclose(mehrotra.q, default.q, atol=1e-5)
+    np.testing.assert_allclose(mehrotra.tau, default.tau, atol=1e-4)
+    assert mehrotra.iterations != default.iterations or not np.allclose(
+        mehrotra.kkt_history, default.kkt_history
+    )

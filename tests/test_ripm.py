@@ -316,6 +316,40 @@ def test_adaptive_mu_option():
             RIPMOptions().replace(**{removed: 1})
 
 
+def test_mehrotra_corrector_and_mu_cap_options():
+    """``corrector`` (Mehrotra's second-order term, monotone or with the probing oracle) and
+    ``mu_max_fact = 0`` (adaptive μ capped at μ_init) solve HS071, the banded control problem and
+    the jamming example to the reference points; the corrector changes the iterates; bad values
+    are rejected by name."""
+    banded = BandedControlNLP(nx=4, nu=2, horizon=20)
+    reference = solve_ripm(banded, banded.initial_guess())
+    probing = {"mu_strategy": "adaptive", "mu_oracle": "probing"}
+    variants = (
+        {"corrector": True},
+        {**probing, "corrector": True},
+        {**probing, "mu_max_fact": 0.0},
+        {**probing, "mu_max_fact": 0.0, "corrector": True},
+    )
+    for options in variants:
+        res = solve_ripm(hs071(), HS071_X0, **options)
+        assert res.status is RIPMStatus.CONVERGED, options
+        assert abs(res.objective - 17.0140172891) < 1e-8
+        res = solve_ripm(banded, banded.initial_guess(), **options)
+        assert res.status is RIPMStatus.CONVERGED, options
+        assert abs(res.objective - reference.objective) < 1e-7 * abs(reference.objective)
+        res = solve_ripm(_outside_disc(), np.array([0.0, 1e-3]), **options)
+        assert res.success and np.allclose(res.x, [2.0, 0.0], atol=1e-6), options
+    plain = solve_ripm(hs071(), HS071_X0).history.objective
+    corrected = solve_ripm(hs071(), HS071_X0, corrector=True).history.objective
+    assert len(plain) != len(corrected) or not np.allclose(plain, corrected)
+    capped = solve_ripm(banded, banded.initial_guess(), **probing, mu_max_fact=0.0)
+    assert max(capped.history.mu) <= RIPMOptions().mu_init
+    with pytest.raises(InputError, match="mu_max_fact"):
+        RIPMOptions(mu_max_fact=-1.0)
+    with pytest.raises(InputError, match="corrector"):
+        RIPMOptions(corrector=1)
+
+
 def _sqrt_problem(objective) -> EuclideanNLP:
     return EuclideanNLP(
         1,

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from mbplan.solvers.iterate import EPS, frac_to_boundary
+from mbplan.solvers.iterate import EPS, Step, frac_to_boundary
 
 
 class BarrierStrategy:
@@ -52,24 +52,21 @@ class BarrierStrategy:
         else:
             self._set_mu(self._loqo_mu())
 
-    def _probe_mu(self) -> None:
+    def _probe_mu(self) -> Step:
         """Mehrotra's predictor (IPOPT's probing oracle): the affine-scaling step (μ = 0) with
         the current factorization, ``μ_aff`` the average complementarity after its
-        fraction-to-boundary steps, ``μ = σ μ_avg`` with ``σ = (μ_aff / μ_avg)³``."""
+        fraction-to-boundary steps, ``μ = σ μ_avg`` with ``σ = (μ_aff / μ_avg)³``; returns the
+        affine step."""
         self.probe_pending = False
-        mu_avg, saved = self._avg_compl(), self.mu
-        self.mu = 0.0
-        try:
-            sol = self._solve(self._rhs(self.r_c))
-            aff = self._split(sol)
-        finally:
-            self.mu = saved
+        mu_avg = self._avg_compl()
+        aff = self._affine_step()
         tau = self.tau
         a_p = frac_to_boundary(self.s, aff.ds, tau)
         a_d = frac_to_boundary(self.z, aff.dz, tau)
         mu_aff = float(np.mean((self.s + a_p * aff.ds) * (self.z + a_d * aff.dz)))
         sigma = min((mu_aff / mu_avg) ** 3, 1.0) if mu_avg > 0 else 0.0
         self._set_mu(float(np.clip(sigma * mu_avg, self.o.tol / 10, self.mu_max)))
+        return aff
 
     def _set_mu(self, mu: float) -> None:
         if mu != self.mu:

@@ -12,14 +12,15 @@ symmetric system solved by :class:`~mbplan.solvers.linear_solver.KKTSystem`::
 the barrier problem iff the inertia is ``(n, n_eq + n_ineq, 0)``; otherwise ``δ_w``, ``δ_c``
 follow WB Algorithm IC. In the restoration phase the elastic variables and their multipliers
 are eliminated row by row as well (:mod:`mbplan.solvers.restoration`): the matrix keeps the main
-loop's pattern, and its symbolic factorization.
+loop's pattern, and its symbolic factorization. With ``corrector`` the complementarity row's
+``μe`` becomes Mehrotra's ``μe - ΔS_aff Δz_aff`` (solves with the same factorization).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from mbplan.solvers.iterate import Step, finite
+from mbplan.solvers.iterate import Step, finite, frac_to_boundary
 
 
 class NewtonStep:
@@ -29,7 +30,7 @@ class NewtonStep:
         """Right-hand side for the constraint values ``c`` (``r_c``, or a second-order
         correction's)."""
         lower = -c
-        lower[self.me :] += self.s - self.mu / self.z
+        lower[self.me :] += self.s - self._compl_target() / self.z
         if self.resto:
             lam = self._lam()
             lower += (self.mu - self.ep * (self.rho - lam)) / self.zp
@@ -45,6 +46,48 @@ class NewtonStep:
             dual -= self.ep / self.zp + self.en / self.zn
         return np.concatenate([np.full(self.n, dw + self.zeta), dual])
 
+    def _compl_target(self) -> np.ndarray | float:
+        """Right-hand side ``μe`` of the complementarity row, minus the second-order term
+        ``ΔS_aff Δz_aff`` with Mehrotra's corrector (Mehrotra 1992; Nocedal & Wright eq. 14.31)."""
+        return self.mu if self.compl_shift is None else self.mu - self.compl_shift
+
+    def _affine_step(self) -> Step:
+        """The affine-scaling (predictor) step: the Newton step for μ = 0 with the current
+        factorization."""
+        saved, self.mu, self.compl_shift = self.mu, 0.0, None
+        try:
+            return self._split(self._solve(self._rhs(self.r_c)))
+        finally:
+            self.mu = saved
+
+    def _corrector_shift(self, aff: Step) -> np.ndarray:
+        """Mehrotra's second-order term ``(α_p Δs_aff)(α_d Δz_aff)`` with the affine step's
+        fraction-to-boundary step lengths: a long affine step corrects fully, a cut one
+        little (the unscaled term lost iterations on the iiwa; docs/ripm-speed.md, session 6)."""
+        a_p = frac_to_boundary(self.s, aff.ds, self.tau)
+        a_d = frac_to_boundary(self.z, aff.dz, self.tau)
+        return (a_p * a_d) * (aff.ds * aff.dz)
+
+    def _safeguarded_corrector(self, corrected: np.ndarray, aff: Step) -> Step:
+        """The corrected step if its fraction-to-boundary step ``min(α_s, α_z)`` (WB eq. 15) is
+        at least the affine step's; otherwise the uncorrected step (one more solve) if that one
+        reaches farther."""
+        step = self._split(corrected)
+        reach = self._boundary_step(step)
+        if reach >= self._boundary_step(aff):
+            return step
+        shift, self.compl_shift = self.compl_shift, None
+        plain = self._split(self._solve(self._rhs(self.r_c)))
+        if finite(plain.dx, plain.dz) and self._boundary_step(plain) > reach:
+            return plain
+        self.compl_shift = shift
+        return step
+
+    def _boundary_step(self, step: Step) -> float:
+        return min(
+            frac_to_boundary(self.s, step.ds, self.tau), frac_to_boundary(self.z, step.dz, self.tau)
+        )
+
     def _solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve with the current factorization (iterative refinement as configured)."""
         return self.kkt.solve(rhs, self.o.max_refinement_steps, self.o.residual_ratio_max)[0]
@@ -53,7 +96,7 @@ class NewtonStep:
         n, me = self.n, self.me
         dlam = sol[n:]
         dz = dlam[me:]
-        ds = -self.s + self.mu / self.z - self.s * dz / self.z
+        ds = -self.s + self._compl_target() / self.z - self.s * dz / self.z
         step = Step(sol[:n], ds, dlam[:me], dz)
         if self.resto:
             lam = self._lam()
@@ -68,6 +111,7 @@ class NewtonStep:
         """Factorize with inertia correction (WB Algorithm IC) and solve; ``None`` on failure."""
         o, m = self.o, self.m
         self.kkt.set_matrices(self.ev.hessian_lower, self.ev.eq_jacobian, self.ev.ineq_jacobian)
+        self.compl_shift = None
         dw = dc = 0.0
         if o.degenerate_iters and self.n_perturbed >= o.degenerate_iters and self.delta_w_last:
             # IPOPT's structurally degenerate Hessian: the zero trial has failed every time
@@ -79,8 +123,12 @@ class NewtonStep:
             correct = inertia is not None and inertia.zero == 0 and inertia.negative == m
             singular = not correct and (inertia is None or inertia.zero > 0 or inertia.negative < m)
             if correct:
+                aff = None
                 if self.probe_pending:  # μ from an affine step with this factorization
-                    self._probe_mu()
+                    aff = self._probe_mu()
+                if o.corrector and self.mi and not self.resto:
+                    aff = aff or self._affine_step()
+                    self.compl_shift = self._corrector_shift(aff)
                 rhs = self._rhs(self.r_c)
                 sol, ratio = self.kkt.solve(rhs, o.max_refinement_steps, o.residual_ratio_max)
                 if finite(sol) and (ratio <= o.residual_ratio_singular or pretend_singular):
@@ -89,6 +137,8 @@ class NewtonStep:
                         self.n_perturbed += 1
                     else:
                         self.n_perturbed = 0
+                    if self.compl_shift is not None:
+                        return self._safeguarded_corrector(sol, aff), dw
                     return self._split(sol), dw
                 pretend_singular = singular = True  # IPOPT: refinement failed
             if singular and dc == 0.0 and m > 0:

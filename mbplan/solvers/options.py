@@ -62,6 +62,16 @@ class RIPMOptions:
     acceptable_iter: int = 15
     constr_viol_tol: float = 1e-4
     """A point with ‖h, g + s‖∞ above it that minimizes the infeasibility is locally infeasible."""
+    corrector: bool = False
+    """Mehrotra's second-order corrector: the complementarity row's right-hand side
+    ``μe - (α_s ΔS_aff)(α_z Δz_aff)`` from the affine-scaling step (the probing oracle's when it
+    runs), kept if it reaches as far before the boundary as the affine step, else unless the
+    uncorrected step reaches farther. Costs the affine solve (shared with the probing oracle) and,
+    where the corrected step falls short of the affine one, a solve of the uncorrected step; all
+    with the step's factorization. Main phase only."""
+    mu_max_fact: float = 1e3
+    """Upper bound of the adaptive μ: ``max(μ_init, mu_max_fact · sᵀz/m)`` at the start (IPOPT's
+    ``mu_max_fact``); 0 caps it at ``μ_init``."""
 
     # --- filter line search (WB) ---
     theta_max_fact: float = 1e4
@@ -167,6 +177,7 @@ class RIPMOptions:
             "tau_min": 0 < self.tau_min < 1,
             "beta": 0 < self.beta < 1,
             "mu_init": self.mu_init > 0,
+            "mu_max_fact": self.mu_max_fact >= 0,
             "gamma_theta": 0 < self.gamma_theta < 1,
             "gamma_phi": 0 < self.gamma_phi < 1,
             "eta_phi": 0 < self.eta_phi < 0.5,

@@ -120,6 +120,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.kkt_refs: list[float] = []
         self.mu_max = math.inf
         self.probe_pending = False  # Mehrotra's μ is due once the step's matrix is factorized
+        self.compl_shift: np.ndarray | None = None  # Mehrotra's corrector ΔS_aff Δz_aff
 
     @property
     def kkt(self) -> KKTSystem | ReducedKKTSystem:
@@ -162,7 +163,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         if self.ev is None:
             raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the initial point")
         theta0 = float(np.sum(np.abs(self._current_trial().c)))
-        self.mu_max = max(o.mu_init, 1e3 * self._avg_compl())
+        self.mu_max = max(o.mu_init, o.mu_max_fact * self._avg_compl())
         self.theta_max = o.theta_max_fact * max(1.0, theta0)
         self.theta_min = o.theta_min_fact * max(1.0, theta0)
 
