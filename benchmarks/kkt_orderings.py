@@ -63,7 +63,7 @@ def _first_ripm_kkt(problem, x0, options) -> tuple[tuple, np.ndarray]:
 
     ls.KKTSystem.factorize, ls.KKTSystem.set_matrices = capture, capture_blocks
     try:
-        solve_ripm(problem, x0, options.replace(max_iter=1))
+        solve_ripm(problem, x0, options.replace(max_iter=1, kkt_method="full"))
     finally:
         ls.KKTSystem.factorize, ls.KKTSystem.set_matrices = factorize, set_matrices
     return saved["blocks"], saved["diagonal"]

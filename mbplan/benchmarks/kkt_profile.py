@@ -14,6 +14,7 @@ from mbplan.solvers import RIPMOptions, RIPMResult, solve_ripm
 from mbplan.solvers import linear_solver as ls
 from mbplan.solvers.ldl_symbolic import Analysis
 from mbplan.solvers.ordering import amd_order, coordinate_dissection_order
+from mbplan.solvers.reduced_step import ReducedKKTSystem
 
 
 class _TimedProblem:
@@ -40,36 +41,47 @@ class _TimedProblem:
     def retract(self, *args: Any, **kw: Any) -> Any:
         return self._timed("retract", self._p.retract, *args, **kw)
 
+    def __getattr__(self, name: str) -> Any:
+        """Everything else (e.g. the ``elimination_plan`` of ``kkt_method="reduced"``) untimed."""
+        return getattr(self._p, name)
+
 
 PROFILE_KEYS = ("evaluate", "values", "retract", "assembly", "factorize", "solve")
+_KKT_CLASSES = (ls.KKTSystem, ReducedKKTSystem)
 
 
 @contextmanager
 def _timed_kkt(clock: dict[str, float]):
-    """Timers on the KKT system's methods (class-level patch, restored on exit)."""
-    cls = ls.KKTSystem
-    saved = {name: getattr(cls, name) for name in ("set_matrices", "factorize", "solve")}
+    """Timers on the KKT systems' methods (class-level patches, restored on exit); a call made
+    from inside a timed call (the reduced system's own full and reduced systems) is not counted
+    again."""
+    methods = ("set_matrices", "factorize", "solve")
+    saved = {(cls, name): getattr(cls, name) for cls in _KKT_CLASSES for name in methods}
     key = {"set_matrices": "assembly", "factorize": "factorize", "solve": "solve"}
+    depth = [0]
 
-    def wrap(name: str) -> Callable:
-        fn = saved[name]
+    def wrap(cls: type, name: str) -> Callable:
+        fn = saved[cls, name]
 
         def timed(self: Any, *args: Any, **kw: Any) -> Any:
+            depth[0] += 1
             t0 = time.perf_counter()
             try:
                 return fn(self, *args, **kw)
             finally:
-                clock[key[name]] += time.perf_counter() - t0
-                clock["n_" + key[name]] += 1
+                depth[0] -= 1
+                if depth[0] == 0:
+                    clock[key[name]] += time.perf_counter() - t0
+                    clock["n_" + key[name]] += 1
 
         return timed
 
     try:
-        for name in saved:
-            setattr(cls, name, wrap(name))
+        for cls, name in saved:
+            setattr(cls, name, wrap(cls, name))
         yield
     finally:
-        for name, fn in saved.items():
+        for (cls, name), fn in saved.items():
             setattr(cls, name, fn)
 
 

@@ -134,7 +134,8 @@ class RIPMOptions:
     """``"full"``: factorize the whole KKT matrix; ``"reduced"``: eliminate the pairs of the
     problem's ``elimination_plan`` first (:mod:`mbplan.solvers.reduced_step`; the full
     factorization where it does not apply, e.g. ``δ_c > 0``); ``"auto"``: reduced when the
-    problem has a plan."""
+    problem has a plan and the full factorization needs at most
+    :data:`~mbplan.solvers.reduced_step.AUTO_MAX_FLOPS` multiply-adds."""
 
     # --- feasibility restoration (WB §3.3) ---
     restoration: bool = True

@@ -39,6 +39,13 @@ def _ratio(res: np.ndarray, x: np.ndarray, b: np.ndarray) -> float:
     return nr / den if den > 0 else (0.0 if nr == 0 else np.inf)
 
 
+AUTO_MAX_FLOPS = 4e9
+"""``kkt_method="auto"`` reduces only KKT matrices whose full factorization needs at most this
+many multiply-adds: above it the reduction's per-knot dense blocks (dense over each body's
+ancestors) and the reduced matrix's small supernodes cost more than the full supernodal
+factorization saves (chain64: 9.2e9, reduced 1.4× slower; chain16 0.59×; docs/ripm-speed.md)."""
+
+
 class ReducedKKTSystem:
     """:class:`KKTSystem`'s interface, factorizing through the plan ``plan_of(A_E)`` returns
     for each new pattern (module docstring); the full factorization when the plan is ``None``
@@ -59,7 +66,7 @@ class ReducedKKTSystem:
     ) -> None:
         self.full = KKTSystem(n, n_eq, n_ineq, ordering=ordering, pivot_threshold=pivot_threshold)
         self.n, self.n_eq, self.n_ineq, self.dim = n, n_eq, n_ineq, self.full.dim
-        self.ordering = ordering
+        self.ordering, self.pivot_threshold = ordering, pivot_threshold
         self.plan_of, self.strict = plan_of, strict
         self._red: Reduction | None = None
         self._seen = -1  # full.n_analyses the reduction was built for
@@ -96,10 +103,13 @@ class ReducedKKTSystem:
                 shape=(self.dim, self.dim),
             )
             self._red = None
+            if not self.strict and f._pattern.analysis.flops > AUTO_MAX_FLOPS:
+                self._values = False
+                return
             try:
                 plan = self.plan_of(ae)
                 if plan is not None:
-                    self._red = reduction(plan, hess, ae, ai, self.ordering)
+                    self._red = reduction(plan, hess, ae, ai, self.ordering, self.pivot_threshold)
             except InputError:
                 if self.strict:
                     raise

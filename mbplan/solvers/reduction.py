@@ -49,12 +49,14 @@ def reduction(
     ae: sp.csr_matrix,
     ai: sp.csr_matrix,
     ordering: str,
+    pivot_threshold: float = 0.0,
 ) -> Reduction:
     """A :class:`Reduction` of its own for ``plan`` and the blocks' patterns; the symbolic
     phase is memoized per process for the last few (the solves of one task family share it,
     with the replaced rows and dependent columns picked on the first one's values)."""
     key = (
         ordering,
+        pivot_threshold,
         *(getattr(plan, f.name).tobytes() for f in dataclasses.fields(plan)),
         *(a.tobytes() for m in (hess, ae, ai) for a in (m.indptr, m.indices)),
     )
@@ -64,7 +66,7 @@ def reduction(
             _REDUCTIONS.move_to_end(key)
             return hit.fresh()
     announce_uncached_numba(*REDUCED_KERNELS)  # first run only
-    hit = Reduction(plan, hess, ae, ai, ordering)
+    hit = Reduction(plan, hess, ae, ai, ordering, pivot_threshold)
     with _REDUCTIONS_LOCK:
         _REDUCTIONS[key] = hit
         while len(_REDUCTIONS) > _REDUCTIONS_KEPT:
@@ -121,6 +123,7 @@ class Reduction:
         ae: sp.csr_matrix,
         ai: sp.csr_matrix,
         ordering: str,
+        pivot_threshold: float = 0.0,
     ) -> None:
         n, me = ae.shape[1], ae.shape[0]
         self.n, self.me, self.mi = n, me, ai.shape[0]
@@ -129,8 +132,8 @@ class Reduction:
         self._blocks(plan, ae, slots)
         self._transform()
         self._products(hess, ae, ai)
-        self.ordering = ordering
-        self.kkt = KKTSystem(self.nr, len(self.kept), self.mi, ordering=ordering)
+        self.factor_options = {"ordering": ordering, "pivot_threshold": pivot_threshold}
+        self.kkt = KKTSystem(self.nr, len(self.kept), self.mi, **self.factor_options)
         self.ok = False
 
     _WORK = ("M", "new_rows", "lbuf", "ebuf", "lu", "piv", "work", "hr_base", "dt_data", "ttt")
@@ -144,7 +147,7 @@ class Reduction:
         for name in self._MATRICES:
             m = getattr(self, name)
             setattr(new, name, sp.csr_matrix((m.data.copy(), m.indices, m.indptr), shape=m.shape))
-        new.kkt = KKTSystem(self.nr, len(self.kept), self.mi, ordering=self.ordering)
+        new.kkt = KKTSystem(self.nr, len(self.kept), self.mi, **self.factor_options)
         new.ok = False
         return new
 
