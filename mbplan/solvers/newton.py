@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from mbplan.solvers.iterate import Step, finite
+from mbplan.solvers.ripm_kernels import newton_diagonal, newton_rhs, slack_step
 
 
 class NewtonStep:
@@ -28,22 +29,22 @@ class NewtonStep:
     def _rhs(self, c: np.ndarray) -> np.ndarray:
         """Right-hand side for the constraint values ``c`` (``r_c``, or a second-order
         correction's)."""
-        lower = -c
-        lower[self.me :] += self.s - self.mu / self.z
+        rhs = np.empty(self.n + self.m)
+        newton_rhs(self.r_d, c, self.me, self.s, self.z, self.mu, rhs)
         if self.resto:
-            lam = self._lam()
+            lam, lower = self._lam(), rhs[self.n :]
             lower += (self.mu - self.ep * (self.rho - lam)) / self.zp
             lower -= (self.mu - self.en * (self.rho + lam)) / self.zn
-        return np.concatenate([-self.r_d, lower])
+        return rhs
 
     def _diagonal(self, dw: float, dc: float) -> np.ndarray:
         """Diagonal added to ``K``: ``δ_w (+ζ)`` on the primal, the eliminated blocks and
         ``-δ_c`` on the dual rows."""
-        dual = np.full(self.m, -dc)
-        dual[self.me :] -= self.s / self.z
+        diagonal = np.empty(self.n + self.m)
+        newton_diagonal(self.n, self.me, dw + self.zeta, dc, self.s, self.z, diagonal)
         if self.resto:
-            dual -= self.ep / self.zp + self.en / self.zn
-        return np.concatenate([np.full(self.n, dw + self.zeta), dual])
+            diagonal[self.n :] -= self.ep / self.zp + self.en / self.zn
+        return diagonal
 
     def _solve(self, rhs: np.ndarray) -> np.ndarray:
         """Solve with the current factorization (iterative refinement as configured)."""
@@ -53,7 +54,7 @@ class NewtonStep:
         n, me = self.n, self.me
         dlam = sol[n:]
         dz = dlam[me:]
-        ds = -self.s + self.mu / self.z - self.s * dz / self.z
+        ds = slack_step(self.s, self.z, dz, self.mu)
         step = Step(sol[:n], ds, dlam[:me], dz)
         if self.resto:
             lam = self._lam()

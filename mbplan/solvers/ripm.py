@@ -45,6 +45,7 @@ from mbplan.solvers.options import RIPMOptions
 from mbplan.solvers.problem import NLPEvaluation, Point, RIPMProblem
 from mbplan.solvers.restoration import Restoration, Stop
 from mbplan.solvers.result import IterationHistory, RIPMResult, RIPMStatus
+from mbplan.solvers.ripm_kernels import safeguarded_duals
 
 _HEADER = "iter    objective    inf_pr   inf_du lg(mu)  ||d||  lg(rg) alpha_du alpha_pr  ls"
 
@@ -66,7 +67,9 @@ def solve_ripm(
     parameters (``solve_ripm(p, x0, tol=1e-8)``). ``y0``, ``z0`` (> 0) and ``s0`` (> 0) warm-start
     the multipliers and slacks. ``verbose=True`` is ``print_level=1``.
     """
-    opts = (options or RIPMOptions()).replace(**overrides)
+    opts = options or RIPMOptions()
+    if overrides:
+        opts = opts.replace(**overrides)
     if verbose and opts.print_level == 0:
         opts = opts.replace(print_level=1)
     return _RIPM(problem, opts).run(x0, y0, z0, s0)
@@ -277,15 +280,12 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         if search.tag[0] == "h":
             self._augment_filter(self.cur.theta, self.cur.phi)
         y = self.y + alpha * step.dy
-        z = self.z + alpha_z * step.dz
         s = trial.s
-        z = np.clip(z, self.mu / (o.kappa_sigma * s), o.kappa_sigma * self.mu / s)  # WB eq. 16
+        z = safeguarded_duals(self.z, step.dz, alpha_z, s, self.mu, o.kappa_sigma)  # WB eq. 16
         if self.resto:
-            zp = self.zp + alpha_z * step.dzp
-            zn = self.zn + alpha_z * step.dzn
             p, n = trial.p, trial.n
-            self.zp = np.clip(zp, self.mu / (o.kappa_sigma * p), o.kappa_sigma * self.mu / p)
-            self.zn = np.clip(zn, self.mu / (o.kappa_sigma * n), o.kappa_sigma * self.mu / n)
+            self.zp = safeguarded_duals(self.zp, step.dzp, alpha_z, p, self.mu, o.kappa_sigma)
+            self.zn = safeguarded_duals(self.zn, step.dzn, alpha_z, n, self.mu, o.kappa_sigma)
             self.ep, self.en, self.xi = p, n, trial.xi
         ev = self._evaluate(trial.x, y, z)
         if ev is None:
