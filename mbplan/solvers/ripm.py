@@ -20,6 +20,7 @@ Every linear-algebra object is sparse with a fixed pattern; one iteration costs 
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import time
@@ -29,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from mbplan.engine.jit import announce_uncached_numba
 from mbplan.errors import InputError
 from mbplan.solvers.barrier import BarrierStrategy
 from mbplan.solvers.iterate import (
@@ -45,7 +47,7 @@ from mbplan.solvers.options import RIPMOptions
 from mbplan.solvers.problem import NLPEvaluation, Point, RIPMProblem
 from mbplan.solvers.restoration import Restoration, Stop
 from mbplan.solvers.result import IterationHistory, RIPMResult, RIPMStatus
-from mbplan.solvers.ripm_kernels import safeguarded_duals
+from mbplan.solvers.ripm_kernels import RIPM_KERNELS, safeguarded_duals
 
 _HEADER = "iter    objective    inf_pr   inf_du lg(mu)  ||d||  lg(rg) alpha_du alpha_pr  ls"
 
@@ -75,6 +77,13 @@ def solve_ripm(
     return _RIPM(problem, opts).run(x0, y0, z0, s0)
 
 
+@functools.cache
+def _announce_uncached_kernels() -> None:
+    """The first-run line if the iteration's numba kernels are not cached yet (once per
+    process)."""
+    announce_uncached_numba(*RIPM_KERNELS)
+
+
 @dataclass
 class _Shared:
     """What the main phase and a restoration phase share: counters, log, KKT system."""
@@ -101,6 +110,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.parent = parent
         self.resto = parent is not None
         if parent is None:
+            _announce_uncached_kernels()
             out = (lambda line: print(line, file=sys.stdout)) if options.print_level > 0 else None
             kkt = KKTSystem(self.n, self.me, self.mi, ordering=options.kkt_ordering)
             self.sh = _Shared(kkt, IterationHistory(), out)
