@@ -25,6 +25,7 @@ from mbplan.solvers.ripm_kernels import (
     constraint_values,
     csr_transpose_times,
     frac_to_boundary,
+    pairwise_sum,
     residuals,
 )
 
@@ -164,7 +165,7 @@ class IterateState:
         if p is not None:
             c += n - p
             theta = abs_sum(c)
-        phi = self.sigma * f - self.mu * float(np.sum(np.log(s)))
+        phi = self.sigma * f - self.mu * pairwise_sum(np.log(s))
         if p is not None:
             phi += self.rho * float(np.sum(p) + np.sum(n))
             phi -= self.mu * float(np.sum(np.log(p)) + np.sum(np.log(n)))

@@ -303,7 +303,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.x, self.s, self.y, self.z, self.ev = trial.x, s, y, z, ev
         self.sh.iter += 1
         self.last = {
-            "d": amax(alpha * step.dx),
+            "d": alpha * amax(step.dx),  # = ‖α dx‖∞ exactly (α > 0)
             "dw": dw,
             "a_du": alpha_z,
             "a_pr": alpha,
