@@ -270,7 +270,6 @@ class KKTSystem:
         self._indptr, self._indices = pat.indptr, pat.indices
         nnz = len(pat.indices)
         self._base = np.zeros(nnz)
-        self._data = np.zeros(nnz)
         self._full_data = np.zeros(len(pat.full_src))  # K in the full symmetric pattern
         # the factorized values, entry by entry of the lower CSR arrays (= upper CSC arrays)
         self._factor_data = np.zeros(nnz)
@@ -324,7 +323,7 @@ class KKTSystem:
         pat = self._pattern
         matrix_values(
             self._base, self._diag_slot, diagonal, self.n, float(static_reg), pat.full_src,
-            self._data, self._full_data, values,
+            self._full_data, values,
         )  # fmt: skip
         self.n_factorizations += 1
         positive, negative, ok = self._solver.factor(values)
