@@ -67,10 +67,15 @@ class Step:
     dzn: np.ndarray | None = None
 
 
+_SMALL = 8192
+"""Below this length a compiled loop checks finiteness faster than NumPy's call overhead;
+above it NumPy's vectorized ``isfinite`` is faster."""
+
+
 def finite(*arrays: Any) -> bool:
     """No NaN or infinity in any of the arrays (or floats)."""
     for a in arrays:
-        if type(a) is np.ndarray and a.ndim == 1:
+        if type(a) is np.ndarray and a.ndim == 1 and a.shape[0] < _SMALL:
             if not all_finite(a):
                 return False
         elif type(a) is float:
