@@ -33,6 +33,10 @@ def test_nan_propagates_through_the_norms():
     assert np.isnan(k.complementarity_error(v, np.ones(3), 0.0))
     assert not finite(v) and not finite(np.array([np.inf])) and not finite(np.nan)
     assert finite(np.ones(3), 2.0, np.zeros((2, 2)), np.zeros(0, np.int64))
+    long = np.ones(20000)  # NumPy's check above 8192 entries
+    assert finite(long)
+    long[-1] = np.inf
+    assert not finite(long) and not finite(long[-100:])
 
 
 @pytest.mark.parametrize("n", [0, 5, 200])
