@@ -1,8 +1,8 @@
 """A/B of the per-iteration profile: this tree against a baseline checkout, interleaved.
 
 Each round runs the profile (``mbplan.benchmarks.kkt_profile.profile_solve``, ``--repeats``
-solves per case, the minimum of each component) in a fresh process in the baseline tree, then in
-this tree; the report is, per task and component, the minimum over rounds per case and the
+solves per case, the minimum of each component) in a fresh process in the baseline tree and in
+this tree, alternating which goes first; the report is, per task and component, the minimum over rounds per case and the
 median over cases, with the iteration counts of both (they must agree). On a shared machine
 only these side-by-side ratios mean anything.
 
@@ -72,8 +72,9 @@ def main() -> None:
     args = ap.parse_args()
     here = Path(__file__).resolve().parents[1]
     runs: dict[str, list[dict]] = {"baseline": [], "new": []}
-    for _ in range(args.rounds):
-        for tag, tree in (("baseline", Path(args.baseline)), ("new", here)):
+    trees = [("baseline", Path(args.baseline)), ("new", here)]
+    for r in range(args.rounds):  # ABBA: neither tree always runs first
+        for tag, tree in trees if r % 2 == 0 else trees[::-1]:
             runs[tag].append(_run(tree, args.tasks, args.cases, args.repeats))
     report = {}
     for task in args.tasks:

@@ -8,15 +8,26 @@ KKT error ``E_μ`` (eq. 55-56, WB eq. 5).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
-import numba as nb
 import numpy as np
 import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.solvers.problem import NLPEvaluation, Point
+from mbplan.solvers.ripm_kernels import (
+    abs_max,
+    abs_sum,
+    all_finite,
+    complementarity_error,
+    constraint_values,
+    csr_transpose_times,
+    frac_to_boundary,
+    pairwise_sum,
+    residuals,
+)
 
 EPS = float(np.finfo(float).eps)
 
@@ -56,43 +67,57 @@ class Step:
     dzn: np.ndarray | None = None
 
 
+_SMALL = 8192
+"""Below this length a compiled loop checks finiteness faster than NumPy's call overhead;
+above it NumPy's vectorized ``isfinite`` is faster."""
+
+
 def finite(*arrays: Any) -> bool:
+    """No NaN or infinity in any of the arrays (or floats)."""
     for a in arrays:
-        if not np.isfinite(a).all():
+        if type(a) is np.ndarray and a.ndim == 1 and a.shape[0] < _SMALL:
+            if not all_finite(a):
+                return False
+        elif type(a) is float:
+            if not math.isfinite(a):
+                return False
+        elif not np.isfinite(a).all():
             return False
     return True
 
 
-def amax(v: np.ndarray) -> float:
-    return float(np.abs(v).max()) if v.size else 0.0
+amax = abs_max
+"""``‖v‖∞`` of a 1-D array (0 if empty)."""
 
-
-def frac_to_boundary(v: np.ndarray, dv: np.ndarray, tau: float) -> float:
-    """Largest ``α ∈ (0, 1]`` with ``v + α dv ≥ (1 - τ) v`` (WB eq. 15)."""
-    neg = dv < 0
-    if not neg.any():
-        return 1.0
-    return float(min(1.0, (-tau * v[neg] / dv[neg]).min()))
+__all__ = [
+    "EPS",
+    "IterateState",
+    "Step",
+    "Trial",
+    "amax",
+    "finite",
+    "frac_to_boundary",
+    "transpose_times",
+]
 
 
 def transpose_times(a: sp.csr_matrix | sp.csr_array, x: np.ndarray) -> np.ndarray:
     """``aᵀ x`` for a CSR ``a`` without building the transpose (the sums of scipy's
     ``a.T @ x``, in its order)."""
     if not (
-        sp.issparse(a) and a.format == "csr" and a.dtype == x.dtype == np.float64
+        sp.issparse(a) and a.format == "csr" and x.dtype == np.float64 and a.dtype == x.dtype
     ) or x.shape != (a.shape[0],):
+        if x.shape == (a.shape[0],) and sp.issparse(a) and a.nnz == 0:
+            return np.zeros(a.shape[1])  # an empty block of any dtype
         return a.T @ x  # scipy's product (and its error for a wrong length)
-    return _csr_transpose_times(a.indptr, a.indices, a.data, x, a.shape[1])
+    return csr_transpose_times(a.indptr, a.indices, a.data, x, a.shape[1])
 
 
-@nb.njit(cache=True)
-def _csr_transpose_times(indptr, indices, data, x, n):  # pragma: no cover - numba
-    out = np.zeros(n)
-    for i in range(len(indptr) - 1):
-        xi = x[i]
-        for k in range(indptr[i], indptr[i + 1]):
-            out[indices[k]] += data[k] * xi
-    return out
+def _csr_arrays(a: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``indptr, indices, data`` of a Jacobian (converted to CSR if given otherwise)."""
+    if not (sp.issparse(a) and a.format == "csr"):
+        a = sp.csr_matrix(a)
+    return a.indptr, a.indices, a.data
 
 
 class IterateState:
@@ -140,9 +165,12 @@ class IterateState:
         return np.concatenate([self.y, self.z])
 
     def _make_trial(self, x: Point, s: np.ndarray, f: float, h, g, p=None, n=None, xi=None):
-        c = self._constraints(h, g, s, p, n)
-        theta = float(np.sum(np.abs(c)))
-        phi = self.sigma * f - self.mu * float(np.sum(np.log(s)))
+        c = np.empty(self.m)
+        theta = constraint_values(h, g, s, c)
+        if p is not None:
+            c += n - p
+            theta = abs_sum(c)
+        phi = self.sigma * f - self.mu * pairwise_sum(np.log(s))
         if p is not None:
             phi += self.rho * float(np.sum(p) + np.sum(n))
             phi -= self.mu * float(np.sum(np.log(p)) + np.sum(np.log(n)))
@@ -173,11 +201,11 @@ class IterateState:
         smax = self.o.s_max
         s_d = s_c = 1.0
         n_bounds = self.mi + (2 * len(self.ep) if self.resto else 0)
-        bound_sum = float(np.sum(np.abs(self.z)))
+        bound_sum = abs_sum(self.z)
         if self.resto:
             bound_sum += float(np.sum(self.zp) + np.sum(self.zn))
         if self.m:
-            avg = (float(np.sum(np.abs(self.y))) + bound_sum) / (self.me + n_bounds)
+            avg = (abs_sum(self.y) + bound_sum) / (self.me + n_bounds)
             s_d = max(smax, avg) / smax
         if n_bounds:
             s_c = max(smax, bound_sum / n_bounds) / smax
@@ -186,26 +214,29 @@ class IterateState:
     def _measures(self) -> None:
         """Residuals of (50) (of the restoration problem in that phase) at the current iterate."""
         ev = self.ev
-        self.r_d = (
-            (ev.gradient if self.sigma == 1.0 else self.sigma * ev.gradient)
-            + transpose_times(ev.eq_jacobian, self.y)
-            + transpose_times(ev.ineq_jacobian, self.z)
-        )
-        if self.zeta:
-            self.r_d += self.zeta * self.xi
-        self.r_c = self._constraints(ev.eq, ev.ineq, self.s, self.ep, self.en)
-        self.inf_du = amax(self.r_d)
+        self.r_d, self.r_c = np.empty(self.n), np.empty(self.m)
+        self.inf_du, self.inf_pr = residuals(
+            ev.gradient, self.sigma, *_csr_arrays(ev.eq_jacobian), self.y,
+            *_csr_arrays(ev.ineq_jacobian), self.z, ev.eq, ev.ineq, self.s, self.r_d, self.r_c,
+        )  # fmt: skip
         if self.resto:
+            if self.zeta:
+                self.r_d += self.zeta * self.xi
+            self.r_c += self.en - self.ep
             lam = self._lam()
             self.r_pn = (self.rho - lam - self.zp, self.rho + lam - self.zn)
-            self.inf_du = max(self.inf_du, amax(self.r_pn[0]), amax(self.r_pn[1]))
-        self.inf_pr = amax(self.r_c)
+            self.inf_du = max(amax(self.r_d), amax(self.r_pn[0]), amax(self.r_pn[1]))
+            self.inf_pr = amax(self.r_c)
         self.s_d, self.s_c = self._scalings()
         self.kkt_error = self._error(0.0)
 
     def _error(self, mu: float) -> float:
         """``E_μ`` (eq. 55-56): scaled dual infeasibility, infeasibility, complementarity."""
-        compl = amax(self.s * self.z - mu)
+        compl = complementarity_error(self.s, self.z, mu)
         if self.resto:
-            compl = max(compl, amax(self.ep * self.zp - mu), amax(self.en * self.zn - mu))
+            compl = max(
+                compl,
+                complementarity_error(self.ep, self.zp, mu),
+                complementarity_error(self.en, self.zn, mu),
+            )
         return max(self.inf_du / self.s_d, self.inf_pr, compl / self.s_c)

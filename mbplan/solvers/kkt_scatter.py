@@ -10,13 +10,14 @@ import numba as nb
 
 @nb.njit(cache=True)
 def same_arrays(a, b) -> bool:
-    """``a == b`` elementwise and in length (early exit, no temporary)."""
+    """``a == b`` elementwise and in length, for integer arrays (an OR of the XORs: one
+    vectorized pass, no temporary)."""
     if a.shape[0] != b.shape[0]:
         return False
+    diff = 0
     for i in range(a.shape[0]):
-        if a[i] != b[i]:
-            return False
-    return True
+        diff |= a[i] ^ b[i]
+    return diff == 0
 
 
 @nb.njit(cache=True)
@@ -33,19 +34,17 @@ def scatter_blocks(base, h_data, h_src, h_slot, e_data, e_slot, i_data, i_slot) 
 
 
 @nb.njit(cache=True)
-def matrix_values(base, diag_slot, diagonal, n, static_reg, full_src, data, full, values) -> None:
-    """``data = base`` with ``diagonal`` added on the diagonal (the matrix ``K``), ``full =
-    data[full_src]`` (``K`` in its full symmetric CSR pattern), ``values = data`` with
-    ``+static_reg`` on the first ``n`` diagonal entries and ``-static_reg`` on the others (the
+def matrix_values(base, diag_slot, diagonal, n, static_reg, full_src, full, values) -> None:
+    """``values = base`` with ``diagonal`` added on the diagonal (the matrix ``K``), then
+    ``full = values[full_src]`` (``K`` in its full symmetric CSR pattern), then ``+static_reg``
+    on the first ``n`` diagonal entries of ``values`` and ``-static_reg`` on the others (the
     factorized matrix)."""
     for e in range(base.shape[0]):
-        data[e] = base[e]
+        values[e] = base[e]
     for i in range(diag_slot.shape[0]):
-        data[diag_slot[i]] += diagonal[i]
+        values[diag_slot[i]] += diagonal[i]
     for e in range(full_src.shape[0]):
-        full[e] = data[full_src[e]]
-    for e in range(base.shape[0]):
-        values[e] = data[e]
+        full[e] = values[full_src[e]]
     if static_reg:
         for i in range(n):
             values[diag_slot[i]] += static_reg

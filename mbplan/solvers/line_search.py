@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mbplan.solvers.iterate import Step, Trial, finite, frac_to_boundary
+from mbplan.solvers.ripm_kernels import ratio_sum
 
 
 @dataclass
@@ -81,7 +82,7 @@ class FilterLineSearch:
     def _slope(self, step: Step) -> float:
         """Directional derivative of ``φ_μ`` along the step."""
         gphi = self.sigma * float(self.ev.gradient @ step.dx)
-        gphi -= self.mu * float(np.sum(step.ds / self.s))
+        gphi -= self.mu * ratio_sum(step.ds, self.s)
         if self.resto:
             gphi += self.rho * float(np.sum(step.dp) + np.sum(step.dn))
             gphi -= self.mu * float(np.sum(step.dp / self.ep) + np.sum(step.dn / self.en))

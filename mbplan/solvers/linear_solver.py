@@ -40,6 +40,7 @@ whose smallest eigenvalue magnitude exceeds ``ε``.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import threading
 from collections import OrderedDict
@@ -60,6 +61,7 @@ from mbplan.solvers.ordering import amd_order, metis_order, nested_dissection_or
 from mbplan.solvers.supernodal_ldl import SupernodalLDL
 
 _NONE = np.zeros(0, np.int64)
+_NONE_F = np.zeros(0)
 
 
 @dataclass(frozen=True)
@@ -71,9 +73,15 @@ class Inertia:
     zero: int
 
 
+@functools.lru_cache(maxsize=16)
+def _empty_csr(shape: tuple[int, int]) -> sp.csr_matrix:
+    """An all-zero block (shared, read only: built once per shape)."""
+    return sp.csr_matrix(shape)
+
+
 def _csr(a: sp.spmatrix | sp.sparray | None, shape: tuple[int, int]) -> sp.csr_matrix:
     if a is None:
-        return sp.csr_matrix(shape)
+        return _empty_csr(shape)
     if type(a) is sp.csr_matrix and a.shape == shape and a.has_canonical_format:
         return a  # read only: no copy needed
     out = sp.csr_matrix(a)
@@ -85,11 +93,19 @@ def _csr(a: sp.spmatrix | sp.sparray | None, shape: tuple[int, int]) -> sp.csr_m
     return out
 
 
-def _same_pattern(a: sp.csr_matrix, b: sp.csr_matrix | None) -> bool:
+@dataclass(frozen=True)
+class _BlockPattern:
+    """A block's sparsity pattern: its shape and copies of its CSR index arrays."""
+
+    shape: tuple[int, int]
+    indptr: np.ndarray
+    indices: np.ndarray
+
+
+def _same_pattern(a: sp.csr_matrix | _BlockPattern, b: _BlockPattern | None) -> bool:
     return (
         b is not None
         and a.shape == b.shape
-        and a.nnz == b.nnz
         and same_arrays(a.indptr, b.indptr)
         and same_arrays(a.indices, b.indices)
     )
@@ -254,7 +270,7 @@ class KKTSystem:
         self.pivot_threshold = float(pivot_threshold)
         self.n, self.n_eq, self.n_ineq = n, n_eq, n_ineq
         self.dim = n + n_eq + n_ineq
-        self._patterns: tuple[sp.csr_matrix | None, ...] = (None, None, None)
+        self._patterns: tuple[_BlockPattern | None, ...] = (None, None, None)
         self._solver: SupernodalLDL | None = None
         self.n_factorizations = 0
         self.n_analyses = 0
@@ -267,7 +283,6 @@ class KKTSystem:
         self._indptr, self._indices = pat.indptr, pat.indices
         nnz = len(pat.indices)
         self._base = np.zeros(nnz)
-        self._data = np.zeros(nnz)
         self._full_data = np.zeros(len(pat.full_src))  # K in the full symmetric pattern
         # the factorized values, entry by entry of the lower CSR arrays (= upper CSC arrays)
         self._factor_data = np.zeros(nnz)
@@ -290,18 +305,19 @@ class KKTSystem:
         zero_hessian = hessian is None
         hess = self._patterns[0] if zero_hessian else _csr(hessian, (n, n))
         if hess is None:
-            hess = sp.csr_matrix((n, n))
+            hess = _empty_csr((n, n))
         new = (hess, jac_eq, jac_ineq)
         if not all(_same_pattern(a, b) for a, b in zip(new, self._patterns, strict=True)):
             self._build_pattern(*new)
             self._patterns = tuple(
-                sp.csr_matrix((np.zeros(a.nnz), a.indices.copy(), a.indptr.copy()), shape=a.shape)
-                for a in new
+                _BlockPattern(a.shape, a.indptr.copy(), a.indices.copy()) for a in new
             )
         pat = self._pattern
-        h_src, h_slot = (pat.h_src, pat.h_slot) if not zero_hessian else (_NONE, _NONE)
+        h_data, h_src, h_slot = (
+            (hess.data, pat.h_src, pat.h_slot) if not zero_hessian else (_NONE_F, _NONE, _NONE)
+        )
         scatter_blocks(
-            self._base, hess.data, h_src, h_slot, jac_eq.data, pat.e_slot, jac_ineq.data,
+            self._base, h_data, h_src, h_slot, jac_eq.data, pat.e_slot, jac_ineq.data,
             pat.i_slot,
         )  # fmt: skip
 
@@ -329,7 +345,7 @@ class KKTSystem:
         pat = self._pattern
         matrix_values(
             self._base, self._diag_slot, diagonal, self.n, float(static_reg), pat.full_src,
-            self._data, self._full_data, values,
+            self._full_data, values,
         )  # fmt: skip
         self.n_factorizations += 1
         u = self.pivot_threshold

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from mbplan.solvers.iterate import Step, finite, frac_to_boundary
+from mbplan.solvers.ripm_kernels import newton_diagonal, newton_rhs, slack_step
 
 
 class NewtonStep:
@@ -29,27 +30,24 @@ class NewtonStep:
     def _rhs(self, c: np.ndarray) -> np.ndarray:
         """Right-hand side for the constraint values ``c`` (``r_c``, or a second-order
         correction's)."""
-        lower = -c
-        lower[self.me :] += self.s - self._compl_target() / self.z
+        rhs = np.empty(self.n + self.m)
+        newton_rhs(self.r_d, c, self.me, self.s, self.z, self.mu, rhs)
+        if self.compl_shift is not None:  # μe - shift on the complementarity row
+            rhs[self.n + self.me :] += self.compl_shift / self.z
         if self.resto:
-            lam = self._lam()
+            lam, lower = self._lam(), rhs[self.n :]
             lower += (self.mu - self.ep * (self.rho - lam)) / self.zp
             lower -= (self.mu - self.en * (self.rho + lam)) / self.zn
-        return np.concatenate([-self.r_d, lower])
+        return rhs
 
     def _diagonal(self, dw: float, dc: float) -> np.ndarray:
         """Diagonal added to ``K``: ``δ_w (+ζ)`` on the primal, the eliminated blocks and
         ``-δ_c`` on the dual rows."""
-        dual = np.full(self.m, -dc)
-        dual[self.me :] -= self.s / self.z
+        diagonal = np.empty(self.n + self.m)
+        newton_diagonal(self.n, self.me, dw + self.zeta, dc, self.s, self.z, diagonal)
         if self.resto:
-            dual -= self.ep / self.zp + self.en / self.zn
-        return np.concatenate([np.full(self.n, dw + self.zeta), dual])
-
-    def _compl_target(self) -> np.ndarray | float:
-        """Right-hand side ``μe`` of the complementarity row, minus the second-order term
-        ``ΔS_aff Δz_aff`` with Mehrotra's corrector (Mehrotra 1992; Nocedal & Wright eq. 14.31)."""
-        return self.mu if self.compl_shift is None else self.mu - self.compl_shift
+            diagonal[self.n :] -= self.ep / self.zp + self.en / self.zn
+        return diagonal
 
     def _affine_step(self) -> Step:
         """The affine-scaling (predictor) step: the Newton step for μ = 0 with the current
@@ -96,7 +94,9 @@ class NewtonStep:
         n, me = self.n, self.me
         dlam = sol[n:]
         dz = dlam[me:]
-        ds = -self.s + self._compl_target() / self.z - self.s * dz / self.z
+        ds = slack_step(self.s, self.z, dz, self.mu)
+        if self.compl_shift is not None:
+            ds -= self.compl_shift / self.z
         step = Step(sol[:n], ds, dlam[:me], dz)
         if self.resto:
             lam = self._lam()

@@ -134,7 +134,6 @@ class ReducedKKTSystem:
             self.n,
             0.0,
             f._pattern.full_src,
-            f._data,
             f._full_data,
             f._factor_data,
         )  # fmt: skip  (K itself, for the refinement residuals)

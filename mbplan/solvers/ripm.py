@@ -20,6 +20,7 @@ Every linear-algebra object is sparse with a fixed pattern; one iteration costs 
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import time
@@ -29,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from mbplan.engine.jit import announce_uncached_numba
 from mbplan.errors import InputError
 from mbplan.solvers.barrier import BarrierStrategy
 from mbplan.solvers.iterate import (
@@ -46,6 +48,7 @@ from mbplan.solvers.problem import NLPEvaluation, Point, RIPMProblem
 from mbplan.solvers.reduced_step import ReducedKKTSystem, kkt_system
 from mbplan.solvers.restoration import Restoration, Stop
 from mbplan.solvers.result import IterationHistory, RIPMResult, RIPMStatus
+from mbplan.solvers.ripm_kernels import RIPM_KERNELS, safeguarded_duals
 
 _HEADER = "iter    objective    inf_pr   inf_du lg(mu)  ||d||  lg(rg) alpha_du alpha_pr  ls"
 
@@ -67,10 +70,19 @@ def solve_ripm(
     parameters (``solve_ripm(p, x0, tol=1e-8)``). ``y0``, ``z0`` (> 0) and ``s0`` (> 0) warm-start
     the multipliers and slacks. ``verbose=True`` is ``print_level=1``.
     """
-    opts = (options or RIPMOptions()).replace(**overrides)
+    opts = options or RIPMOptions()
+    if overrides:
+        opts = opts.replace(**overrides)
     if verbose and opts.print_level == 0:
         opts = opts.replace(print_level=1)
     return _RIPM(problem, opts).run(x0, y0, z0, s0)
+
+
+@functools.cache
+def _announce_uncached_kernels() -> None:
+    """The first-run line if the iteration's numba kernels are not cached yet (once per
+    process)."""
+    announce_uncached_numba(*RIPM_KERNELS)
 
 
 @dataclass
@@ -99,6 +111,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.parent = parent
         self.resto = parent is not None
         if parent is None:
+            _announce_uncached_kernels()
             out = (lambda line: print(line, file=sys.stdout)) if options.print_level > 0 else None
             kkt = kkt_system(
                 problem, options.kkt_method, options.kkt_ordering, options.kkt_pivot_threshold
@@ -287,15 +300,12 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         if search.tag[0] == "h":
             self._augment_filter(self.cur.theta, self.cur.phi)
         y = self.y + alpha * step.dy
-        z = self.z + alpha_z * step.dz
         s = trial.s
-        z = np.clip(z, self.mu / (o.kappa_sigma * s), o.kappa_sigma * self.mu / s)  # WB eq. 16
+        z = safeguarded_duals(self.z, step.dz, alpha_z, s, self.mu, o.kappa_sigma)  # WB eq. 16
         if self.resto:
-            zp = self.zp + alpha_z * step.dzp
-            zn = self.zn + alpha_z * step.dzn
             p, n = trial.p, trial.n
-            self.zp = np.clip(zp, self.mu / (o.kappa_sigma * p), o.kappa_sigma * self.mu / p)
-            self.zn = np.clip(zn, self.mu / (o.kappa_sigma * n), o.kappa_sigma * self.mu / n)
+            self.zp = safeguarded_duals(self.zp, step.dzp, alpha_z, p, self.mu, o.kappa_sigma)
+            self.zn = safeguarded_duals(self.zn, step.dzn, alpha_z, n, self.mu, o.kappa_sigma)
             self.ep, self.en, self.xi = p, n, trial.xi
         ev = self._evaluate(trial.x, y, z)
         if ev is None:
@@ -303,7 +313,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.x, self.s, self.y, self.z, self.ev = trial.x, s, y, z, ev
         self.sh.iter += 1
         self.last = {
-            "d": amax(alpha * step.dx),
+            "d": alpha * amax(step.dx),  # = ‖α dx‖∞ exactly (α > 0)
             "dw": dw,
             "a_du": alpha_z,
             "a_pr": alpha,
