@@ -22,6 +22,7 @@ from mbplan.solvers import (
     RIPMStatus,
     solve_ripm,
 )
+from mbplan.solvers.barrier import ADAPTIVE_MU_MIN
 from mbplan.solvers.examples import HS071_X0, BandedControlNLP, hs071
 from mbplan.solvers.linear_solver import KKTSystem
 
@@ -314,6 +315,16 @@ def test_adaptive_mu_option():
     for removed in ("restoration_method", "watchdog_shortened_iter_trigger", "regularize_slacks"):
         with pytest.raises(InputError, match=removed):
             RIPMOptions().replace(**{removed: 1})
+
+
+def test_adaptive_mu_stays_above_its_floor_at_unreachable_tolerance():
+    """With ``tol = 1e-20`` the probing oracle would choose μ = 1e-21, where ``τ = 1 - μ``
+    rounds to 1 and a slack reaches 0 (non-finite derivatives); the adaptive μ stops at
+    ``ADAPTIVE_MU_MIN`` and the solve ends at the tiny-step rule."""
+    options = {"mu_strategy": "adaptive", "mu_oracle": "probing", "mu_max_fact": 0.0}
+    res = solve_ripm(hs071(), HS071_X0, tol=1e-20, corrector=True, **options)
+    assert res.status is RIPMStatus.ACCEPTABLE and res.success
+    assert min(res.history.mu) >= ADAPTIVE_MU_MIN and abs(res.objective - 17.0140172891) < 1e-8
 
 
 def test_mehrotra_corrector_and_mu_cap_options():

@@ -101,3 +101,14 @@ def test_empty_blocks_of_any_dtype():
     )
     assert empty.dtype == np.int64
     assert np.array_equal(transpose_times(empty, np.zeros(0)), np.zeros(5))
+
+
+def test_kernels_divide_by_zero_as_numpy_does():
+    """A zero slack gives infinite bounds (NumPy's semantics), not a ZeroDivisionError from
+    inside a compiled kernel: the solver's finiteness checks then report a numerical error."""
+    s = np.array([0.0, 1.0])
+    with np.errstate(divide="ignore"):
+        want = np.minimum(np.maximum(np.ones(2) + 0.5, 0.1 / (10.0 * s)), 10.0 * 0.1 / s)
+        got = k.safeguarded_duals(np.ones(2), np.ones(2), 0.5, s, 0.1, 10.0)
+    assert np.isinf(got[0])
+    np.testing.assert_array_equal(got, want)

@@ -14,6 +14,12 @@ import numpy as np
 
 from mbplan.solvers.iterate import EPS, Step, frac_to_boundary
 
+ADAPTIVE_MU_MIN = 1e-14
+"""The smallest μ the adaptive strategy's oracles and its monotone fall-back choose (the
+role of IPOPT's ``mu_min``): the fraction to the boundary ``τ = 1 - μ`` stays below 1 in
+floating point, so slacks stay positive (with ``tol = 1e-20`` the probing oracle chose
+μ = 1e-21, τ rounded to 1 and a slack reached 0)."""
+
 
 class BarrierStrategy:
     """``mu``, ``tau`` (fraction to the boundary, WB eq. 8) and their updates."""
@@ -65,8 +71,12 @@ class BarrierStrategy:
         a_d = frac_to_boundary(self.z, aff.dz, tau)
         mu_aff = float(np.mean((self.s + a_p * aff.ds) * (self.z + a_d * aff.dz)))
         sigma = min((mu_aff / mu_avg) ** 3, 1.0) if mu_avg > 0 else 0.0
-        self._set_mu(float(np.clip(sigma * mu_avg, self.o.tol / 10, self.mu_max)))
+        self._set_mu(float(np.clip(sigma * mu_avg, self._mu_floor(), self.mu_max)))
         return aff
+
+    def _mu_floor(self) -> float:
+        """Lower bound of the adaptive μ: ``tol/10``, at least :data:`ADAPTIVE_MU_MIN`."""
+        return max(self.o.tol / 10, ADAPTIVE_MU_MIN)
 
     def _set_mu(self, mu: float) -> None:
         if mu != self.mu:
@@ -86,7 +96,7 @@ class BarrierStrategy:
         avg = float(np.mean(sz))
         xi = float(np.min(sz)) / avg if avg > 0 else 1.0
         sigma = 0.1 * min(0.05 * (1 - xi) / max(xi, EPS), 2.0) ** 3
-        return float(np.clip(sigma * avg, self.o.tol / 10, self.mu_max))
+        return float(np.clip(sigma * avg, self._mu_floor(), self.mu_max))
 
     def _free_mode_progress(self) -> bool:
         """IPOPT's ``adaptive_mu_globalization=kkt-error``: stay in free mode while ``E_0``
@@ -102,5 +112,5 @@ class BarrierStrategy:
         """Fixed-μ fallback (IPOPT): μ = 0.8 · average complementarity, the filter reset."""
         self.free_mode = False
         self._count("monotone_switches")
-        self._set_mu(float(np.clip(0.8 * self._avg_compl(), self.o.tol / 10, self.mu_max)))
+        self._set_mu(float(np.clip(0.8 * self._avg_compl(), self._mu_floor(), self.mu_max)))
         self.filter = []

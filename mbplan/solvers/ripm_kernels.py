@@ -16,7 +16,7 @@ import numpy as np
 _BLOCK = 128  # NumPy's PW_BLOCKSIZE
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _block_sum(a, lo, n):  # pragma: no cover - numba
     """NumPy's ``pairwise_sum`` of ``a[lo : lo + n]`` for ``n ≤ 128``: eight running sums."""
     if n < 8:
@@ -45,7 +45,7 @@ def _block_sum(a, lo, n):  # pragma: no cover - numba
     return res
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def pairwise_sum(a: np.ndarray) -> float:
     """``np.sum(a)`` of a contiguous 1-D float array, bitwise: NumPy's pairwise summation
     (halves rounded down to a multiple of 8 until a piece has ≤ 128 entries, added to the
@@ -86,13 +86,13 @@ def pairwise_sum(a: np.ndarray) -> float:
     return 0.0 + total
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def abs_sum(a: np.ndarray) -> float:
     """``np.sum(np.abs(a))`` (bitwise)."""
     return pairwise_sum(np.abs(a))
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def abs_max(a: np.ndarray) -> float:
     """``‖a‖∞``: 0 for an empty ``a``, NaN if some entry is NaN (as ``np.abs(a).max()``)."""
     out = 0.0
@@ -104,7 +104,7 @@ def abs_max(a: np.ndarray) -> float:
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def _add_transpose_times(indptr, indices, data, x, out) -> None:  # pragma: no cover - numba
     """``out += aᵀx`` for a CSR ``a``, row by row (the order of scipy's ``a.T @ x``)."""
     for i in range(indptr.shape[0] - 1):
@@ -113,7 +113,7 @@ def _add_transpose_times(indptr, indices, data, x, out) -> None:  # pragma: no c
             out[indices[k]] += data[k] * xi
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def csr_transpose_times(indptr, indices, data, x, n) -> np.ndarray:  # pragma: no cover - numba
     """``aᵀx`` for the CSR arrays of an ``(len(x), n)`` matrix ``a``."""
     out = np.zeros(n)
@@ -121,7 +121,7 @@ def csr_transpose_times(indptr, indices, data, x, n) -> np.ndarray:  # pragma: n
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def residuals(
     grad, sigma, e_ptr, e_idx, e_val, y, i_ptr, i_idx, i_val, z, h, g, s, r_d, r_c
 ) -> tuple[float, float]:  # pragma: no cover - numba
@@ -142,7 +142,7 @@ def residuals(
     return abs_max(r_d), abs_max(r_c)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def complementarity_error(s, z, mu) -> float:  # pragma: no cover - numba
     """``‖s∘z - μ‖∞`` (NaN propagated like :func:`abs_max`)."""
     out = 0.0
@@ -154,7 +154,7 @@ def complementarity_error(s, z, mu) -> float:  # pragma: no cover - numba
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def newton_diagonal(n, me, primal, dc, s, z, out) -> None:  # pragma: no cover - numba
     """The diagonal added to ``K`` (eq. 53 reduced): ``primal`` on the ``n`` primal rows,
     ``-δ_c`` on the equality rows and ``-δ_c - s/z`` on the inequality rows."""
@@ -164,7 +164,7 @@ def newton_diagonal(n, me, primal, dc, s, z, out) -> None:  # pragma: no cover -
         out[n + me + i] = -dc - s[i] / z[i]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def newton_rhs(r_d, c, me, s, z, mu, out) -> None:  # pragma: no cover - numba
     """The right-hand side ``-(r_d, c - (0, s - μ/z))`` for constraint values ``c``."""
     n = r_d.shape[0]
@@ -176,7 +176,7 @@ def newton_rhs(r_d, c, me, s, z, mu, out) -> None:  # pragma: no cover - numba
         out[n + me + i] = -c[me + i] + (s[i] - mu / z[i])
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def slack_step(s, z, dz, mu) -> np.ndarray:  # pragma: no cover - numba
     """``ds = -s + μ/z - s∘dz/z`` (the last row of eq. 53)."""
     ds = np.empty(s.shape[0])
@@ -185,7 +185,7 @@ def slack_step(s, z, dz, mu) -> np.ndarray:  # pragma: no cover - numba
     return ds
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def frac_to_boundary(v, dv, tau) -> float:  # pragma: no cover - numba
     """Largest ``α ∈ (0, 1]`` with ``v + α dv ≥ (1 - τ) v`` (WB eq. 15)."""
     out = np.inf
@@ -195,13 +195,13 @@ def frac_to_boundary(v, dv, tau) -> float:  # pragma: no cover - numba
     return min(1.0, out)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def ratio_sum(a, b) -> float:  # pragma: no cover - numba
     """``np.sum(a / b)`` (bitwise)."""
     return pairwise_sum(a / b)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def constraint_values(h, g, s, c) -> float:  # pragma: no cover - numba
     """``c = (h, g + s)`` into ``c``; returns ``θ = ‖c‖₁``."""
     me = h.shape[0]
@@ -211,7 +211,7 @@ def constraint_values(h, g, s, c) -> float:  # pragma: no cover - numba
     return abs_sum(c)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def safeguarded_duals(z, dz, alpha, s, mu, kappa) -> np.ndarray:  # pragma: no cover - numba
     """``z + α dz`` clipped to ``[μ/(κ s), κ μ/s]`` (WB eq. 16)."""
     out = np.empty(z.shape[0])
@@ -221,7 +221,7 @@ def safeguarded_duals(z, dz, alpha, s, mu, kappa) -> np.ndarray:  # pragma: no c
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, error_model="numpy")
 def all_finite(a) -> bool:  # pragma: no cover - numba
     """No NaN or infinity in the 1-D array ``a``."""
     for v in a:
