@@ -22,7 +22,7 @@ from mbplan.solvers import (
     RIPMStatus,
     solve_ripm,
 )
-from mbplan.solvers.barrier import ADAPTIVE_MU_MIN
+from mbplan.solvers.barrier import MU_MIN
 from mbplan.solvers.examples import HS071_X0, BandedControlNLP, hs071
 from mbplan.solvers.linear_solver import KKTSystem
 
@@ -319,12 +319,14 @@ def test_adaptive_mu_option():
 
 def test_adaptive_mu_stays_above_its_floor_at_unreachable_tolerance():
     """With ``tol = 1e-20`` the probing oracle would choose μ = 1e-21, where ``τ = 1 - μ``
-    rounds to 1 and a slack reaches 0 (non-finite derivatives); the adaptive μ stops at
-    ``ADAPTIVE_MU_MIN`` and the solve ends at the tiny-step rule."""
-    options = {"mu_strategy": "adaptive", "mu_oracle": "probing", "mu_max_fact": 0.0}
-    res = solve_ripm(hs071(), HS071_X0, tol=1e-20, corrector=True, **options)
-    assert res.status is RIPMStatus.ACCEPTABLE and res.success
-    assert min(res.history.mu) >= ADAPTIVE_MU_MIN and abs(res.objective - 17.0140172891) < 1e-8
+    rounds to 1 and a slack reaches 0 (non-finite derivatives); μ stops at ``MU_MIN`` and the
+    solve ends at the tiny-step rule, with the adaptive and with the monotone strategy."""
+    adaptive = {"mu_strategy": "adaptive", "mu_oracle": "probing", "mu_max_fact": 0.0}
+    for options in (adaptive | {"corrector": True}, {"mu_strategy": "monotone"}):
+        res = solve_ripm(hs071(), HS071_X0, tol=1e-20, **options)
+        assert res.status is RIPMStatus.ACCEPTABLE and res.success, options
+        assert min(res.history.mu) >= MU_MIN, options
+        assert abs(res.objective - 17.0140172891) < 1e-8
 
 
 def test_mehrotra_corrector_and_mu_cap_options():
@@ -515,3 +517,19 @@ def test_initial_equality_multipliers_option():
     assert RIPMOptions().constr_mult_init_max == 1.0
     with pytest.raises(InputError, match="constr_mult_init_max"):
         RIPMOptions(constr_mult_init_max=-1.0)
+
+
+def test_wrong_constraint_lengths_are_input_errors():
+    """A problem whose constraint values do not match its declared sizes is rejected by name
+    before the compiled iteration kernels index them."""
+    prob = EuclideanNLP(
+        2,
+        lambda x: float(x @ x),
+        lambda x: 2 * x,
+        lambda x, s, y, z: 2 * s * np.eye(2),
+        ineq=lambda x: np.array([x[0] - 1.0, x[1] - 1.0]),  # two rows, one declared
+        ineq_jacobian=lambda x: np.array([[1.0, 0.0]]),
+        n_ineq=1,
+    )
+    with pytest.raises(InputError, match="shapes"):
+        solve_ripm(prob, np.zeros(2))

@@ -14,11 +14,11 @@ import numpy as np
 
 from mbplan.solvers.iterate import EPS, Step, frac_to_boundary
 
-ADAPTIVE_MU_MIN = 1e-14
-"""The smallest μ the adaptive strategy's oracles and its monotone fall-back choose (the
-role of IPOPT's ``mu_min``): the fraction to the boundary ``τ = 1 - μ`` stays below 1 in
-floating point, so slacks stay positive (with ``tol = 1e-20`` the probing oracle chose
-μ = 1e-21, τ rounded to 1 and a slack reached 0)."""
+MU_MIN = 1e-14
+"""The smallest μ the barrier strategies choose (the role of IPOPT's ``mu_min``): the
+fraction to the boundary ``τ = 1 - μ`` stays below 1 in floating point, so slacks stay
+positive (with ``tol = 1e-20`` the probing oracle chose μ = 1e-21, τ rounded to 1 and a slack
+reached 0)."""
 
 
 class BarrierStrategy:
@@ -29,7 +29,7 @@ class BarrierStrategy:
 
         Returns ``True`` when a tiny step was taken at the smallest μ (no progress possible)."""
         o = self.o
-        mu_min = o.tol / 10
+        mu_min = self._mu_floor()
         if self.free_mode:
             if tiny_step or not self._free_mode_progress():
                 self._enter_monotone_mode()
@@ -75,8 +75,8 @@ class BarrierStrategy:
         return aff
 
     def _mu_floor(self) -> float:
-        """Lower bound of the adaptive μ: ``tol/10``, at least :data:`ADAPTIVE_MU_MIN`."""
-        return max(self.o.tol / 10, ADAPTIVE_MU_MIN)
+        """Lower bound of μ: ``tol/10`` (WB eq. 7), at least :data:`MU_MIN`."""
+        return max(self.o.tol / 10, MU_MIN)
 
     def _set_mu(self, mu: float) -> None:
         if mu != self.mu:
@@ -91,7 +91,7 @@ class BarrierStrategy:
         """LOQO's oracle (Vanderbei & Shanno 1999; IPOPT's ``mu_oracle=loqo``):
         ``μ = σ sᵀz/m`` with ``σ = 0.1 min(0.05 (1-ξ)/ξ, 2)³``, ``ξ = min(s z)/avg(s z)``."""
         if not self.mi:
-            return max(self.o.tol / 10, self.mu * self.o.kappa_mu)
+            return max(self._mu_floor(), self.mu * self.o.kappa_mu)
         sz = self.s * self.z
         avg = float(np.mean(sz))
         xi = float(np.min(sz)) / avg if avg > 0 else 1.0

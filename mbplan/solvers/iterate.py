@@ -141,10 +141,15 @@ class IterateState:
         if not finite(*parts):
             return None
         shapes = (np.shape(ev.gradient), np.shape(ev.eq), np.shape(ev.ineq))
-        if shapes != ((self.n,), (self.me,), (self.mi,)):
+        shapes += (ev.eq_jacobian.shape, ev.ineq_jacobian.shape)
+        expected = ((self.n,), (self.me,), (self.mi,), (self.me, self.n), (self.mi, self.n))
+        if hessian:
+            shapes += (ev.hessian_lower.shape,)
+            expected += ((self.n, self.n),)
+        if shapes != expected:  # the compiled kernels index by these shapes unchecked
             raise InputError(
-                f"problem returned gradient/eq/ineq of shapes {shapes}, expected "
-                f"({self.n},), ({self.me},), ({self.mi},)"
+                "problem returned gradient, eq, ineq, their Jacobians (and the Hessian) of "
+                f"shapes {shapes}, expected {expected}"
             )
         return ev
 
@@ -152,7 +157,13 @@ class IterateState:
         """``f, h, g`` at a trial point, or ``None`` if they are not finite."""
         self.sh.n_values += 1
         f, h, g = self.p.values(x)
-        return (float(f), np.asarray(h), np.asarray(g)) if finite(f, h, g) else None
+        h, g = np.asarray(h), np.asarray(g)
+        if h.shape != (self.me,) or g.shape != (self.mi,):
+            raise InputError(
+                f"problem.values returned eq/ineq of shapes {h.shape}, {g.shape}, expected "
+                f"({self.me},), ({self.mi},)"
+            )
+        return (float(f), h, g) if finite(f, h, g) else None
 
     def _constraints(self, h, g, s, p=None, n=None) -> np.ndarray:
         c = np.concatenate([h, g + s])

@@ -113,6 +113,11 @@ class ReducedKKTSystem:
             except InputError:
                 if self.strict:
                     raise
+            except (ValueError, IndexError, KeyError) as err:  # a plan that does not fit
+                if self.strict:
+                    raise InputError(
+                        f"kkt_method='reduced': unusable elimination plan: {err}"
+                    ) from err
         self._values = self._red is not None and self._red.set_values(hess, ae, ai)
 
     def factorize(self, diagonal: np.ndarray, static_reg: float = 0.0) -> Inertia | None:
@@ -169,7 +174,8 @@ class ReducedKKTSystem:
             return x, ratio
         self.n_fallbacks += 1
         self._active = False
-        self.full.factorize(self._diag, self._reg)
+        if self.full.factorize(self._diag, self._reg) is None:  # a breakdown: no usable step
+            return np.full(self.dim, np.nan), np.inf
         return self.full.solve(rhs, max_refinement, ratio_max)
 
 
@@ -181,7 +187,8 @@ def kkt_system(
 ) -> KKTSystem | ReducedKKTSystem:
     """The RIPM's KKT system for ``problem``: ``"full"``, ``"reduced"`` (through the problem's
     ``elimination_plan(A_E)``, an :class:`InputError` if it has none or it is invalid) or
-    ``"auto"`` (reduced when the problem has a valid plan)."""
+    ``"auto"`` (reduced when the problem has a valid plan and the full factorization needs at
+    most :data:`AUTO_MAX_FLOPS` multiply-adds)."""
     if method not in KKT_METHODS:
         raise InputError(f"kkt_method: expected one of {KKT_METHODS}, got {method!r}")
     n, me, mi = int(problem.n), int(problem.n_eq), int(problem.n_ineq)
