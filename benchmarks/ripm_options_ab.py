@@ -1,0 +1,61 @@
+"""Opt-in RIPM options against the defaults, interleaved in one process on the profile tasks.
+
+Each (task, case) is solved with every variant in turn (``profile_solve``: a warm-up solve,
+then a timed one); prints one JSON line per solve (iterations, ms per iteration, factorize and
+solve ms per iteration).
+
+    python benchmarks/ripm_options_ab.py --tasks iiwa-com --cases 3 --variants base red bar red+bar
+    python benchmarks/ripm_options_ab.py --tasks chain4 chain16 chain64 --cases 1 --variants base red piv all
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from mbplan.benchmarks.kkt_profile import profile_solve
+from mbplan.benchmarks.speed_tasks import TASKS
+
+REDUCED = {"kkt_method": "auto"}
+PIVOTED_METIS = {"kkt_ordering": "auto", "kkt_pivot_threshold": 1e-10}
+MEHROTRA = {
+    "mu_strategy": "adaptive",
+    "mu_oracle": "probing",
+    "mu_max_fact": 0.0,
+    "corrector": True,
+}
+VARIANTS = {
+    "base": {},
+    "red": REDUCED,
+    "piv": PIVOTED_METIS,
+    "bar": MEHROTRA,
+    "red+bar": REDUCED | MEHROTRA,
+    "all": REDUCED | PIVOTED_METIS | MEHROTRA,
+}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--tasks", nargs="+", default=["iiwa-com"], choices=list(TASKS))
+    ap.add_argument("--cases", type=int, default=3)
+    ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    args = ap.parse_args()
+    for task in args.tasks:
+        for case in range(args.cases):
+            problem, x0, options = TASKS[task](case)
+            for name in args.variants:
+                r = profile_solve(problem, x0, dataclasses.replace(options, **VARIANTS[name]))
+                row = {"task": task, "case": case, "variant": name, "status": r["status"]}
+                row |= {"iterations": r["iterations"], "ms_per_iter": round(r["per_iter_ms"], 2)}
+                row |= {"factorize_ms": round(r["factorize_ms"], 2)}
+                row |= {"solve_ms": round(r["solve_ms"], 2), "total_ms": round(r["total_ms"], 1)}
+                print(json.dumps(row), flush=True)
+
+
+if __name__ == "__main__":
+    main()
