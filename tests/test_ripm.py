@@ -292,22 +292,28 @@ def test_elastic_restoration_escapes_jamming():
     assert off.status is RIPMStatus.LINE_SEARCH_FAILED and not any(off.history.restoration)
 
 
+def _assert_solves_the_test_problems(options: dict) -> None:
+    """HS071, the banded control problem and the jamming disc solved to their reference
+    points with ``options``."""
+    banded = BandedControlNLP(nx=4, nu=2, horizon=20)
+    reference = solve_ripm(banded, banded.initial_guess())
+    res = solve_ripm(hs071(), HS071_X0, **options)
+    assert res.status is RIPMStatus.CONVERGED, options
+    assert abs(res.objective - 17.0140172891) < 1e-8
+    res = solve_ripm(banded, banded.initial_guess(), **options)
+    assert res.status is RIPMStatus.CONVERGED, options
+    assert abs(res.objective - reference.objective) < 1e-7 * abs(reference.objective)
+    res = solve_ripm(_outside_disc(), np.array([0.0, 1e-3]), **options)
+    assert res.success and np.allclose(res.x, [2.0, 0.0], atol=1e-6), options
+
+
 def test_adaptive_mu_option():
     """Adaptive μ (LOQO's or Mehrotra's probing oracle) still solves HS071, the banded control
     problem and the jamming example, and is not monotone; removed options are rejected by
     name."""
-    banded = BandedControlNLP(nx=4, nu=2, horizon=20)
-    reference = solve_ripm(banded, banded.initial_guess())
     variants = ({"mu_strategy": "adaptive"}, {"mu_strategy": "adaptive", "mu_oracle": "probing"})
     for options in variants:
-        res = solve_ripm(hs071(), HS071_X0, **options)
-        assert res.status is RIPMStatus.CONVERGED, options
-        assert abs(res.objective - 17.0140172891) < 1e-8
-        res = solve_ripm(banded, banded.initial_guess(), **options)
-        assert res.status is RIPMStatus.CONVERGED, options
-        assert abs(res.objective - reference.objective) < 1e-7 * abs(reference.objective)
-        res = solve_ripm(_outside_disc(), np.array([0.0, 1e-3]), **options)
-        assert res.success and np.allclose(res.x, [2.0, 0.0], atol=1e-6), options
+        _assert_solves_the_test_problems(options)
     mu = np.array(solve_ripm(hs071(), HS071_X0, mu_strategy="adaptive").history.mu)
     assert np.any(np.diff(mu) > 0)
     with pytest.raises(InputError, match="mu_strategy"):
@@ -335,7 +341,6 @@ def test_mehrotra_corrector_and_mu_cap_options():
     the jamming example to the reference points; the corrector changes the iterates; bad values
     are rejected by name."""
     banded = BandedControlNLP(nx=4, nu=2, horizon=20)
-    reference = solve_ripm(banded, banded.initial_guess())
     probing = {"mu_strategy": "adaptive", "mu_oracle": "probing"}
     variants = (
         {"corrector": True},
@@ -344,14 +349,7 @@ def test_mehrotra_corrector_and_mu_cap_options():
         {**probing, "mu_max_fact": 0.0, "corrector": True},
     )
     for options in variants:
-        res = solve_ripm(hs071(), HS071_X0, **options)
-        assert res.status is RIPMStatus.CONVERGED, options
-        assert abs(res.objective - 17.0140172891) < 1e-8
-        res = solve_ripm(banded, banded.initial_guess(), **options)
-        assert res.status is RIPMStatus.CONVERGED, options
-        assert abs(res.objective - reference.objective) < 1e-7 * abs(reference.objective)
-        res = solve_ripm(_outside_disc(), np.array([0.0, 1e-3]), **options)
-        assert res.success and np.allclose(res.x, [2.0, 0.0], atol=1e-6), options
+        _assert_solves_the_test_problems(options)
     plain = solve_ripm(hs071(), HS071_X0).history.objective
     corrected = solve_ripm(hs071(), HS071_X0, corrector=True).history.objective
     assert len(plain) != len(corrected) or not np.allclose(plain, corrected)
