@@ -6,6 +6,7 @@ solve ms per iteration).
 
     python benchmarks/ripm_options_ab.py --tasks iiwa-com --cases 3 --variants base red bar red+bar
     python benchmarks/ripm_options_ab.py --tasks chain4 chain16 chain64 --cases 1 --variants base red piv all
+    python benchmarks/ripm_options_ab.py --tasks iiwa-com --variants base red --eps 1e-9 1e-10 1e-11
 """
 
 from __future__ import annotations
@@ -44,13 +45,16 @@ def main() -> None:
     ap.add_argument("--tasks", nargs="+", default=["iiwa-com"], choices=list(TASKS))
     ap.add_argument("--cases", type=int, default=3)
     ap.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
+    ap.add_argument("--eps", nargs="+", type=float, default=[None], help="static_regularization")
     args = ap.parse_args()
     for task in args.tasks:
         for case in range(args.cases):
             problem, x0, options = TASKS[task](case)
-            for name in args.variants:
-                r = profile_solve(problem, x0, dataclasses.replace(options, **VARIANTS[name]))
+            for eps, name in ((e, v) for e in args.eps for v in args.variants):
+                chosen = VARIANTS[name] | ({} if eps is None else {"static_regularization": eps})
+                r = profile_solve(problem, x0, dataclasses.replace(options, **chosen))
                 row = {"task": task, "case": case, "variant": name, "status": r["status"]}
+                row |= {"static_regularization": chosen.get("static_regularization")}
                 row |= {"iterations": r["iterations"], "ms_per_iter": round(r["per_iter_ms"], 2)}
                 row |= {"factorize_ms": round(r["factorize_ms"], 2)}
                 row |= {"solve_ms": round(r["solve_ms"], 2), "total_ms": round(r["total_ms"], 1)}
