@@ -16,11 +16,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from mbplan.benchmarks.common import run_in_tree
 
 PROFILE = ("evaluate", "values", "retract")
 MICRO = ("evaluate_us", "jacobian_us", "values_us", "retract_us")
@@ -84,14 +87,6 @@ print(json.dumps(out))
 """
 
 
-def _run(tree: Path, tasks: list[str], cases: int, micro: int) -> dict:
-    arg = json.dumps([tasks, cases, micro])
-    done = subprocess.run(
-        [sys.executable, "-c", _CHILD, arg], cwd=tree, capture_output=True, text=True, check=True
-    )
-    return json.loads(done.stdout.strip().splitlines()[-1])
-
-
 def summarize(runs: list[dict], task: str) -> dict:
     """Per component: min over rounds per case, median over cases."""
     cases = range(len(runs[0][task]))
@@ -117,7 +112,7 @@ def main() -> None:
     runs: dict[str, list[dict]] = {"baseline": [], "new": []}
     for _ in range(args.rounds):
         for tag, tree in (("baseline", Path(args.baseline)), ("new", here)):
-            runs[tag].append(_run(tree, args.tasks, args.cases, args.micro))
+            runs[tag].append(run_in_tree(tree, _CHILD, [args.tasks, args.cases, args.micro]))
     report = {}
     for task in args.tasks:
         report[task] = {tag: summarize(r, task) for tag, r in runs.items()}

@@ -14,11 +14,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from mbplan.benchmarks.common import run_in_tree
 
 KEYS = ("evaluate", "values", "retract", "assembly", "factorize", "solve", "python")
 
@@ -40,14 +43,6 @@ for name in tasks:
     out[name] = rows
 print(json.dumps(out))
 """
-
-
-def _run(tree: Path, tasks: list[str], cases: int, repeats: int) -> dict:
-    arg = json.dumps([tasks, cases, repeats])
-    done = subprocess.run(
-        [sys.executable, "-c", _CHILD, arg], cwd=tree, capture_output=True, text=True, check=True
-    )
-    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def summarize(runs: list[dict], task: str) -> dict:
@@ -75,7 +70,7 @@ def main() -> None:
     trees = [("baseline", Path(args.baseline)), ("new", here)]
     for r in range(args.rounds):  # ABBA: neither tree always runs first
         for tag, tree in trees if r % 2 == 0 else trees[::-1]:
-            runs[tag].append(_run(tree, args.tasks, args.cases, args.repeats))
+            runs[tag].append(run_in_tree(tree, _CHILD, [args.tasks, args.cases, args.repeats]))
     report = {}
     for task in args.tasks:
         report[task] = {tag: summarize(r, task) for tag, r in runs.items()}

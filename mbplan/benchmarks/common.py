@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import os
 import platform
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -28,6 +30,20 @@ def median_time(fn: Callable[[], Any], min_repeats: int = 5, min_seconds: float 
         fn()
         times.append(time.perf_counter() - t0)
     return float(np.median(times))
+
+
+def run_in_tree(tree: Path, code: str, arg: Any) -> Any:
+    """Run ``code`` by ``python -c`` in the checkout ``tree`` (so that it imports that tree's
+    mbplan: A/B runs against a baseline checkout) with ``json.dumps(arg)`` as its argument;
+    returns its last line of output, parsed as JSON."""
+    done = subprocess.run(
+        [sys.executable, "-c", code, json.dumps(arg)],
+        cwd=tree,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def machine_info() -> dict[str, Any]:
