@@ -35,7 +35,7 @@ MAX_SYSTEMS = 6  # captured KKT systems timed per case (evenly spaced over the s
 METHODS = {"set_matrices": "assembly", "factorize": "factorize", "solve": "solve"}
 
 
-BASELINE_MODULES = ("ldl_pivot", "ldl_kernels", "supernodal_ldl", "linear_solver")
+BASELINE_MODULES = ("ldl_pivot", "ldl_kernels", "ldl_solve", "supernodal_ldl", "linear_solver")
 
 
 def baseline_kkt(rev: str) -> type:

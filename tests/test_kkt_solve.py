@@ -10,7 +10,7 @@ import scipy.sparse as sp
 from test_linear_solver import _dense, _kkt_blocks
 
 from mbplan.solvers.kkt_scatter import same_arrays
-from mbplan.solvers.ldl_kernels import _residual_into
+from mbplan.solvers.ldl_solve import _residual_into
 from mbplan.solvers.linear_solver import KKTSystem
 
 

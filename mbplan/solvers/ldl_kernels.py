@@ -1,7 +1,7 @@
 """Numeric kernels of the supernodal LDLᵀ (:mod:`mbplan.solvers.linear_solver`): the multifrontal
 factorization (counting the pivot signs), unpivoted or with threshold pivoting inside each
-supernode (:mod:`mbplan.solvers.ldl_pivot`), and the triangular solves, compiled with numba;
-storage as described in :mod:`mbplan.solvers.ldl_symbolic`.
+supernode (:mod:`mbplan.solvers.ldl_pivot`), compiled with numba (the solves:
+:mod:`mbplan.solvers.ldl_solve`); storage as described in :mod:`mbplan.solvers.ldl_symbolic`.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 
 from mbplan.solvers.ldl_pivot import pivoted_front, rotate_pairs
 
-_SMALL = 4  # supernodes with at most this many columns are solved without a gathered copy
+SMALL_COLUMNS = 4  # supernodes with at most this many columns are solved without a gathered copy
 _WIDE = 24  # fronts with at least this many rows below the pivot get the 4 x 4 kernels
 BLAS_PIVOTS = 8  # the BLAS update needs at least this many pivot columns to pay for its copy
 
@@ -196,7 +196,7 @@ def _scale_checked(col, lo, hi, dt, u):
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
 def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta):
-    """The front's ``k <= _SMALL`` pivot columns, unpivoted, and its Schur update (column by
+    """The front's ``k <= SMALL_COLUMNS`` pivot columns, unpivoted, and its Schur update (column by
     column; for ``u > 0`` after all pivots), on flat indices (no array views). Returns the
     pivot counts and 0 (done), 1 (breakdown: a zero or non-finite pivot) or 2 (a pivot failed
     the threshold test ``u`` or ``|d| <= delta``: the Schur update is not done)."""
@@ -353,7 +353,7 @@ def ldl_factor(
             ubuf[i] = 0.0
         _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, False)
         spiv[s] = False
-        if k <= _SMALL:  # few pivot columns: plain loops on flat indices (no array views)
+        if k <= SMALL_COLUMNS:  # few pivot columns: plain loops on flat indices (no array views)
             ip, ineg, status = _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta)
         else:
             L = lbuf[lo : lo + k * m].reshape(k, m)
@@ -416,194 +416,4 @@ def ldl_factor(
     return npos, nneg, npert, True
 
 
-@nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
-def _forward_front(L, w, k, m):
-    """``w ← (I + L_front)⁻¹ w`` on a gathered front (``L[t]`` is front column ``t``), four
-    columns at a time."""
-    k4 = k - k % 4
-    for t in range(0, k4, 4):
-        l0, l1, l2, l3 = L[t], L[t + 1], L[t + 2], L[t + 3]
-        a0 = w[t]
-        a1 = w[t + 1] - l0[t + 1] * a0
-        a2 = w[t + 2] - l0[t + 2] * a0 - l1[t + 2] * a1
-        a3 = w[t + 3] - l0[t + 3] * a0 - l1[t + 3] * a1 - l2[t + 3] * a2
-        w[t + 1], w[t + 2], w[t + 3] = a1, a2, a3
-        for i in range(t + 4, m):
-            w[i] -= a0 * l0[i] + a1 * l1[i] + a2 * l2[i] + a3 * l3[i]
-    for t in range(k4, k):
-        lt, a0 = L[t], w[t]
-        for i in range(t + 1, m):
-            w[i] -= a0 * lt[i]
-
-
-@nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
-def _backward_front(L, w, k, m):
-    """``w[:k] ← w[:k] - L_frontᵀ w`` solved backwards (``(I + L)ᵀ``), four columns at a time."""
-    k4 = k - k % 4
-    for t in range(k - 1, k4 - 1, -1):
-        lt = L[t]
-        acc = 0.0
-        for i in range(t + 1, m):
-            acc += lt[i] * w[i]
-        w[t] -= acc
-    for t in range(k4 - 4, -1, -4):
-        l0, l1, l2, l3 = L[t], L[t + 1], L[t + 2], L[t + 3]
-        a0 = a1 = a2 = a3 = 0.0
-        for i in range(t + 4, m):
-            x = w[i]
-            a0 += l0[i] * x
-            a1 += l1[i] * x
-            a2 += l2[i] * x
-            a3 += l3[i] * x
-        x3 = w[t + 3] - a3
-        x2 = w[t + 2] - a2 - l2[t + 3] * x3
-        x1 = w[t + 1] - a1 - l1[t + 2] * x2 - l1[t + 3] * x3
-        w[t] -= a0 + l0[t + 1] * x1 + l0[t + 2] * x2 + l0[t + 3] * x3
-        w[t + 1], w[t + 2], w[t + 3] = x1, x2, x3
-
-
-@nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
-def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv):
-    """``x = K⁻¹ b`` with the factorization, into ``x`` (``y``: length ``n``, ``w``: the
-    largest front, work arrays): forward, (block) diagonal and backward substitution; a
-    supernode with many columns, or pivoted inside (``spiv``; ``piv``: its local order, ``e``:
-    its 2 × 2 blocks), works on a gathered copy of its rows of the right-hand side. ``y`` holds
-    a pivoted supernode's own entries in pivot order from its forward to its backward pass."""
-    n = b.shape[0]
-    ns = sfirst.shape[0] - 1
-    for i in range(n):
-        y[i] = b[perm[i]]
-    for s in range(ns):
-        f, fp, lo = sfirst[s], fptr[s], loff[s]
-        k = sfirst[s + 1] - f
-        m = fptr[s + 1] - fp
-        if k <= _SMALL and not spiv[s]:  # flat indexing: no views for the many small ones
-            for t in range(k):
-                yt = y[f + t]
-                if yt != 0.0:
-                    c = lo + t * m
-                    for i in range(t + 1, m):
-                        y[rows[fp + i]] -= lbuf[c + i] * yt
-            continue
-        L = lbuf[lo : lo + k * m].reshape(k, m)
-        if spiv[s]:
-            for i in range(k):
-                w[i] = y[f + piv[f + i]]
-        else:
-            for i in range(k):
-                w[i] = y[f + i]
-        for i in range(k, m):
-            w[i] = 0.0
-        _forward_front(L, w, k, m)
-        for i in range(k):
-            y[f + i] = w[i]
-        for i in range(k, m):
-            y[rows[fp + i]] += w[i]
-    i = 0
-    while i < n:
-        if e[i] == 0.0:
-            y[i] /= d[i]
-            i += 1
-            continue
-        a, c, g = d[i], e[i], d[i + 1]  # the 2 × 2 block [[a, c], [c, g]]
-        det = a * g - c * c
-        y0, y1 = y[i], y[i + 1]
-        y[i] = (g * y0 - c * y1) / det
-        y[i + 1] = (a * y1 - c * y0) / det
-        i += 2
-    for s in range(ns - 1, -1, -1):
-        f, fp, lo = sfirst[s], fptr[s], loff[s]
-        k = sfirst[s + 1] - f
-        m = fptr[s + 1] - fp
-        if k <= _SMALL and not spiv[s]:
-            for t in range(k - 1, -1, -1):
-                c = lo + t * m
-                acc = 0.0
-                for i in range(t + 1, m):
-                    acc += lbuf[c + i] * y[rows[fp + i]]
-                y[f + t] -= acc
-            continue
-        L = lbuf[lo : lo + k * m].reshape(k, m)
-        for i in range(k):
-            w[i] = y[f + i]
-        for i in range(k, m):
-            w[i] = y[rows[fp + i]]
-        _backward_front(L, w, k, m)
-        if spiv[s]:
-            for i in range(k):
-                y[f + piv[f + i]] = w[i]
-        else:
-            for i in range(k):
-                y[f + i] = w[i]
-    for i in range(n):
-        x[perm[i]] = y[i]
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _residual_into(indptr, indices, data, b, x, r):
-    """``r = b - K x`` with ``K`` in CSR arrays (row sums in SciPy's order, so the same
-    rounding as ``b - K @ x``); returns ``(‖r‖∞, ‖x‖∞)``, NaN if either has a NaN."""
-    for i in range(b.shape[0]):
-        acc = 0.0
-        for e in range(indptr[i], indptr[i + 1]):
-            acc += data[e] * x[indices[e]]
-        r[i] = b[i] - acc
-    return _max_abs(r), _max_abs(x)
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _max_abs(v):
-    """``‖v‖∞``, NaN if ``v`` has a NaN."""
-    out = 0.0
-    for i in range(v.shape[0]):
-        a = abs(v[i])
-        if a > out:
-            out = a
-        elif a != a:
-            return np.nan
-    return out
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _ratio(nrm_r, nrm_x, nrm_b):
-    """IPOPT's residual ratio ``‖r‖∞ / (min(‖x‖∞, 1e6‖b‖∞) + ‖b‖∞)``, ``inf`` if not finite."""
-    denom = min(nrm_x, 1e6 * nrm_b) + nrm_b if nrm_x == nrm_x else nrm_x
-    ratio = nrm_r / denom if denom > 0 else nrm_r
-    return ratio if np.isfinite(ratio) else np.inf
-
-
-@nb.njit(cache=True, error_model="numpy")
-def refined_solve(
-    b, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv, wmax, indptr, indices, data,
-    max_refinement, ratio_max,
-):  # fmt: skip
-    """Solve ``K x = b`` with the factorization of the regularized ``K`` and iterative
-    refinement against ``K`` (full CSR arrays ``indptr, indices, data``): at least
-    one (IPOPT's default) and at most ``max_refinement`` steps, stopping at a residual ratio
-    ``<= ratio_max`` or when a step does not reduce it. Returns ``x`` and the ratio."""
-    n = b.shape[0]
-    y, w = np.empty(n), np.empty(wmax)
-    sol, cand, dx = np.empty(n), np.empty(n), np.empty(n)
-    resid, cand_resid = np.empty(n), np.empty(n)
-    nrm_b = _max_abs(b)
-    _solve_into(b, sol, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv)
-    nrm_r, nrm_x = _residual_into(indptr, indices, data, b, sol, resid)
-    ratio = _ratio(nrm_r, nrm_x, nrm_b)
-    for step in range(max_refinement):
-        if step >= 1 and ratio <= ratio_max:
-            break
-        _solve_into(resid, dx, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv)
-        for i in range(n):
-            cand[i] = sol[i] + dx[i]
-        nrm_r, nrm_x = _residual_into(indptr, indices, data, b, cand, cand_resid)
-        cand_ratio = _ratio(nrm_r, nrm_x, nrm_b)
-        if not cand_ratio < ratio:
-            break
-        sol, cand = cand, sol
-        resid, cand_resid = cand_resid, resid
-        ratio = cand_ratio
-    return sol, ratio
-
-
 NUMERIC_KERNELS = (ldl_factor,)  # compiled entry points (for the cache check)
-SOLVE_KERNELS = (refined_solve,)

@@ -52,10 +52,8 @@ import scipy.sparse as sp
 from mbplan.engine.jit import announce_uncached_numba, numba_cached
 from mbplan.errors import InputError
 from mbplan.solvers.kkt_scatter import SCATTER_KERNELS, matrix_values, same_arrays, scatter_blocks
-from mbplan.solvers.ldl_kernels import (
-    NUMERIC_KERNELS,
-    SOLVE_KERNELS,
-)
+from mbplan.solvers.ldl_kernels import NUMERIC_KERNELS
+from mbplan.solvers.ldl_solve import SOLVE_KERNELS
 from mbplan.solvers.ldl_symbolic import SYMBOLIC_KERNELS, Analysis
 from mbplan.solvers.ordering import amd_order, metis_order, nested_dissection_order
 from mbplan.solvers.supernodal_ldl import SupernodalLDL
