@@ -10,11 +10,15 @@ import pinocchio as pin
 import pytest
 
 import mbplan as mb
+from mbplan.engine.jit import jit_available
+from mbplan.formulations import maximal
 from mbplan.robots import available_robots, load
+from mbplan.solvers import RIPMStatus, solve_ripm
 from mbplan.viz import static_html
 
 # Known failures, asserted so that a fix shows up: IPOPT's restoration fails on the 3-dof
-# finger's fingertip goal (3 equations on 3 joints) where the RIPM converges.
+# finger's frame goal, whose 3 equations have rank 2 (the frame's origin is on the last joint's
+# axis; test_rank_deficient_frame_goal), where the RIPM converges.
 KNOWN_FAILURES = {("finger_edu", "frame", "ipopt")}
 
 
@@ -77,3 +81,33 @@ def test_every_arm_plans_joint_and_frame_goals_in_both_formulations(name: str, t
         ):
             page = static_html(results, tmp_path / f"{name}.html")
             assert page.stat().st_size > 10_000
+
+
+def test_rank_deficient_frame_goal():
+    """The sweep's frame goal of the 3-dof finger is the origin of ``finger_lower_link``, on the
+    last joint's axis: its 3 equations have rank 2 at every configuration (LICQ fails, the
+    linearized goal is inconsistent off the solution), so the KKT matrix is singular. The
+    stalled refinement gives ``δ_c`` of the residual's size (``NewtonStep._delta_c``): the full
+    and the joint-eliminated step take the same few iterations to the same point, a KKT point
+    without the multiplier scaling ``s_d`` (the static regularization alone: 75 / > 200
+    iterations, ``y`` ~ 6e5 ~ 1/ε, and with ε = 1e-11 "converged" at ``inf_du`` 2e-2)."""
+    robot = _robot("finger_edu")
+    model, data = robot.model, robot.model.createData()
+    ocp = _tasks(robot, seed=len("finger_edu"))["frame"]
+    frame = model.getFrameId(ocp["goal"].residual.frame)
+    for q in (ocp.q0, np.zeros(model.nq)):
+        jac = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
+        sv = np.linalg.svd(jac, compute_uv=False)
+        assert sv[2] < 1e-12 * sv[0] and sv[1] > 1e-2 * sv[0]
+    nlp, _ = maximal.build(ocp, jit_available())
+    x0 = nlp.initial_point(np.repeat(ocp.q0[None], ocp.N + 1, axis=0))
+    runs = [
+        solve_ripm(nlp.problem, x0, tol=1e-6, max_iter=50, kkt_method=method)
+        for method in ("full", "reduced")
+    ]
+    for res in runs:
+        assert res.status is RIPMStatus.CONVERGED and res.iterations <= 10
+        assert res.inf_du <= 1e-6 and res.inf_pr <= 1e-6
+        assert np.max(np.abs(res.y)) < 1e5
+    assert runs[0].iterations == runs[1].iterations
+    assert runs[0].objective == pytest.approx(runs[1].objective, rel=1e-8)
