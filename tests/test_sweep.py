@@ -10,9 +10,10 @@ import pinocchio as pin
 import pytest
 
 import mbplan as mb
+from mbplan.benchmarks.arm_sweep import sweep_robot, sweep_tasks
 from mbplan.engine.jit import jit_available
 from mbplan.formulations import maximal
-from mbplan.robots import available_robots, load
+from mbplan.robots import available_robots
 from mbplan.solvers import RIPMStatus, solve_ripm
 from mbplan.viz import static_html
 
@@ -22,47 +23,10 @@ from mbplan.viz import static_html
 KNOWN_FAILURES = {("finger_edu", "frame", "ipopt")}
 
 
-def _robot(name: str) -> mb.Robot:
-    model = load(name, geometry=False).model
-    prismatic = [
-        model.names[j]
-        for j in range(1, model.njoints)
-        if model.joints[j].shortname().startswith("JointModelP")
-    ]
-    return mb.load_robot(name, lock=prismatic)
-
-
-def _tasks(robot: mb.Robot, seed: int) -> dict[str, mb.OCP]:
-    model = robot.model
-    lo = np.maximum(model.lowerPositionLimit, -np.pi)
-    hi = np.minimum(model.upperPositionLimit, np.pi)
-    rng = np.random.default_rng(seed)
-    q0 = 0.5 * (lo + hi) + 0.2 * (hi - lo) * rng.uniform(-0.5, 0.5, robot.nq)
-    q_goal = np.clip(q0 + 0.3 * rng.uniform(-1, 1, robot.nq), lo, hi)
-    tip = max(
-        (f for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint > 0),
-        key=lambda f: f.parentJoint,
-    )
-    data = model.createData()
-    pin.framesForwardKinematics(model, data, q_goal)
-    point = data.oMf[model.getFrameId(tip.name)].translation.copy()
-    tasks = {}
-    for kind in ("joint", "frame"):
-        ocp = mb.OCP(robot, N=6, dt=0.1, q0=q0)
-        ocp.add_cost("velocity", mb.residuals.JointVelocity(), 1e-2)
-        ocp.add_cost("effort", mb.residuals.JointTorque(), 1e-4)
-        if kind == "joint":
-            ocp.add_terminal_constraint("goal", mb.residuals.JointPosition(q_goal))
-        else:
-            ocp.add_terminal_constraint("goal", mb.residuals.FrameTranslation(tip.name, point))
-        tasks[kind] = ocp
-    return tasks
-
-
 @pytest.mark.parametrize("name", available_robots())  # continuous joints: one angle each
 def test_every_arm_plans_joint_and_frame_goals_in_both_formulations(name: str, tmp_path: Path):
-    robot = _robot(name)
-    for kind, ocp in _tasks(robot, seed=len(name)).items():
+    robot = sweep_robot(name)
+    for kind, ocp in sweep_tasks(robot, seed=len(name)).items():
         results = []
         for method in ("ripm", "ipopt"):
             rest = np.repeat(ocp.q0[None], ocp.N + 1, axis=0)  # the solver has to move the arm
@@ -91,9 +55,9 @@ def test_rank_deficient_frame_goal():
     and the joint-eliminated step take the same few iterations to the same point, a KKT point
     without the multiplier scaling ``s_d`` (the static regularization alone: 75 / > 200
     iterations, ``y`` ~ 6e5 ~ 1/ε, and with ε = 1e-11 "converged" at ``inf_du`` 2e-2)."""
-    robot = _robot("finger_edu")
+    robot = sweep_robot("finger_edu")
     model, data = robot.model, robot.model.createData()
-    ocp = _tasks(robot, seed=len("finger_edu"))["frame"]
+    ocp = sweep_tasks(robot, seed=len("finger_edu"))["frame"]
     frame = model.getFrameId(ocp["goal"].residual.frame)
     for q in (ocp.q0, np.zeros(model.nq)):
         jac = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
