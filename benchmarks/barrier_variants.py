@@ -1,14 +1,18 @@
-"""Barrier and initialization variants of the RIPM on the same cases: iterations and solved &
-verified counts (issue #12 item 4).
+"""RIPM option variants on the same cases: iterations and solved & verified counts (issue #12).
 
 Every solve goes through ``mbplan.plan`` and ``mbplan.verify`` (``plan_row``, the benchmarks'
 row): drone docking without and with input limits (geodesic warm start, tol 1e-6, max 100
-iterations, as ``mbplan bench drone-docking``) and the iiwa com obstacle (via warm start, tol
-1e-6, max 500 iterations, as ``mbplan bench iiwa-obstacle``). The (case, variant) jobs are
-interleaved so that every variant sees the same load.
+iterations, as ``mbplan bench drone-docking``), the iiwa obstacle with the com and the distance
+constraint (via warm start, tol 1e-6, max 500 iterations, as ``mbplan bench iiwa-obstacle``),
+the chain reach with 4, 8 and 16 links (linear warm start, tol 1e-6, max 500) and the arm sweep
+of ``tests/test_sweep.py`` (42 tasks from rest, max 200 iterations). The (case, variant) jobs
+are interleaved so that every variant sees the same load. ``default`` is ``RIPMOptions()`` of
+the checkout; the other variants are overrides of the session-6 defaults (``session6``).
 
-    python benchmarks/barrier_variants.py --drone 30 --iiwa 30 --variants default corrector \
+    python benchmarks/barrier_variants.py --drone 30 --iiwa 30 --variants default session6 \
         --out benchmarks/results/barrier
+    python benchmarks/barrier_variants.py --tasks chain4 chain8 chain16 sweep \
+        --variants default session6
 """
 
 from __future__ import annotations
@@ -26,23 +30,31 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tqdm import tqdm
 
+SESSION6 = {
+    "mu_strategy": "monotone",
+    "mu_oracle": "loqo",
+    "mu_max_fact": 1e3,
+    "corrector": False,
+    "kkt_method": "full",
+}
+"""The defaults before session 7 (monotone μ, full KKT)."""
+PROBING = {"mu_strategy": "adaptive", "mu_oracle": "probing"}
 VARIANTS: dict[str, dict[str, Any]] = {
     "default": {},
-    "corrector": {"corrector": True},
-    "probing": {"mu_strategy": "adaptive", "mu_oracle": "probing"},
-    "probing-corrector": {"mu_strategy": "adaptive", "mu_oracle": "probing", "corrector": True},
-    "probing-cap": {"mu_strategy": "adaptive", "mu_oracle": "probing", "mu_max_fact": 0.0},
-    "probing-cap-corrector": {
-        "mu_strategy": "adaptive",
-        "mu_oracle": "probing",
-        "mu_max_fact": 0.0,
-        "corrector": True,
-    },
-    "loqo": {"mu_strategy": "adaptive", "mu_oracle": "loqo"},
+    "session6": SESSION6,
+    "default-full": {"kkt_method": "full"},
+    "corrector": SESSION6 | {"corrector": True},
+    "probing": SESSION6 | PROBING,
+    "probing-corrector": SESSION6 | PROBING | {"corrector": True},
+    "probing-cap": SESSION6 | PROBING | {"mu_max_fact": 0.0},
+    "probing-cap-corrector": SESSION6 | PROBING | {"mu_max_fact": 0.0, "corrector": True},
+    "loqo": SESSION6 | {"mu_strategy": "adaptive", "mu_oracle": "loqo"},
 }
 """Name → :class:`~mbplan.solvers.RIPMOptions` overrides."""
 
-TASKS = ("drone", "drone-limits", "iiwa")
+TASKS = ("drone", "drone-limits", "iiwa", "iiwa-distance", "chain4", "chain8", "chain16", "sweep")
+FIXED_CASES = {"chain4": 1, "chain8": 1, "chain16": 1, "sweep": 42}
+"""Tasks with a fixed number of cases (the sweep: 21 arms × joint and frame goal)."""
 
 
 @functools.cache
@@ -53,43 +65,63 @@ def _drone_cases(n: int, limits: bool) -> list:
 
 
 @functools.cache
-def _iiwa_starts(n: int) -> Any:
+def _iiwa_starts(n: int, constraint: str) -> Any:
     from mbplan.paper import iiwa_obstacle_starts
 
-    return iiwa_obstacle_starts(n, 0, "com")
+    return iiwa_obstacle_starts(n, 0, constraint)
 
 
 _SOLVES = [0]
 
 
 def _count_kkt_solves() -> None:
-    """Count ``KKTSystem.solve`` calls in this process (the Newton, affine, corrector and SOC
-    solves; each with its iterative refinement)."""
+    """Count the solver's KKT solves in this process (the Newton, affine, corrector and SOC
+    solves, each with its iterative refinement): outermost calls of ``KKTSystem.solve`` and
+    ``ReducedKKTSystem.solve`` (whose reduced matrix and fallback solve with a KKTSystem)."""
     from mbplan.solvers.linear_solver import KKTSystem
+    from mbplan.solvers.reduced_step import ReducedKKTSystem
 
-    if getattr(KKTSystem.solve, "counted", False):
-        return
-    solve_kkt = KKTSystem.solve
+    depth = [0]
+    for cls in (KKTSystem, ReducedKKTSystem):
+        if getattr(cls.solve, "counted", False):
+            continue
 
-    def counted(self, *args, **kwargs):
-        _SOLVES[0] += 1
-        return solve_kkt(self, *args, **kwargs)
+        def counted(self, *args, _solve=cls.solve, **kwargs):
+            _SOLVES[0] += depth[0] == 0
+            depth[0] += 1
+            try:
+                return _solve(self, *args, **kwargs)
+            finally:
+                depth[0] -= 1
 
-    counted.counted = True
-    KKTSystem.solve = counted
+        counted.counted = True
+        cls.solve = counted
 
 
 def solve(task: str, index: int, n: int, variant: str) -> dict[str, Any]:
     """One (task, case, variant) solve, verified, as a JSON row."""
+    from mbplan.benchmarks.arm_sweep import sweep_case
     from mbplan.benchmarks.common import plan_row
+    from mbplan.benchmarks.speed_tasks import chain_task
     from mbplan.paper import drone_docking, iiwa_obstacle
 
     _count_kkt_solves()
     _SOLVES[0] = 0
     options = VARIANTS[variant]
-    if task == "iiwa":
-        ocp = iiwa_obstacle(_iiwa_starts(n)[index], N=40, constraint="com")
+    extra = {}
+    if task.startswith("iiwa"):
+        constraint = "distance" if task == "iiwa-distance" else "com"
+        ocp = iiwa_obstacle(_iiwa_starts(n, constraint)[index], N=40, constraint=constraint)
         row, _, _ = plan_row(ocp, "ripm", warm_start="via", tol=1e-6, max_iter=500, options=options)
+    elif task.startswith("chain"):
+        ocp = chain_task(int(task[5:]))
+        row, _, _ = plan_row(
+            ocp, "ripm", warm_start="linear", tol=1e-6, max_iter=500, options=options
+        )
+    elif task == "sweep":
+        name, kind, ocp, rest = sweep_case(index)
+        row, _, _ = plan_row(ocp, "ripm", warm_start=rest, max_iter=200, options=options)
+        extra = {"robot": name, "kind": kind}
     else:
         ocp = drone_docking(_drone_cases(n, task == "drone-limits")[index])
         row, _, _ = plan_row(
@@ -97,7 +129,7 @@ def solve(task: str, index: int, n: int, variant: str) -> dict[str, Any]:
         )
     row.pop("verification_reasons")
     row["kkt_solves"] = _SOLVES[0]
-    return {"task": task, "case": index, "variant": variant, **row}
+    return {"task": task, "case": index, "variant": variant, **extra, **row}
 
 
 def _solve(job: tuple) -> dict[str, Any]:
@@ -141,7 +173,8 @@ def summarize(rows: list[dict[str, Any]], variants: list[str]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--drone", type=int, default=30, help="drone cases (of 100, seed 0)")
-    ap.add_argument("--iiwa", type=int, default=30, help="iiwa cases (of 100, seed 0)")
+    ap.add_argument("--iiwa", type=int, default=30, help="iiwa com cases (of 100, seed 0)")
+    ap.add_argument("--distance", type=int, default=30, help="iiwa distance cases (of 100)")
     ap.add_argument("--first", type=int, default=0, help="first case index")
     ap.add_argument("--cases", type=int, nargs="*", default=None, help="these case indices")
     ap.add_argument("--tasks", nargs="*", default=list(TASKS), choices=TASKS)
@@ -150,8 +183,9 @@ def main() -> None:
     ap.add_argument("--out", default=None, help="folder for rows.json and results.md")
     args = ap.parse_args()
     jobs = []
+    counts = {"iiwa": args.iiwa, "iiwa-distance": args.distance} | FIXED_CASES
     for task in args.tasks:
-        count = args.iiwa if task == "iiwa" else args.drone
+        count = counts.get(task, args.drone)
         for i in args.cases or range(args.first, args.first + count):
             jobs += [(task, i, 100, v) for v in args.variants]
     with ProcessPoolExecutor(args.workers) as pool:

@@ -2,11 +2,13 @@
 
 Each (task, case) is solved with every variant in turn (``profile_solve``: a warm-up solve,
 then a timed one); prints one JSON line per solve (iterations, ms per iteration, factorize and
-solve ms per iteration).
+solve ms per iteration). ``base`` is ``RIPMOptions()`` of the checkout, ``s6`` the defaults
+before session 7 (monotone μ, full KKT); the others override ``base``.
 
     python benchmarks/ripm_options_ab.py --tasks iiwa-com --cases 3 --variants base red bar red+bar
     python benchmarks/ripm_options_ab.py --tasks chain4 chain16 chain64 --cases 1 --variants base red piv all
     python benchmarks/ripm_options_ab.py --tasks iiwa-com --variants base red --eps 1e-9 1e-10 1e-11
+    python benchmarks/ripm_options_ab.py --tasks chain4 chain8 chain16 chain32 chain64 --cases 1 --variants base s6
 """
 
 from __future__ import annotations
@@ -30,8 +32,16 @@ MEHROTRA = {
     "mu_max_fact": 0.0,
     "corrector": True,
 }
+SESSION6 = {
+    "mu_strategy": "monotone",
+    "mu_oracle": "loqo",
+    "mu_max_fact": 1e3,
+    "corrector": False,
+    "kkt_method": "full",
+}
 VARIANTS = {
     "base": {},
+    "s6": SESSION6,
     "red": REDUCED,
     "piv": PIVOTED_METIS,
     "bar": MEHROTRA,

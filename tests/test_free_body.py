@@ -284,11 +284,12 @@ def test_inverse_dynamics_inputs_are_exact_for_a_fully_actuated_body() -> None:
 
 def test_mehrotra_barrier_options_plan_the_docking_with_input_limits() -> None:
     """The drone docking with input limits (bang-bang torques) planned with Mehrotra's probing
-    μ capped at μ_init and the corrector: converges, verifies, and reaches the default options'
-    trajectory along different iterates."""
+    μ capped at μ_init and the corrector (the defaults): converges, verifies, and reaches the
+    monotone barrier's trajectory along different iterates."""
     ocp = paper.drone_docking(sample_docking_cases(2, 0, with_input_limits=True)[0])
     options = {"mu_strategy": "adaptive", "mu_oracle": "probing", "mu_max_fact": 0.0}
-    default = mb.plan(ocp, "ripm", warm_start="linear")
+    monotone = {"mu_strategy": "monotone", "corrector": False}
+    default = mb.plan(ocp, "ripm", warm_start="linear", options=monotone)
     mehrotra = mb.plan(ocp, "ripm", warm_start="linear", options=options | {"corrector": True})
     assert default.success and mehrotra.success
     assert mb.verify(ocp, mehrotra).passed

@@ -10,55 +10,23 @@ import pinocchio as pin
 import pytest
 
 import mbplan as mb
-from mbplan.robots import available_robots, load
+from mbplan.benchmarks.arm_sweep import sweep_robot, sweep_tasks
+from mbplan.engine.jit import jit_available
+from mbplan.formulations import maximal
+from mbplan.robots import available_robots
+from mbplan.solvers import RIPMStatus, solve_ripm
 from mbplan.viz import static_html
 
 # Known failures, asserted so that a fix shows up: IPOPT's restoration fails on the 3-dof
-# finger's fingertip goal (3 equations on 3 joints) where the RIPM converges.
+# finger's frame goal, whose 3 equations have rank 2 (the frame's origin is on the last joint's
+# axis; test_rank_deficient_frame_goal), where the RIPM converges.
 KNOWN_FAILURES = {("finger_edu", "frame", "ipopt")}
-
-
-def _robot(name: str) -> mb.Robot:
-    model = load(name, geometry=False).model
-    prismatic = [
-        model.names[j]
-        for j in range(1, model.njoints)
-        if model.joints[j].shortname().startswith("JointModelP")
-    ]
-    return mb.load_robot(name, lock=prismatic)
-
-
-def _tasks(robot: mb.Robot, seed: int) -> dict[str, mb.OCP]:
-    model = robot.model
-    lo = np.maximum(model.lowerPositionLimit, -np.pi)
-    hi = np.minimum(model.upperPositionLimit, np.pi)
-    rng = np.random.default_rng(seed)
-    q0 = 0.5 * (lo + hi) + 0.2 * (hi - lo) * rng.uniform(-0.5, 0.5, robot.nq)
-    q_goal = np.clip(q0 + 0.3 * rng.uniform(-1, 1, robot.nq), lo, hi)
-    tip = max(
-        (f for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint > 0),
-        key=lambda f: f.parentJoint,
-    )
-    data = model.createData()
-    pin.framesForwardKinematics(model, data, q_goal)
-    point = data.oMf[model.getFrameId(tip.name)].translation.copy()
-    tasks = {}
-    for kind in ("joint", "frame"):
-        ocp = mb.OCP(robot, N=6, dt=0.1, q0=q0)
-        ocp.add_cost("velocity", mb.residuals.JointVelocity(), 1e-2)
-        ocp.add_cost("effort", mb.residuals.JointTorque(), 1e-4)
-        if kind == "joint":
-            ocp.add_terminal_constraint("goal", mb.residuals.JointPosition(q_goal))
-        else:
-            ocp.add_terminal_constraint("goal", mb.residuals.FrameTranslation(tip.name, point))
-        tasks[kind] = ocp
-    return tasks
 
 
 @pytest.mark.parametrize("name", available_robots())  # continuous joints: one angle each
 def test_every_arm_plans_joint_and_frame_goals_in_both_formulations(name: str, tmp_path: Path):
-    robot = _robot(name)
-    for kind, ocp in _tasks(robot, seed=len(name)).items():
+    robot = sweep_robot(name)
+    for kind, ocp in sweep_tasks(robot, seed=len(name)).items():
         results = []
         for method in ("ripm", "ipopt"):
             rest = np.repeat(ocp.q0[None], ocp.N + 1, axis=0)  # the solver has to move the arm
@@ -77,3 +45,33 @@ def test_every_arm_plans_joint_and_frame_goals_in_both_formulations(name: str, t
         ):
             page = static_html(results, tmp_path / f"{name}.html")
             assert page.stat().st_size > 10_000
+
+
+def test_rank_deficient_frame_goal():
+    """The sweep's frame goal of the 3-dof finger is the origin of ``finger_lower_link``, on the
+    last joint's axis: its 3 equations have rank 2 at every configuration (LICQ fails, the
+    linearized goal is inconsistent off the solution), so the KKT matrix is singular. The
+    stalled refinement gives ``δ_c`` of the residual's size (``NewtonStep._delta_c``): the full
+    and the joint-eliminated step take the same few iterations to the same point, a KKT point
+    without the multiplier scaling ``s_d`` (the static regularization alone: 75 / > 200
+    iterations, ``y`` ~ 6e5 ~ 1/ε, and with ε = 1e-11 "converged" at ``inf_du`` 2e-2)."""
+    robot = sweep_robot("finger_edu")
+    model, data = robot.model, robot.model.createData()
+    ocp = sweep_tasks(robot, seed=len("finger_edu"))["frame"]
+    frame = model.getFrameId(ocp["goal"].residual.frame)
+    for q in (ocp.q0, np.zeros(model.nq)):
+        jac = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
+        sv = np.linalg.svd(jac, compute_uv=False)
+        assert sv[2] < 1e-12 * sv[0] and sv[1] > 1e-2 * sv[0]
+    nlp, _ = maximal.build(ocp, jit_available())
+    x0 = nlp.initial_point(np.repeat(ocp.q0[None], ocp.N + 1, axis=0))
+    runs = [
+        solve_ripm(nlp.problem, x0, tol=1e-6, max_iter=50, kkt_method=method)
+        for method in ("full", "reduced")
+    ]
+    for res in runs:
+        assert res.status is RIPMStatus.CONVERGED and res.iterations <= 10
+        assert res.inf_du <= 1e-6 and res.inf_pr <= 1e-6
+        assert np.max(np.abs(res.y)) < 1e5
+    assert runs[0].iterations == runs[1].iterations
+    assert runs[0].objective == pytest.approx(runs[1].objective, rel=1e-8)

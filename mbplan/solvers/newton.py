@@ -10,7 +10,10 @@ symmetric system solved by :class:`~mbplan.solvers.linear_solver.KKTSystem`::
 
 ``W`` is the Riemannian Hessian of the Lagrangian (eq. 54). The step is a descent direction of
 the barrier problem iff the inertia is ``(n, n_eq + n_ineq, 0)``; otherwise ``δ_w``, ``δ_c``
-follow WB Algorithm IC. In the restoration phase the elastic variables and their multipliers
+follow WB Algorithm IC. ``K`` is also treated as singular (IC-2) when iterative refinement cannot
+bring the residual ratio below ``residual_ratio_max``: the static regularization hides a zero
+pivot from the inertia, and only a right-hand side outside the range of ``K`` leaves a residual
+that refinement cannot remove. In the restoration phase the elastic variables and their multipliers
 are eliminated row by row as well (:mod:`mbplan.solvers.restoration`): the matrix keeps the main
 loop's pattern, and its symbolic factorization. With ``corrector`` the complementarity row's
 ``μe`` becomes Mehrotra's ``μe - ΔS_aff Δz_aff`` (solves with the same factorization).
@@ -20,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mbplan.solvers.iterate import Step, finite, frac_to_boundary
+from mbplan.solvers.iterate import Step, amax, finite, frac_to_boundary
 from mbplan.solvers.ripm_kernels import newton_diagonal, newton_rhs, slack_step
 
 
@@ -30,6 +33,7 @@ class NewtonStep:
     def _rhs(self, c: np.ndarray) -> np.ndarray:
         """Right-hand side for the constraint values ``c`` (``r_c``, or a second-order
         correction's)."""
+        self.rhs_c = c  # the rows' linearization the solution satisfies (see _split)
         rhs = np.empty(self.n + self.m)
         newton_rhs(self.r_d, c, self.me, self.s, self.z, self.mu, rhs)
         if self.compl_shift is not None:  # μe - shift on the complementarity row
@@ -99,13 +103,37 @@ class NewtonStep:
             ds -= self.compl_shift / self.z
         step = Step(sol[:n], ds, dlam[:me], dz)
         if self.resto:
-            lam = self._lam()
-            p, nn, zp, zn, mu = self.ep, self.en, self.zp, self.zn, self.mu
-            step.dp = (p / zp) * (dlam + mu / p - self.rho + lam)
-            step.dn = (nn / zn) * (-dlam + mu / nn - self.rho - lam)
-            step.dzp = mu / p - zp - (zp / p) * step.dp
-            step.dzn = mu / nn - zn - (zn / nn) * step.dn
+            self._elastic_steps(step, dlam)
         return step
+
+    def _elastic_steps(self, step: Step, dlam: np.ndarray) -> None:
+        """``dp, dn`` and their multipliers' steps of the restoration phase. Each row's elastic
+        with the larger ``p/z_p`` (``n/z_n``) comes from the row's linearization
+        ``c + A dx + ds - dp + dn = 0`` instead of its own equations: where ``z → 0`` its formula
+        ``(n/z_n)(-dλ + μ/n - ρ - λ)`` multiplies the cancellation in ``ρ + λ`` by ``n/z_n``
+        (10¹⁰ on the Wächter–Biegler example: rows off by 5e-5, the line search failed)."""
+        lam, me = self._lam(), self.me
+        p, nn, zp, zn, mu = self.ep, self.en, self.zp, self.zn, self.mu
+        dp = (p / zp) * (dlam + mu / p - self.rho + lam)
+        dn = (nn / zn) * (-dlam + mu / nn - self.rho - lam)
+        lin = np.array(self.rhs_c, dtype=float)
+        lin[:me] += self.ev.eq_jacobian @ step.dx
+        lin[me:] += self.ev.ineq_jacobian @ step.dx + step.ds
+        from_row = nn / zn >= p / zp
+        step.dn = np.where(from_row, dp - lin, dn)
+        step.dp = np.where(from_row, dp, lin + dn)
+        step.dzp = mu / p - zp - (zp / p) * step.dp
+        step.dzn = mu / nn - zn - (zn / nn) * step.dn
+
+    def _delta_c(self, residual: float = 0.0) -> float:
+        """``δ_c`` of a singular ``K`` (IC-2): IPOPT's ``δ̄_c μ^κ_c``, at least the residual
+        ``‖b - K x‖∞`` that refinement could not remove (the right-hand side's part outside the
+        range of ``K``). Along a left null vector ``v`` of the Jacobian the step is
+        ``dλ_v = -vᵀc / δ_c``: with ``δ_c`` of the residual's size it stays bounded, as in
+        stabilized SQP (Wright 1998); a small fixed ``δ_c`` or the static regularization alone
+        let the multipliers, and with them the Hessian of the Lagrangian, grow like ``1/δ_c``."""
+        o = self.o
+        return max(o.delta_c_bar * self.mu**o.kappa_c, residual)
 
     def _newton_step(self) -> tuple[Step, float] | None:
         """Factorize with inertia correction (WB Algorithm IC) and solve; ``None`` on failure."""
@@ -123,14 +151,21 @@ class NewtonStep:
             correct = inertia is not None and inertia.zero == 0 and inertia.negative == m
             singular = not correct and (inertia is None or inertia.zero > 0 or inertia.negative < m)
             if correct:
-                aff = None
-                if self.probe_pending:  # μ from an affine step with this factorization
+                aff, probing = None, self.probe_pending
+                if probing:  # μ from an affine step with this factorization
                     aff = self._probe_mu()
                 if o.corrector and self.mi and not self.resto:
                     aff = aff or self._affine_step()
                     self.compl_shift = self._corrector_shift(aff)
                 rhs = self._rhs(self.r_c)
                 sol, ratio = self.kkt.solve(rhs, o.max_refinement_steps, o.residual_ratio_max)
+                if dc == 0.0 and m > 0 and ratio > o.residual_ratio_max and finite(sol):
+                    # refinement stalled: K is singular, the right-hand side not in its range
+                    # (e.g. a rank-deficient A_E with inconsistent linearized constraints)
+                    pretend_singular = ratio > o.residual_ratio_singular
+                    self.probe_pending = probing
+                    dc = self._delta_c(_residual(ratio, sol, rhs))
+                    continue
                 if finite(sol) and (ratio <= o.residual_ratio_singular or pretend_singular):
                     if dw > 0:
                         self.delta_w_last = dw
@@ -142,7 +177,7 @@ class NewtonStep:
                     return self._split(sol), dw
                 pretend_singular = singular = True  # IPOPT: refinement failed
             if singular and dc == 0.0 and m > 0:
-                dc = o.delta_c_bar * self.mu**o.kappa_c  # IC-2
+                dc = self._delta_c()  # IC-2
                 continue
             if dw == 0.0:  # IC-3
                 dw = (
@@ -157,3 +192,9 @@ class NewtonStep:
                 self.delta_w_last = 0.0
                 self.n_perturbed = 0
                 return None
+
+
+def _residual(ratio: float, x: np.ndarray, b: np.ndarray) -> float:
+    """``‖b - K x‖∞`` from IPOPT's ratio ``‖r‖∞ / (min(‖x‖∞, 1e6‖b‖∞) + ‖b‖∞)``."""
+    nb = amax(b)
+    return ratio * (min(amax(x), 1e6 * nb) + nb)

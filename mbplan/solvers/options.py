@@ -1,5 +1,7 @@
 """Parameters of the RIPM: Table IV of the RIPM paper where it gives one, IPOPT's defaults
-(Wächter & Biegler 2006, "WB" below) for the rest."""
+(Wächter & Biegler 2006, "WB" below) for the rest, except the barrier strategy (Mehrotra's
+probing μ capped at μ_init with the corrector) and the joint-eliminated Newton step, measured
+in docs/ripm-speed.md (sessions 6 and 7)."""
 
 from __future__ import annotations
 
@@ -44,11 +46,11 @@ class RIPMOptions:
     """β: backtracking factor of the step size."""
 
     # --- barrier problem and termination (WB) ---
-    mu_strategy: str = "monotone"
-    """``"monotone"``: Fiacco-McCormick (WB eq. 7, Algorithm 1); ``"adaptive"``: LOQO's oracle
-    every iteration (free mode) while ``E_0`` decreases, with IPOPT's fall-back to the monotone
-    rule (``adaptive_mu_globalization=kkt-error``)."""
-    mu_oracle: str = "loqo"
+    mu_strategy: str = "adaptive"
+    """``"adaptive"``: the free-mode oracle (``mu_oracle``) every iteration while ``E_0``
+    decreases, with IPOPT's fall-back to the monotone rule (``adaptive_mu_globalization=
+    kkt-error``); ``"monotone"``: Fiacco-McCormick (WB eq. 7, Algorithm 1; IPOPT's default)."""
+    mu_oracle: str = "probing"
     """Free-mode μ of ``mu_strategy="adaptive"``: ``"loqo"`` (Vanderbei & Shanno's rule on the
     complementarity spread) or ``"probing"`` (Mehrotra's predictor: an affine-scaling step with
     the iteration's factorization, ``μ = (μ_aff/μ_avg)³ μ_avg``; IPOPT's ``mu_oracle=probing``)."""
@@ -62,16 +64,16 @@ class RIPMOptions:
     acceptable_iter: int = 15
     constr_viol_tol: float = 1e-4
     """A point with ‖h, g + s‖∞ above it that minimizes the infeasibility is locally infeasible."""
-    corrector: bool = False
+    corrector: bool = True
     """Mehrotra's second-order corrector: the complementarity row's right-hand side
     ``μe - (α_s ΔS_aff)(α_z Δz_aff)`` from the affine-scaling step (the probing oracle's when it
     runs), kept if it reaches as far before the boundary as the affine step, else unless the
     uncorrected step reaches farther. Costs the affine solve (shared with the probing oracle) and,
     where the corrected step falls short of the affine one, a solve of the uncorrected step; all
     with the step's factorization. Main phase only."""
-    mu_max_fact: float = 1e3
+    mu_max_fact: float = 0.0
     """Upper bound of the adaptive μ: ``max(μ_init, mu_max_fact · sᵀz/m)`` at the start (IPOPT's
-    ``mu_max_fact``); 0 caps it at ``μ_init``."""
+    ``mu_max_fact``, 1e3 there); 0 caps it at ``μ_init``."""
 
     # --- filter line search (WB) ---
     theta_max_fact: float = 1e4
@@ -130,7 +132,7 @@ class RIPMOptions:
     """Threshold ``u`` of 1 × 1 / 2 × 2 pivoting inside each supernode of the KKT
     factorization (MA57's test ``|d| >= u · max |column|``; tiny pivots without an acceptable
     replacement perturbed, :class:`~mbplan.solvers.linear_solver.KKTSystem`); 0: no pivoting."""
-    kkt_method: str = "full"
+    kkt_method: str = "auto"
     """``"full"``: factorize the whole KKT matrix; ``"reduced"``: eliminate the pairs of the
     problem's ``elimination_plan`` first (:mod:`mbplan.solvers.reduced_step`; the full
     factorization where it does not apply, e.g. ``δ_c > 0``); ``"auto"``: reduced when the
