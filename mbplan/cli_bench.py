@@ -109,6 +109,7 @@ def _bench_speed(args: argparse.Namespace) -> int:
     run(
         out,
         n_iiwa=args.n_iiwa,
+        n_iiwa_distance=args.n_iiwa_distance,
         n_drone=args.n_drone,
         links=tuple(args.links),
         seed=args.seed,
@@ -227,9 +228,16 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     ilqr.set_defaults(func=_bench_ilqr)
     speed = bench_sub.add_parser(
         "speed",
-        help="RIPM vs every baseline on drone, iiwa (com) and chain reach, with the RIPM profile",
+        help="RIPM vs every baseline on drone, iiwa (com, distance) and chain reach (without and "
+        "with an obstacle), with the RIPM profile",
     )
     speed.add_argument("--n-iiwa", type=integer(1), default=100, help="iiwa cases (default 100)")
+    speed.add_argument(
+        "--n-iiwa-distance",
+        type=integer(0),
+        default=None,
+        help="iiwa cases with coal distance constraints (default: --n-iiwa)",
+    )
     speed.add_argument("--n-drone", type=integer(1), default=100, help="drone cases (default 100)")
     speed.add_argument(
         "--links",

@@ -30,3 +30,16 @@ def test_profile_splits_the_iteration_into_parts_that_add_up():
     assert 0 < parts <= row["per_iter_ms"] and row["python_ms"] >= 0
     assert row["factorize_per_iter"] >= 1 and row["evaluate_per_iter"] >= 1
     assert row["kkt_dim"] == prob.n + prob.n_eq + prob.n_ineq
+
+
+def test_chain_obstacle_task_blocks_the_linear_path_but_not_its_ends():
+    from mbplan.planning.initial_guess import initial_path, path_clearance
+
+    for n in (4, 8):
+        ocp = chain_task(n, N=10, obstacle=True)
+        assert [o.name for o in ocp.scene] == ["cylinder"]
+        assert "com_outside_cylinder" in [c.name for c in ocp.constraints]
+        path = initial_path(ocp, "linear")
+        assert path_clearance(ocp, path) > 0.0  # the straight reach crosses the cylinder
+        assert path_clearance(ocp, path[[0, -1]]) < 0.0  # start and goal are clear
+        np.testing.assert_allclose(path[-1], ocp["joint_position_terminal"].residual.target)

@@ -26,6 +26,7 @@ from mbplan.benchmarks.speed_tasks import (
 # ------------------------------------------------------------------------------- benchmark
 
 IIWA_METHODS = ("ripm", "ipopt", "csqp")
+IIWA_DISTANCE_METHODS = ("ripm", "ipopt")  # CSQP's Python coal residual: 10–30 s per solve
 DRONE_METHODS = ("ripm", "ripm-input-limits", "ipopt-quaternion")
 CHAIN_METHODS = ("ripm", "ipopt")
 
@@ -57,15 +58,19 @@ def run(
     workers: int = 1,
     scheduler: str | None = None,
     profile_cases: int = 3,
+    n_iiwa_distance: int | None = None,
 ) -> dict:
-    """Every method side by side on the drone, the iiwa (com, via warm start) and the chain
-    reach; then the RIPM's per-iteration profile and the orderings' flops. Writes
-    results.jsonl files (resumable), summary.json, results.md and plots under ``out``."""
+    """Every method side by side on the drone, the iiwa (via warm start; eq. 62 ``com`` and
+    coal ``distance`` constraints, ``n_iiwa_distance`` cases, default ``n_iiwa``) and the chain
+    reach without and with an obstacle; then the RIPM's per-iteration profile and the
+    orderings' flops. Writes results.jsonl files (resumable), summary.json, results.md and
+    plots under ``out``."""
     from mbplan.benchmarks import drone_docking, iiwa_obstacle
     from mbplan.benchmarks.common import machine_info, write_atomic, write_json
     from mbplan.benchmarks.harness import Job, run_jobs
 
     out.mkdir(parents=True, exist_ok=True)
+    n_dist = n_iiwa if n_iiwa_distance is None else n_iiwa_distance
     pool = {"workers": workers, "scheduler": scheduler}
     summary: dict[str, Any] = {"tasks": {}}
     sections = (
@@ -76,6 +81,20 @@ def run(
                 Job(i, m, iiwa_obstacle.solve_case, (m, n_iiwa, seed, i, 40, 1e-6, 500, "via"))
                 for i in range(n_iiwa)
                 for m in IIWA_METHODS
+            ],
+        ),
+        (
+            "iiwa-distance",
+            n_dist,
+            [
+                Job(
+                    i,
+                    m,
+                    iiwa_obstacle.solve_case,
+                    (m, n_dist, seed, i, 40, 1e-6, 500, "via", "distance"),
+                )
+                for i in range(n_dist)
+                for m in IIWA_DISTANCE_METHODS
             ],
         ),
         (
@@ -92,6 +111,11 @@ def run(
             len(links),
             [Job(k, m, chain_case, (m, k)) for k in links for m in CHAIN_METHODS],
         ),
+        (
+            "chain-obstacle",
+            len(links),
+            [Job(k, m, chain_case, (m, k, True)) for k in links for m in CHAIN_METHODS],
+        ),
     )
     rows_by_task = {}
     for name, count, jobs in sections:
@@ -103,7 +127,7 @@ def run(
         rows = [r for r in rows if (r["case"], r["method"]) in keys]
         rows_by_task[name] = rows
         methods = sorted({r["method"] for r in rows})
-        if name == "chain":
+        if name.startswith("chain"):
             summary["tasks"][name] = {
                 m: {
                     str(k): _method_stats([r for r in rows if r["method"] == m and r["case"] == k])
@@ -116,11 +140,14 @@ def run(
                 m: _method_stats([r for r in rows if r["method"] == m]) for m in methods
             }
     profile: dict[str, list[dict]] = {}
-    names = ["iiwa-com"] * bool(n_iiwa) + ["drone", "drone-limits"] * bool(n_drone)
+    names = ["iiwa-com"] * bool(n_iiwa) + ["iiwa-distance"] * bool(n_dist)
+    names += ["drone", "drone-limits"] * bool(n_drone)
     for name in names:
         profile[name] = [profile_solve(*TASKS[name](i)) for i in range(profile_cases)]
-    for k in links:
-        profile[f"chain{k}"] = [profile_solve(*chain_problem(k))]
+    for obstacle in (False, True):
+        for k in links:
+            name = f"chain{k}" + "-obstacle" * obstacle
+            profile[name] = [profile_solve(*chain_problem(k, obstacle))]
     summary["profile"] = {
         name: {key: float(np.median([r[key] for r in rs])) for key in rs[0] if key != "status"}
         for name, rs in profile.items()
@@ -136,13 +163,13 @@ def run(
     if n_drone:
         summary["drone_horizon_scaling"] = drone_docking.horizon_scaling(seed)
     summary["command"] = (
-        f"mbplan bench speed --n-iiwa {n_iiwa} --n-drone {n_drone} "
+        f"mbplan bench speed --n-iiwa {n_iiwa} --n-iiwa-distance {n_dist} --n-drone {n_drone} "
         f"--links {','.join(map(str, links))} --seed {seed} --workers {workers} --out {out}"
     )
     summary["machine"] = machine_info()
     write_json(out / "summary.json", summary)
     write_atomic(out / "results.md", _markdown(summary))
-    if "chain" in rows_by_task:
+    if {"chain", "chain-obstacle"} & set(rows_by_task):
         _chain_plot(summary, links, out)
     return summary
 
@@ -171,11 +198,11 @@ def _markdown(s: dict) -> str:
         "the solvers by *solve*.",
         "",
     ]
-    for task in ("iiwa-com", "drone"):
+    for task in ("iiwa-com", "iiwa-distance", "drone"):
         if task not in s["tasks"]:
             continue
         ms = s["tasks"][task]
-        base = "ipopt" if task == "iiwa-com" else "ipopt-quaternion"
+        base = "ipopt" if task.startswith("iiwa") else "ipopt-quaternion"
         lines += [
             f"## {task}",
             "",
@@ -196,29 +223,12 @@ def _markdown(s: dict) -> str:
                 f"| {_ratio(m['median_time_per_iter_s'], b.get('median_time_per_iter_s'))} |"
             )
         lines += ["", "Statuses: " + "; ".join(f"{n}: {m['statuses']}" for n, m in ms.items()), ""]
-    if "chain" in s["tasks"]:
-        ch = s["tasks"]["chain"]
-        links = list(next(iter(ch.values())))
-        lines += [
-            "## Chain reach (N = 40, no obstacles), RIPM vs generalized IPOPT",
-            "",
-            "Warm solves (a cold solve with compilation and symbolic analysis runs first).",
-            "",
-            "| links | RIPM iters | RIPM ms/iter | IPOPT iters | IPOPT ms/iter | RIPM total [s] "
-            "| IPOPT total [s] | total RIPM/IPOPT | verified RIPM / IPOPT |",
-            "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-        ]
-        for k in links:
-            r, i = ch["ripm"][k], ch["ipopt"][k]
-            lines.append(
-                f"| {k} | {_fmt(r['median_iters'], digits=0)} "
-                f"| {_fmt(r['median_time_per_iter_s'], 1e3)} | {_fmt(i['median_iters'], digits=0)} "
-                f"| {_fmt(i['median_time_per_iter_s'], 1e3)} | {_fmt(r['median_total_time_s'], digits=2)} "
-                f"| {_fmt(i['median_total_time_s'], digits=2)} "
-                f"| {_ratio(r['median_total_time_s'], i['median_total_time_s'])} "
-                f"| {r['verified']} / {i['verified']} |"
-            )
-        lines.append("")
+    for task, title in (
+        ("chain", "Chain reach (N = 40, no obstacles)"),
+        ("chain-obstacle", "Chain reach around a cylinder (N = 40, eq. 62, joint speed limits)"),
+    ):
+        if task in s["tasks"]:
+            lines += _chain_table(s["tasks"][task], title)
     prof = s["profile"]
     lines += [
         "## RIPM profile per iteration (median over the profiled cases, ms per iteration)",
@@ -286,6 +296,31 @@ def _markdown(s: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _chain_table(ch: dict, title: str) -> list[str]:
+    links = list(next(iter(ch.values())))
+    lines = [
+        f"## {title}, RIPM vs generalized IPOPT",
+        "",
+        "Warm solves from the linear warm start (a cold solve with compilation and symbolic "
+        "analysis runs first).",
+        "",
+        "| links | RIPM iters | RIPM ms/iter | IPOPT iters | IPOPT ms/iter | RIPM total [s] "
+        "| IPOPT total [s] | total RIPM/IPOPT | verified RIPM / IPOPT |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for k in links:
+        r, i = ch["ripm"][k], ch["ipopt"][k]
+        lines.append(
+            f"| {k} | {_fmt(r['median_iters'], digits=0)} "
+            f"| {_fmt(r['median_time_per_iter_s'], 1e3)} | {_fmt(i['median_iters'], digits=0)} "
+            f"| {_fmt(i['median_time_per_iter_s'], 1e3)} | {_fmt(r['median_total_time_s'], digits=2)} "
+            f"| {_fmt(i['median_total_time_s'], digits=2)} "
+            f"| {_ratio(r['median_total_time_s'], i['median_total_time_s'])} "
+            f"| {r['verified']} / {i['verified']} |"
+        )
+    return [*lines, ""]
+
+
 def _chain_plot(s: dict, links: tuple[int, ...], out: Path) -> None:
     import matplotlib
 
@@ -295,20 +330,24 @@ def _chain_plot(s: dict, links: tuple[int, ...], out: Path) -> None:
     from mbplan.benchmarks.common import save_plot
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    ch = s["tasks"]["chain"]
     x = np.array(links, dtype=float)
-    for m, style in (("ripm", "o-"), ("ipopt", "s-")):
-        per = [ch[m][str(k)]["median_time_per_iter_s"] for k in links]
-        tot = [ch[m][str(k)]["median_total_time_s"] for k in links]
-        axes[0].loglog(x, [np.nan if v is None else v for v in per], style, label=m)
-        axes[1].loglog(x, [np.nan if v is None else v for v in tot], style, label=m)
+    for task, fill in (("chain", "full"), ("chain-obstacle", "none")):
+        ch = s["tasks"].get(task)
+        for m, style in (("ripm", "o-"), ("ipopt", "s--")) if ch else ():
+            per = [ch[m][str(k)]["median_time_per_iter_s"] for k in links]
+            tot = [ch[m][str(k)]["median_total_time_s"] for k in links]
+            for ax, ys in zip(axes, (per, tot), strict=True):
+                ax.loglog(
+                    x, [np.nan if v is None else v for v in ys], style, fillstyle=fill,
+                    label=f"{m}, {task}",
+                )  # fmt: skip
     for ax, what in zip(axes, ("time per iteration [s]", "total time [s]"), strict=True):
         ref = ax.get_lines()[0].get_ydata()[0]
         if np.isfinite(ref):
             ax.loglog(x, ref * (x / x[0]) ** 1.5, "k:", lw=0.8, label="∝ n^1.5")
         ax.set_xlabel("links")
         ax.set_ylabel(what)
-        ax.legend()
+        ax.legend(fontsize=8)
     fig.suptitle("Chain reach, N = 40: maximal (RIPM) vs generalized (IPOPT)")
     fig.tight_layout()
     save_plot(fig, out / "chain_scaling.png", dpi=110)

@@ -86,15 +86,50 @@ def _chain_path(n: int) -> str:
     return str(path)
 
 
-def chain_task(n: int, N: int = 40):
-    """Reach with an ``n``-link hanging chain: from rest at q = 0 to a curl of 1.2 rad total."""
-    from mbplan.paper import tracking_ocp
+CHAIN_CURL = 1.2  # rad, the reach's total curl (every joint 1.2 / n)
+CHAIN_BEND = (1.0, 3.0)  # rad: the upper half's x joints, the lower half's y joints (obstacle task)
+CHAIN_CYLINDER = ((-0.15, 0.22), 0.05)  # vertical cylinder: centre xy, radius (m)
+CHAIN_MARGIN = 0.08  # m, eq. (62) margin of the link COMs (the replay deviates ~3 cm between knots)
+CHAIN_VELOCITY = 2.0  # rad/s, joint speed limit of the obstacle task (no whipping past it)
 
-    return tracking_ocp(_chain_path(n), np.zeros(n), np.full(n, 1.2 / n), N=N)
+
+def chain_target(n: int, obstacle: bool = False) -> np.ndarray:
+    """The reach's goal: a uniform curl of :data:`CHAIN_CURL`, or (``obstacle``) a bend: the
+    upper half's x joints share ``CHAIN_BEND[0]``, the lower half's y joints ``CHAIN_BEND[1]``,
+    so that the linear interpolation sweeps the link COMs through :data:`CHAIN_CYLINDER`
+    (≥ 7 cm into it with the margin for 4…64 links) while start and goal keep ≥ 2 cm clear of it and its margin."""
+    if not obstacle:
+        return np.full(n, CHAIN_CURL / n)
+    i = np.arange(n)
+    upper, about_x = i < n // 2, i % 2 == 0
+    q = np.zeros(n)
+    for rows, total in zip((upper & about_x, ~upper & ~about_x), CHAIN_BEND, strict=True):
+        q[rows] = total / max(int(rows.sum()), 1)
+    return q
 
 
-def _iiwa(i: int):
-    return (*maximal_ripm_problem(iiwa_task(i)), RIPMOptions(tol=1e-6, max_iter=500))
+def chain_task(n: int, N: int = 40, obstacle: bool = False):
+    """Reach with an ``n``-link hanging chain from rest at q = 0 to :func:`chain_target`;
+    ``obstacle``: around a vertical cylinder, every link COM outside it (eq. 62), joint speeds
+    within :data:`CHAIN_VELOCITY`."""
+    from mbplan.ocp.scene import Scene
+    from mbplan.paper import add_obstacle_constraint, tracking_ocp
+
+    scene = None
+    if obstacle:
+        (x, y), r = CHAIN_CYLINDER
+        scene = Scene().add_cylinder("cylinder", r, 1.2, (x, y, -0.6))
+    vmax = np.full(n, CHAIN_VELOCITY) if obstacle else None
+    target = chain_target(n, obstacle)
+    ocp = tracking_ocp(_chain_path(n), np.zeros(n), target, scene, N=N, velocity_limit=vmax)
+    return add_obstacle_constraint(ocp, "com", CHAIN_MARGIN) if obstacle else ocp
+
+
+def _iiwa(i: int, constraint: str = "com"):
+    return (
+        *maximal_ripm_problem(iiwa_task(i, constraint=constraint)),
+        RIPMOptions(tol=1e-6, max_iter=500),
+    )
 
 
 def _drone(i: int, limits: bool = False):
@@ -104,24 +139,31 @@ def _drone(i: int, limits: bool = False):
     )
 
 
-def chain_problem(n: int):
+def chain_problem(n: int, obstacle: bool = False):
     """The RIPM problem, warm start and options of the ``n``-link chain reach."""
-    return (*maximal_ripm_problem(chain_task(n), "linear"), RIPMOptions(tol=1e-6, max_iter=500))
+    return (
+        *maximal_ripm_problem(chain_task(n, obstacle=obstacle), "linear"),
+        RIPMOptions(tol=1e-6, max_iter=500),
+    )
 
 
 TASKS: dict[str, Callable[[int], tuple]] = {
     "iiwa-com": _iiwa,
+    "iiwa-distance": functools.partial(_iiwa, constraint="distance"),
     "drone": _drone,
     "drone-limits": functools.partial(_drone, limits=True),
     **{f"chain{n}": (lambda _i, n=n: chain_problem(n)) for n in CHAIN_LINKS},
+    **{f"chain{n}-obstacle": (lambda _i, n=n: chain_problem(n, True)) for n in CHAIN_LINKS},
 }
 
 
-def chain_case(method: str, links: int) -> dict:
-    """One chain reach solve (``ripm`` or ``ipopt``) with its verification, as a JSON row."""
+def chain_case(method: str, links: int, obstacle: bool = False) -> dict:
+    """One chain reach solve (``ripm`` or ``ipopt``; ``obstacle``: around the cylinder) from the
+    linear warm start, with its verification, as a JSON row. The linear start crosses the
+    obstacle; the via warm start's random via points are poor starts for long chains."""
     from mbplan.planning.solve import plan
 
-    ocp = chain_task(links)
+    ocp = chain_task(links, obstacle=obstacle)
     t0 = time.perf_counter()
     plan(ocp, method, warm_start="linear")  # cold: compilation, symbolic analysis
     cold = time.perf_counter() - t0
