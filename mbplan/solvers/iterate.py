@@ -130,13 +130,15 @@ class IterateState:
     """
 
     def _evaluate(
-        self, x: Point, y: np.ndarray, z: np.ndarray, hessian: bool = True
+        self, x: Point, y: np.ndarray, z: np.ndarray, hessian: bool = True, finite_hessian=True
     ) -> NLPEvaluation | None:
+        """The problem at ``x`` (the Lagrangian's Hessian with ``σ, y, z``), or ``None`` if
+        something is not finite (the Hessian not checked unless ``finite_hessian``)."""
         self.sh.n_eval += 1
         ev: NLPEvaluation = self.p.evaluate(x, self.sigma, y, z, hessian)
         parts = [ev.objective, ev.gradient, ev.eq, ev.ineq, ev.eq_jacobian.data]
         parts.append(ev.ineq_jacobian.data)
-        if hessian:
+        if hessian and finite_hessian:
             parts.append(ev.hessian_lower.data)
         if not finite(*parts):
             return None

@@ -148,23 +148,17 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
 
     # ------------------------------------------------------------------ start
     def _initialize(self, x0: Point, y0, z0, s0) -> None:
+        """The starting iterate: slacks from the first evaluation, ``y`` by least squares (WB)
+        unless given. One evaluation with the Hessian serves unless the least-squares ``y`` is
+        kept (it is discarded, ``‖y‖∞ > constr_mult_init_max``, on every LGVI task); then the
+        iterate is evaluated again with it."""
         o = self.o
         self.mu = o.mu_init
         self.tau = max(o.tau_min, 1 - self.mu)
         self.x = x0
-        self.y = np.zeros(self.me)
-        self.z = np.full(self.mi, o.bound_mult_init_val)
-        ev = self._evaluate(x0, self.y, self.z, hessian=False)
-        if ev is None:
-            self.s = np.ones(self.mi)
-            raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite evaluation at the initial point")
-        self.s = np.maximum(-ev.ineq, o.bound_push) if s0 is None else np.asarray(s0, float)
-        if z0 is not None:
-            self.z = np.asarray(z0, dtype=float)
-        if y0 is not None:
-            self.y = np.asarray(y0, dtype=float)
-        elif self.me and o.constr_mult_init_max > 0:
-            self.y = self._least_squares_y(ev)
+        self.y = np.zeros(self.me) if y0 is None else np.asarray(y0, dtype=float)
+        self.z = np.full(self.mi, o.bound_mult_init_val) if z0 is None else np.asarray(z0, float)
+        self.s = np.ones(self.mi) if s0 is None else np.asarray(s0, dtype=float)
         shapes = (self.y.shape, self.z.shape, self.s.shape)
         if shapes != ((self.me,), (self.mi,), (self.mi,)):
             raise InputError(
@@ -172,9 +166,18 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
             )
         if np.any(self.s <= 0) or np.any(self.z <= 0) or not finite(self.y, self.z, self.s):
             raise InputError("s0 and z0 must be finite and positive, y0 finite")
-        self.ev = self._evaluate(x0, self.y, self.z)
-        if self.ev is None:
+        ev = self._evaluate(x0, self.y, self.z, finite_hessian=False)
+        if ev is None:
+            raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite evaluation at the initial point")
+        if s0 is None:
+            self.s = np.maximum(-ev.ineq, o.bound_push)
+        if y0 is None and self.me and o.constr_mult_init_max > 0:
+            self.y = self._least_squares_y(ev)
+            if np.any(self.y):
+                ev = self._evaluate(x0, self.y, self.z)
+        if ev is None or not finite(ev.hessian_lower.data):
             raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the initial point")
+        self.ev = ev
         theta0 = float(np.sum(np.abs(self._current_trial().c)))
         self.mu_max = max(o.mu_init, o.mu_max_fact * self._avg_compl())
         self.theta_max = o.theta_max_fact * max(1.0, theta0)

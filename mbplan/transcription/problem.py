@@ -9,7 +9,7 @@ cost of one evaluation is linear in the horizon and in the number of bodies.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -107,7 +107,6 @@ class TrajectoryProblem:
         self._rows_in_order = {
             kind: np.array_equal(rows, np.arange(len(rows))) for kind, rows in self._rows.items()
         }
-        self._blocks = [(name, b.shape) for name, b in variables.blocks.items()]
         self._jac_patterns = {
             kind: self._jacobian_pattern(kind, sizes[kind]) for kind in ("eq", "ineq")
         }
@@ -136,23 +135,6 @@ class TrajectoryProblem:
                     a = args[sl.name].reshape(lay.term.sites, *sl.shape)
                     part = np.swapaxes(a, 1, -1).reshape(lay.term.sites, -1)
                     lay.z_index[:, sl.offset : sl.offset + sl.size] = part
-
-    def _packed(self, point: Point) -> np.ndarray:
-        """The point's blocks raveled into one vector (shapes and finiteness checked)."""
-        parts = []
-        mapping = type(point) is dict or isinstance(point, Mapping)
-        for name, shape in self._blocks:
-            a = point.get(name) if mapping else None
-            if a is None or np.shape(a) != shape:
-                got = "missing" if a is None else f"shape {np.shape(a)}"
-                raise InputError(f"point: block {name!r} must have shape {shape}, got {got}")
-            parts.append(np.asarray(a, dtype=float).reshape(-1))
-        vec = np.concatenate(parts)
-        if not np.isfinite(vec).all():
-            names = self.variables.blocks
-            bad = next(n for n, a in zip(names, parts, strict=True) if not np.isfinite(a).all())
-            raise InputError(f"point: block {bad!r} contains NaN or inf")
-        return vec
 
     def _jacobian_pattern(self, kind: str, m: int) -> SparsePattern:
         rows = _cat_index([lay.jac_rows.ravel() for lay in self._layouts[kind]])
@@ -221,7 +203,7 @@ class TrajectoryProblem:
 
     def _gather(self, point: Point) -> None:
         """Every term's packed variables from the point, into the term's input buffer."""
-        vec = self._packed(point)
+        vec = self.variables.packed(point)
         for lay in self._all_layouts:
             np.take(vec, lay.z_index, out=lay.z, mode="clip")  # indices in range by construction
 
