@@ -11,6 +11,7 @@ groups' own ``retract`` give, with their checks (finite, ``X`` a rotation) as fl
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from operator import is_
 from typing import Any
 
 import numba as nb
@@ -33,11 +34,13 @@ class PackedPoint(dict):
         self.layout, self.packed, self._views = layout, packed, views
 
     def packed_by(self, layout: PackedLayout) -> bool:
-        """Made by ``layout`` and every block still its view (none replaced)."""
+        """Made by ``layout`` and every block still its view (none replaced or re-inserted:
+        the values in insertion order are the views)."""
+        views = self._views
         return (
             self.layout is layout
-            and len(self) == len(self._views)
-            and all(self.get(n) is v for n, v in zip(layout.names, self._views, strict=True))
+            and len(self) == len(views)
+            and all(map(is_, self.values(), views))
         )
 
     def __reduce__(self) -> tuple:

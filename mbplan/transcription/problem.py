@@ -9,6 +9,7 @@ cost of one evaluation is linear in the horizon and in the number of bodies.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -115,6 +116,7 @@ class TrajectoryProblem:
         self._grad_cols = self._gradient_columns()
         self._hess_pattern = self._hessian_pattern()
         self._output_buffers()
+        self._bound: dict[str, list[Callable[[], None]]] = {}
 
     # ------------------------------------------------------------------ patterns
     def _packed_layout(self) -> None:
@@ -205,13 +207,20 @@ class TrajectoryProblem:
         """Every term's packed variables from the point, into the term's input buffer."""
         vec = self.variables.packed(point)
         for lay in self._all_layouts:
-            np.take(vec, lay.z_index, out=lay.z, mode="clip")  # indices in range by construction
+            vec.take(lay.z_index, out=lay.z, mode="clip")  # indices in range by construction
+
+    def _calls(self, kind: str) -> list[Callable[[], None]]:
+        """Every term's bound ``value``, ``jacobian`` or ``hessian`` call, in term order."""
+        calls = self._bound.get(kind)
+        if calls is None:
+            calls = self._bound[kind] = [lay.call(kind) for lay in self._all_layouts]
+        return calls
 
     def values(self, point: Point) -> tuple[float, np.ndarray, np.ndarray]:
         """Objective, equality and inequality residuals (for line-search trials)."""
         self._gather(point)
-        for lay in self._all_layouts:
-            lay.call("value")()
+        for call in self._calls("value"):
+            call()
         f = float(sum(r.sum() for r in self._cost_residuals))
         return f, self._scatter("eq"), self._scatter("ineq")
 
@@ -228,19 +237,18 @@ class TrajectoryProblem:
         z = np.zeros(self.n_ineq) if z is None else np.asarray(z, dtype=float)
         if y.shape != (self.n_eq,) or z.shape != (self.n_ineq,):
             raise InputError(f"multipliers must have shapes ({self.n_eq},), ({self.n_ineq},)")
-        if not (np.isfinite(obj_factor) and np.isfinite(y).all() and np.isfinite(z).all()):
+        if not (math.isfinite(obj_factor) and np.isfinite(y).all() and np.isfinite(z).all()):
             raise InputError("objective factor or multipliers contain NaN or inf")
         self._gather(point)
-        kind_of_call = "hessian" if hessian else "jacobian"
-        multipliers = {"eq": y, "ineq": z}
-        for kind, lays in self._layouts.items():
-            for lay in lays:
-                if hessian:
-                    if kind == "cost":
-                        lay.lam.fill(float(obj_factor))
-                    else:
-                        np.take(multipliers[kind], lay.rows, out=lay.lam, mode="clip")
-                lay.call(kind_of_call)()
+        if hessian:
+            for lay in self._layouts["cost"]:
+                lay.lam.fill(float(obj_factor))
+            for lay in self._layouts["eq"]:
+                y.take(lay.rows, out=lay.lam, mode="clip")
+            for lay in self._layouts["ineq"]:
+                z.take(lay.rows, out=lay.lam, mode="clip")
+        for call in self._calls("hessian" if hessian else "jacobian"):
+            call()
         grad = np.bincount(self._grad_cols, weights=self._jacobians["cost"], minlength=self.n + 1)
         return Evaluation(
             objective=float(self._residuals["cost"].sum()),
