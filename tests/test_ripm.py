@@ -517,29 +517,25 @@ def test_initial_equality_multipliers_option():
         RIPMOptions(constr_mult_init_max=-1.0)
 
 
-def test_one_evaluation_starts_the_solve_unless_the_least_squares_y_is_kept():
-    """The start evaluates once (with the Hessian at ``y = 0``) when the least-squares ``y₀``
-    is discarded, is 0 or not computed, and again at the kept ``y₀``; the iterates are those of
-    the kept or dropped ``y₀`` either way. A non-finite Hessian at the start is reported as
-    non-finite derivatives, the other parts as a non-finite evaluation."""
-    big = float(np.max(np.abs(solve_ripm(hs071(), HS071_X0, max_iter=0).y)))
-    counts = {}
-    for bound in (0.5 * big, 2 * big, 0.0):
-        res = solve_ripm(hs071(), HS071_X0, max_iter=0, constr_mult_init_max=bound)
-        counts[bound] = res.n_evaluations
-    assert counts == {0.5 * big: 1, 2 * big: 2, 0.0: 1}
-    banded = BandedControlNLP(nx=4, nu=2, horizon=20)  # ‖y₀‖∞ > 1: discarded
-    res = solve_ripm(banded, banded.initial_guess())
-    assert res.success and res.n_evaluations == res.iterations + 1
-
-    def hessian(x, s, y, z):
-        return np.array([[np.nan]]) if np.array_equal(x, [4.0]) else np.array([[1.0]])
-
-    nan_hessian = EuclideanNLP(1, lambda x: x[0] ** 2, lambda x: 2 * x, hessian)
-    res = solve_ripm(nan_hessian, np.array([4.0]))
+def test_the_jacobian_only_start_evaluation_only_when_needed():
+    """The start evaluates the Jacobians alone for the slacks and the least-squares ``y₀``
+    (its rounding, not the Hessian evaluation's), then with the Hessian; with ``y₀`` given (or
+    ``constr_mult_init_max = 0``) and ``s₀`` given (or no inequalities) only with the Hessian.
+    A non-finite start is a numerical error either way."""
+    cold = solve_ripm(hs071(), HS071_X0, max_iter=3)
+    assert cold.n_evaluations == cold.iterations + 2
+    warm = {"y0": cold.y, "z0": cold.z, "s0": cold.s}
+    once = solve_ripm(hs071(), cold.x, max_iter=3, **warm)
+    twice = solve_ripm(hs071(), cold.x, max_iter=3, **{**warm, "s0": None})
+    assert once.n_evaluations == once.iterations + 1
+    assert twice.n_evaluations == twice.iterations + 2
+    parabola = EuclideanNLP(
+        1, lambda x: (x[0] - 1) ** 2, lambda x: 2 * (x - 1), lambda x, s, y, z: np.array([[2 * s]])
+    )
+    no_ls = solve_ripm(parabola, np.array([4.0]))
+    assert no_ls.success and no_ls.n_evaluations == no_ls.iterations + 1
+    res = solve_ripm(_sqrt_problem(lambda x: np.nan), np.array([4.0]), y0=np.zeros(0))
     assert res.status is RIPMStatus.NUMERICAL_ERROR and "derivatives" in res.message
-    res = solve_ripm(_sqrt_problem(lambda x: np.nan), np.array([4.0]))
-    assert res.status is RIPMStatus.NUMERICAL_ERROR and "evaluation" in res.message
 
 
 def test_wrong_constraint_lengths_are_input_errors():

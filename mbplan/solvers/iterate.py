@@ -130,16 +130,16 @@ class IterateState:
     """
 
     def _evaluate(
-        self, x: Point, y: np.ndarray, z: np.ndarray, hessian: bool = True, finite_hessian=True
+        self, x: Point, y: np.ndarray, z: np.ndarray, hessian: bool = True
     ) -> NLPEvaluation | None:
         """The problem at ``x`` (the Lagrangian's Hessian with ``σ, y, z``), or ``None`` if
-        something is not finite (the Hessian not checked unless ``finite_hessian``)."""
+        something is not finite."""
         self.sh.n_eval += 1
         ev: NLPEvaluation = self.p.evaluate(x, self.sigma, y, z, hessian)
         h = ev.hessian_lower if hessian else None
         if not finite(
             ev.objective, ev.gradient, ev.eq, ev.ineq, ev.eq_jacobian.data, ev.ineq_jacobian.data,
-            h.data if h is not None and finite_hessian else 0.0,
+            0.0 if h is None else h.data,
         ):  # fmt: skip
             return None
         shapes = (_shape(ev.gradient), _shape(ev.eq), _shape(ev.ineq))

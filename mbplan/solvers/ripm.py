@@ -148,10 +148,10 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
 
     # ------------------------------------------------------------------ start
     def _initialize(self, x0: Point, y0, z0, s0) -> None:
-        """The starting iterate: slacks from the first evaluation, ``y`` by least squares (WB)
-        unless given. One evaluation with the Hessian serves unless the least-squares ``y`` is
-        kept (it is discarded, ``‖y‖∞ > constr_mult_init_max``, on every LGVI task); then the
-        iterate is evaluated again with it."""
+        """The starting iterate: slacks from a Jacobian-only evaluation, ``y`` by least squares
+        with its Jacobian (WB) unless given, then the evaluation with the Hessian. Without
+        slacks or least squares to compute (``y0`` given or ``constr_mult_init_max = 0``, and
+        ``s0`` given or no inequalities) the first evaluation is skipped."""
         o = self.o
         self.mu = o.mu_init
         self.tau = max(o.tau_min, 1 - self.mu)
@@ -166,18 +166,18 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
             )
         if np.any(self.s <= 0) or np.any(self.z <= 0) or not finite(self.y, self.z, self.s):
             raise InputError("s0 and z0 must be finite and positive, y0 finite")
-        ev = self._evaluate(x0, self.y, self.z, finite_hessian=False)
-        if ev is None:
-            raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite evaluation at the initial point")
-        if s0 is None:
-            self.s = np.maximum(-ev.ineq, o.bound_push)
-        if y0 is None and self.me and o.constr_mult_init_max > 0:
-            self.y = self._least_squares_y(ev)
-            if np.any(self.y):
-                ev = self._evaluate(x0, self.y, self.z)
-        if ev is None or not finite(ev.hessian_lower.data):
+        least_squares = y0 is None and self.me > 0 and o.constr_mult_init_max > 0
+        if least_squares or (s0 is None and self.mi > 0):
+            ev = self._evaluate(x0, self.y, self.z, hessian=False)
+            if ev is None:
+                raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite evaluation at the initial point")
+            if s0 is None:
+                self.s = np.maximum(-ev.ineq, o.bound_push)
+            if least_squares:
+                self.y = self._least_squares_y(ev)
+        self.ev = self._evaluate(x0, self.y, self.z)
+        if self.ev is None:
             raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the initial point")
-        self.ev = ev
         theta0 = float(np.sum(np.abs(self._current_trial().c)))
         self.mu_max = max(o.mu_init, o.mu_max_fact * self._avg_compl())
         self.theta_max = o.theta_max_fact * max(1.0, theta0)
