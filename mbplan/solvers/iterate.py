@@ -245,6 +245,7 @@ class IterateState:
             self.inf_pr = amax(self.r_c)
         self.s_d, self.s_c = self._scalings(y_sum, z_sum)
         self.kkt_error = self._error(0.0, compl)
+        self.measured = (ev, self.y, self.z, self.s)
 
     def _error(self, mu: float, compl: float | None = None) -> float:
         """``E_μ`` (eq. 55-56): scaled dual infeasibility, infeasibility, complementarity

@@ -26,6 +26,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from operator import is_
 from typing import Any
 
 import numpy as np
@@ -134,6 +135,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.mu_max = math.inf
         self.probe_pending = False  # Mehrotra's μ is due once the step's matrix is factorized
         self.compl_shift: np.ndarray | None = None  # Mehrotra's corrector ΔS_aff Δz_aff
+        self.measured: tuple = (None,) * 4  # ev, y, z, s of the last _measures
 
     @property
     def kkt(self) -> KKTSystem | ReducedKKTSystem:
@@ -164,7 +166,11 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
             raise InputError(
                 f"y0, z0, s0 have shapes {shapes}; expected ({self.me},), ({self.mi},) x2"
             )
-        if np.any(self.s <= 0) or np.any(self.z <= 0) or not finite(self.y, self.z, self.s):
+        # the defaults are finite and positive (the options are validated)
+        if (y0 is not None and not finite(self.y)) or any(
+            a0 is not None and (not finite(a) or np.any(a <= 0))
+            for a, a0 in ((self.z, z0), (self.s, s0))
+        ):
             raise InputError("s0 and z0 must be finite and positive, y0 finite")
         least_squares = y0 is None and self.me > 0 and o.constr_mult_init_max > 0
         if least_squares or (s0 is None and self.mi > 0):
@@ -178,7 +184,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.ev = self._evaluate(x0, self.y, self.z)
         if self.ev is None:
             raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the initial point")
-        theta0 = float(np.sum(np.abs(self._current_trial().c)))
+        theta0 = self._current_trial().theta
         self.mu_max = max(o.mu_init, o.mu_max_fact * self._avg_compl())
         self.theta_max = o.theta_max_fact * max(1.0, theta0)
         self.theta_min = o.theta_min_fact * max(1.0, theta0)
@@ -352,8 +358,8 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
     def _result(self, status: RIPMStatus, message: str) -> RIPMResult:
         wall = time.perf_counter() - self.sh.t0
         ok = getattr(self, "ev", None) is not None
-        if ok:
-            self._measures()
+        if ok and not all(map(is_, self.measured, (self.ev, self.y, self.z, self.s))):
+            self._measures()  # stopped after the iterate moved
         result = RIPMResult(
             status=status,
             message=message,
