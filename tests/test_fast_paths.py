@@ -206,3 +206,17 @@ def test_packed_retraction_falls_back_to_the_groups_errors():
     with np.errstate(over="ignore"):
         out = variables.retract(overflow, big)  # as Rⁿ's retract: inf, no error
     assert type(out) is dict and np.isinf(out["p"][1:]).all()
+
+
+def test_finite_vector_tells_nan_and_infinity_from_large_entries():
+    from mbplan.finite import finite_vector
+
+    v = np.linspace(-1.0, 1.0, 9)
+    assert finite_vector(v) and finite_vector(np.zeros(0))
+    assert finite_vector(np.array([1e200, -1e300, 2.0]))  # v·v overflows: entrywise test
+    for bad in (np.nan, np.inf, -np.inf):
+        w = v.copy()
+        w[4] = bad
+        assert not finite_vector(w)
+        w[0] = 1e200
+        assert not finite_vector(w)

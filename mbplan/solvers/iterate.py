@@ -16,6 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mbplan.errors import InputError
+from mbplan.finite import finite_vector
 from mbplan.solvers.problem import NLPEvaluation, Point
 from mbplan.solvers.ripm_kernels import (
     abs_max,
@@ -67,12 +68,10 @@ class Step:
 
 
 def finite(*arrays: Any) -> bool:
-    """No NaN or infinity in any of the arrays (or floats). A float vector is finite if its
-    ``v·v`` is (one BLAS pass; NaN or ±∞ anywhere makes it NaN or +∞), else if every entry
-    is (``v·v`` overflows from entries ≥ 1e154 on)."""
+    """No NaN or infinity in any of the arrays (or floats)."""
     for a in arrays:
         if type(a) is np.ndarray and a.ndim == 1 and a.dtype == np.float64:
-            if not math.isfinite(a.dot(a)) and not np.isfinite(a).all():
+            if not finite_vector(a):
                 return False
         elif isinstance(a, float):  # np.float64 too
             if not math.isfinite(a):

@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mbplan.errors import InputError
+from mbplan.finite import finite_vector
 from mbplan.transcription.sparse import SparsePattern
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Point, TrajectoryVariables
@@ -237,7 +238,7 @@ class TrajectoryProblem:
         z = np.zeros(self.n_ineq) if z is None else np.asarray(z, dtype=float)
         if y.shape != (self.n_eq,) or z.shape != (self.n_ineq,):
             raise InputError(f"multipliers must have shapes ({self.n_eq},), ({self.n_ineq},)")
-        if not (math.isfinite(obj_factor) and np.isfinite(y).all() and np.isfinite(z).all()):
+        if not (math.isfinite(obj_factor) and finite_vector(y) and finite_vector(z)):
             raise InputError("objective factor or multipliers contain NaN or inf")
         self._gather(point)
         if hessian:

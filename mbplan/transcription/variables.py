@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from mbplan.errors import InputError
+from mbplan.finite import finite_vector
 from mbplan.transcription.packed import PackedLayout, PackedPoint
 
 Point = dict[str, np.ndarray]
@@ -116,7 +117,7 @@ class TrajectoryVariables:
                     )
                 parts.append(np.asarray(a, dtype=float).reshape(-1))
             vec = np.concatenate(parts)
-        if not np.isfinite(vec).all():
+        if not finite_vector(vec):
             bad = next(n for n in self.blocks if not np.isfinite(point[n]).all())
             raise InputError(f"point: block {bad!r} contains NaN or inf")
         return vec
