@@ -220,3 +220,7 @@ def test_finite_vector_tells_nan_and_infinity_from_large_entries():
         assert not finite_vector(w)
         w[0] = 1e200
         assert not finite_vector(w)
+    long = np.zeros(20_000)  # past the dot test's length: entrywise
+    assert finite_vector(long)
+    long[-1] = np.nan
+    assert not finite_vector(long)
