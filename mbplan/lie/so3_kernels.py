@@ -102,6 +102,3 @@ def product_batch(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     for k in range(n):
         product_into(fa, 9 * k, fb, 9 * k, out, 9 * k)
     return out.reshape(n, 3, 3)
-
-
-SO3_KERNELS = (exp_batch, product_batch)

@@ -17,6 +17,7 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from mbplan.engine.jit import announce_uncached_numba
 from mbplan.lie.group import MEMBERSHIP_TOL, rotation_error
 from mbplan.lie.rn import RnGroup
 from mbplan.lie.so3 import SO3Group
@@ -65,24 +66,23 @@ class PackedLayout:
             idx = index[b.name]  # (elements, dim) tangent columns, -1 where fixed
             free = np.flatnonzero(idx[:, 0] >= 0)
             width = size // (b.knots * b.count)  # entries per element
-            if free.size == 0:
-                pass
-            elif isinstance(b.group, SO3Group):
+            if free.size and isinstance(b.group, SO3Group):
                 so3_off.append(start + 9 * free)
                 so3_col.append(idx[free, 0])
-            elif isinstance(b.group, RnGroup):
+            elif free.size and isinstance(b.group, RnGroup):
                 rn_dst.append((start + width * free[:, None] + np.arange(width)).ravel())
                 rn_src.append(idx[free].ravel())
-            else:
+            elif free.size:
                 self.retractable = False
             start += size
-        self.size = start
 
         def cat(parts: list[np.ndarray]) -> np.ndarray:
             return np.concatenate(parts).astype(np.int64) if parts else np.zeros(0, np.int64)
 
         self._so3_off, self._so3_col = cat(so3_off), cat(so3_col)
         self._rn_dst, self._rn_src = cat(rn_dst), cat(rn_src)
+        if self.retractable:
+            announce_uncached_numba(_retract)  # first run only
 
     def pack(self, point: Mapping[str, np.ndarray]) -> np.ndarray | None:
         """The packed vector of ``point`` (``packed`` itself for a :class:`PackedPoint` of
@@ -141,6 +141,3 @@ def _retract(x, dx, so3_off, so3_col, rn_dst, rn_src, out):  # pragma: no cover 
         for i in range(9):
             finite &= np.isfinite(out[o + i])
     return err, det_min, finite
-
-
-PACKED_KERNELS = (_retract,)
