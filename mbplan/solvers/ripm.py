@@ -199,15 +199,16 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
             pivot_threshold=self.o.kkt_pivot_threshold,
         )
         kkt.set_matrices(None, ev.eq_jacobian, None)
-        diag = np.concatenate([np.ones(self.n), np.zeros(self.me)])
+        diag = np.zeros(self.n + self.me)
+        diag[: self.n] = 1.0
         inertia = kkt.factorize(diag, self.o.static_regularization)
         if inertia is None or inertia.zero or inertia.negative != self.me:
             return np.zeros(self.me)
-        grad = ev.gradient + transpose_times(ev.ineq_jacobian, self.z)
-        rhs = np.concatenate([-grad, np.zeros(self.me)])
+        rhs = np.zeros(self.n + self.me)
+        np.negative(ev.gradient + transpose_times(ev.ineq_jacobian, self.z), out=rhs[: self.n])
         sol, _ = kkt.solve(rhs, self.o.max_refinement_steps, self.o.residual_ratio_max)
         y = sol[self.n :]
-        return y if finite(y) and np.max(np.abs(y)) <= self.o.constr_mult_init_max else 0 * y
+        return y if finite(y) and amax(y) <= self.o.constr_mult_init_max else 0 * y
 
     # ------------------------------------------------------------------ loop
     def run(self, x0: Point, y0, z0, s0) -> RIPMResult:
