@@ -91,3 +91,136 @@ def test_grouped_retraction_equals_per_block(fixed):
         assert np.array_equal(out[name][~free], point[name][~free])
     with pytest.raises(InputError, match="not orthogonal"):
         variables.retract({**point, "F": 2 * point["F"]}, dx)
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    """The bit patterns (signed zeros told apart)."""
+    return np.ascontiguousarray(a, dtype=np.float64).view(np.int64)
+
+
+def test_so3_products_round_in_their_documented_order():
+    """Every entry of a 3 x 3 product is ``fma(a₂, b₂, fma(a₁, b₁, fma(a₀, b₀, 0)))``: checked
+    against exact rational arithmetic rounded at the same three places; and within a few ulps
+    of NumPy's product."""
+    from fractions import Fraction
+
+    from mbplan.lie.so3_kernels import product_batch
+
+    def fma(a: float, b: float, c: float) -> float:
+        return float(Fraction(a) * Fraction(b) + Fraction(c))
+
+    rng = np.random.default_rng(4)
+    a, b = rng.standard_normal((50, 3, 3)), rng.standard_normal((50, 3, 3))
+    a[:5] = np.where(rng.random((5, 3, 3)) < 0.5, -0.0, a[:5])  # signed zeros
+    out = product_batch(a, b)
+    for k, i, j in np.ndindex(10, 3, 3):
+        want = fma(
+            a[k, i, 2], b[k, 2, j], fma(a[k, i, 1], b[k, 1, j], fma(a[k, i, 0], b[k, 0, j], 0.0))
+        )
+        assert _bits(out[k, i, j]) == _bits(np.float64(want))
+    np.testing.assert_allclose(out, a @ b, rtol=0, atol=1e-14)
+
+
+def test_so3_exp_is_rodrigues_formula():
+    from mbplan.lie.so3 import _coefficients, _hat_numeric
+
+    rng = np.random.default_rng(5)
+    xi = rng.standard_normal((40, 3)) * np.repeat([1e-5, 1e-2, 1.0, 3.0], 10)[:, None]
+    a, b, _ = _coefficients(xi)
+    K = _hat_numeric(xi)
+    want = np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
+    np.testing.assert_allclose(SO3.exp(xi), want, rtol=0, atol=1e-15)
+
+
+def _trajectory(fixed=(0,), knots=6):
+    rng = np.random.default_rng(6)
+    blocks = [
+        Block("R", SO3, knots, fixed=fixed, count=2),
+        Block("p", R(3), knots, fixed=fixed, count=2),
+        Block("u", R(2), knots - 1),
+    ]
+    variables = TrajectoryVariables(blocks)
+    point = {
+        "R": SO3.exp(rng.standard_normal((knots, 2, 3))),
+        "p": rng.standard_normal((knots, 2, 3)),
+        "u": rng.standard_normal((knots - 1, 2)),
+    }
+    point["R"][1, 0] = np.eye(3)  # exact zeros in X
+    dx = rng.standard_normal(variables.n) * 0.3
+    dx[variables.tangent_index("R")[2]] = [0.0, -0.0, 1e-9]  # zero and Taylor-branch steps
+    return variables, point, dx
+
+
+@pytest.mark.parametrize("fixed", [(0,), (0, 3)])
+def test_packed_retraction_is_the_groups_retraction_bit_for_bit(fixed):
+    """One compiled pass over the packed point gives the blocks' own retraction exactly, signed
+    zeros included, from a plain point and from a packed one; the arrays are views of the
+    packed vector, which evaluation then uses without a copy."""
+    from mbplan.transcription.packed import PackedPoint
+
+    variables, point, dx = _trajectory(fixed)
+    assert variables.layout.retractable
+    moved = variables.retract(point, dx)
+    assert type(moved) is PackedPoint
+    want = variables._retract_blocks(point, dx)
+    again, want_again = variables.retract(moved, -dx), variables._retract_blocks(want, -dx)
+    for name in variables.blocks:
+        assert np.array_equal(_bits(moved[name]), _bits(want[name]))
+        assert np.array_equal(_bits(again[name]), _bits(want_again[name]))
+        assert np.shares_memory(moved[name], moved.packed)
+    assert variables.packed(moved) is moved.packed
+    assert np.array_equal(variables.packed(dict(moved)), moved.packed)
+
+
+def test_packed_point_copies_are_plain_and_replaced_blocks_are_seen():
+    import copy
+    import pickle
+
+    variables, point, dx = _trajectory()
+    moved = variables.retract(point, dx)
+    for clone in (copy.copy(moved), pickle.loads(pickle.dumps(moved))):
+        assert type(clone) is dict and clone.keys() == moved.keys()
+        assert all(np.array_equal(clone[k], moved[k]) for k in moved)
+    replaced = variables.retract(point, dx)
+    replaced["p"] = replaced["p"] + 1.0  # no longer a view: the packed vector is rebuilt
+    assert not replaced.packed_by(variables.layout)
+    assert np.array_equal(
+        variables.packed(replaced)[: replaced.packed.size], variables.packed(dict(replaced))
+    )
+    moved["u"][0, 0] = np.nan  # written into the packed vector
+    with pytest.raises(InputError, match="block 'u' contains NaN"):
+        variables.packed(moved)
+
+
+def test_packed_retraction_falls_back_to_the_groups_errors():
+    variables, point, dx = _trajectory()
+    with pytest.raises(InputError, match="not orthogonal"):
+        variables.retract({**point, "R": 2 * point["R"]}, dx)
+    bad = dx.copy()
+    bad[variables.tangent_index("R")[3, 0]] = np.nan
+    with pytest.raises(InputError, match="tangent vector: contains NaN"):
+        variables.retract(point, bad)
+    overflow = {**point, "p": np.full_like(point["p"], 1.7e308)}
+    big = dx.copy()
+    big[variables.tangent_index("p")] = 1e308
+    with np.errstate(over="ignore"):
+        out = variables.retract(overflow, big)  # as Rⁿ's retract: inf, no error
+    assert type(out) is dict and np.isinf(out["p"][1:]).all()
+
+
+def test_finite_vector_tells_nan_and_infinity_from_large_entries():
+    from mbplan.finite import finite_vector
+
+    v = np.linspace(-1.0, 1.0, 9)
+    assert finite_vector(v) and finite_vector(np.zeros(0))
+    assert finite_vector(np.array([1e200, -1e300, 2.0]))  # v·v overflows: entrywise test
+    for bad in (np.nan, np.inf, -np.inf):
+        w = v.copy()
+        w[4] = bad
+        assert not finite_vector(w)
+        w[0] = 1e200
+        assert not finite_vector(w)
+    long = np.zeros(20_000)  # past the dot test's length: entrywise
+    assert finite_vector(long)
+    long[-1] = np.nan
+    assert not finite_vector(long)

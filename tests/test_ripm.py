@@ -558,6 +558,27 @@ def test_initial_equality_multipliers_option():
         RIPMOptions(constr_mult_init_max=-1.0)
 
 
+def test_the_jacobian_only_start_evaluation_only_when_needed():
+    """The start evaluates the Jacobians alone for the slacks and the least-squares ``y₀``
+    (its rounding, not the Hessian evaluation's), then with the Hessian; with ``y₀`` given (or
+    ``constr_mult_init_max = 0``) and ``s₀`` given (or no inequalities) only with the Hessian.
+    A non-finite start is a numerical error either way."""
+    cold = solve_ripm(hs071(), HS071_X0, max_iter=3)
+    assert cold.n_evaluations == cold.iterations + 2
+    warm = {"y0": cold.y, "z0": cold.z, "s0": cold.s}
+    once = solve_ripm(hs071(), cold.x, max_iter=3, **warm)
+    twice = solve_ripm(hs071(), cold.x, max_iter=3, **{**warm, "s0": None})
+    assert once.n_evaluations == once.iterations + 1
+    assert twice.n_evaluations == twice.iterations + 2
+    parabola = EuclideanNLP(
+        1, lambda x: (x[0] - 1) ** 2, lambda x: 2 * (x - 1), lambda x, s, y, z: np.array([[2 * s]])
+    )
+    no_ls = solve_ripm(parabola, np.array([4.0]))
+    assert no_ls.success and no_ls.n_evaluations == no_ls.iterations + 1
+    res = solve_ripm(_sqrt_problem(lambda x: np.nan), np.array([4.0]), y0=np.zeros(0))
+    assert res.status is RIPMStatus.NUMERICAL_ERROR and "derivatives" in res.message
+
+
 def test_wrong_constraint_lengths_are_input_errors():
     """A problem whose constraint values do not match its declared sizes is rejected by name
     before the compiled iteration kernels index them."""

@@ -19,7 +19,8 @@ import scipy.linalg
 from mbplan.errors import InputError
 from mbplan.lie.backend import Array, as_numeric, check_symbolic_shape, column, is_symbolic
 
-_MEMBERSHIP_TOL = 1e-6
+MEMBERSHIP_TOL = 1e-6
+"""Largest ``|XᵀX - I|`` (and ``|det X - 1|``) accepted as group membership."""
 _SYM_EXP_SQUARINGS = 6
 _SYM_EXP_TERMS = 12
 
@@ -240,37 +241,45 @@ def check_orthogonal(R: np.ndarray, group: str, what: str) -> None:
     """Raise unless every matrix in ``R`` (finite) is a proper rotation."""
     n = R.shape[-1]
     if n == 3 and R.dtype == np.float64:
-        err, det_min = _rotation_errors(R.reshape(-1, 3, 3))
+        err, det_min = _rotation_errors(np.ascontiguousarray(R).reshape(-1))
     else:
         err = np.max(np.abs(np.swapaxes(R, -1, -2) @ R - np.eye(n)), initial=0.0)
         det_min = np.min(np.linalg.det(R), initial=np.inf)
-    if err > _MEMBERSHIP_TOL:
+    if err > MEMBERSHIP_TOL:
         raise InputError(f"{group} {what}: not orthogonal (max |RᵀR - I| = {err:.2e})")
     if det_min <= 0:
         raise InputError(f"{group} {what}: determinant is not +1 (a reflection)")
 
 
+@nb.njit(inline="always")
+def rotation_error(a: np.ndarray, o: int) -> tuple[float, float]:  # pragma: no cover - numba
+    """``max |RᵀR - I|`` and ``det R`` of the row-major 3 x 3 matrix ``a[o : o + 9]``."""
+    err = 0.0
+    for i in range(3):
+        for j in range(3):
+            g = a[o + i] * a[o + j] + a[o + 3 + i] * a[o + 3 + j] + a[o + 6 + i] * a[o + 6 + j]
+            err = max(err, abs(g - (1.0 if i == j else 0.0)))
+    det = (
+        a[o] * (a[o + 4] * a[o + 8] - a[o + 5] * a[o + 7])
+        - a[o + 1] * (a[o + 3] * a[o + 8] - a[o + 5] * a[o + 6])
+        + a[o + 2] * (a[o + 3] * a[o + 7] - a[o + 4] * a[o + 6])
+    )
+    return err, det
+
+
 @nb.njit(cache=True)
 def _rotation_errors(R: np.ndarray) -> tuple[float, float]:
-    """``max |RᵀR - I|`` and the smallest determinant over a batch of 3 x 3 matrices."""
+    """``max |RᵀR - I|`` and the smallest determinant over a batch of row-major 3 x 3
+    matrices, raveled."""
     err, det_min = 0.0, np.inf
-    for k in range(R.shape[0]):
-        for i in range(3):
-            for j in range(3):
-                g = R[k, 0, i] * R[k, 0, j] + R[k, 1, i] * R[k, 1, j] + R[k, 2, i] * R[k, 2, j]
-                err = max(err, abs(g - (1.0 if i == j else 0.0)))
-        a = R[k]
-        det = (
-            a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1])
-            - a[0, 1] * (a[1, 0] * a[2, 2] - a[1, 2] * a[2, 0])
-            + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0])
-        )
-        det_min = min(det_min, det)
+    for k in range(R.shape[0] // 9):
+        e, d = rotation_error(R, 9 * k)
+        err, det_min = max(err, e), min(det_min, d)
     return err, det_min
 
 
 def check_unit_determinant(X: np.ndarray, group: str, what: str) -> None:
     det = np.linalg.det(X)
     err = np.max(np.abs(det - 1.0), initial=0.0)
-    if err > _MEMBERSHIP_TOL:
+    if err > MEMBERSHIP_TOL:
         raise InputError(f"{group} {what}: determinant is not 1 (max |det - 1| = {err:.2e})")

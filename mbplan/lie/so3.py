@@ -6,13 +6,13 @@
 from __future__ import annotations
 
 import casadi as cs
-import numba as nb
 import numpy as np
 
 from mbplan.lie.backend import Array, as_numeric, check_symbolic_shape, is_symbolic
 from mbplan.lie.group import MatrixLieGroup, check_orthogonal
+from mbplan.lie.so3_kernels import SMALL as _SMALL
+from mbplan.lie.so3_kernels import exp_batch, product_batch
 
-_SMALL = 1e-6  # θ² below which Taylor series replace the closed forms
 _NEAR_PI = 1e-4  # sin²θ below which (with cos θ < 0) log uses the symmetric part
 
 
@@ -61,6 +61,21 @@ class SO3Group(MatrixLieGroup):
         a, b, _ = _coefficients(xi)
         K = self.hat(xi)
         return cs.DM.eye(3) + a * K + b * cs.mtimes(K, K)
+
+    def retract(self, X: Array, xi: Array) -> Array:
+        """``X exp(ξ)`` (eq. 39); ``X`` validated. Numeric batches of equal shape multiply in
+        :mod:`~mbplan.lie.so3_kernels`' order (as the packed retraction of trajectory
+        variables does)."""
+        X = self._element(X)
+        E = self.exp(xi)
+        if is_symbolic(X, E):
+            return cs.mtimes(X, E)
+        if X.shape == E.shape and X.dtype == np.float64:
+            flat = (-1, 3, 3)
+            return product_batch(np.ascontiguousarray(X).reshape(flat), E.reshape(flat)).reshape(
+                X.shape
+            )
+        return X @ E
 
     def log(self, X: Array) -> Array:
         """Rotation vector of ``X`` with angle in [0, π], accurate near 0 and near π."""
@@ -121,43 +136,10 @@ def _hat_numeric(xi: np.ndarray) -> np.ndarray:
 
 
 def _exp_numeric(xi: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula ``I + a φ^ + b φ^²`` on a batch: ``φ^``, ``a`` and ``b`` (the
-    arithmetic of :func:`_coefficients`) in one compiled pass, the product ``φ^ φ^`` by NumPy."""
+    """Rodrigues' formula ``(I + a φ^) + b φ^φ^`` on a batch, compiled (the arithmetic of
+    :func:`_coefficients`, products in :mod:`~mbplan.lie.so3_kernels`' order)."""
     flat = np.ascontiguousarray(xi.reshape(-1, 3), dtype=np.float64)
-    K, a, b = _hat_coefficients(flat)
-    return _rodrigues(K, a, b, K @ K).reshape(*xi.shape[:-1], 3, 3)
-
-
-@nb.njit(cache=True)
-def _hat_coefficients(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``φ^``, ``a = sinθ/θ`` and ``b = (1-cosθ)/θ²`` (Taylor series for θ² < _SMALL) of each
-    row of ``xi``, with the operations in the order of :func:`_coefficients`."""
-    n = xi.shape[0]
-    K, a, b = np.zeros((n, 3, 3)), np.empty(n), np.empty(n)
-    for k in range(n):
-        x, y, z = xi[k, 0], xi[k, 1], xi[k, 2]
-        K[k, 0, 1], K[k, 0, 2], K[k, 1, 2] = -z, y, -x
-        K[k, 1, 0], K[k, 2, 0], K[k, 2, 1] = z, -y, x
-        t2 = x * x + y * y + z * z
-        if t2 < _SMALL:
-            a[k] = 1 - t2 / 6 + t2 * t2 / 120
-            b[k] = 0.5 - t2 / 24 + t2 * t2 / 720
-        else:
-            t = np.sqrt(t2)
-            a[k] = np.sin(t) / t
-            b[k] = (1 - np.cos(t)) / (t * t)
-    return K, a, b
-
-
-@nb.njit(cache=True)
-def _rodrigues(K: np.ndarray, a: np.ndarray, b: np.ndarray, KK: np.ndarray) -> np.ndarray:
-    """``(I + a K) + b K²`` per matrix of the batch."""
-    E = np.empty_like(K)
-    for k in range(K.shape[0]):
-        for i in range(3):
-            for j in range(3):
-                E[k, i, j] = ((1.0 if i == j else 0.0) + a[k] * K[k, i, j]) + b[k] * KK[k, i, j]
-    return E
+    return exp_batch(flat).reshape(*xi.shape[:-1], 3, 3)
 
 
 def _coefficients(xi: Array) -> tuple[Array, Array, Array]:

@@ -16,17 +16,17 @@ import numpy as np
 import scipy.sparse as sp
 
 from mbplan.errors import InputError
+from mbplan.finite import finite_vector
 from mbplan.solvers.problem import NLPEvaluation, Point
 from mbplan.solvers.ripm_kernels import (
     abs_max,
     abs_sum,
-    all_finite,
     complementarity_error,
     constraint_values,
     csr_transpose_times,
     frac_to_boundary,
+    measures,
     pairwise_sum,
-    residuals,
 )
 
 EPS = float(np.finfo(float).eps)
@@ -67,18 +67,13 @@ class Step:
     dzn: np.ndarray | None = None
 
 
-_SMALL = 8192
-"""Below this length a compiled loop checks finiteness faster than NumPy's call overhead;
-above it NumPy's vectorized ``isfinite`` is faster."""
-
-
 def finite(*arrays: Any) -> bool:
     """No NaN or infinity in any of the arrays (or floats)."""
     for a in arrays:
-        if type(a) is np.ndarray and a.ndim == 1 and a.shape[0] < _SMALL:
-            if not all_finite(a):
+        if type(a) is np.ndarray and a.ndim == 1 and a.dtype == np.float64:
+            if not finite_vector(a):
                 return False
-        elif type(a) is float:
+        elif isinstance(a, float):  # np.float64 too
             if not math.isfinite(a):
                 return False
         elif not np.isfinite(a).all():
@@ -113,9 +108,13 @@ def transpose_times(a: sp.csr_matrix | sp.csr_array, x: np.ndarray) -> np.ndarra
     return csr_transpose_times(a.indptr, a.indices, a.data, x, a.shape[1])
 
 
+def _shape(a: Any) -> tuple[int, ...]:
+    return a.shape if type(a) is np.ndarray else np.shape(a)
+
+
 def _csr_arrays(a: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``indptr, indices, data`` of a Jacobian (converted to CSR if given otherwise)."""
-    if not (sp.issparse(a) and a.format == "csr"):
+    if type(a) is not sp.csr_matrix and not (sp.issparse(a) and a.format == "csr"):
         a = sp.csr_matrix(a)
     return a.indptr, a.indices, a.data
 
@@ -132,19 +131,22 @@ class IterateState:
     def _evaluate(
         self, x: Point, y: np.ndarray, z: np.ndarray, hessian: bool = True
     ) -> NLPEvaluation | None:
+        """The problem at ``x`` (the Lagrangian's Hessian with ``σ, y, z``), or ``None`` if
+        something is not finite."""
         self.sh.n_eval += 1
         ev: NLPEvaluation = self.p.evaluate(x, self.sigma, y, z, hessian)
-        parts = [ev.objective, ev.gradient, ev.eq, ev.ineq, ev.eq_jacobian.data]
-        parts.append(ev.ineq_jacobian.data)
-        if hessian:
-            parts.append(ev.hessian_lower.data)
-        if not finite(*parts):
+        h = ev.hessian_lower if hessian else None
+        if not finite(
+            ev.objective, ev.gradient, ev.eq, ev.ineq, ev.eq_jacobian.data, ev.ineq_jacobian.data,
+            0.0 if h is None else h.data,
+        ):  # fmt: skip
             return None
-        shapes = (np.shape(ev.gradient), np.shape(ev.eq), np.shape(ev.ineq))
+        shapes = (_shape(ev.gradient), _shape(ev.eq), _shape(ev.ineq))
         shapes += (ev.eq_jacobian.shape, ev.ineq_jacobian.shape)
+        if h is not None:
+            shapes += (h.shape,)
         expected = ((self.n,), (self.me,), (self.mi,), (self.me, self.n), (self.mi, self.n))
         if hessian:
-            shapes += (ev.hessian_lower.shape,)
             expected += ((self.n, self.n),)
         if shapes != expected:  # the compiled kernels index by these shapes unchecked
             raise InputError(
@@ -181,7 +183,7 @@ class IterateState:
         if p is not None:
             c += n - p
             theta = abs_sum(c)
-        phi = self.sigma * f - self.mu * pairwise_sum(np.log(s))
+        phi = self.sigma * f - self.mu * (pairwise_sum(np.log(s)) if len(s) else 0.0)
         if p is not None:
             phi += self.rho * float(np.sum(p) + np.sum(n))
             phi -= self.mu * float(np.sum(np.log(p)) + np.sum(np.log(n)))
@@ -207,26 +209,28 @@ class IterateState:
             xi = self.xi + alpha * step.dx
         return self._make_trial(x, self.s + alpha * step.ds, *vals, p, n, xi)
 
-    def _scalings(self) -> tuple[float, float]:
-        """``s_d``, ``s_c`` of WB eq. 5 (multipliers averaged per component, as in IPOPT)."""
+    def _scalings(self, y_sum: float, z_sum: float) -> tuple[float, float]:
+        """``s_d``, ``s_c`` of WB eq. 5 (multipliers averaged per component, as in IPOPT) from
+        ``Σ|y|`` and ``Σ|z|``."""
         smax = self.o.s_max
         s_d = s_c = 1.0
         n_bounds = self.mi + (2 * len(self.ep) if self.resto else 0)
-        bound_sum = abs_sum(self.z)
+        bound_sum = z_sum
         if self.resto:
             bound_sum += float(np.sum(self.zp) + np.sum(self.zn))
         if self.m:
-            avg = (abs_sum(self.y) + bound_sum) / (self.me + n_bounds)
+            avg = (y_sum + bound_sum) / (self.me + n_bounds)
             s_d = max(smax, avg) / smax
         if n_bounds:
             s_c = max(smax, bound_sum / n_bounds) / smax
         return s_d, s_c
 
     def _measures(self) -> None:
-        """Residuals of (50) (of the restoration problem in that phase) at the current iterate."""
+        """Residuals of (50) (of the restoration problem in that phase) at the current iterate,
+        the scalings and the KKT error ``E_0``."""
         ev = self.ev
         self.r_d, self.r_c = np.empty(self.n), np.empty(self.m)
-        self.inf_du, self.inf_pr = residuals(
+        self.inf_du, self.inf_pr, y_sum, z_sum, compl = measures(
             ev.gradient, self.sigma, *_csr_arrays(ev.eq_jacobian), self.y,
             *_csr_arrays(ev.ineq_jacobian), self.z, ev.eq, ev.ineq, self.s, self.r_d, self.r_c,
         )  # fmt: skip
@@ -238,12 +242,15 @@ class IterateState:
             self.r_pn = (self.rho - lam - self.zp, self.rho + lam - self.zn)
             self.inf_du = max(amax(self.r_d), amax(self.r_pn[0]), amax(self.r_pn[1]))
             self.inf_pr = amax(self.r_c)
-        self.s_d, self.s_c = self._scalings()
-        self.kkt_error = self._error(0.0)
+        self.s_d, self.s_c = self._scalings(y_sum, z_sum)
+        self.kkt_error = self._error(0.0, compl)
+        self.measured = (ev, self.y, self.z, self.s)
 
-    def _error(self, mu: float) -> float:
-        """``E_μ`` (eq. 55-56): scaled dual infeasibility, infeasibility, complementarity."""
-        compl = complementarity_error(self.s, self.z, mu)
+    def _error(self, mu: float, compl: float | None = None) -> float:
+        """``E_μ`` (eq. 55-56): scaled dual infeasibility, infeasibility, complementarity
+        (``‖s∘z - μ‖∞`` of the main rows given as ``compl``, or computed)."""
+        if compl is None:
+            compl = complementarity_error(self.s, self.z, mu)
         if self.resto:
             compl = max(
                 compl,

@@ -26,6 +26,7 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from operator import is_
 from typing import Any
 
 import numpy as np
@@ -134,6 +135,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.mu_max = math.inf
         self.probe_pending = False  # Mehrotra's μ is due once the step's matrix is factorized
         self.compl_shift: np.ndarray | None = None  # Mehrotra's corrector ΔS_aff Δz_aff
+        self.measured: tuple = (None,) * 4  # ev, y, z, s of the last _measures
 
     @property
     def kkt(self) -> KKTSystem | ReducedKKTSystem:
@@ -148,34 +150,41 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
 
     # ------------------------------------------------------------------ start
     def _initialize(self, x0: Point, y0, z0, s0) -> None:
+        """The starting iterate: slacks from a Jacobian-only evaluation, ``y`` by least squares
+        with its Jacobian (WB) unless given, then the evaluation with the Hessian. Without
+        slacks or least squares to compute (``y0`` given or ``constr_mult_init_max = 0``, and
+        ``s0`` given or no inequalities) the first evaluation is skipped."""
         o = self.o
         self.mu = o.mu_init
         self.tau = max(o.tau_min, 1 - self.mu)
         self.x = x0
-        self.y = np.zeros(self.me)
-        self.z = np.full(self.mi, o.bound_mult_init_val)
-        ev = self._evaluate(x0, self.y, self.z, hessian=False)
-        if ev is None:
-            self.s = np.ones(self.mi)
-            raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite evaluation at the initial point")
-        self.s = np.maximum(-ev.ineq, o.bound_push) if s0 is None else np.asarray(s0, float)
-        if z0 is not None:
-            self.z = np.asarray(z0, dtype=float)
-        if y0 is not None:
-            self.y = np.asarray(y0, dtype=float)
-        elif self.me and o.constr_mult_init_max > 0:
-            self.y = self._least_squares_y(ev)
+        self.y = np.zeros(self.me) if y0 is None else np.asarray(y0, dtype=float)
+        self.z = np.full(self.mi, o.bound_mult_init_val) if z0 is None else np.asarray(z0, float)
+        self.s = np.ones(self.mi) if s0 is None else np.asarray(s0, dtype=float)
         shapes = (self.y.shape, self.z.shape, self.s.shape)
         if shapes != ((self.me,), (self.mi,), (self.mi,)):
             raise InputError(
                 f"y0, z0, s0 have shapes {shapes}; expected ({self.me},), ({self.mi},) x2"
             )
-        if np.any(self.s <= 0) or np.any(self.z <= 0) or not finite(self.y, self.z, self.s):
+        # the defaults are finite and positive (the options are validated)
+        if (y0 is not None and not finite(self.y)) or any(
+            a0 is not None and (not finite(a) or np.any(a <= 0))
+            for a, a0 in ((self.z, z0), (self.s, s0))
+        ):
             raise InputError("s0 and z0 must be finite and positive, y0 finite")
+        least_squares = y0 is None and self.me > 0 and o.constr_mult_init_max > 0
+        if least_squares or (s0 is None and self.mi > 0):
+            ev = self._evaluate(x0, self.y, self.z, hessian=False)
+            if ev is None:
+                raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite evaluation at the initial point")
+            if s0 is None:
+                self.s = np.maximum(-ev.ineq, o.bound_push)
+            if least_squares:
+                self.y = self._least_squares_y(ev)
         self.ev = self._evaluate(x0, self.y, self.z)
         if self.ev is None:
             raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the initial point")
-        theta0 = float(np.sum(np.abs(self._current_trial().c)))
+        theta0 = self._current_trial().theta
         self.mu_max = max(o.mu_init, o.mu_max_fact * self._avg_compl())
         self.theta_max = o.theta_max_fact * max(1.0, theta0)
         self.theta_min = o.theta_min_fact * max(1.0, theta0)
@@ -190,15 +199,16 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
             pivot_threshold=self.o.kkt_pivot_threshold,
         )
         kkt.set_matrices(None, ev.eq_jacobian, None)
-        diag = np.concatenate([np.ones(self.n), np.zeros(self.me)])
+        diag = np.zeros(self.n + self.me)
+        diag[: self.n] = 1.0
         inertia = kkt.factorize(diag, self.o.static_regularization)
         if inertia is None or inertia.zero or inertia.negative != self.me:
             return np.zeros(self.me)
-        grad = ev.gradient + transpose_times(ev.ineq_jacobian, self.z)
-        rhs = np.concatenate([-grad, np.zeros(self.me)])
+        rhs = np.zeros(self.n + self.me)
+        np.negative(ev.gradient + transpose_times(ev.ineq_jacobian, self.z), out=rhs[: self.n])
         sol, _ = kkt.solve(rhs, self.o.max_refinement_steps, self.o.residual_ratio_max)
         y = sol[self.n :]
-        return y if finite(y) and np.max(np.abs(y)) <= self.o.constr_mult_init_max else 0 * y
+        return y if finite(y) and amax(y) <= self.o.constr_mult_init_max else 0 * y
 
     # ------------------------------------------------------------------ loop
     def run(self, x0: Point, y0, z0, s0) -> RIPMResult:
@@ -349,8 +359,8 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
     def _result(self, status: RIPMStatus, message: str) -> RIPMResult:
         wall = time.perf_counter() - self.sh.t0
         ok = getattr(self, "ev", None) is not None
-        if ok:
-            self._measures()
+        if ok and not all(map(is_, self.measured, (self.ev, self.y, self.z, self.s))):
+            self._measures()  # stopped after the iterate moved
         result = RIPMResult(
             status=status,
             message=message,

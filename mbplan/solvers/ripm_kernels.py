@@ -155,6 +155,18 @@ def complementarity_error(s, z, mu) -> float:  # pragma: no cover - numba
 
 
 @nb.njit(cache=True, error_model="numpy")
+def measures(
+    grad, sigma, e_ptr, e_idx, e_val, y, i_ptr, i_idx, i_val, z, h, g, s, r_d, r_c
+) -> tuple[float, float, float, float, float]:  # pragma: no cover - numba
+    """:func:`residuals` (same arguments) with what the KKT error needs besides:
+    ``‖r_d‖∞, ‖r_c‖∞, Σ|y|, Σ|z|`` and ``‖s∘z‖∞``."""
+    inf_du, inf_pr = residuals(
+        grad, sigma, e_ptr, e_idx, e_val, y, i_ptr, i_idx, i_val, z, h, g, s, r_d, r_c
+    )
+    return inf_du, inf_pr, abs_sum(y), abs_sum(z), complementarity_error(s, z, 0.0)
+
+
+@nb.njit(cache=True, error_model="numpy")
 def newton_diagonal(n, me, primal, dc, s, z, out) -> None:  # pragma: no cover - numba
     """The diagonal added to ``K`` (eq. 53 reduced): ``primal`` on the ``n`` primal rows,
     ``-δ_c`` on the equality rows and ``-δ_c - s/z`` on the inequality rows."""
@@ -221,15 +233,6 @@ def safeguarded_duals(z, dz, alpha, s, mu, kappa) -> np.ndarray:  # pragma: no c
     return out
 
 
-@nb.njit(cache=True, error_model="numpy")
-def all_finite(a) -> bool:  # pragma: no cover - numba
-    """No NaN or infinity in the 1-D array ``a``."""
-    for v in a:
-        if not np.isfinite(v):
-            return False
-    return True
-
-
 RIPM_KERNELS = (
     pairwise_sum,
     abs_sum,
@@ -237,6 +240,7 @@ RIPM_KERNELS = (
     csr_transpose_times,
     residuals,
     complementarity_error,
+    measures,
     newton_diagonal,
     newton_rhs,
     slack_step,
@@ -244,5 +248,4 @@ RIPM_KERNELS = (
     ratio_sum,
     constraint_values,
     safeguarded_duals,
-    all_finite,
 )

@@ -9,13 +9,15 @@ cost of one evaluation is linear in the horizon and in the number of bodies.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Mapping, Sequence
+import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 from mbplan.errors import InputError
+from mbplan.finite import finite_vector
 from mbplan.transcription.sparse import SparsePattern
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Point, TrajectoryVariables
@@ -107,7 +109,6 @@ class TrajectoryProblem:
         self._rows_in_order = {
             kind: np.array_equal(rows, np.arange(len(rows))) for kind, rows in self._rows.items()
         }
-        self._blocks = [(name, b.shape) for name, b in variables.blocks.items()]
         self._jac_patterns = {
             kind: self._jacobian_pattern(kind, sizes[kind]) for kind in ("eq", "ineq")
         }
@@ -116,6 +117,7 @@ class TrajectoryProblem:
         self._grad_cols = self._gradient_columns()
         self._hess_pattern = self._hessian_pattern()
         self._output_buffers()
+        self._bound: dict[str, list[Callable[[], None]]] = {}
 
     # ------------------------------------------------------------------ patterns
     def _packed_layout(self) -> None:
@@ -136,23 +138,6 @@ class TrajectoryProblem:
                     a = args[sl.name].reshape(lay.term.sites, *sl.shape)
                     part = np.swapaxes(a, 1, -1).reshape(lay.term.sites, -1)
                     lay.z_index[:, sl.offset : sl.offset + sl.size] = part
-
-    def _packed(self, point: Point) -> np.ndarray:
-        """The point's blocks raveled into one vector (shapes and finiteness checked)."""
-        parts = []
-        mapping = type(point) is dict or isinstance(point, Mapping)
-        for name, shape in self._blocks:
-            a = point.get(name) if mapping else None
-            if a is None or np.shape(a) != shape:
-                got = "missing" if a is None else f"shape {np.shape(a)}"
-                raise InputError(f"point: block {name!r} must have shape {shape}, got {got}")
-            parts.append(np.asarray(a, dtype=float).reshape(-1))
-        vec = np.concatenate(parts)
-        if not np.isfinite(vec).all():
-            names = self.variables.blocks
-            bad = next(n for n, a in zip(names, parts, strict=True) if not np.isfinite(a).all())
-            raise InputError(f"point: block {bad!r} contains NaN or inf")
-        return vec
 
     def _jacobian_pattern(self, kind: str, m: int) -> SparsePattern:
         rows = _cat_index([lay.jac_rows.ravel() for lay in self._layouts[kind]])
@@ -221,15 +206,22 @@ class TrajectoryProblem:
 
     def _gather(self, point: Point) -> None:
         """Every term's packed variables from the point, into the term's input buffer."""
-        vec = self._packed(point)
+        vec = self.variables.packed(point)
         for lay in self._all_layouts:
-            np.take(vec, lay.z_index, out=lay.z, mode="clip")  # indices in range by construction
+            vec.take(lay.z_index, out=lay.z, mode="clip")  # indices in range by construction
+
+    def _calls(self, kind: str) -> list[Callable[[], None]]:
+        """Every term's bound ``value``, ``jacobian`` or ``hessian`` call, in term order."""
+        calls = self._bound.get(kind)
+        if calls is None:
+            calls = self._bound[kind] = [lay.call(kind) for lay in self._all_layouts]
+        return calls
 
     def values(self, point: Point) -> tuple[float, np.ndarray, np.ndarray]:
         """Objective, equality and inequality residuals (for line-search trials)."""
         self._gather(point)
-        for lay in self._all_layouts:
-            lay.call("value")()
+        for call in self._calls("value"):
+            call()
         f = float(sum(r.sum() for r in self._cost_residuals))
         return f, self._scatter("eq"), self._scatter("ineq")
 
@@ -246,19 +238,18 @@ class TrajectoryProblem:
         z = np.zeros(self.n_ineq) if z is None else np.asarray(z, dtype=float)
         if y.shape != (self.n_eq,) or z.shape != (self.n_ineq,):
             raise InputError(f"multipliers must have shapes ({self.n_eq},), ({self.n_ineq},)")
-        if not (np.isfinite(obj_factor) and np.isfinite(y).all() and np.isfinite(z).all()):
+        if not (math.isfinite(obj_factor) and finite_vector(y) and finite_vector(z)):
             raise InputError("objective factor or multipliers contain NaN or inf")
         self._gather(point)
-        kind_of_call = "hessian" if hessian else "jacobian"
-        multipliers = {"eq": y, "ineq": z}
-        for kind, lays in self._layouts.items():
-            for lay in lays:
-                if hessian:
-                    if kind == "cost":
-                        lay.lam.fill(float(obj_factor))
-                    else:
-                        np.take(multipliers[kind], lay.rows, out=lay.lam, mode="clip")
-                lay.call(kind_of_call)()
+        if hessian:
+            for lay in self._layouts["cost"]:
+                lay.lam.fill(float(obj_factor))
+            for lay in self._layouts["eq"]:
+                y.take(lay.rows, out=lay.lam, mode="clip")
+            for lay in self._layouts["ineq"]:
+                z.take(lay.rows, out=lay.lam, mode="clip")
+        for call in self._calls("hessian" if hessian else "jacobian"):
+            call()
         grad = np.bincount(self._grad_cols, weights=self._jacobians["cost"], minlength=self.n + 1)
         return Evaluation(
             objective=float(self._residuals["cost"].sum()),

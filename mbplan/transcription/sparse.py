@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import copy
-
 import numba as nb
 import numpy as np
 import scipy.sparse as sp
@@ -38,9 +36,10 @@ class SparsePattern:
         self._template.has_canonical_format = True
 
     def assemble(self, values: np.ndarray) -> sp.csr_matrix:
-        # a shallow copy of the validated template with new data: scipy's constructor checks
-        # the (fixed) index arrays again on every call, ~5x the cost of the copy
-        out = copy.copy(self._template)
+        # a shallow copy of the validated template with new data (what copy.copy does, without
+        # its reduce protocol): scipy's constructor checks the fixed index arrays on every call
+        out = sp.csr_matrix.__new__(sp.csr_matrix)
+        out.__dict__.update(self._template.__dict__)
         values = np.asarray(values, dtype=float)
         if values.shape != self._slot.shape:
             raise InputError(f"{len(self._slot)} values expected, got shape {values.shape}")

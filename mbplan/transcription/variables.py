@@ -15,6 +15,8 @@ from typing import Any
 import numpy as np
 
 from mbplan.errors import InputError
+from mbplan.finite import finite_vector
+from mbplan.transcription.packed import PackedLayout, PackedPoint
 
 Point = dict[str, np.ndarray]
 
@@ -74,6 +76,7 @@ class TrajectoryVariables:
         self._retract_groups = [
             (self.blocks[entries[0][0]].group, entries) for entries in by_group.values()
         ]
+        self.layout = PackedLayout(list(self.blocks.values()), self._index)
 
     def tangent_index(self, name: str) -> np.ndarray:
         """``(knots * count, dim)`` tangent coordinates of each element; ``-1`` where fixed."""
@@ -97,8 +100,42 @@ class TrajectoryVariables:
             raise InputError(f"{what}: unknown blocks {extra}")
         return out
 
+    def packed(self, point: Point) -> np.ndarray:
+        """The point's blocks raveled into one vector (shapes and finiteness checked): the
+        vector of a :class:`PackedPoint` itself, without a copy."""
+        if type(point) is PackedPoint and point.packed_by(self.layout):
+            vec = point.packed
+        else:
+            parts = []
+            mapping = type(point) is dict or isinstance(point, Mapping)
+            for b in self.blocks.values():
+                a = point.get(b.name) if mapping else None
+                if a is None or np.shape(a) != b.shape:
+                    got = "missing" if a is None else f"shape {np.shape(a)}"
+                    raise InputError(
+                        f"point: block {b.name!r} must have shape {b.shape}, got {got}"
+                    )
+                parts.append(np.asarray(a, dtype=float).reshape(-1))
+            vec = np.concatenate(parts)
+        if not finite_vector(vec):
+            bad = next(n for n in self.blocks if not np.isfinite(point[n]).all())
+            raise InputError(f"point: block {bad!r} contains NaN or inf")
+        return vec
+
     def retract(self, point: Point, dx: np.ndarray) -> Point:
-        """``X exp(ξ)`` on every free element (``y + ξ`` for vector blocks)."""
+        """``X exp(ξ)`` on every free element (``y + ξ`` for vector blocks): a
+        :class:`PackedPoint` from one compiled pass when every free block is SO(3) or Rⁿ and
+        the inputs pass the groups' checks, the blocks one group at a time otherwise."""
+        layout = self.layout
+        if layout.retractable and type(dx) is np.ndarray and dx.shape == (self.n,):
+            packed = layout.pack(point) if dx.dtype == np.float64 else None
+            out = None if packed is None else layout.retract(packed, dx)
+            if out is not None:
+                return layout.unpack(out)
+        return self._retract_blocks(point, dx)
+
+    def _retract_blocks(self, point: Point, dx: np.ndarray) -> Point:
+        """The retraction by the groups' ``retract`` (any group; their errors)."""
         out = dict(point)
         for group, entries in self._retract_groups:
             flats = [point[name].reshape(flat) for name, flat, _, _, _ in entries]

@@ -1,0 +1,147 @@
+"""Bitwise fingerprints of RIPM solves: an md5 of every iterate-dependent output (history, x, y,
+z, s) with the iteration, evaluation and factorization counts, per case, to compare two trees
+(``diff`` the outputs of a baseline checkout and this one).
+
+    python benchmarks/ripm_fingerprint.py > /tmp/new.txt  # from the root of a tree
+    (cd <baseline> && PYTHONPATH=. python <this tree>/benchmarks/ripm_fingerprint.py) > /tmp/base.txt
+    diff /tmp/base.txt /tmp/new.txt
+
+The cases: drone 0-7, drone-limits 0-7, iiwa-com 0, chain4, the RIPM tests' small problems
+(restoration, adaptive μ, Mehrotra probing and corrector) from ``tests/test_ripm.py`` and the
+arm sweep's finger_edu tasks (``tests/test_sweep.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path.cwd()))  # the tree to fingerprint: the working directory
+
+
+def fingerprint(res) -> str:
+    """md5 of the history, the iterate and the counts of a :class:`RIPMResult`."""
+    h = hashlib.md5()
+    hist = res.history
+    for name in sorted(vars(hist)):
+        if name == "time_s":
+            continue
+        h.update(name.encode())
+        h.update(np.asarray(getattr(hist, name), dtype=float).tobytes())
+    x = res.x
+    parts = [x[k] for k in sorted(x)] if isinstance(x, dict) else [x]
+    for a in [*parts, res.y, res.z, res.s]:
+        h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+    counts = (res.iterations, res.n_evaluations, res.n_trial_evaluations, res.n_factorizations)
+    return (
+        f"{res.status.name} it={counts[0]} ev={counts[1]} tr={counts[2]} fa={counts[3]} "
+        + (h.hexdigest()[:16])
+    )
+
+
+def _infeasible_eq():
+    from mbplan.solvers import EuclideanNLP
+
+    return EuclideanNLP(
+        2,
+        lambda x: x[0] ** 2 + (x[1] - 1) ** 2,
+        lambda x: np.array([2 * x[0], 2 * (x[1] - 1)]),
+        lambda x, s, y, z: np.diag([2 * s + 2 * y[0], 2 * s]),
+        eq=lambda x: np.array([x[0] ** 2 + 1]),
+        eq_jacobian=lambda x: np.array([[2 * x[0], 0.0]]),
+        n_eq=1,
+    )
+
+
+def _infeasible_ineq():
+    from mbplan.solvers import EuclideanNLP
+
+    return EuclideanNLP(
+        2,
+        lambda x: x[0] + x[1],
+        lambda x: np.ones(2),
+        lambda x, s, y, z: np.diag([2 * z[0], 0.0]),
+        ineq=lambda x: np.array([x[0] ** 2 + 1, -x[1]]),
+        ineq_jacobian=lambda x: np.array([[2 * x[0], 0.0], [0.0, -1.0]]),
+        n_ineq=2,
+    )
+
+
+def _test_cases():
+    """The small problems of tests/test_ripm.py with the option sets that exercise the
+    restoration phase, the adaptive μ and Mehrotra's probing and corrector."""
+    sys.path.insert(0, str(Path.cwd() / "tests"))
+    import test_ripm as t
+
+    import mbplan
+
+    assert Path(mbplan.__file__).resolve().parents[1] == Path.cwd().resolve(), mbplan.__file__
+    from mbplan.solvers.examples import HS071_X0, BandedControlNLP, hs071
+
+    banded = BandedControlNLP(nx=4, nu=2, horizon=20)
+    probing = {"mu_strategy": "adaptive", "mu_oracle": "probing"}
+    problems = {
+        "infeasible-eq": (_infeasible_eq, lambda: np.array([1.0, 3.0])),
+        "infeasible-ineq": (_infeasible_ineq, lambda: np.array([1.0, 3.0])),
+        "hs071": (hs071, lambda: HS071_X0),
+        "banded": (lambda: banded, banded.initial_guess),
+        "disc": (t._outside_disc, lambda: np.array([0.0, 1e-3])),
+        "wb": (t._wachter_biegler, lambda: np.array([-2.0, 1.0, 1.0])),
+    }
+    variants = {
+        "default": {},
+        "adaptive": {"mu_strategy": "adaptive"},
+        "probing": probing,
+        "mehrotra": {**probing, "corrector": True, "mu_max_fact": 0.0},
+    }
+    for pname, (make, x0) in problems.items():
+        for vname, opts in variants.items():
+            yield f"{pname}/{vname}", make(), x0(), opts
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--drone-cases", type=int, default=8)
+    ap.add_argument("--no-large", action="store_true", help="skip iiwa-com 0 and chain4")
+    args = ap.parse_args()
+    from mbplan.benchmarks.speed_tasks import TASKS
+    from mbplan.solvers import solve_ripm
+
+    for name, problem, x0, opts in _test_cases():
+        print(name, fingerprint(solve_ripm(problem, x0, **opts)), flush=True)
+    tasks = [(t, i) for t in ("drone", "drone-limits") for i in range(args.drone_cases)]
+    if not args.no_large:
+        tasks += [("iiwa-com", 0), ("chain4", 0)]
+    for task, i in tasks:
+        problem, x0, options = TASKS[task](i)
+        print(f"{task}/{i}", fingerprint(solve_ripm(problem, x0, options)), flush=True)
+    for kind, result in _finger_edu().items():
+        print(f"finger_edu/{kind}", result, flush=True)
+
+
+def _finger_edu() -> dict[str, str]:
+    """The arm sweep's finger_edu tasks as ``plan(ocp, "ripm", warm_start=rest, max_iter=200)``
+    solves them (tests/test_sweep.py): a kept least-squares ``y₀`` and a nearly singular
+    Hessian, sensitive to the last bit (the frame goal takes 75 iterations)."""
+    import test_sweep as t
+
+    from mbplan.engine.jit import jit_available
+    from mbplan.formulations import maximal
+    from mbplan.solvers import solve_ripm
+    from mbplan.solvers.dispatch import options_for
+
+    results = {}
+    for kind, ocp in t._tasks(t._robot("finger_edu"), seed=len("finger_edu")).items():
+        nlp, _ = maximal.build(ocp, jit_available())
+        x0 = nlp.initial_point(np.repeat(ocp.q0[None], ocp.N + 1, axis=0))
+        options = options_for("ripm", tol=1e-6, max_iter=200)
+        results[kind] = fingerprint(solve_ripm(nlp.problem, x0, options))
+    return results
+
+
+if __name__ == "__main__":
+    main()
