@@ -150,7 +150,16 @@ def test_so3_matches_pinocchio(axis, angle):
     # Pinocchio's Jexp3 is the right Jacobian; Jlog3(R) = J_r⁻¹(log3(R)).
     np.testing.assert_allclose(SO3.jac_right(phi), pin.Jexp3(phi), rtol=0, atol=1e-10)
     np.testing.assert_allclose(SO3.jac_right(phi), right_jacobian_series(skew(phi)), atol=1e-13)
-    np.testing.assert_allclose(SO3.jac_right_inv(log_pin), pin.Jlog3(Rm), rtol=0, atol=1e-9)
+    # Pinocchio's closed-form Jlog3 cancels in floating point above its Taylor switch (1.0e-9 off
+    # at angle 2.9e-4, found by hypothesis): compare within eps / angle²; the inverse check below
+    # is the tight one at every angle.
+    cancellation = 2e-16 / angle**2 if angle > 1e-6 else 0.0  # below: Pinocchio's Taylor branch
+    atol = 1e-9 + cancellation
+    np.testing.assert_allclose(SO3.jac_right_inv(log_pin), pin.Jlog3(Rm), rtol=0, atol=atol)
+    if np.pi - angle > 1e-6:  # J_r is singular at π
+        np.testing.assert_allclose(
+            SO3.jac_right_inv(phi) @ SO3.jac_right(phi), np.eye(3), atol=1e-12
+        )
     np.testing.assert_allclose(SO3.Ad(Rm), Rm)
 
 
