@@ -195,11 +195,12 @@ def _scale_checked(col, lo, hi, dt, u):
 
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
-def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta):
-    """The front's ``k <= SMALL_COLUMNS`` pivot columns, unpivoted, and its Schur update (column by
-    column; for ``u > 0`` after all pivots), on flat indices (no array views). Returns the
-    pivot counts and 0 (done), 1 (breakdown: a zero or non-finite pivot) or 2 (a pivot failed
-    the threshold test ``u`` or ``|d| <= delta``: the Schur update is not done)."""
+def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta, schur):
+    """The front's ``k <= SMALL_COLUMNS`` pivot columns, unpivoted, and (``schur``) its Schur
+    update (column by column; for ``u > 0`` after all pivots), on flat indices (no array
+    views). Returns the pivot counts and 0 (done), 1 (breakdown: a zero or non-finite pivot) or
+    2 (a pivot failed the threshold test ``u`` or ``|d| <= delta``: the Schur update is not
+    done)."""
     npos = nneg = 0
     for t in range(k):
         ct = lo + t * m
@@ -226,8 +227,9 @@ def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta):
         inv = 1.0 / dt
         for i in range(t + 1, m):
             lbuf[ct + i] *= inv
-        _small_update(lbuf, ubuf, k, m, ct, uo, dt)
-    if u > 0.0:  # the Schur update once every pivot has passed
+        if schur:
+            _small_update(lbuf, ubuf, k, m, ct, uo, dt)
+    if u > 0.0 and schur:  # the Schur update once every pivot has passed
         for t in range(k):
             _small_update(lbuf, ubuf, k, m, lo + t * m, uo, d[f + t])
     return npos, nneg, 0
@@ -298,13 +300,56 @@ def _schur(L, df, k, U, blas_rows):
         _schur_update2(L, df, k, U)
 
 
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def _direct_update(c, p, sfirst, fptr, loff, uoff, rptr, rel, lbuf, ubuf, d, pivot_only):
+    """Subtract the Schur update ``Σ_t d_t l_t l_tᵀ`` of the factorized leaf front ``c``
+    (``k <= DIRECT_COLUMNS`` pivot columns) from its parent ``p``'s front: its pivot columns
+    in ``lbuf`` and (unless ``pivot_only``) its update matrix in ``ubuf``."""
+    f = sfirst[c]
+    k, m = sfirst[c + 1] - f, fptr[c + 1] - fptr[c]
+    lo, r = loff[c] + k, m - k  # l_t[a] (row k + a of front column t): lbuf[lo + t m + a]
+    pk = sfirst[p + 1] - sfirst[p]
+    pm = fptr[p + 1] - fptr[p]
+    rp = rptr[c]
+    for bb in range(r):
+        col = rel[rp + bb]
+        if col < pk:
+            out, dst = lbuf, loff[p] + col * pm
+        elif pivot_only:
+            break  # rel increases: the remaining rows are all in the update matrix
+        else:
+            out, dst = ubuf, uoff[p] + (col - pk) * (pm - pk) - pk
+        c0 = lbuf[lo + bb] * d[f]
+        if k == 1:
+            for aa in range(bb, r):
+                out[dst + rel[rp + aa]] -= c0 * lbuf[lo + aa]
+            continue
+        c1 = lbuf[lo + m + bb] * d[f + 1]
+        for aa in range(bb, r):
+            out[dst + rel[rp + aa]] -= c0 * lbuf[lo + aa] + c1 * lbuf[lo + m + aa]
+        for t in range(2, k):
+            ct = lbuf[lo + t * m + bb] * d[f + t]
+            for aa in range(bb, r):
+                out[dst + rel[rp + aa]] -= ct * lbuf[lo + t * m + aa]
+
+
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, pivot_only):
+def _assemble_children(
+    s, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, sent, lbuf, ubuf, d, pivot_only
+):  # fmt: skip
     """Add the children's update matrices into front ``s`` (its pivot columns in ``lbuf``, its
-    own update matrix in ``ubuf``; ``pivot_only``: the pivot columns only)."""
+    own update matrix in ``ubuf``); children that sent theirs directly (``sent``) are skipped,
+    or with ``pivot_only`` (reassembling the pivot columns only) sent again."""
+    k = sfirst[s + 1] - sfirst[s]
+    m = fptr[s + 1] - fptr[s]
     r = m - k
+    lo, uo = loff[s], uoff[s]
     for ci in range(cptr[s], cptr[s + 1]):
         c = child[ci]
+        if sent[c]:
+            if pivot_only:
+                _direct_update(c, s, sfirst, fptr, loff, uoff, rptr, rel, lbuf, ubuf, d, True)
+            continue
         rc, uc, rp = rptr[c + 1] - rptr[c], uoff[c], rptr[c]
         for bb in range(rc):
             col = rel[rp + bb]
@@ -321,8 +366,8 @@ def _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, pivot
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
 def ldl_factor(
-    vals, amap, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, lbuf, ubuf, d, blas_rows,
-    u, delta, sign, piv, e, spiv, eptr, eidx, save, stats,
+    vals, amap, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, sparent, direct, sent, lbuf,
+    ubuf, d, blas_rows, u, delta, sign, piv, e, spiv, eptr, eidx, save, stats,
 ):  # fmt: skip
     """Multifrontal ``LDLᵀ``. Fronts with at least ``blas_rows`` update rows (and
     ``BLAS_PIVOTS`` pivot columns) get their Schur update from BLAS. ``u = 0``: no pivoting, a
@@ -332,8 +377,9 @@ def ldl_factor(
     :func:`~mbplan.solvers.ldl_pivot.pivoted_front`: 1 × 1 / 2 × 2 pivots among its own columns
     (``piv``: local order, ``e``: 2 × 2 off-diagonals, ``spiv[s]``: supernode s pivoted), tiny
     pivots perturbed to ``sign · delta`` (``sign``: expected pivot signs, pivot order). ``stats``: pivoted fronts, 2 × 2 pivots, perturbed pivots,
-    pivots accepted below the threshold. Returns the numbers of positive, negative and
-    perturbed pivots and ``False`` on a breakdown."""
+    pivots accepted below the threshold. A leaf front flagged ``direct`` (parent ``sparent``)
+    subtracts its Schur update from its parent's front itself (``sent``: it did). Returns the
+    numbers of positive, negative and perturbed pivots and ``False`` on a breakdown."""
     lbuf[:] = 0.0
     for q in range(vals.shape[0]):
         lbuf[amap[q]] += vals[q]
@@ -349,12 +395,25 @@ def ldl_factor(
         m = fptr[s + 1] - fptr[s]
         r = m - k
         lo, uo = loff[s], uoff[s]
-        for i in range(uo, uo + r * r):
-            ubuf[i] = 0.0
-        _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, False)
-        spiv[s] = False
-        if k <= SMALL_COLUMNS:  # few pivot columns: plain loops on flat indices (no array views)
-            ip, ineg, status = _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta)
+        p = sparent[s]
+        if p != -1 and child[cptr[p]] == s:  # the first child: direct children write into it
+            ur = fptr[p + 1] - fptr[p] - sfirst[p + 1] + sfirst[p]
+            ubuf[uoff[p] : uoff[p] + ur * ur] = 0.0
+        if cptr[s] == cptr[s + 1] and not direct[s]:
+            ubuf[uo : uo + r * r] = 0.0
+        _assemble_children(
+            s, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, sent, lbuf, ubuf, d, False
+        )  # fmt: skip
+        spiv[s] = sent[s] = False
+        if direct[s]:
+            ip, ineg, status = _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta, False)
+            if status == 0:
+                _direct_update(s, p, sfirst, fptr, loff, uoff, rptr, rel, lbuf, ubuf, d, False)
+                sent[s] = True
+            else:
+                ubuf[uo : uo + r * r] = 0.0  # the pivoted path below computes its update matrix
+        elif k <= SMALL_COLUMNS:  # few pivot columns: plain loops on flat indices (no views)
+            ip, ineg, status = _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta, True)
         else:
             L = lbuf[lo : lo + k * m].reshape(k, m)
             ip, ineg, status = _front_columns(L, d[f : f + k], k, m, u, delta)
@@ -371,7 +430,9 @@ def ldl_factor(
         lbuf[lo : lo + k * m] = 0.0
         for q in eidx[eptr[s] : eptr[s + 1]]:
             lbuf[amap[q]] += vals[q]
-        _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, True)
+        _assemble_children(
+            s, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, sent, lbuf, ubuf, d, True
+        )  # fmt: skip
         L = lbuf[lo : lo + k * m].reshape(k, m)
         out = save[: k * m].reshape(k, m)
         ip, ineg, ipert, weak, ok = pivoted_front(

@@ -14,6 +14,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+DIRECT_COLUMNS = 4
+"""Leaf supernodes with at most this many columns update their parent's front directly (no
+update matrix of their own)."""
+
 
 @nb.njit(cache=True)
 def _upper_csc(n, pinv, rows, cols):
@@ -241,9 +245,15 @@ class Analysis:
         parent = _etree(n, ptr, idx)
         self.n, self.perm = n, perm
         self.sfirst, self.nnz_l = _supernodes(n, ptr, idx, parent)
-        self.fptr, self.rows, sparent, snode = _front_rows(n, ptr, idx, parent, self.sfirst)
+        self.fptr, self.rows, self.sparent, snode = _front_rows(n, ptr, idx, parent, self.sfirst)
         (self.loff, self.uoff, self.amap, self.rptr, self.rel, self.cptr, self.child) = (
-            _assembly_maps(n, self.sfirst, self.fptr, self.rows, sparent, snode, hi, lo)
+            _assembly_maps(n, self.sfirst, self.fptr, self.rows, self.sparent, snode, hi, lo)
+        )
+        # leaves with few pivot columns send their Schur update straight into the parent's front
+        self.direct = (
+            (np.diff(self.sfirst) <= DIRECT_COLUMNS)
+            & (np.diff(self.cptr) == 0)
+            & (self.sparent != -1)
         )
         self.wmax = int(np.diff(self.fptr).max(initial=1))
         k, m = np.diff(self.sfirst), np.diff(self.fptr)

@@ -62,6 +62,7 @@ class SupernodalLDL:
         self.e = np.zeros(analysis.n)  # 2 × 2 pivots' off-diagonals (pivoted supernodes)
         self.piv = np.zeros(analysis.n, np.int64)  # local pivot order (pivoted supernodes)
         self.spiv = np.zeros(len(analysis.sfirst) - 1, np.bool_)
+        self.sent = np.zeros(len(analysis.sfirst) - 1, np.bool_)  # see ldl_factor
         self.stats = np.zeros(4, np.int64)  # see ldl_factor
         self._save = np.empty(0)  # work array of pivoted fronts, and the entries of each front:
         self._eptr = np.zeros(len(analysis.loff), np.int64)
@@ -93,7 +94,7 @@ class SupernodalLDL:
             sign = np.ones(a.n)
         args = (
             vals, a.amap, a.sfirst, a.fptr, a.loff, a.uoff, a.rptr, a.rel, a.cptr, a.child,
-            self.lbuf, self.ubuf, self.d, self.blas_rows, float(pivot_threshold), float(delta),
+            a.sparent, a.direct, self.sent, self.lbuf, self.ubuf, self.d, self.blas_rows, float(pivot_threshold), float(delta),
             sign, self.piv, self.e, self.spiv, self._eptr, self._eidx,
             self._save if self._save.size else self.d, self.stats,
         )  # fmt: skip
