@@ -19,31 +19,29 @@ BLAS_PIVOTS = 8  # the BLAS update needs at least this many pivot columns to pay
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
 def _schur_update2(L, d, k, U):
     """``U[b, a] -= Σ_t L[t, k+b] d_t L[t, k+a]`` for ``a >= b``: two rows of ``U`` and four
-    pivot columns at a time (``L[t]`` is front column ``t``, ``d`` its pivots)."""
+    pivot columns at a time (``L[t]`` is front column ``t``, ``d`` its pivots). Inner loops
+    run over zero-based views: their indices are provably non-negative, so they vectorize."""
     r = U.shape[0]
     k4 = k - k % 4
     for b in range(0, r - 1, 2):
-        u0 = U[b]
-        u1 = U[b + 1]
+        n = r - b
+        u0, u1 = U[b, b:], U[b + 1, b:]
         for t in range(0, k4, 4):
-            l0 = L[t, k:]
-            l1 = L[t + 1, k:]
-            l2 = L[t + 2, k:]
-            l3 = L[t + 3, k:]
-            a0, a1, a2, a3 = l0[b] * d[t], l1[b] * d[t + 1], l2[b] * d[t + 2], l3[b] * d[t + 3]
-            b0, b1 = l0[b + 1] * d[t], l1[b + 1] * d[t + 1]
-            b2, b3 = l2[b + 1] * d[t + 2], l3[b + 1] * d[t + 3]
+            l0, l1, l2, l3 = L[t, k + b :], L[t + 1, k + b :], L[t + 2, k + b :], L[t + 3, k + b :]
+            a0, a1, a2, a3 = l0[0] * d[t], l1[0] * d[t + 1], l2[0] * d[t + 2], l3[0] * d[t + 3]
+            b0, b1 = l0[1] * d[t], l1[1] * d[t + 1]
+            b2, b3 = l2[1] * d[t + 2], l3[1] * d[t + 3]
             if a0 == 0.0 and a1 == 0.0 and a2 == 0.0 and a3 == 0.0:
                 if b0 == 0.0 and b1 == 0.0 and b2 == 0.0 and b3 == 0.0:
                     continue
-            for a in range(b, r):
+            for a in range(n):
                 x0, x1, x2, x3 = l0[a], l1[a], l2[a], l3[a]
                 u0[a] -= a0 * x0 + a1 * x1 + a2 * x2 + a3 * x3
                 u1[a] -= b0 * x0 + b1 * x1 + b2 * x2 + b3 * x3
         for t in range(k4, k):
-            lt = L[t, k:]
-            a0, b0 = lt[b] * d[t], lt[b + 1] * d[t]
-            for a in range(b, r):
+            lt = L[t, k + b :]
+            a0, b0 = lt[0] * d[t], lt[1] * d[t]
+            for a in range(n):
                 u0[a] -= a0 * lt[a]
                 u1[a] -= b0 * lt[a]
     if r % 2 == 1:
@@ -56,47 +54,48 @@ def _schur_update2(L, d, k, U):
 def _schur_update4(L, d, k, U):
     """``U[b, a] -= Σ_t L[t, k+b] d_t L[t, k+a]`` for ``a >= b``: four rows of ``U`` and four
     pivot columns at a time (``L[t]`` is front column ``t``, ``d`` its pivots; entries ``a < b``
-    of the four rows are written too and never read)."""
+    of the four rows are written too and never read; zero-based inner loops, as above)."""
     r = U.shape[0]
     k4, r4 = k - k % 4, r - r % 4
-    c = np.empty((4, 4))
     for b in range(0, r4, 4):
-        u0, u1, u2, u3 = U[b], U[b + 1], U[b + 2], U[b + 3]
+        n = r - b
+        u0, u1, u2, u3 = U[b, b:], U[b + 1, b:], U[b + 2, b:], U[b + 3, b:]
         for t in range(0, k4, 4):
-            l0, l1, l2, l3 = L[t, k:], L[t + 1, k:], L[t + 2, k:], L[t + 3, k:]
-            nonzero = False
-            for i in range(4):
-                for j in range(4):
-                    c[i, j] = L[t + j, k + b + i] * d[t + j]
-                    nonzero = nonzero or c[i, j] != 0.0
-            if not nonzero:
+            l0, l1, l2, l3 = L[t, k + b :], L[t + 1, k + b :], L[t + 2, k + b :], L[t + 3, k + b :]
+            d0, d1, d2, d3 = d[t], d[t + 1], d[t + 2], d[t + 3]
+            c00, c01, c02, c03 = l0[0] * d0, l1[0] * d1, l2[0] * d2, l3[0] * d3
+            c10, c11, c12, c13 = l0[1] * d0, l1[1] * d1, l2[1] * d2, l3[1] * d3
+            c20, c21, c22, c23 = l0[2] * d0, l1[2] * d1, l2[2] * d2, l3[2] * d3
+            c30, c31, c32, c33 = l0[3] * d0, l1[3] * d1, l2[3] * d2, l3[3] * d3
+            if (
+                c00 == 0.0 and c01 == 0.0 and c02 == 0.0 and c03 == 0.0
+                and c10 == 0.0 and c11 == 0.0 and c12 == 0.0 and c13 == 0.0
+                and c20 == 0.0 and c21 == 0.0 and c22 == 0.0 and c23 == 0.0
+                and c30 == 0.0 and c31 == 0.0 and c32 == 0.0 and c33 == 0.0
+            ):  # fmt: skip
                 continue
-            c00, c01, c02, c03 = c[0, 0], c[0, 1], c[0, 2], c[0, 3]
-            c10, c11, c12, c13 = c[1, 0], c[1, 1], c[1, 2], c[1, 3]
-            c20, c21, c22, c23 = c[2, 0], c[2, 1], c[2, 2], c[2, 3]
-            c30, c31, c32, c33 = c[3, 0], c[3, 1], c[3, 2], c[3, 3]
-            for a in range(b, r):
+            for a in range(n):
                 x0, x1, x2, x3 = l0[a], l1[a], l2[a], l3[a]
                 u0[a] -= c00 * x0 + c01 * x1 + c02 * x2 + c03 * x3
                 u1[a] -= c10 * x0 + c11 * x1 + c12 * x2 + c13 * x3
                 u2[a] -= c20 * x0 + c21 * x1 + c22 * x2 + c23 * x3
                 u3[a] -= c30 * x0 + c31 * x1 + c32 * x2 + c33 * x3
         for t in range(k4, k):
-            lt = L[t, k:]
-            e0, e1, e2, e3 = lt[b] * d[t], lt[b + 1] * d[t], lt[b + 2] * d[t], lt[b + 3] * d[t]
-            for a in range(b, r):
+            lt = L[t, k + b :]
+            e0, e1, e2, e3 = lt[0] * d[t], lt[1] * d[t], lt[2] * d[t], lt[3] * d[t]
+            for a in range(n):
                 x = lt[a]
                 u0[a] -= e0 * x
                 u1[a] -= e1 * x
                 u2[a] -= e2 * x
                 u3[a] -= e3 * x
     for b in range(r4, r):
-        ub = U[b]
+        ub = U[b, b:]
         for t in range(k):
-            lt = L[t, k:]
-            e = lt[b] * d[t]
+            lt = L[t, k + b :]
+            e = lt[0] * d[t]
             if e != 0.0:
-                for a in range(b, r):
+                for a in range(r - b):
                     ub[a] -= e * lt[a]
 
 
@@ -276,14 +275,15 @@ def _front_columns(L, df, k, m, u, delta):
                     return npos, nneg, 2
             else:
                 inv = 1.0 / dt
-                for i in range(t + step + 1, m):
-                    col[i] *= inv
+                below = col[t + step + 1 :]
+                for i in range(m - t - step - 1):
+                    below[i] *= inv
             for j in range(t + step + 1, t + w):  # the group's later columns
                 coef = col[j] * dt
                 if coef != 0.0:
-                    nxt = L[j]
-                    for i in range(j, m):
-                        nxt[i] -= coef * col[i]
+                    nxt, src = L[j, j:], col[j:]
+                    for i in range(m - j):
+                        nxt[i] -= coef * src[i]
         t += w
     return npos, nneg, 0
 

@@ -14,7 +14,7 @@ from mbplan.solvers.ldl_kernels import SMALL_COLUMNS
 @nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
 def _forward_front(L, w, k, m):
     """``w ← (I + L_front)⁻¹ w`` on a gathered front (``L[t]`` is front column ``t``), four
-    columns at a time."""
+    columns at a time (zero-based inner loops: they vectorize)."""
     k4 = k - k % 4
     for t in range(0, k4, 4):
         l0, l1, l2, l3 = L[t], L[t + 1], L[t + 2], L[t + 3]
@@ -23,12 +23,13 @@ def _forward_front(L, w, k, m):
         a2 = w[t + 2] - l0[t + 2] * a0 - l1[t + 2] * a1
         a3 = w[t + 3] - l0[t + 3] * a0 - l1[t + 3] * a1 - l2[t + 3] * a2
         w[t + 1], w[t + 2], w[t + 3] = a1, a2, a3
-        for i in range(t + 4, m):
-            w[i] -= a0 * l0[i] + a1 * l1[i] + a2 * l2[i] + a3 * l3[i]
+        wv, v0, v1, v2, v3 = w[t + 4 :], l0[t + 4 :], l1[t + 4 :], l2[t + 4 :], l3[t + 4 :]
+        for i in range(m - t - 4):
+            wv[i] -= a0 * v0[i] + a1 * v1[i] + a2 * v2[i] + a3 * v3[i]
     for t in range(k4, k):
-        lt, a0 = L[t], w[t]
-        for i in range(t + 1, m):
-            w[i] -= a0 * lt[i]
+        a0, wv, lt = w[t], w[t + 1 :], L[t, t + 1 :]
+        for i in range(m - t - 1):
+            wv[i] -= a0 * lt[i]
 
 
 @nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
@@ -36,20 +37,21 @@ def _backward_front(L, w, k, m):
     """``w[:k] ← w[:k] - L_frontᵀ w`` solved backwards (``(I + L)ᵀ``), four columns at a time."""
     k4 = k - k % 4
     for t in range(k - 1, k4 - 1, -1):
-        lt = L[t]
+        lt, wv = L[t, t + 1 :], w[t + 1 :]
         acc = 0.0
-        for i in range(t + 1, m):
-            acc += lt[i] * w[i]
+        for i in range(m - t - 1):
+            acc += lt[i] * wv[i]
         w[t] -= acc
     for t in range(k4 - 4, -1, -4):
         l0, l1, l2, l3 = L[t], L[t + 1], L[t + 2], L[t + 3]
+        wv, v0, v1, v2, v3 = w[t + 4 :], l0[t + 4 :], l1[t + 4 :], l2[t + 4 :], l3[t + 4 :]
         a0 = a1 = a2 = a3 = 0.0
-        for i in range(t + 4, m):
-            x = w[i]
-            a0 += l0[i] * x
-            a1 += l1[i] * x
-            a2 += l2[i] * x
-            a3 += l3[i] * x
+        for i in range(m - t - 4):
+            x = wv[i]
+            a0 += v0[i] * x
+            a1 += v1[i] * x
+            a2 += v2[i] * x
+            a3 += v3[i] * x
         x3 = w[t + 3] - a3
         x2 = w[t + 2] - a2 - l2[t + 3] * x3
         x1 = w[t + 1] - a1 - l1[t + 2] * x2 - l1[t + 3] * x3
