@@ -10,6 +10,7 @@ import numba as nb
 import numpy as np
 
 from mbplan.solvers.ldl_pivot import pivoted_front, rotate_pairs
+from mbplan.solvers.numba_borrow import borrowed
 
 SMALL_COLUMNS = 4  # supernodes with at most this many columns are solved without a gathered copy
 _WIDE = 24  # fronts with at least this many rows below the pivot get the 4 x 4 kernels
@@ -380,6 +381,29 @@ def ldl_factor(
     pivots accepted below the threshold. A leaf front flagged ``direct`` (parent ``sparent``)
     subtracts its Schur update from its parent's front itself (``sent``: it did). Returns the
     numbers of positive, negative and perturbed pivots and ``False`` on a breakdown."""
+    vals, amap, sfirst, fptr, loff = (
+        borrowed(vals),
+        borrowed(amap),
+        borrowed(sfirst),
+        borrowed(fptr),
+        borrowed(loff),
+    )
+    uoff, rptr, rel, cptr, child = (
+        borrowed(uoff),
+        borrowed(rptr),
+        borrowed(rel),
+        borrowed(cptr),
+        borrowed(child),
+    )
+    sparent, direct, sent, lbuf, ubuf = (
+        borrowed(sparent),
+        borrowed(direct),
+        borrowed(sent),
+        borrowed(lbuf),
+        borrowed(ubuf),
+    )
+    d, sign, piv, e, spiv = borrowed(d), borrowed(sign), borrowed(piv), borrowed(e), borrowed(spiv)
+    eptr, eidx, save, stats = borrowed(eptr), borrowed(eidx), borrowed(save), borrowed(stats)
     lbuf[:] = 0.0
     for q in range(vals.shape[0]):
         lbuf[amap[q]] += vals[q]

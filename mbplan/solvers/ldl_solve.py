@@ -9,6 +9,7 @@ import numba as nb
 import numpy as np
 
 from mbplan.solvers.ldl_kernels import SMALL_COLUMNS
+from mbplan.solvers.numba_borrow import borrowed
 
 
 @nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
@@ -59,6 +60,79 @@ def _backward_front(L, w, k, m):
         w[t + 1], w[t + 2], w[t + 3] = x1, x2, x3
 
 
+@nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy", inline="always")
+def _forward_small(y, rows, lbuf, f, fp, lo, k, m):
+    """The forward pass of an unpivoted supernode with ``k <= SMALL_COLUMNS`` columns on flat
+    indices: its own block, then each row below updated once by all its columns (one exit:
+    numba then drops the arrays' reference counting from the inlined code)."""
+    l1, l2, l3 = lo + m, lo + 2 * m, lo + 3 * m
+    y0 = y[f]
+    if k == 1:
+        for i in range(1, m):
+            y[rows[fp + i]] -= lbuf[lo + i] * y0
+    elif k == 2:
+        y1 = y[f + 1] - lbuf[lo + 1] * y0
+        y[f + 1] = y1
+        for i in range(2, m):
+            y[rows[fp + i]] -= lbuf[lo + i] * y0 + lbuf[l1 + i] * y1
+    elif k == 3:
+        y1 = y[f + 1] - lbuf[lo + 1] * y0
+        y2 = y[f + 2] - lbuf[lo + 2] * y0 - lbuf[l1 + 2] * y1
+        y[f + 1], y[f + 2] = y1, y2
+        for i in range(3, m):
+            y[rows[fp + i]] -= lbuf[lo + i] * y0 + lbuf[l1 + i] * y1 + lbuf[l2 + i] * y2
+    else:
+        y1 = y[f + 1] - lbuf[lo + 1] * y0
+        y2 = y[f + 2] - lbuf[lo + 2] * y0 - lbuf[l1 + 2] * y1
+        y3 = y[f + 3] - lbuf[lo + 3] * y0 - lbuf[l1 + 3] * y1 - lbuf[l2 + 3] * y2
+        y[f + 1], y[f + 2], y[f + 3] = y1, y2, y3
+        for i in range(4, m):
+            y[rows[fp + i]] -= (
+                lbuf[lo + i] * y0 + lbuf[l1 + i] * y1 + lbuf[l2 + i] * y2 + lbuf[l3 + i] * y3
+            )
+
+
+@nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy", inline="always")
+def _backward_small(y, rows, lbuf, f, fp, lo, k, m):
+    """The backward pass of an unpivoted supernode with ``k <= SMALL_COLUMNS`` columns: each
+    row below read once for all its columns, then its own block (one exit, as above)."""
+    l1, l2, l3 = lo + m, lo + 2 * m, lo + 3 * m
+    a0 = a1 = a2 = a3 = 0.0
+    if k == 1:
+        for i in range(1, m):
+            a0 += lbuf[lo + i] * y[rows[fp + i]]
+    elif k == 2:
+        for i in range(2, m):
+            x = y[rows[fp + i]]
+            a0 += lbuf[lo + i] * x
+            a1 += lbuf[l1 + i] * x
+        y[f + 1] -= a1
+        a0 += lbuf[lo + 1] * y[f + 1]
+    elif k == 3:
+        for i in range(3, m):
+            x = y[rows[fp + i]]
+            a0 += lbuf[lo + i] * x
+            a1 += lbuf[l1 + i] * x
+            a2 += lbuf[l2 + i] * x
+        y2 = y[f + 2] - a2
+        y1 = y[f + 1] - a1 - lbuf[l1 + 2] * y2
+        y[f + 2], y[f + 1] = y2, y1
+        a0 += lbuf[lo + 1] * y1 + lbuf[lo + 2] * y2
+    else:
+        for i in range(4, m):
+            x = y[rows[fp + i]]
+            a0 += lbuf[lo + i] * x
+            a1 += lbuf[l1 + i] * x
+            a2 += lbuf[l2 + i] * x
+            a3 += lbuf[l3 + i] * x
+        y3 = y[f + 3] - a3
+        y2 = y[f + 2] - a2 - lbuf[l2 + 3] * y3
+        y1 = y[f + 1] - a1 - lbuf[l1 + 2] * y2 - lbuf[l1 + 3] * y3
+        y[f + 3], y[f + 2], y[f + 1] = y3, y2, y1
+        a0 += lbuf[lo + 1] * y1 + lbuf[lo + 2] * y2 + lbuf[lo + 3] * y3
+    y[f] -= a0
+
+
 @nb.njit(cache=True, fastmath={"contract", "reassoc"}, error_model="numpy")
 def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv):
     """``x = K⁻¹ b`` with the factorization, into ``x`` (``y``: length ``n``, ``w``: the
@@ -75,12 +149,7 @@ def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spi
         k = sfirst[s + 1] - f
         m = fptr[s + 1] - fp
         if k <= SMALL_COLUMNS and not spiv[s]:  # flat indexing: no views for the many small ones
-            for t in range(k):
-                yt = y[f + t]
-                if yt != 0.0:
-                    c = lo + t * m
-                    for i in range(t + 1, m):
-                        y[rows[fp + i]] -= lbuf[c + i] * yt
+            _forward_small(y, rows, lbuf, f, fp, lo, k, m)
             continue
         L = lbuf[lo : lo + k * m].reshape(k, m)
         if spiv[s]:
@@ -113,12 +182,7 @@ def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spi
         k = sfirst[s + 1] - f
         m = fptr[s + 1] - fp
         if k <= SMALL_COLUMNS and not spiv[s]:
-            for t in range(k - 1, -1, -1):
-                c = lo + t * m
-                acc = 0.0
-                for i in range(t + 1, m):
-                    acc += lbuf[c + i] * y[rows[fp + i]]
-                y[f + t] -= acc
+            _backward_small(y, rows, lbuf, f, fp, lo, k, m)
             continue
         L = lbuf[lo : lo + k * m].reshape(k, m)
         for i in range(k):
@@ -171,17 +235,38 @@ def _ratio(nrm_r, nrm_x, nrm_b):
 
 @nb.njit(cache=True, error_model="numpy")
 def refined_solve(
-    b, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv, wmax, indptr, indices, data,
+    b, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv, indptr, indices, data, work,
     max_refinement, ratio_max,
 ):  # fmt: skip
     """Solve ``K x = b`` with the factorization of the regularized ``K`` and iterative
     refinement against ``K`` (full CSR arrays ``indptr, indices, data``): at least
     one (IPOPT's default) and at most ``max_refinement`` steps, stopping at a residual ratio
-    ``<= ratio_max`` or when a step does not reduce it. Returns ``x`` and the ratio."""
+    ``<= ratio_max`` or when a step does not reduce it. ``work``: ``6 n`` plus the largest
+    front. Returns ``x`` (a new array) and the ratio."""
     n = b.shape[0]
-    y, w = np.empty(n), np.empty(wmax)
-    sol, cand, dx = np.empty(n), np.empty(n), np.empty(n)
-    resid, cand_resid = np.empty(n), np.empty(n)
+    b, perm, sfirst, fptr, rows = (
+        borrowed(b),
+        borrowed(perm),
+        borrowed(sfirst),
+        borrowed(fptr),
+        borrowed(rows),
+    )
+    loff, lbuf, d, piv, e, spiv = (
+        borrowed(loff),
+        borrowed(lbuf),
+        borrowed(d),
+        borrowed(piv),
+        borrowed(e),
+        borrowed(spiv),
+    )
+    indptr, indices, data, work = (
+        borrowed(indptr),
+        borrowed(indices),
+        borrowed(data),
+        borrowed(work),
+    )
+    y, sol, cand, dx = work[:n], work[n : 2 * n], work[2 * n : 3 * n], work[3 * n : 4 * n]
+    resid, cand_resid, w = work[4 * n : 5 * n], work[5 * n : 6 * n], work[6 * n :]
     nrm_b = _max_abs(b)
     _solve_into(b, sol, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv)
     nrm_r, nrm_x = _residual_into(indptr, indices, data, b, sol, resid)
@@ -199,7 +284,7 @@ def refined_solve(
         sol, cand = cand, sol
         resid, cand_resid = cand_resid, resid
         ratio = cand_ratio
-    return sol, ratio
+    return sol.copy(), ratio
 
 
 SOLVE_KERNELS = (refined_solve,)  # compiled entry points (for the cache check)

@@ -229,6 +229,42 @@ def _assembly_maps(n, sfirst, fptr, rows, sparent, snode, hi, lo):
     return loff, uoff, amap, rptr, rel, cptr, child
 
 
+def _merge_leaf_siblings(
+    perm: np.ndarray, sfirst: np.ndarray, fptr: np.ndarray, rows: np.ndarray, sparent: np.ndarray
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Leaf supernodes of one parent with the same rows below their columns merged into one
+    supernode of at most ``DIRECT_COLUMNS`` columns (siblings share no entry of L, so the
+    merged front adds only the zeros between their columns): the new elimination order (a
+    topological order of the same elimination tree, so the same fill) and supernode
+    partition, or ``None`` when nothing merges."""
+    ns = len(sfirst) - 1
+    k = np.diff(sfirst)
+    leaf = (np.bincount(sparent[sparent >= 0], minlength=ns) == 0) & (sparent >= 0)
+    groups: dict[tuple[int, bytes], list[int]] = {}
+    for s in np.flatnonzero(leaf & (k < DIRECT_COLUMNS)):
+        key = (int(sparent[s]), rows[fptr[s] + k[s] : fptr[s + 1]].tobytes())
+        groups.setdefault(key, []).append(int(s))
+    label = np.arange(ns)  # the supernode each one is emitted with (its group's last member)
+    merged = False
+    for members in groups.values():
+        start, cols = 0, 0
+        for q, s in enumerate([*members, -1]):
+            if s == -1 or cols + k[s] > DIRECT_COLUMNS:  # close the group members[start:q]
+                if q - start > 1:
+                    label[members[start:q]] = members[q - 1]
+                    merged = True
+                start, cols = q, 0
+            if s != -1:
+                cols += k[s]
+    if not merged:
+        return None
+    order = np.argsort(label, kind="stable")  # supernodes in emission order
+    cols = np.concatenate([np.arange(sfirst[s], sfirst[s + 1]) for s in order])
+    first = np.r_[True, label[order][1:] != label[order][:-1]]
+    new_first = np.r_[np.cumsum(np.r_[0, k[order]])[:-1][first], len(perm)]
+    return perm[cols], new_first.astype(np.int64)
+
+
 class Analysis:
     """Symbolic analysis of a pattern (lower entries ``rows >= cols``, full diagonal) for the
     elimination order ``perm``: read-only arrays shared by every factorization of the pattern."""
@@ -243,9 +279,18 @@ class Analysis:
         pinv[perm] = np.arange(n)
         ptr, idx, hi, lo = _upper_csc(n, pinv, rows, cols)
         parent = _etree(n, ptr, idx)
-        self.n, self.perm = n, perm
         self.sfirst, self.nnz_l = _supernodes(n, ptr, idx, parent)
         self.fptr, self.rows, self.sparent, snode = _front_rows(n, ptr, idx, parent, self.sfirst)
+        siblings = _merge_leaf_siblings(perm, self.sfirst, self.fptr, self.rows, self.sparent)
+        if siblings is not None:
+            perm, self.sfirst = siblings
+            pinv[perm] = np.arange(n)
+            ptr, idx, hi, lo = _upper_csc(n, pinv, rows, cols)
+            parent = _etree(n, ptr, idx)
+            self.fptr, self.rows, self.sparent, snode = _front_rows(
+                n, ptr, idx, parent, self.sfirst
+            )
+        self.n, self.perm = n, perm
         (self.loff, self.uoff, self.amap, self.rptr, self.rel, self.cptr, self.child) = (
             _assembly_maps(n, self.sfirst, self.fptr, self.rows, self.sparent, snode, hi, lo)
         )

@@ -67,6 +67,7 @@ class SupernodalLDL:
         self._save = np.empty(0)  # work array of pivoted fronts, and the entries of each front:
         self._eptr = np.zeros(len(analysis.loff), np.int64)
         self._eidx = np.zeros(0, np.int64)
+        self._work = np.empty(6 * analysis.n + analysis.wmax)  # the refined solve's
         self.blas_rows = BLAS_FRONT_ROWS if blas_rows is None else blas_rows
         k, m = np.diff(analysis.sfirst), np.diff(analysis.fptr)
         self.uses_blas = bool(np.any((m - k >= self.blas_rows) & (k >= BLAS_PIVOTS)))
@@ -110,6 +111,6 @@ class SupernodalLDL:
         a = self.a
         return refined_solve(
             np.ascontiguousarray(b, dtype=np.float64), a.perm, a.sfirst, a.fptr, a.rows,
-            a.loff, self.lbuf, self.d, self.piv, self.e, self.spiv, a.wmax, indptr, indices, data,
-            max_refinement, ratio_max,
+            a.loff, self.lbuf, self.d, self.piv, self.e, self.spiv, indptr, indices, data,
+            self._work, max_refinement, ratio_max,
         )  # fmt: skip
