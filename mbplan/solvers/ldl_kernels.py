@@ -12,6 +12,7 @@ import numpy as np
 from mbplan.solvers.ldl_pivot import pivoted_front, rotate_pairs
 from mbplan.solvers.numba_borrow import borrowed
 
+U64 = nb.uint64  # unsigned flat indices: no negative-index wraparound code in the loops
 SMALL_COLUMNS = 4  # supernodes with at most this many columns are solved without a gathered copy
 _WIDE = 24  # fronts with at least this many rows below the pivot get the 4 x 4 kernels
 BLAS_PIVOTS = 8  # the BLAS update needs at least this many pivot columns to pay for its copy
@@ -209,7 +210,7 @@ def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta, schur):
             coef = lbuf[cp + t] * d[f + p]
             if coef != 0.0:
                 for i in range(t, m):
-                    lbuf[ct + i] -= coef * lbuf[cp + i]
+                    lbuf[U64(ct + i)] -= coef * lbuf[U64(cp + i)]
         dt = lbuf[ct + t]
         if not np.isfinite(dt):
             return npos, nneg, 1
@@ -226,7 +227,7 @@ def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta, schur):
             continue
         inv = 1.0 / dt
         for i in range(t + 1, m):
-            lbuf[ct + i] *= inv
+            lbuf[U64(ct + i)] *= inv
         if schur:
             _small_update(lbuf, ubuf, k, m, ct, uo, dt)
     if u > 0.0 and schur:  # the Schur update once every pivot has passed
@@ -242,9 +243,9 @@ def _small_update(lbuf, ubuf, k, m, ct, uo, dt):
     for b in range(r):
         coef = lbuf[ct + k + b] * dt
         if coef != 0.0:
-            ub = uo + b * r
+            ub, lb = uo + b * r, ct + k
             for a in range(b, r):
-                ubuf[ub + a] -= coef * lbuf[ct + k + a]
+                ubuf[U64(ub + a)] -= coef * lbuf[U64(lb + a)]
 
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
@@ -305,10 +306,13 @@ def _schur(L, df, k, U, blas_rows):
 def _direct_update(c, p, sfirst, fptr, loff, uoff, rptr, rel, lbuf, ubuf, d, pivot_only):
     """Subtract the Schur update ``Σ_t d_t l_t l_tᵀ`` of the factorized leaf front ``c``
     (``k <= DIRECT_COLUMNS`` pivot columns) from its parent ``p``'s front: its pivot columns
-    in ``lbuf`` and (unless ``pivot_only``) its update matrix in ``ubuf``."""
+    in ``lbuf`` and (unless ``pivot_only``) its update matrix in ``ubuf``. Unsigned indices:
+    no negative-index wraparound in the scatter loops."""
     f = sfirst[c]
     k, m = sfirst[c + 1] - f, fptr[c + 1] - fptr[c]
-    lo, r = loff[c] + k, m - k  # l_t[a] (row k + a of front column t): lbuf[lo + t m + a]
+    r = m - k
+    l0 = loff[c] + k  # l_t[a] (row k + a of front column t): lbuf[l0 + t m + a]
+    l1, l2, l3 = l0 + m, l0 + 2 * m, l0 + 3 * m
     pk = sfirst[p + 1] - sfirst[p]
     pm = fptr[p + 1] - fptr[p]
     rp = rptr[c]
@@ -320,18 +324,30 @@ def _direct_update(c, p, sfirst, fptr, loff, uoff, rptr, rel, lbuf, ubuf, d, piv
             break  # rel increases: the remaining rows are all in the update matrix
         else:
             out, dst = ubuf, uoff[p] + (col - pk) * (pm - pk) - pk
-        c0 = lbuf[lo + bb] * d[f]
+        c0 = lbuf[l0 + bb] * d[f]
         if k == 1:
             for aa in range(bb, r):
-                out[dst + rel[rp + aa]] -= c0 * lbuf[lo + aa]
-            continue
-        c1 = lbuf[lo + m + bb] * d[f + 1]
-        for aa in range(bb, r):
-            out[dst + rel[rp + aa]] -= c0 * lbuf[lo + aa] + c1 * lbuf[lo + m + aa]
-        for t in range(2, k):
-            ct = lbuf[lo + t * m + bb] * d[f + t]
+                out[U64(dst + rel[U64(rp + aa)])] -= c0 * lbuf[U64(l0 + aa)]
+        elif k == 2:
+            c1 = lbuf[l1 + bb] * d[f + 1]
             for aa in range(bb, r):
-                out[dst + rel[rp + aa]] -= ct * lbuf[lo + t * m + aa]
+                out[U64(dst + rel[U64(rp + aa)])] -= (
+                    c0 * lbuf[U64(l0 + aa)] + c1 * lbuf[U64(l1 + aa)]
+                )
+        elif k == 3:
+            c1, c2 = lbuf[l1 + bb] * d[f + 1], lbuf[l2 + bb] * d[f + 2]
+            for aa in range(bb, r):
+                out[U64(dst + rel[U64(rp + aa)])] -= (
+                    c0 * lbuf[U64(l0 + aa)] + c1 * lbuf[U64(l1 + aa)] + c2 * lbuf[U64(l2 + aa)]
+                )
+        else:
+            c1, c2 = lbuf[l1 + bb] * d[f + 1], lbuf[l2 + bb] * d[f + 2]
+            c3 = lbuf[l3 + bb] * d[f + 3]
+            for aa in range(bb, r):
+                out[U64(dst + rel[U64(rp + aa)])] -= (
+                    c0 * lbuf[U64(l0 + aa)] + c1 * lbuf[U64(l1 + aa)] + c2 * lbuf[U64(l2 + aa)]
+                    + c3 * lbuf[U64(l3 + aa)]
+                )  # fmt: skip
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -358,11 +374,11 @@ def _assemble_children(
             if col < k:  # into a pivot column of the front
                 dst = lo + col * m
                 for aa in range(bb, rc):
-                    lbuf[dst + rel[rp + aa]] += ubuf[src + aa]
+                    lbuf[U64(dst + rel[U64(rp + aa)])] += ubuf[U64(src + aa)]
             elif not pivot_only:  # into the front's own update matrix
                 dst = uo + (col - k) * r - k
                 for aa in range(bb, rc):
-                    ubuf[dst + rel[rp + aa]] += ubuf[src + aa]
+                    ubuf[U64(dst + rel[U64(rp + aa)])] += ubuf[U64(src + aa)]
 
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
@@ -406,7 +422,7 @@ def ldl_factor(
     eptr, eidx, save, stats = borrowed(eptr), borrowed(eidx), borrowed(save), borrowed(stats)
     lbuf[:] = 0.0
     for q in range(vals.shape[0]):
-        lbuf[amap[q]] += vals[q]
+        lbuf[U64(amap[q])] += vals[q]
     stats[:] = 0
     npos = nneg = npert = 0
     kmax = 1

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from mbplan.solvers.ldl_kernels import SMALL_COLUMNS
+from mbplan.solvers.ldl_kernels import SMALL_COLUMNS, U64
 from mbplan.solvers.numba_borrow import borrowed
 
 
@@ -69,26 +69,31 @@ def _forward_small(y, rows, lbuf, f, fp, lo, k, m):
     y0 = y[f]
     if k == 1:
         for i in range(1, m):
-            y[rows[fp + i]] -= lbuf[lo + i] * y0
+            y[U64(rows[U64(fp + i)])] -= lbuf[U64(lo + i)] * y0
     elif k == 2:
         y1 = y[f + 1] - lbuf[lo + 1] * y0
         y[f + 1] = y1
         for i in range(2, m):
-            y[rows[fp + i]] -= lbuf[lo + i] * y0 + lbuf[l1 + i] * y1
+            y[U64(rows[U64(fp + i)])] -= lbuf[U64(lo + i)] * y0 + lbuf[U64(l1 + i)] * y1
     elif k == 3:
         y1 = y[f + 1] - lbuf[lo + 1] * y0
         y2 = y[f + 2] - lbuf[lo + 2] * y0 - lbuf[l1 + 2] * y1
         y[f + 1], y[f + 2] = y1, y2
         for i in range(3, m):
-            y[rows[fp + i]] -= lbuf[lo + i] * y0 + lbuf[l1 + i] * y1 + lbuf[l2 + i] * y2
+            y[U64(rows[U64(fp + i)])] -= (
+                lbuf[U64(lo + i)] * y0 + lbuf[U64(l1 + i)] * y1 + lbuf[U64(l2 + i)] * y2
+            )
     else:
         y1 = y[f + 1] - lbuf[lo + 1] * y0
         y2 = y[f + 2] - lbuf[lo + 2] * y0 - lbuf[l1 + 2] * y1
         y3 = y[f + 3] - lbuf[lo + 3] * y0 - lbuf[l1 + 3] * y1 - lbuf[l2 + 3] * y2
         y[f + 1], y[f + 2], y[f + 3] = y1, y2, y3
         for i in range(4, m):
-            y[rows[fp + i]] -= (
-                lbuf[lo + i] * y0 + lbuf[l1 + i] * y1 + lbuf[l2 + i] * y2 + lbuf[l3 + i] * y3
+            y[U64(rows[U64(fp + i)])] -= (
+                lbuf[U64(lo + i)] * y0
+                + lbuf[U64(l1 + i)] * y1
+                + lbuf[U64(l2 + i)] * y2
+                + lbuf[U64(l3 + i)] * y3
             )
 
 
@@ -100,31 +105,31 @@ def _backward_small(y, rows, lbuf, f, fp, lo, k, m):
     a0 = a1 = a2 = a3 = 0.0
     if k == 1:
         for i in range(1, m):
-            a0 += lbuf[lo + i] * y[rows[fp + i]]
+            a0 += lbuf[U64(lo + i)] * y[U64(rows[U64(fp + i)])]
     elif k == 2:
         for i in range(2, m):
-            x = y[rows[fp + i]]
-            a0 += lbuf[lo + i] * x
-            a1 += lbuf[l1 + i] * x
+            x = y[U64(rows[U64(fp + i)])]
+            a0 += lbuf[U64(lo + i)] * x
+            a1 += lbuf[U64(l1 + i)] * x
         y[f + 1] -= a1
         a0 += lbuf[lo + 1] * y[f + 1]
     elif k == 3:
         for i in range(3, m):
-            x = y[rows[fp + i]]
-            a0 += lbuf[lo + i] * x
-            a1 += lbuf[l1 + i] * x
-            a2 += lbuf[l2 + i] * x
+            x = y[U64(rows[U64(fp + i)])]
+            a0 += lbuf[U64(lo + i)] * x
+            a1 += lbuf[U64(l1 + i)] * x
+            a2 += lbuf[U64(l2 + i)] * x
         y2 = y[f + 2] - a2
         y1 = y[f + 1] - a1 - lbuf[l1 + 2] * y2
         y[f + 2], y[f + 1] = y2, y1
         a0 += lbuf[lo + 1] * y1 + lbuf[lo + 2] * y2
     else:
         for i in range(4, m):
-            x = y[rows[fp + i]]
-            a0 += lbuf[lo + i] * x
-            a1 += lbuf[l1 + i] * x
-            a2 += lbuf[l2 + i] * x
-            a3 += lbuf[l3 + i] * x
+            x = y[U64(rows[U64(fp + i)])]
+            a0 += lbuf[U64(lo + i)] * x
+            a1 += lbuf[U64(l1 + i)] * x
+            a2 += lbuf[U64(l2 + i)] * x
+            a3 += lbuf[U64(l3 + i)] * x
         y3 = y[f + 3] - a3
         y2 = y[f + 2] - a2 - lbuf[l2 + 3] * y3
         y1 = y[f + 1] - a1 - lbuf[l1 + 2] * y2 - lbuf[l1 + 3] * y3
@@ -143,7 +148,7 @@ def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spi
     n = b.shape[0]
     ns = sfirst.shape[0] - 1
     for i in range(n):
-        y[i] = b[perm[i]]
+        y[i] = b[U64(perm[i])]
     for s in range(ns):
         f, fp, lo = sfirst[s], fptr[s], loff[s]
         k = sfirst[s + 1] - f
@@ -164,7 +169,7 @@ def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spi
         for i in range(k):
             y[f + i] = w[i]
         for i in range(k, m):
-            y[rows[fp + i]] += w[i]
+            y[U64(rows[U64(fp + i)])] += w[i]
     i = 0
     while i < n:
         if e[i] == 0.0:
@@ -188,7 +193,7 @@ def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spi
         for i in range(k):
             w[i] = y[f + i]
         for i in range(k, m):
-            w[i] = y[rows[fp + i]]
+            w[i] = y[U64(rows[U64(fp + i)])]
         _backward_front(L, w, k, m)
         if spiv[s]:
             for i in range(k):
@@ -197,7 +202,7 @@ def _solve_into(b, x, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spi
             for i in range(k):
                 y[f + i] = w[i]
     for i in range(n):
-        x[perm[i]] = y[i]
+        x[U64(perm[i])] = y[i]
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -207,7 +212,7 @@ def _residual_into(indptr, indices, data, b, x, r):
     for i in range(b.shape[0]):
         acc = 0.0
         for e in range(indptr[i], indptr[i + 1]):
-            acc += data[e] * x[indices[e]]
+            acc += data[U64(e)] * x[U64(indices[U64(e)])]
         r[i] = b[i] - acc
     return _max_abs(r), _max_abs(x)
 
