@@ -16,7 +16,7 @@ import numpy as np
 
 DIRECT_COLUMNS = 4
 """Leaf supernodes with at most this many columns update their parent's front directly (no
-update matrix of their own)."""
+update matrix of their own; the kernels handle 1 to 4)."""
 
 
 @nb.njit(cache=True)
