@@ -14,7 +14,7 @@ import pytest
 import scipy.sparse as sp
 from test_linear_solver import CASES, _dense, _kkt_blocks
 
-from mbplan.solvers import ldl_symbolic, linear_solver
+from mbplan.solvers import ldl_layout, linear_solver
 from mbplan.solvers.linear_solver import KKTSystem
 from mbplan.solvers.numba_borrow import borrowed
 
@@ -61,7 +61,7 @@ def _without_small_front_paths(monkeypatch):
     update matrix)."""
     monkeypatch.setattr(linear_solver, "_ANALYSES", OrderedDict())
     monkeypatch.setattr(linear_solver, "_PATTERNS", OrderedDict())
-    monkeypatch.setattr(ldl_symbolic, "DIRECT_COLUMNS", 0)
+    monkeypatch.setattr(ldl_layout, "DIRECT_COLUMNS", 0)
 
 
 @pytest.mark.parametrize("case", [*CASES[2:], "control"])
@@ -183,3 +183,33 @@ def test_borrowed_view_shares_the_data():
     x = np.arange(4.0)
     assert _write_through(x, -1.0) == (4, 0.0)
     np.testing.assert_array_equal(x, [0.0, -1.0, -1.0, -1.0])
+
+
+@pytest.mark.parametrize("case", [*CASES[1:], "control"])
+def test_update_matrices_alive_at_once_do_not_share_memory(case):
+    """Each update matrix lives from its first direct child's step (or its own) to its
+    parent's; any two alive at a common step occupy disjoint parts of the buffer, every one
+    inside it, and every one is zeroed when it starts."""
+    rng = np.random.default_rng(3)
+    blocks = _control_blocks(rng) if case == "control" else _kkt_blocks(rng, *case)
+    kkt = KKTSystem(*(b.shape[0] for b in blocks))
+    kkt.set_matrices(*blocks)
+    a = kkt.analysis
+    ns = len(a.sfirst) - 1
+    size = (np.diff(a.fptr) - np.diff(a.sfirst)) ** 2
+    start = np.arange(ns)
+    for s in range(ns):
+        if a.direct[s]:
+            start[a.sparent[s]] = min(start[a.sparent[s]], s)
+    end = np.where(a.sparent >= 0, a.sparent, np.arange(ns))
+    live = np.flatnonzero(size > 0)
+    assert np.all(a.uoff[live] + size[live] <= a.uoff[-1])
+    if len(live) > 20:
+        assert a.uoff[-1] < size.sum()  # memory is reused
+    for i, s in enumerate(live):
+        for t in live[:i]:
+            if start[s] <= end[t] and start[t] <= end[s]:
+                assert a.uoff[s] + size[s] <= a.uoff[t] or a.uoff[t] + size[t] <= a.uoff[s]
+    zeroed = a.zero_at[a.zero_at >= 0]
+    np.testing.assert_array_equal(np.sort(zeroed), np.flatnonzero(~a.direct))
+    np.testing.assert_array_equal(np.flatnonzero(a.zero_at >= 0), np.sort(start[~a.direct]))

@@ -302,6 +302,14 @@ def _schur(L, df, k, U, blas_rows):
         _schur_update2(L, df, k, U)
 
 
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _zero_upper(ubuf, uo, r):
+    """Zero the entries ``a >= b`` of the ``r × r`` update matrix at ``ubuf[uo]`` (the others are
+    never read)."""
+    for b in range(r):
+        ubuf[uo + b * r + b : uo + (b + 1) * r] = 0.0
+
+
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
 def _direct_update(c, p, sfirst, fptr, loff, uoff, rptr, rel, lbuf, ubuf, d, pivot_only):
     """Subtract the Schur update ``Σ_t d_t l_t l_tᵀ`` of the factorized leaf front ``c``
@@ -383,8 +391,8 @@ def _assemble_children(
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
 def ldl_factor(
-    vals, amap, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, sparent, direct, sent, lbuf,
-    ubuf, d, blas_rows, u, delta, sign, piv, e, spiv, eptr, eidx, save, stats,
+    vals, amap, sfirst, fptr, loff, uoff, zero_at, rptr, rel, cptr, child, sparent, direct, sent,
+    lbuf, ubuf, d, blas_rows, u, delta, sign, piv, e, spiv, eptr, eidx, save, stats,
 ):  # fmt: skip
     """Multifrontal ``LDLᵀ``. Fronts with at least ``blas_rows`` update rows (and
     ``BLAS_PIVOTS`` pivot columns) get their Schur update from BLAS. ``u = 0``: no pivoting, a
@@ -404,8 +412,9 @@ def ldl_factor(
         borrowed(fptr),
         borrowed(loff),
     )
-    uoff, rptr, rel, cptr, child = (
+    uoff, zero_at, rptr, rel, cptr, child = (
         borrowed(uoff),
+        borrowed(zero_at),
         borrowed(rptr),
         borrowed(rel),
         borrowed(cptr),
@@ -435,12 +444,9 @@ def ldl_factor(
         m = fptr[s + 1] - fptr[s]
         r = m - k
         lo, uo = loff[s], uoff[s]
-        p = sparent[s]
-        if p != -1 and child[cptr[p]] == s:  # the first child: direct children write into it
-            ur = fptr[p + 1] - fptr[p] - sfirst[p + 1] + sfirst[p]
-            ubuf[uoff[p] : uoff[p] + ur * ur] = 0.0
-        if cptr[s] == cptr[s + 1] and not direct[s]:
-            ubuf[uo : uo + r * r] = 0.0
+        p, z = sparent[s], zero_at[s]
+        if z != -1:  # an update matrix starts (its own, or its parent's for direct children)
+            _zero_upper(ubuf, uoff[z], fptr[z + 1] - fptr[z] - sfirst[z + 1] + sfirst[z])
         _assemble_children(
             s, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, sent, lbuf, ubuf, d, False
         )  # fmt: skip
@@ -450,8 +456,8 @@ def ldl_factor(
             if status == 0:
                 _direct_update(s, p, sfirst, fptr, loff, uoff, rptr, rel, lbuf, ubuf, d, False)
                 sent[s] = True
-            else:
-                ubuf[uo : uo + r * r] = 0.0  # the pivoted path below computes its update matrix
+            else:  # the pivoted path below computes its update matrix
+                _zero_upper(ubuf, uo, r)
         elif k <= SMALL_COLUMNS:  # few pivot columns: plain loops on flat indices (no views)
             ip, ineg, status = _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta, True)
         else:

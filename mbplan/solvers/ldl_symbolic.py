@@ -14,9 +14,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-DIRECT_COLUMNS = 4
-"""Leaf supernodes with at most this many columns update their parent's front directly (no
-update matrix of their own; the kernels handle 1 to 4)."""
+from mbplan.solvers import ldl_layout
 
 
 @nb.njit(cache=True)
@@ -187,13 +185,11 @@ def _assembly_maps(n, sfirst, fptr, rows, sparent, snode, hi, lo):
     supernode and the positions of a child's update rows in its parent's front."""
     ns = sfirst.shape[0] - 1
     loff = np.zeros(ns + 1, np.int64)
-    uoff = np.zeros(ns + 1, np.int64)
     rptr = np.zeros(ns + 1, np.int64)
     for s in range(ns):
         k = sfirst[s + 1] - sfirst[s]
         m = fptr[s + 1] - fptr[s]
         loff[s + 1] = loff[s] + k * m
-        uoff[s + 1] = uoff[s] + (m - k) * (m - k)
         rptr[s + 1] = rptr[s] + m - k
     pos = np.full(n, -1, np.int64)
     amap = np.empty(hi.shape[0], np.int64)
@@ -226,43 +222,7 @@ def _assembly_maps(n, sfirst, fptr, rows, sparent, snode, hi, lo):
             k = sfirst[c + 1] - sfirst[c]
             for q in range(rptr[c + 1] - rptr[c]):
                 rel[rptr[c] + q] = pos[rows[fptr[c] + k + q]]
-    return loff, uoff, amap, rptr, rel, cptr, child
-
-
-def _merge_leaf_siblings(
-    perm: np.ndarray, sfirst: np.ndarray, fptr: np.ndarray, rows: np.ndarray, sparent: np.ndarray
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Leaf supernodes of one parent with the same rows below their columns merged into one
-    supernode of at most ``DIRECT_COLUMNS`` columns (siblings share no entry of L, so the
-    merged front adds only the zeros between their columns): the new elimination order (a
-    topological order of the same elimination tree, so the same fill) and supernode
-    partition, or ``None`` when nothing merges."""
-    ns = len(sfirst) - 1
-    k = np.diff(sfirst)
-    leaf = (np.bincount(sparent[sparent >= 0], minlength=ns) == 0) & (sparent >= 0)
-    groups: dict[tuple[int, bytes], list[int]] = {}
-    for s in np.flatnonzero(leaf & (k < DIRECT_COLUMNS)):
-        key = (int(sparent[s]), rows[fptr[s] + k[s] : fptr[s + 1]].tobytes())
-        groups.setdefault(key, []).append(int(s))
-    label = np.arange(ns)  # the supernode each one is emitted with (its group's last member)
-    merged = False
-    for members in groups.values():
-        start, cols = 0, 0
-        for q, s in enumerate([*members, -1]):
-            if s == -1 or cols + k[s] > DIRECT_COLUMNS:  # close the group members[start:q]
-                if q - start > 1:
-                    label[members[start:q]] = members[q - 1]
-                    merged = True
-                start, cols = q, 0
-            if s != -1:
-                cols += k[s]
-    if not merged:
-        return None
-    order = np.argsort(label, kind="stable")  # supernodes in emission order
-    cols = np.concatenate([np.arange(sfirst[s], sfirst[s + 1]) for s in order])
-    first = np.r_[True, label[order][1:] != label[order][:-1]]
-    new_first = np.r_[np.cumsum(np.r_[0, k[order]])[:-1][first], len(perm)]
-    return perm[cols], new_first.astype(np.int64)
+    return loff, amap, rptr, rel, cptr, child
 
 
 class Analysis:
@@ -281,9 +241,9 @@ class Analysis:
         parent = _etree(n, ptr, idx)
         self.sfirst, self.nnz_l = _supernodes(n, ptr, idx, parent)
         self.fptr, self.rows, self.sparent, snode = _front_rows(n, ptr, idx, parent, self.sfirst)
-        siblings = _merge_leaf_siblings(perm, self.sfirst, self.fptr, self.rows, self.sparent)
-        if siblings is not None:
-            perm, self.sfirst = siblings
+        leaves = ldl_layout.leaves_last(perm, self.sfirst, self.fptr, self.rows, self.sparent)
+        if leaves is not None:
+            perm, self.sfirst = leaves
             pinv[perm] = np.arange(n)
             ptr, idx, hi, lo = _upper_csc(n, pinv, rows, cols)
             parent = _etree(n, ptr, idx)
@@ -291,14 +251,17 @@ class Analysis:
                 n, ptr, idx, parent, self.sfirst
             )
         self.n, self.perm = n, perm
-        (self.loff, self.uoff, self.amap, self.rptr, self.rel, self.cptr, self.child) = (
-            _assembly_maps(n, self.sfirst, self.fptr, self.rows, self.sparent, snode, hi, lo)
+        (self.loff, self.amap, self.rptr, self.rel, self.cptr, self.child) = _assembly_maps(
+            n, self.sfirst, self.fptr, self.rows, self.sparent, snode, hi, lo
         )
         # leaves with few pivot columns send their Schur update straight into the parent's front
         self.direct = (
-            (np.diff(self.sfirst) <= DIRECT_COLUMNS)
+            (np.diff(self.sfirst) <= ldl_layout.DIRECT_COLUMNS)
             & (np.diff(self.cptr) == 0)
             & (self.sparent != -1)
+        )
+        self.uoff, self.zero_at = ldl_layout.update_offsets(
+            self.sfirst, self.fptr, self.sparent, self.cptr, self.child, self.direct
         )
         self.wmax = int(np.diff(self.fptr).max(initial=1))
         k, m = np.diff(self.sfirst), np.diff(self.fptr)

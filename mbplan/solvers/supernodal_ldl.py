@@ -94,7 +94,7 @@ class SupernodalLDL:
         if sign is None:
             sign = np.ones(a.n)
         args = (
-            vals, a.amap, a.sfirst, a.fptr, a.loff, a.uoff, a.rptr, a.rel, a.cptr, a.child,
+            vals, a.amap, a.sfirst, a.fptr, a.loff, a.uoff, a.zero_at, a.rptr, a.rel, a.cptr, a.child,
             a.sparent, a.direct, self.sent, self.lbuf, self.ubuf, self.d, self.blas_rows, float(pivot_threshold), float(delta),
             sign, self.piv, self.e, self.spiv, self._eptr, self._eidx,
             self._save if self._save.size else self.d, self.stats,
