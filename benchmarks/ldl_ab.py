@@ -37,8 +37,8 @@ from mbplan.solvers import linear_solver  # noqa: E402
 from mbplan.solvers.reduced_step import ReducedKKTSystem  # noqa: E402
 
 MODULES = (
-    "ordering", "ldl_symbolic", "ldl_pivot", "ldl_kernels", "ldl_solve", "supernodal_ldl",
-    "kkt_scatter", "linear_solver",
+    "ordering", "numba_borrow", "ldl_layout", "ldl_symbolic", "ldl_pivot", "ldl_dense",
+    "ldl_kernels", "ldl_solve", "supernodal_ldl", "kkt_scatter", "linear_solver",
 )  # fmt: skip
 CACHE = Path(tempfile.gettempdir()) / "mbplan-ldl-ab"
 

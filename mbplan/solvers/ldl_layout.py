@@ -56,6 +56,12 @@ def leaves_last(
     return perm[cols], new_first.astype(np.int64)
 
 
+def direct_leaves(sfirst: np.ndarray, cptr: np.ndarray, sparent: np.ndarray) -> np.ndarray:
+    """Which supernodes update their parent's front directly: leaves with a parent and at most
+    ``DIRECT_COLUMNS`` columns."""
+    return (np.diff(sfirst) <= DIRECT_COLUMNS) & (np.diff(cptr) == 0) & (sparent != -1)
+
+
 @nb.njit(cache=True)
 def update_offsets(sfirst, fptr, sparent, cptr, child, direct):
     """Offsets of the update matrices (``r × r`` for a front with ``r`` rows below its pivots)

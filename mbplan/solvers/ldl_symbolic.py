@@ -14,7 +14,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from mbplan.solvers import ldl_layout
+from mbplan.solvers.ldl_layout import direct_leaves, leaves_last, update_offsets
 
 
 @nb.njit(cache=True)
@@ -241,7 +241,7 @@ class Analysis:
         parent = _etree(n, ptr, idx)
         self.sfirst, self.nnz_l = _supernodes(n, ptr, idx, parent)
         self.fptr, self.rows, self.sparent, snode = _front_rows(n, ptr, idx, parent, self.sfirst)
-        leaves = ldl_layout.leaves_last(perm, self.sfirst, self.fptr, self.rows, self.sparent)
+        leaves = leaves_last(perm, self.sfirst, self.fptr, self.rows, self.sparent)
         if leaves is not None:
             perm, self.sfirst = leaves
             pinv[perm] = np.arange(n)
@@ -254,13 +254,8 @@ class Analysis:
         (self.loff, self.amap, self.rptr, self.rel, self.cptr, self.child) = _assembly_maps(
             n, self.sfirst, self.fptr, self.rows, self.sparent, snode, hi, lo
         )
-        # leaves with few pivot columns send their Schur update straight into the parent's front
-        self.direct = (
-            (np.diff(self.sfirst) <= ldl_layout.DIRECT_COLUMNS)
-            & (np.diff(self.cptr) == 0)
-            & (self.sparent != -1)
-        )
-        self.uoff, self.zero_at = ldl_layout.update_offsets(
+        self.direct = direct_leaves(self.sfirst, self.cptr, self.sparent)
+        self.uoff, self.zero_at = update_offsets(
             self.sfirst, self.fptr, self.sparent, self.cptr, self.child, self.direct
         )
         self.wmax = int(np.diff(self.fptr).max(initial=1))
@@ -270,4 +265,6 @@ class Analysis:
         self.nnz_factor = int(np.sum(below) + n)  # L's stored entries (supernodal) with D
 
 
-SYMBOLIC_KERNELS = (_upper_csc, _etree, _postorder, _supernodes, _front_rows, _assembly_maps)
+SYMBOLIC_KERNELS = (
+    _upper_csc, _etree, _postorder, _supernodes, _front_rows, _assembly_maps, update_offsets,
+)  # fmt: skip

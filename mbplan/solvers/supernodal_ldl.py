@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 import threadpoolctl
 
-from mbplan.solvers.ldl_kernels import BLAS_PIVOTS, ldl_factor
+from mbplan.solvers.ldl_dense import BLAS_PIVOTS
+from mbplan.solvers.ldl_kernels import ldl_factor
 from mbplan.solvers.ldl_solve import refined_solve
 from mbplan.solvers.ldl_symbolic import Analysis
 
