@@ -25,32 +25,28 @@ update matrix of their own unless they need pivoting; the kernels handle 1 to 4)
 def leaves_last(
     perm: np.ndarray, sfirst: np.ndarray, fptr: np.ndarray, rows: np.ndarray, sparent: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The elimination order and supernode partition with sibling leaves merged (up to
-    ``DIRECT_COLUMNS`` columns; a leaf joins a sibling whose rows contain its own and are at
-    most twice as many) and every leaf of at most ``DIRECT_COLUMNS`` columns moved right
-    before its parent; ``None`` when there is no such leaf."""
+    """The elimination order and supernode partition with sibling leaves of equal rows merged
+    (up to ``DIRECT_COLUMNS`` columns) and every leaf of at most ``DIRECT_COLUMNS`` columns
+    moved right before its parent; ``None`` when there is no such leaf."""
     ns = len(sfirst) - 1
     k = np.diff(sfirst)
     leaf = (np.bincount(sparent[sparent >= 0], minlength=ns) == 0) & (sparent >= 0)
     small = np.flatnonzero(leaf & (k <= DIRECT_COLUMNS))
     if small.size == 0:
         return None
-    siblings: dict[int, list[int]] = {}
+    groups: dict[tuple[int, bytes], list[int]] = {}
     for s in small:
-        siblings.setdefault(int(sparent[s]), []).append(int(s))
-    group = np.arange(ns)  # each supernode's new supernode (a merged group: its largest member)
-    for members in siblings.values():
-        below = {s: frozenset(rows[fptr[s] + k[s] : fptr[s + 1]].tolist()) for s in members}
-        open_groups: list[list] = []  # [first member, its rows, columns so far]
-        for s in sorted(members, key=lambda s: -len(below[s])):
-            for g in open_groups:
-                fits = g[2] + k[s] <= DIRECT_COLUMNS and 2 * len(below[s]) >= len(g[1])
-                if fits and below[s] <= g[1]:
-                    group[s] = g[0]
-                    g[2] += k[s]
-                    break
-            else:
-                open_groups.append([s, below[s], k[s]])
+        key = (int(sparent[s]), rows[fptr[s] + k[s] : fptr[s + 1]].tobytes())
+        groups.setdefault(key, []).append(int(s))
+    group = np.arange(ns)  # each supernode's new supernode (a merged group: its first member)
+    for members in groups.values():
+        start, cols = 0, 0
+        for q, s in enumerate([*members, -1]):
+            if s == -1 or cols + k[s] > DIRECT_COLUMNS:  # close the group members[start:q]
+                group[members[start:q]] = members[start]
+                start, cols = q, 0
+            if s != -1:
+                cols += k[s]
     position = 2 * np.arange(ns)  # small leaves right before their parent, groups together
     position[small] = 2 * sparent[small] - 1
     order = np.lexsort((np.arange(ns), group, position))
