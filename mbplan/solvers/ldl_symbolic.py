@@ -1,5 +1,6 @@
 """Symbolic analysis of the supernodal LDLᵀ (:mod:`mbplan.solvers.linear_solver`): elimination
-tree, postorder, fundamental supernodes with relaxed amalgamation, front rows and the maps that
+tree, postorder, fundamental supernodes with relaxed amalgamation, small leaves merged and
+moved before their parents (:mod:`mbplan.solvers.ldl_layout`), front rows and the maps that
 place every entry of ``K`` and every child's update matrix in the factor's storage.
 
 Index conventions: ``perm[i]`` is the original index of the i-th pivot, the permuted pattern is
