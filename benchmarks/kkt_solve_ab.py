@@ -35,7 +35,10 @@ MAX_SYSTEMS = 6  # captured KKT systems timed per case (evenly spaced over the s
 METHODS = {"set_matrices": "assembly", "factorize": "factorize", "solve": "solve"}
 
 
-BASELINE_MODULES = ("ldl_pivot", "ldl_kernels", "ldl_solve", "supernodal_ldl", "linear_solver")
+BASELINE_MODULES = (
+    "numba_borrow", "ldl_layout", "ldl_symbolic", "ldl_pivot", "ldl_dense", "ldl_kernels",
+    "ldl_solve", "supernodal_ldl", "kkt_scatter", "linear_solver",
+)  # fmt: skip
 
 
 def baseline_kkt(rev: str) -> type:

@@ -1,7 +1,11 @@
 """Numeric kernels of the supernodal LDLᵀ (:mod:`mbplan.solvers.linear_solver`): the multifrontal
 factorization (counting the pivot signs), unpivoted or with threshold pivoting inside each
-supernode (:mod:`mbplan.solvers.ldl_pivot`), compiled with numba (the solves:
-:mod:`mbplan.solvers.ldl_solve`); storage as described in :mod:`mbplan.solvers.ldl_symbolic`.
+supernode (:mod:`mbplan.solvers.ldl_pivot`), compiled with numba: the loop over the fronts,
+the small fronts' flat kernels and the direct updates of small leaves
+(:mod:`mbplan.solvers.ldl_layout`); the large fronts' dense kernels are in
+:mod:`mbplan.solvers.ldl_dense`, the solves in :mod:`mbplan.solvers.ldl_solve`; storage as
+described in :mod:`mbplan.solvers.ldl_symbolic`. Every kernel works on borrowed arrays
+(:mod:`mbplan.solvers.numba_borrow`) and flat indices cast to unsigned (no wraparound code).
 """
 
 from __future__ import annotations
@@ -9,197 +13,21 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from mbplan.solvers.ldl_dense import _WIDE, _front_columns, _scale_checked, _schur  # noqa: F401
 from mbplan.solvers.ldl_pivot import pivoted_front, rotate_pairs
+from mbplan.solvers.numba_borrow import borrowed
 
+U64 = nb.uint64  # unsigned flat indices: no negative-index wraparound code in the loops
 SMALL_COLUMNS = 4  # supernodes with at most this many columns are solved without a gathered copy
-_WIDE = 24  # fronts with at least this many rows below the pivot get the 4 x 4 kernels
-BLAS_PIVOTS = 8  # the BLAS update needs at least this many pivot columns to pay for its copy
-
-
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _schur_update2(L, d, k, U):
-    """``U[b, a] -= Σ_t L[t, k+b] d_t L[t, k+a]`` for ``a >= b``: two rows of ``U`` and four
-    pivot columns at a time (``L[t]`` is front column ``t``, ``d`` its pivots)."""
-    r = U.shape[0]
-    k4 = k - k % 4
-    for b in range(0, r - 1, 2):
-        u0 = U[b]
-        u1 = U[b + 1]
-        for t in range(0, k4, 4):
-            l0 = L[t, k:]
-            l1 = L[t + 1, k:]
-            l2 = L[t + 2, k:]
-            l3 = L[t + 3, k:]
-            a0, a1, a2, a3 = l0[b] * d[t], l1[b] * d[t + 1], l2[b] * d[t + 2], l3[b] * d[t + 3]
-            b0, b1 = l0[b + 1] * d[t], l1[b + 1] * d[t + 1]
-            b2, b3 = l2[b + 1] * d[t + 2], l3[b + 1] * d[t + 3]
-            if a0 == 0.0 and a1 == 0.0 and a2 == 0.0 and a3 == 0.0:
-                if b0 == 0.0 and b1 == 0.0 and b2 == 0.0 and b3 == 0.0:
-                    continue
-            for a in range(b, r):
-                x0, x1, x2, x3 = l0[a], l1[a], l2[a], l3[a]
-                u0[a] -= a0 * x0 + a1 * x1 + a2 * x2 + a3 * x3
-                u1[a] -= b0 * x0 + b1 * x1 + b2 * x2 + b3 * x3
-        for t in range(k4, k):
-            lt = L[t, k:]
-            a0, b0 = lt[b] * d[t], lt[b + 1] * d[t]
-            for a in range(b, r):
-                u0[a] -= a0 * lt[a]
-                u1[a] -= b0 * lt[a]
-    if r % 2 == 1:
-        for t in range(k):
-            x = L[t, k + r - 1]
-            U[r - 1, r - 1] -= x * d[t] * x
-
-
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _schur_update4(L, d, k, U):
-    """``U[b, a] -= Σ_t L[t, k+b] d_t L[t, k+a]`` for ``a >= b``: four rows of ``U`` and four
-    pivot columns at a time (``L[t]`` is front column ``t``, ``d`` its pivots; entries ``a < b``
-    of the four rows are written too and never read)."""
-    r = U.shape[0]
-    k4, r4 = k - k % 4, r - r % 4
-    c = np.empty((4, 4))
-    for b in range(0, r4, 4):
-        u0, u1, u2, u3 = U[b], U[b + 1], U[b + 2], U[b + 3]
-        for t in range(0, k4, 4):
-            l0, l1, l2, l3 = L[t, k:], L[t + 1, k:], L[t + 2, k:], L[t + 3, k:]
-            nonzero = False
-            for i in range(4):
-                for j in range(4):
-                    c[i, j] = L[t + j, k + b + i] * d[t + j]
-                    nonzero = nonzero or c[i, j] != 0.0
-            if not nonzero:
-                continue
-            c00, c01, c02, c03 = c[0, 0], c[0, 1], c[0, 2], c[0, 3]
-            c10, c11, c12, c13 = c[1, 0], c[1, 1], c[1, 2], c[1, 3]
-            c20, c21, c22, c23 = c[2, 0], c[2, 1], c[2, 2], c[2, 3]
-            c30, c31, c32, c33 = c[3, 0], c[3, 1], c[3, 2], c[3, 3]
-            for a in range(b, r):
-                x0, x1, x2, x3 = l0[a], l1[a], l2[a], l3[a]
-                u0[a] -= c00 * x0 + c01 * x1 + c02 * x2 + c03 * x3
-                u1[a] -= c10 * x0 + c11 * x1 + c12 * x2 + c13 * x3
-                u2[a] -= c20 * x0 + c21 * x1 + c22 * x2 + c23 * x3
-                u3[a] -= c30 * x0 + c31 * x1 + c32 * x2 + c33 * x3
-        for t in range(k4, k):
-            lt = L[t, k:]
-            e0, e1, e2, e3 = lt[b] * d[t], lt[b + 1] * d[t], lt[b + 2] * d[t], lt[b + 3] * d[t]
-            for a in range(b, r):
-                x = lt[a]
-                u0[a] -= e0 * x
-                u1[a] -= e1 * x
-                u2[a] -= e2 * x
-                u3[a] -= e3 * x
-    for b in range(r4, r):
-        ub = U[b]
-        for t in range(k):
-            lt = L[t, k:]
-            e = lt[b] * d[t]
-            if e != 0.0:
-                for a in range(b, r):
-                    ub[a] -= e * lt[a]
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _schur_blas(L, d, k, U):
-    """``U -= Bᵀ diag(d) B`` with ``B = L[:, k:]`` as one BLAS ``dgemm`` (both triangles; the
-    entries ``a < b`` are never read): the large fronts' update."""
-    B = np.ascontiguousarray(L[:, k:])
-    U -= (B * d.reshape(-1, 1)).T @ B
-
-
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _apply_previous(L, d, t, two):
-    """Front column ``t`` (and ``t+1`` if ``two``), rows ``t..``, minus the contributions of the
-    columns before ``t``, four at a time."""
-    ca = L[t, t:]
-    cb = L[t + 1, t:] if two else ca
-    m = ca.shape[0]
-    t4 = t - t % 4
-    for p in range(0, t4, 4):
-        l0 = L[p, t:]
-        l1 = L[p + 1, t:]
-        l2 = L[p + 2, t:]
-        l3 = L[p + 3, t:]
-        a0, a1, a2, a3 = l0[0] * d[p], l1[0] * d[p + 1], l2[0] * d[p + 2], l3[0] * d[p + 3]
-        if two:
-            b0, b1 = l0[1] * d[p], l1[1] * d[p + 1]
-            b2, b3 = l2[1] * d[p + 2], l3[1] * d[p + 3]
-            for i in range(m):
-                x0, x1, x2, x3 = l0[i], l1[i], l2[i], l3[i]
-                ca[i] -= a0 * x0 + a1 * x1 + a2 * x2 + a3 * x3
-                cb[i] -= b0 * x0 + b1 * x1 + b2 * x2 + b3 * x3
-        elif a0 != 0.0 or a1 != 0.0 or a2 != 0.0 or a3 != 0.0:
-            for i in range(m):
-                ca[i] -= a0 * l0[i] + a1 * l1[i] + a2 * l2[i] + a3 * l3[i]
-    for p in range(t4, t):
-        lp = L[p, t:]
-        a0 = lp[0] * d[p]
-        b0 = lp[1] * d[p] if two else 0.0
-        for i in range(m):
-            ca[i] -= a0 * lp[i]
-            if two:
-                cb[i] -= b0 * lp[i]
-
-
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _apply_previous4(L, d, t):
-    """Front columns ``t .. t+3``, rows ``t..``, minus the contributions of the columns before
-    ``t``, four at a time (entries above each column's diagonal are written and never read)."""
-    c0, c1, c2, c3 = L[t, t:], L[t + 1, t:], L[t + 2, t:], L[t + 3, t:]
-    m = c0.shape[0]
-    c = np.empty((4, 4))
-    t4 = t - t % 4
-    for p in range(0, t4, 4):
-        l0, l1, l2, l3 = L[p, t:], L[p + 1, t:], L[p + 2, t:], L[p + 3, t:]
-        nonzero = False
-        for i in range(4):
-            for j in range(4):
-                c[i, j] = L[p + j, t + i] * d[p + j]
-                nonzero = nonzero or c[i, j] != 0.0
-        if not nonzero:
-            continue
-        a00, a01, a02, a03 = c[0, 0], c[0, 1], c[0, 2], c[0, 3]
-        a10, a11, a12, a13 = c[1, 0], c[1, 1], c[1, 2], c[1, 3]
-        a20, a21, a22, a23 = c[2, 0], c[2, 1], c[2, 2], c[2, 3]
-        a30, a31, a32, a33 = c[3, 0], c[3, 1], c[3, 2], c[3, 3]
-        for i in range(m):
-            x0, x1, x2, x3 = l0[i], l1[i], l2[i], l3[i]
-            c0[i] -= a00 * x0 + a01 * x1 + a02 * x2 + a03 * x3
-            c1[i] -= a10 * x0 + a11 * x1 + a12 * x2 + a13 * x3
-            c2[i] -= a20 * x0 + a21 * x1 + a22 * x2 + a23 * x3
-            c3[i] -= a30 * x0 + a31 * x1 + a32 * x2 + a33 * x3
-    for p in range(t4, t):
-        lp = L[p, t:]
-        e0, e1, e2, e3 = lp[0] * d[p], lp[1] * d[p], lp[2] * d[p], lp[3] * d[p]
-        for i in range(m):
-            x = lp[i]
-            c0[i] -= e0 * x
-            c1[i] -= e1 * x
-            c2[i] -= e2 * x
-            c3[i] -= e3 * x
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _scale_checked(col, lo, hi, dt, u):
-    """``col[lo:hi] /= dt``; returns ``False`` when a scaled entry exceeds ``1/u`` (the
-    threshold test ``|dt| >= u max |col|`` fails; ``u = 0``: no test)."""
-    inv = 1.0 / dt
-    big = 0.0
-    for i in range(lo, hi):
-        col[i] *= inv
-        a = abs(col[i])
-        if a > big:
-            big = a
-    return big * u <= 1.0
 
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy", inline="always")
-def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta):
-    """The front's ``k <= SMALL_COLUMNS`` pivot columns, unpivoted, and its Schur update (column by
-    column; for ``u > 0`` after all pivots), on flat indices (no array views). Returns the
-    pivot counts and 0 (done), 1 (breakdown: a zero or non-finite pivot) or 2 (a pivot failed
-    the threshold test ``u`` or ``|d| <= delta``: the Schur update is not done)."""
+def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta, schur):
+    """The front's ``k <= SMALL_COLUMNS`` pivot columns, unpivoted, and (``schur``) its Schur
+    update (column by column; for ``u > 0`` after all pivots), on flat indices (no array
+    views). Returns the pivot counts and 0 (done), 1 (breakdown: a zero or non-finite pivot) or
+    2 (a pivot failed the threshold test ``u`` or ``|d| <= delta``: the Schur update is not
+    done)."""
     npos = nneg = 0
     for t in range(k):
         ct = lo + t * m
@@ -208,7 +36,7 @@ def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta):
             coef = lbuf[cp + t] * d[f + p]
             if coef != 0.0:
                 for i in range(t, m):
-                    lbuf[ct + i] -= coef * lbuf[cp + i]
+                    lbuf[U64(ct + i)] -= coef * lbuf[U64(cp + i)]
         dt = lbuf[ct + t]
         if not np.isfinite(dt):
             return npos, nneg, 1
@@ -225,9 +53,10 @@ def _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta):
             continue
         inv = 1.0 / dt
         for i in range(t + 1, m):
-            lbuf[ct + i] *= inv
-        _small_update(lbuf, ubuf, k, m, ct, uo, dt)
-    if u > 0.0:  # the Schur update once every pivot has passed
+            lbuf[U64(ct + i)] *= inv
+        if schur:
+            _small_update(lbuf, ubuf, k, m, ct, uo, dt)
+    if u > 0.0 and schur:  # the Schur update once every pivot has passed
         for t in range(k):
             _small_update(lbuf, ubuf, k, m, lo + t * m, uo, d[f + t])
     return npos, nneg, 0
@@ -240,71 +69,84 @@ def _small_update(lbuf, ubuf, k, m, ct, uo, dt):
     for b in range(r):
         coef = lbuf[ct + k + b] * dt
         if coef != 0.0:
-            ub = uo + b * r
+            ub, lb = uo + b * r, ct + k
             for a in range(b, r):
-                ubuf[ub + a] -= coef * lbuf[ct + k + a]
-
-
-@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
-def _front_columns(L, df, k, m, u, delta):
-    """The front's pivot columns, unpivoted, four (at the end two or one) at a time; return
-    values as :func:`_small_front` (the Schur update is the caller's)."""
-    npos = nneg = 0
-    t = 0
-    while t < k:
-        w = 4 if t + 4 <= k and m - t >= _WIDE else min(2, k - t)
-        if w == 4:
-            _apply_previous4(L, df, t)
-        else:
-            _apply_previous(L, df, t, w == 2)
-        for step in range(w):
-            col = L[t + step]
-            dt = col[t + step]
-            if not np.isfinite(dt):
-                return npos, nneg, 1
-            if abs(dt) <= delta:
-                return npos, nneg, 2 if u > 0.0 else 1
-            df[t + step] = dt
-            if dt > 0.0:
-                npos += 1
-            else:
-                nneg += 1
-            if u > 0.0:
-                if not _scale_checked(col, t + step + 1, m, dt, u):
-                    return npos, nneg, 2
-            else:
-                inv = 1.0 / dt
-                for i in range(t + step + 1, m):
-                    col[i] *= inv
-            for j in range(t + step + 1, t + w):  # the group's later columns
-                coef = col[j] * dt
-                if coef != 0.0:
-                    nxt = L[j]
-                    for i in range(j, m):
-                        nxt[i] -= coef * col[i]
-        t += w
-    return npos, nneg, 0
-
-
-@nb.njit(cache=True, error_model="numpy")
-def _schur(L, df, k, U, blas_rows):
-    """``U -= Σ_t d_t l_t l_tᵀ`` over the front's update rows, by the kernel for its size."""
-    r = U.shape[0]
-    if r >= blas_rows and k >= BLAS_PIVOTS:
-        _schur_blas(L, df, k, U)
-    elif r >= _WIDE:
-        _schur_update4(L, df, k, U)
-    elif r > 0:
-        _schur_update2(L, df, k, U)
+                ubuf[U64(ub + a)] -= coef * lbuf[U64(lb + a)]
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, pivot_only):
-    """Add the children's update matrices into front ``s`` (its pivot columns in ``lbuf``, its
-    own update matrix in ``ubuf``; ``pivot_only``: the pivot columns only)."""
+def _zero_upper(ubuf, uo, r):
+    """Zero the entries ``a >= b`` of the ``r × r`` update matrix at ``ubuf[uo]`` (the others are
+    never read)."""
+    for b in range(r):
+        ubuf[uo + b * r + b : uo + (b + 1) * r] = 0.0
+
+
+@nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
+def _direct_update(c, p, sfirst, fptr, loff, uoff, rptr, rel, lbuf, ubuf, d, pivot_only):
+    """Subtract the Schur update ``Σ_t d_t l_t l_tᵀ`` of the factorized leaf front ``c``
+    (``k <= DIRECT_COLUMNS`` pivot columns) from its parent ``p``'s front: its pivot columns
+    in ``lbuf`` and (unless ``pivot_only``) its update matrix in ``ubuf``. Unsigned indices:
+    no negative-index wraparound in the scatter loops."""
+    f = sfirst[c]
+    k, m = sfirst[c + 1] - f, fptr[c + 1] - fptr[c]
     r = m - k
+    l0 = loff[c] + k  # l_t[a] (row k + a of front column t): lbuf[l0 + t m + a]
+    l1, l2, l3 = l0 + m, l0 + 2 * m, l0 + 3 * m
+    pk = sfirst[p + 1] - sfirst[p]
+    pm = fptr[p + 1] - fptr[p]
+    rp = rptr[c]
+    for bb in range(r):
+        col = rel[rp + bb]
+        if col < pk:
+            out, dst = lbuf, loff[p] + col * pm
+        elif pivot_only:
+            break  # rel increases: the remaining rows are all in the update matrix
+        else:
+            out, dst = ubuf, uoff[p] + (col - pk) * (pm - pk) - pk
+        c0 = lbuf[l0 + bb] * d[f]
+        if k == 1:
+            for aa in range(bb, r):
+                out[U64(dst + rel[U64(rp + aa)])] -= c0 * lbuf[U64(l0 + aa)]
+        elif k == 2:
+            c1 = lbuf[l1 + bb] * d[f + 1]
+            for aa in range(bb, r):
+                out[U64(dst + rel[U64(rp + aa)])] -= (
+                    c0 * lbuf[U64(l0 + aa)] + c1 * lbuf[U64(l1 + aa)]
+                )
+        elif k == 3:
+            c1, c2 = lbuf[l1 + bb] * d[f + 1], lbuf[l2 + bb] * d[f + 2]
+            for aa in range(bb, r):
+                out[U64(dst + rel[U64(rp + aa)])] -= (
+                    c0 * lbuf[U64(l0 + aa)] + c1 * lbuf[U64(l1 + aa)] + c2 * lbuf[U64(l2 + aa)]
+                )
+        else:
+            c1, c2 = lbuf[l1 + bb] * d[f + 1], lbuf[l2 + bb] * d[f + 2]
+            c3 = lbuf[l3 + bb] * d[f + 3]
+            for aa in range(bb, r):
+                out[U64(dst + rel[U64(rp + aa)])] -= (
+                    c0 * lbuf[U64(l0 + aa)] + c1 * lbuf[U64(l1 + aa)] + c2 * lbuf[U64(l2 + aa)]
+                    + c3 * lbuf[U64(l3 + aa)]
+                )  # fmt: skip
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _assemble_children(
+    s, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, sent, lbuf, ubuf, d, pivot_only
+):  # fmt: skip
+    """Add the children's update matrices into front ``s`` (its pivot columns in ``lbuf``, its
+    own update matrix in ``ubuf``); children that sent theirs directly (``sent``) are skipped,
+    or with ``pivot_only`` (reassembling the pivot columns only) sent again."""
+    k = sfirst[s + 1] - sfirst[s]
+    m = fptr[s + 1] - fptr[s]
+    r = m - k
+    lo, uo = loff[s], uoff[s]
     for ci in range(cptr[s], cptr[s + 1]):
         c = child[ci]
+        if sent[c]:
+            if pivot_only:
+                _direct_update(c, s, sfirst, fptr, loff, uoff, rptr, rel, lbuf, ubuf, d, True)
+            continue
         rc, uc, rp = rptr[c + 1] - rptr[c], uoff[c], rptr[c]
         for bb in range(rc):
             col = rel[rp + bb]
@@ -312,17 +154,17 @@ def _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, pivot
             if col < k:  # into a pivot column of the front
                 dst = lo + col * m
                 for aa in range(bb, rc):
-                    lbuf[dst + rel[rp + aa]] += ubuf[src + aa]
+                    lbuf[U64(dst + rel[U64(rp + aa)])] += ubuf[U64(src + aa)]
             elif not pivot_only:  # into the front's own update matrix
                 dst = uo + (col - k) * r - k
                 for aa in range(bb, rc):
-                    ubuf[dst + rel[rp + aa]] += ubuf[src + aa]
+                    ubuf[U64(dst + rel[U64(rp + aa)])] += ubuf[U64(src + aa)]
 
 
 @nb.njit(cache=True, fastmath={"contract"}, error_model="numpy")
 def ldl_factor(
-    vals, amap, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, lbuf, ubuf, d, blas_rows,
-    u, delta, sign, piv, e, spiv, eptr, eidx, save, stats,
+    vals, amap, sfirst, fptr, loff, uoff, zero_at, rptr, rel, cptr, child, sparent, direct, sent,
+    lbuf, ubuf, d, blas_rows, u, delta, sign, piv, e, spiv, eptr, eidx, save, stats,
 ):  # fmt: skip
     """Multifrontal ``LDLᵀ``. Fronts with at least ``blas_rows`` update rows (and
     ``BLAS_PIVOTS`` pivot columns) get their Schur update from BLAS. ``u = 0``: no pivoting, a
@@ -332,11 +174,18 @@ def ldl_factor(
     :func:`~mbplan.solvers.ldl_pivot.pivoted_front`: 1 × 1 / 2 × 2 pivots among its own columns
     (``piv``: local order, ``e``: 2 × 2 off-diagonals, ``spiv[s]``: supernode s pivoted), tiny
     pivots perturbed to ``sign · delta`` (``sign``: expected pivot signs, pivot order). ``stats``: pivoted fronts, 2 × 2 pivots, perturbed pivots,
-    pivots accepted below the threshold. Returns the numbers of positive, negative and
-    perturbed pivots and ``False`` on a breakdown."""
+    pivots accepted below the threshold. A leaf front flagged ``direct`` (parent ``sparent``)
+    subtracts its Schur update from its parent's front itself (``sent``: it did). Returns the
+    numbers of positive, negative and perturbed pivots and ``False`` on a breakdown."""
+    vals, amap, sfirst, fptr, loff = borrowed(vals), borrowed(amap), borrowed(sfirst), borrowed(fptr), borrowed(loff)  # fmt: skip
+    uoff, zero_at, rptr, rel = borrowed(uoff), borrowed(zero_at), borrowed(rptr), borrowed(rel)
+    cptr, child, sparent, direct = borrowed(cptr), borrowed(child), borrowed(sparent), borrowed(direct)  # fmt: skip
+    sent, lbuf, ubuf, d, sign = borrowed(sent), borrowed(lbuf), borrowed(ubuf), borrowed(d), borrowed(sign)  # fmt: skip
+    piv, e, spiv, eptr = borrowed(piv), borrowed(e), borrowed(spiv), borrowed(eptr)
+    eidx, save, stats = borrowed(eidx), borrowed(save), borrowed(stats)
     lbuf[:] = 0.0
     for q in range(vals.shape[0]):
-        lbuf[amap[q]] += vals[q]
+        lbuf[U64(amap[q])] += vals[q]
     stats[:] = 0
     npos = nneg = npert = 0
     kmax = 1
@@ -349,12 +198,22 @@ def ldl_factor(
         m = fptr[s + 1] - fptr[s]
         r = m - k
         lo, uo = loff[s], uoff[s]
-        for i in range(uo, uo + r * r):
-            ubuf[i] = 0.0
-        _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, False)
-        spiv[s] = False
-        if k <= SMALL_COLUMNS:  # few pivot columns: plain loops on flat indices (no array views)
-            ip, ineg, status = _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta)
+        p, z = sparent[s], zero_at[s]
+        if z != -1:  # an update matrix starts (its own, or its parent's for direct children)
+            _zero_upper(ubuf, uoff[z], fptr[z + 1] - fptr[z] - sfirst[z + 1] + sfirst[z])
+        _assemble_children(
+            s, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, sent, lbuf, ubuf, d, False
+        )  # fmt: skip
+        spiv[s] = sent[s] = False
+        if direct[s]:
+            ip, ineg, status = _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta, False)
+            if status == 0:
+                _direct_update(s, p, sfirst, fptr, loff, uoff, rptr, rel, lbuf, ubuf, d, False)
+                sent[s] = True
+            else:  # the pivoted path below computes its update matrix
+                _zero_upper(ubuf, uo, r)
+        elif k <= SMALL_COLUMNS:  # few pivot columns: plain loops on flat indices (no views)
+            ip, ineg, status = _small_front(lbuf, ubuf, d, f, k, m, lo, uo, u, delta, True)
         else:
             L = lbuf[lo : lo + k * m].reshape(k, m)
             ip, ineg, status = _front_columns(L, d[f : f + k], k, m, u, delta)
@@ -371,7 +230,9 @@ def ldl_factor(
         lbuf[lo : lo + k * m] = 0.0
         for q in eidx[eptr[s] : eptr[s + 1]]:
             lbuf[amap[q]] += vals[q]
-        _extend_add(s, k, m, lo, uo, rptr, rel, uoff, cptr, child, lbuf, ubuf, True)
+        _assemble_children(
+            s, sfirst, fptr, loff, uoff, rptr, rel, cptr, child, sent, lbuf, ubuf, d, True
+        )  # fmt: skip
         L = lbuf[lo : lo + k * m].reshape(k, m)
         out = save[: k * m].reshape(k, m)
         ip, ineg, ipert, weak, ok = pivoted_front(

@@ -1,5 +1,6 @@
 """Symbolic analysis of the supernodal LDLᵀ (:mod:`mbplan.solvers.linear_solver`): elimination
-tree, postorder, fundamental supernodes with relaxed amalgamation, front rows and the maps that
+tree, postorder, fundamental supernodes with relaxed amalgamation, small leaves merged and
+moved before their parents (:mod:`mbplan.solvers.ldl_layout`), front rows and the maps that
 place every entry of ``K`` and every child's update matrix in the factor's storage.
 
 Index conventions: ``perm[i]`` is the original index of the i-th pivot, the permuted pattern is
@@ -13,6 +14,8 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+
+from mbplan.solvers.ldl_layout import direct_leaves, leaves_last, update_offsets
 
 
 @nb.njit(cache=True)
@@ -183,13 +186,11 @@ def _assembly_maps(n, sfirst, fptr, rows, sparent, snode, hi, lo):
     supernode and the positions of a child's update rows in its parent's front."""
     ns = sfirst.shape[0] - 1
     loff = np.zeros(ns + 1, np.int64)
-    uoff = np.zeros(ns + 1, np.int64)
     rptr = np.zeros(ns + 1, np.int64)
     for s in range(ns):
         k = sfirst[s + 1] - sfirst[s]
         m = fptr[s + 1] - fptr[s]
         loff[s + 1] = loff[s] + k * m
-        uoff[s + 1] = uoff[s] + (m - k) * (m - k)
         rptr[s + 1] = rptr[s] + m - k
     pos = np.full(n, -1, np.int64)
     amap = np.empty(hi.shape[0], np.int64)
@@ -222,7 +223,7 @@ def _assembly_maps(n, sfirst, fptr, rows, sparent, snode, hi, lo):
             k = sfirst[c + 1] - sfirst[c]
             for q in range(rptr[c + 1] - rptr[c]):
                 rel[rptr[c] + q] = pos[rows[fptr[c] + k + q]]
-    return loff, uoff, amap, rptr, rel, cptr, child
+    return loff, amap, rptr, rel, cptr, child
 
 
 class Analysis:
@@ -239,11 +240,24 @@ class Analysis:
         pinv[perm] = np.arange(n)
         ptr, idx, hi, lo = _upper_csc(n, pinv, rows, cols)
         parent = _etree(n, ptr, idx)
-        self.n, self.perm = n, perm
         self.sfirst, self.nnz_l = _supernodes(n, ptr, idx, parent)
-        self.fptr, self.rows, sparent, snode = _front_rows(n, ptr, idx, parent, self.sfirst)
-        (self.loff, self.uoff, self.amap, self.rptr, self.rel, self.cptr, self.child) = (
-            _assembly_maps(n, self.sfirst, self.fptr, self.rows, sparent, snode, hi, lo)
+        self.fptr, self.rows, self.sparent, snode = _front_rows(n, ptr, idx, parent, self.sfirst)
+        leaves = leaves_last(perm, self.sfirst, self.fptr, self.rows, self.sparent)
+        if leaves is not None:
+            perm, self.sfirst = leaves
+            pinv[perm] = np.arange(n)
+            ptr, idx, hi, lo = _upper_csc(n, pinv, rows, cols)
+            parent = _etree(n, ptr, idx)
+            self.fptr, self.rows, self.sparent, snode = _front_rows(
+                n, ptr, idx, parent, self.sfirst
+            )
+        self.n, self.perm = n, perm
+        (self.loff, self.amap, self.rptr, self.rel, self.cptr, self.child) = _assembly_maps(
+            n, self.sfirst, self.fptr, self.rows, self.sparent, snode, hi, lo
+        )
+        self.direct = direct_leaves(self.sfirst, self.cptr, self.sparent)
+        self.uoff, self.zero_at = update_offsets(
+            self.sfirst, self.fptr, self.sparent, self.cptr, self.child, self.direct
         )
         self.wmax = int(np.diff(self.fptr).max(initial=1))
         k, m = np.diff(self.sfirst), np.diff(self.fptr)
@@ -252,4 +266,6 @@ class Analysis:
         self.nnz_factor = int(np.sum(below) + n)  # L's stored entries (supernodal) with D
 
 
-SYMBOLIC_KERNELS = (_upper_csc, _etree, _postorder, _supernodes, _front_rows, _assembly_maps)
+SYMBOLIC_KERNELS = (
+    _upper_csc, _etree, _postorder, _supernodes, _front_rows, _assembly_maps, update_offsets,
+)  # fmt: skip

@@ -17,8 +17,10 @@ supernodal multifrontal ``P K Pᵀ = (I + L) D (I + L)ᵀ`` with a diagonal ``D`
 (optionally 1 × 1 / 2 × 2 threshold pivoting inside each supernode, ``D`` block diagonal:
 :mod:`mbplan.solvers.ldl_pivot`), compiled with numba. Its symbolic analysis takes the approximate minimum
 degree ordering qdldl computes (SuiteSparse AMD), postorders the elimination tree, groups
-columns into fundamental supernodes merged by CHOLMOD's relaxed amalgamation rule, and
-precomputes where every entry of ``K`` and every child's update matrix lands; it is memoized per
+columns into fundamental supernodes merged by CHOLMOD's relaxed amalgamation rule, merges
+sibling leaves with equal rows and moves small leaves right before their parent, which they
+update directly (:mod:`mbplan.solvers.ldl_layout`), and precomputes where every entry of
+``K`` and every child's update matrix lands; it is memoized per
 process for the last few patterns (the KKT systems of one task family share theirs). The numeric
 factorization works on small dense fronts with register-blocked loops: on trajectory-optimization
 KKT matrices, whose elimination ends in a chain of dense knot-to-knot blocks, it is about twice

@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 import threadpoolctl
 
-from mbplan.solvers.ldl_kernels import BLAS_PIVOTS, ldl_factor
+from mbplan.solvers.ldl_dense import BLAS_PIVOTS
+from mbplan.solvers.ldl_kernels import ldl_factor
 from mbplan.solvers.ldl_solve import refined_solve
 from mbplan.solvers.ldl_symbolic import Analysis
 
@@ -62,10 +63,12 @@ class SupernodalLDL:
         self.e = np.zeros(analysis.n)  # 2 × 2 pivots' off-diagonals (pivoted supernodes)
         self.piv = np.zeros(analysis.n, np.int64)  # local pivot order (pivoted supernodes)
         self.spiv = np.zeros(len(analysis.sfirst) - 1, np.bool_)
+        self.sent = np.zeros(len(analysis.sfirst) - 1, np.bool_)  # see ldl_factor
         self.stats = np.zeros(4, np.int64)  # see ldl_factor
         self._save = np.empty(0)  # work array of pivoted fronts, and the entries of each front:
         self._eptr = np.zeros(len(analysis.loff), np.int64)
         self._eidx = np.zeros(0, np.int64)
+        self._work = np.empty(6 * analysis.n + analysis.wmax)  # the refined solve's
         self.blas_rows = BLAS_FRONT_ROWS if blas_rows is None else blas_rows
         k, m = np.diff(analysis.sfirst), np.diff(analysis.fptr)
         self.uses_blas = bool(np.any((m - k >= self.blas_rows) & (k >= BLAS_PIVOTS)))
@@ -92,8 +95,8 @@ class SupernodalLDL:
         if sign is None:
             sign = np.ones(a.n)
         args = (
-            vals, a.amap, a.sfirst, a.fptr, a.loff, a.uoff, a.rptr, a.rel, a.cptr, a.child,
-            self.lbuf, self.ubuf, self.d, self.blas_rows, float(pivot_threshold), float(delta),
+            vals, a.amap, a.sfirst, a.fptr, a.loff, a.uoff, a.zero_at, a.rptr, a.rel, a.cptr, a.child,
+            a.sparent, a.direct, self.sent, self.lbuf, self.ubuf, self.d, self.blas_rows, float(pivot_threshold), float(delta),
             sign, self.piv, self.e, self.spiv, self._eptr, self._eidx,
             self._save if self._save.size else self.d, self.stats,
         )  # fmt: skip
@@ -109,6 +112,6 @@ class SupernodalLDL:
         a = self.a
         return refined_solve(
             np.ascontiguousarray(b, dtype=np.float64), a.perm, a.sfirst, a.fptr, a.rows,
-            a.loff, self.lbuf, self.d, self.piv, self.e, self.spiv, a.wmax, indptr, indices, data,
-            max_refinement, ratio_max,
+            a.loff, self.lbuf, self.d, self.piv, self.e, self.spiv, indptr, indices, data,
+            self._work, max_refinement, ratio_max,
         )  # fmt: skip
