@@ -94,6 +94,17 @@ def test_regularized_jacobian_block_goes_to_the_full_factorization(systems):
     assert np.abs(red.solve(b)[0] - full.solve(b)[0]).max() == 0.0
 
 
+def test_nonnegative_inequality_diagonal_goes_to_the_full_factorization(systems):
+    """The inequality rows are folded into ``K_r`` only for ``D_I < 0`` (the RIPM's ``-Σ⁻¹``)."""
+    problem, _, full, red, sigma, rng = systems
+    diag = _diag(problem, 1e-4, 0.0, -sigma)
+    reduced = red.n_reduced
+    assert red.factorize(diag, 1e-9) == full.factorize(diag, 1e-9)
+    assert red.n_reduced == reduced
+    b = rng.normal(size=full.dim)
+    assert np.abs(red.solve(b)[0] - full.solve(b)[0]).max() == 0.0
+
+
 def test_ripm_reduced_solve_equals_full():
     problem, x0 = maximal_ripm_problem(chain_task(4, N=8), "linear")
     opts = RIPMOptions(tol=1e-6, max_iter=100)

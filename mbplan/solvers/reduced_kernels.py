@@ -259,6 +259,30 @@ def csr_matvec(indptr, indices, data, x) -> np.ndarray:
 
 
 @nb.njit(cache=True)
+def rows_matvec(indptr, indices, data, rows, x) -> np.ndarray:
+    """``(A x)[rows]`` for CSR arrays."""
+    y = np.zeros(rows.shape[0])
+    for k in range(rows.shape[0]):
+        t = 0.0
+        for e in range(indptr[rows[k]], indptr[rows[k] + 1]):
+            t += data[e] * x[indices[e]]
+        y[k] = t
+    return y
+
+
+@nb.njit(cache=True)
+def rows_t_matvec(indptr, indices, data, rows, v, n) -> np.ndarray:
+    """``A[rows]ᵀ v`` (length ``n``) for CSR arrays: for a symmetric ``A``, ``A[:, rows] v``."""
+    y = np.zeros(n)
+    for k in range(rows.shape[0]):
+        vk = v[k]
+        if vk != 0.0:
+            for e in range(indptr[rows[k]], indptr[rows[k] + 1]):
+                y[indices[e]] += data[e] * vk
+    return y
+
+
+@nb.njit(cache=True)
 def b_solve(rhs, lbuf, shape, loff, cptr, cblk, ccol, lu, lu_off, piv, uoff) -> np.ndarray:
     """``B⁻¹ rhs``, ``B`` lower block triangular: per block ``L_b[:, dep]`` on the diagonal and
     ``L_b[:, dep_i]`` below (``rhs``, result: blocks' local rows / dependent columns at
@@ -337,6 +361,8 @@ REDUCED_KERNELS = (
     spgemm,
     spgemm_lower,
     csr_matvec,
+    rows_matvec,
+    rows_t_matvec,
     b_solve,
     bt_solve,
     s_apply,

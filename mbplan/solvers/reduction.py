@@ -11,7 +11,6 @@ import copy
 import dataclasses
 import threading
 from collections import OrderedDict
-from collections.abc import Callable
 
 import numpy as np
 import scipy.linalg as sla
@@ -28,6 +27,8 @@ from mbplan.solvers.reduced_kernels import (
     bt_solve,
     csr_matvec,
     group_values,
+    rows_matvec,
+    rows_t_matvec,
     s_apply,
     spgemm,
     spgemm_lower,
@@ -96,16 +97,27 @@ def _pivots(m: np.ndarray) -> np.ndarray:
     return sla.qr(m, pivoting=True, mode="r")[1]
 
 
-def _product_pattern(a: sp.csr_matrix, b: sp.csr_matrix) -> sp.csr_matrix:
-    """The structural pattern of ``a @ b`` (values of ones: no cancellation), zero values."""
+def _product_pattern(*pairs: tuple[sp.csr_matrix, sp.csr_matrix]) -> sp.csr_matrix:
+    """The structural pattern of ``Σ a @ b`` over the pairs (values of ones: no cancellation),
+    zero values."""
 
     def one(m: sp.csr_matrix) -> sp.csr_matrix:
         return sp.csr_matrix((np.ones(m.nnz), m.indices, m.indptr), shape=m.shape)
 
-    p = sp.csr_matrix(one(a) @ one(b))
+    p = sp.csr_matrix(sum(one(a) @ one(b) for a, b in pairs))
     p.sort_indices()
     p.data[:] = 0.0
     return p
+
+
+def _transpose(m: sp.csr_matrix) -> tuple[sp.csr_matrix, np.ndarray]:
+    """``mᵀ``'s pattern (zero values, sorted) and where each of its entries is in ``m.data``."""
+    pos = sp.csr_matrix((np.arange(m.nnz, dtype=float) + 1, m.indices, m.indptr), shape=m.shape)
+    pos_t = pos.T.tocsr()
+    pos_t.sort_indices()
+    shape = (m.shape[1], m.shape[0])
+    t = sp.csr_matrix((np.zeros(pos_t.nnz), pos_t.indices, pos_t.indptr), shape=shape)
+    return t, pos_t.data.astype(np.int64) - 1
 
 
 def _rows_of(a: sp.csr_matrix, row: int) -> np.ndarray:
@@ -133,11 +145,12 @@ class Reduction:
         self._transform()
         self._products(hess, ae, ai)
         self.factor_options = {"ordering": ordering, "pivot_threshold": pivot_threshold}
-        self.kkt = KKTSystem(self.nr, len(self.kept), self.mi, **self.factor_options)
+        self.kkt = KKTSystem(self.nr, len(self.kept), 0, **self.factor_options)
         self.ok = False
 
-    _WORK = ("M", "new_rows", "lbuf", "ebuf", "lu", "piv", "work", "hr_base", "dt_data", "ttt")
-    _MATRICES = ("T", "Tt", "hs", "W", "Hr", "ak", "Ar", "AIr")
+    _WORK = ("M", "new_rows", "lbuf", "ebuf", "lu", "piv", "work", "hr_base", "dt_data", "ttt",
+             "sigma", "ai_scaled")  # fmt: skip
+    _MATRICES = ("T", "Tt", "hs", "W", "Hr", "ak", "Ar", "AIr", "AIt")
 
     def fresh(self) -> Reduction:
         """A copy sharing the symbolic arrays, with its own work arrays and ``K_r`` system."""
@@ -147,7 +160,7 @@ class Reduction:
         for name in self._MATRICES:
             m = getattr(self, name)
             setattr(new, name, sp.csr_matrix((m.data.copy(), m.indices, m.indptr), shape=m.shape))
-        new.kkt = KKTSystem(self.nr, len(self.kept), self.mi, **self.factor_options)
+        new.kkt = KKTSystem(self.nr, len(self.kept), 0, **self.factor_options)
         new.ok = False
         return new
 
@@ -315,19 +328,12 @@ class Reduction:
         )
         self.t_e = np.flatnonzero(e_id >= 0)
         self.t_e_src = e_id[self.t_e]
-        tt = self.T.T.tocsr()
-        # where each Tᵀ entry comes from in T.data
-        perm = sp.csr_matrix(
-            (np.arange(len(rows), dtype=float) + 1, cols, self.T.indptr), shape=self.T.shape
-        )
-        perm_t = perm.T.tocsr()
-        perm_t.sort_indices()
-        self.Tt = sp.csr_matrix((np.zeros(tt.nnz), perm_t.indices, perm_t.indptr), shape=tt.shape)
-        self.tt_src = perm_t.data.astype(np.int64) - 1
+        self.Tt, self.tt_src = _transpose(self.T)
         self.t_rows = np.repeat(np.arange(n), np.diff(self.T.indptr))
 
     def _products(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> None:
-        """Patterns of ``H_sym``, ``H_sym T``, ``Tᵀ H_sym T``, ``A_E,kept T``, ``A_I T``."""
+        """Patterns of ``H_sym``, ``H_sym T``, ``A_E,kept T``, ``A_I T`` and of ``H_r``, the
+        lower triangle of ``Tᵀ H_sym T + (A_I T)ᵀ Σ (A_I T)`` (the inequality rows folded in)."""
         n, me = self.n, self.me
         h_rows = np.repeat(np.arange(n), np.diff(hess.indptr))
         low = np.flatnonzero(h_rows >= hess.indices)
@@ -342,9 +348,7 @@ class Reduction:
             shape=(n, n),
         )
         self.hs_slot, self.hs_src = inv[src >= 0], src[src >= 0]
-        self.W = _product_pattern(self.hs, self.T)
-        self.Hr = sp.csr_matrix(sp.tril(_product_pattern(self.Tt, self.W), format="csr"))
-        self.Hr.sort_indices()
+        self.W = _product_pattern((self.hs, self.T))
         is_y = np.zeros(me, bool)
         is_y[self.y_rows] = True
         self.kept = np.flatnonzero(~is_y)
@@ -356,8 +360,15 @@ class Reduction:
         ae_pos.sort_indices()
         self.ak = sp.csr_matrix((np.zeros(sub.nnz), ae_pos.indices, ae_pos.indptr), shape=sub.shape)
         self.ak_src = ae_pos.data.astype(np.int64) - 1
-        self.Ar = _product_pattern(self.ak, self.T)
-        self.AIr = _product_pattern(ai, self.T)
+        self.Ar = _product_pattern((self.ak, self.T))
+        self.AIr = _product_pattern((ai, self.T))
+        self.AIt, self.ait_src = _transpose(self.AIr)
+        hr = _product_pattern((self.Tt, self.W), (self.AIt, self.AIr))
+        self.Hr = sp.csr_matrix(sp.tril(hr, format="csr"))
+        self.Hr.sort_indices()
+        self.air_rows = np.repeat(np.arange(self.mi), np.diff(self.AIr.indptr))
+        self.sigma = np.zeros(self.mi)
+        self.ai_scaled = np.zeros(self.AIr.nnz)
         self.work = np.zeros(max(self.nr, 1))
         self.hr_base = np.zeros(self.Hr.nnz)
         self.dt_data = np.zeros(self.T.nnz)
@@ -393,6 +404,7 @@ class Reduction:
         self.ak.data[:] = ae.data[self.ak_src]
         self._product(self.ak, T, self.Ar)
         self._product(ai, T, self.AIr)
+        self.AIt.data[:] = self.AIr.data[self.ait_src]
         self.ok = bool(np.isfinite(self.hr_base).all())
         return self.ok
 
@@ -406,11 +418,12 @@ class Reduction:
                c.data, self.work)  # fmt: skip
 
     def factorize(self, diagonal: np.ndarray, static_reg: float) -> Inertia | None:
-        """Factorize ``K_r`` for ``K``'s diagonal (``Tᵀ D_x T`` added to ``Tᵀ H T``, lower
-        triangles); the inertia of ``K`` (``None``: a nonzero diagonal on a local row, or a
-        breakdown)."""
+        """Factorize ``K_r`` for ``K``'s diagonal (``Tᵀ D_x T`` added to ``Tᵀ H T``; the
+        inequality rows folded in, ``Σ = -D_I⁻¹``); the inertia of ``K`` (``None``: a nonzero
+        diagonal on a local row, ``D_I`` not negative, or a breakdown)."""
         n, me = self.n, self.me
-        if not self.ok or np.any(diagonal[n + self.y_rows] != 0.0):
+        d_i = diagonal[n + me :]
+        if not self.ok or np.any(diagonal[n + self.y_rows] != 0.0) or not np.all(d_i < 0.0):
             return None
         dx = diagonal[:n]
         if not dx.any():
@@ -429,37 +442,43 @@ class Reduction:
             tt, hr = self.Tt, self.Hr
             spgemm_lower(tt.indptr, tt.indices, tt.data, T.indptr, T.indices, self.dt_data,
                          hr.indptr, hr.indices, hr.data, self.work)  # fmt: skip
-        self.kkt.set_matrices(self.Hr, self.Ar, self.AIr)
-        diag_r = np.concatenate([np.zeros(self.nr), diagonal[n + self.kept], diagonal[n + me :]])
+        np.divide(-1.0, d_i, out=self.sigma)
+        np.multiply(self.AIr.data, self.sigma[self.air_rows], out=self.ai_scaled)
+        at, ar, hr = self.AIt, self.AIr, self.Hr
+        spgemm_lower(at.indptr, at.indices, at.data, ar.indptr, ar.indices, self.ai_scaled,
+                     hr.indptr, hr.indices, hr.data, self.work)  # fmt: skip
+        if not np.isfinite(hr.data).all():
+            return None
+        self.kkt.set_matrices(hr, self.Ar, None)
+        diag_r = np.concatenate([np.zeros(self.nr), diagonal[n + self.kept]])
         inertia = self.kkt.factorize(diag_r, max(static_reg, REDUCED_STATIC_REG))
         if inertia is None:
             return None
         m = len(self.dep)
-        return Inertia(inertia.positive + m, inertia.negative + m, 0)
+        return Inertia(inertia.positive + m, inertia.negative + m + self.mi, 0)
 
-    def _tt_times(self, x: np.ndarray) -> np.ndarray:
-        return csr_matvec(self.Tt.indptr, self.Tt.indices, self.Tt.data, x)
-
-    def solve_once(self, b: np.ndarray, matvec: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
-        """``K⁻¹ b`` through the reduction (module docstring), ``matvec``: ``v ↦ K v``."""
-        n, me, nr, nk = self.n, self.me, self.nr, len(self.kept)
+    def solve_once(self, b: np.ndarray, k: sp.csr_matrix, ratio_max: float) -> np.ndarray:
+        """``K⁻¹ b`` through the reduction (module docstring; ``k``: ``K``, full symmetric
+        pattern), ``K_r`` solved to the residual ratio ``ratio_max``."""
+        n, me, nr = self.n, self.me, self.nr
         bx, be, bi = b[:n], b[n : n + me], b[n + me :]
         blk = (self.lbuf, self.shape, self.loff, self.cptr, self.cblk, self.ccol, self.lu,
                self.lu_off, self.piv, self.uoff)  # fmt: skip
         xu = b_solve(s_apply(be, self.tgt, self.src, self.sub, self.M, False)[self.y_rows], *blk)
-        v = np.zeros(len(b))
-        v[self.dep] = xu
-        kv = matvec(v)
-        rr = np.concatenate(
-            [self._tt_times(bx - kv[:n]), (be - kv[n : n + me])[self.kept], bi - kv[n + me :]]
-        )
-        xr = self.kkt.solve(rr, 1, 0.0)[0]
+        kv = rows_t_matvec(k.indptr, k.indices, k.data, self.dep, xu, len(b))  # K[:, dep] x_U
+        at, ar, T = self.AIt, self.AIr, self.T
+        rz = bi - kv[n + me :]
+        rx = csr_matvec(self.Tt.indptr, self.Tt.indices, self.Tt.data, bx - kv[:n])
+        rx += csr_matvec(at.indptr, at.indices, at.data, self.sigma * rz)
+        xr = self.kkt.solve(np.concatenate([rx, (be - kv[n : n + me])[self.kept]]), 10, ratio_max)[
+            0
+        ]
         w = np.zeros(len(b))
-        w[:n] = csr_matvec(self.T.indptr, self.T.indices, self.T.data, xr[:nr])
+        w[:n] = csr_matvec(T.indptr, T.indices, T.data, xr[:nr])
         w[self.dep] += xu
-        w[n + self.kept] = xr[nr : nr + nk]
-        w[n + me :] = xr[nr + nk :]
-        kw = matvec(w)
-        w[n + self.y_rows] = bt_solve((bx - kw[:n])[self.dep], *blk)
+        w[n + self.kept] = xr[nr:]
+        w[n + me :] = self.sigma * (csr_matvec(ar.indptr, ar.indices, ar.data, xr[:nr]) - rz)
+        kw = rows_matvec(k.indptr, k.indices, k.data, self.dep, w)  # (K w)[dep]
+        w[n + self.y_rows] = bt_solve(bx[self.dep] - kw, *blk)
         w[n : n + me] = s_apply(w[n : n + me], self.tgt, self.src, self.sub, self.M, True)
         return w
