@@ -231,15 +231,28 @@ def spgemm(ap, ai, ax, bp, bi, bx, cp, ci, cx, work) -> None:
 
 
 @nb.njit(cache=True)
-def spgemm_lower(ap, ai, ax, bp, bi, bx, cp, ci, cx, work) -> None:
-    """``C += tril(A B)`` into ``C``'s fixed lower CSR pattern (``B`` with sorted column
-    indices; :func:`spgemm`'s other conventions)."""
+def lower_ends(ap, ai, bp, bi) -> np.ndarray:
+    """Per entry ``(i, k)`` of ``A``: the end of row ``k`` of ``B`` (sorted column indices)
+    within the lower triangle of row ``i`` of ``A B`` (symbolic, for :func:`spgemm_lower`)."""
+    ends = np.empty(ai.shape[0], np.int64)
+    for i in range(ap.shape[0] - 1):
+        for ka in range(ap[i], ap[i + 1]):
+            k = ai[ka]
+            kb = bp[k]
+            while kb < bp[k + 1] and bi[kb] <= i:
+                kb += 1
+            ends[ka] = kb
+    return ends
+
+
+@nb.njit(cache=True)
+def spgemm_lower(ap, ai, ax, bp, bi, bx, ends, cp, ci, cx, work) -> None:
+    """``C += tril(A B)`` into ``C``'s fixed lower CSR pattern (``ends`` from
+    :func:`lower_ends`; :func:`spgemm`'s other conventions)."""
     for i in range(ap.shape[0] - 1):
         for ka in range(ap[i], ap[i + 1]):
             k, a = ai[ka], ax[ka]
-            for kb in range(bp[k], bp[k + 1]):
-                if bi[kb] > i:
-                    break
+            for kb in range(bp[k], ends[ka]):
                 work[bi[kb]] += a * bx[kb]
         for kc in range(cp[i], cp[i + 1]):
             cx[kc] += work[ci[kc]]
@@ -279,6 +292,27 @@ def rows_t_matvec(indptr, indices, data, rows, v, n) -> np.ndarray:
         if vk != 0.0:
             for e in range(indptr[rows[k]], indptr[rows[k] + 1]):
                 y[indices[e]] += data[e] * vk
+    return y
+
+
+@nb.njit(cache=True)
+def kkt_matvec(hp, hi, hx, ep, ei, ex, ip, ii, ix, diag, x) -> np.ndarray:
+    """``K x`` from its blocks: ``H`` (full symmetric CSR), ``A_E``, ``A_I`` (CSR) and the
+    diagonal ``diag`` (module :mod:`mbplan.solvers.linear_solver`'s ``K``)."""
+    n, me = hp.shape[0] - 1, ep.shape[0] - 1
+    y = diag * x
+    for i in range(n):
+        t = 0.0
+        for e in range(hp[i], hp[i + 1]):
+            t += hx[e] * x[hi[e]]
+        y[i] += t
+    for off, p, idx, v in ((n, ep, ei, ex), (n + me, ip, ii, ix)):
+        for r in range(p.shape[0] - 1):
+            t, xr = 0.0, x[off + r]
+            for e in range(p[r], p[r + 1]):
+                t += v[e] * x[idx[e]]
+                y[idx[e]] += v[e] * xr
+            y[off + r] += t
     return y
 
 
@@ -360,9 +394,11 @@ REDUCED_KERNELS = (
     block_values,
     spgemm,
     spgemm_lower,
+    lower_ends,
     csr_matvec,
     rows_matvec,
     rows_t_matvec,
+    kkt_matvec,
     b_solve,
     bt_solve,
     s_apply,

@@ -30,7 +30,6 @@ import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.solvers.elimination import EliminationPlan
-from mbplan.solvers.kkt_scatter import matrix_values
 from mbplan.solvers.linear_solver import Inertia, KKTSystem, _csr
 from mbplan.solvers.reduction import Reduction, reduction
 
@@ -106,13 +105,8 @@ class ReducedKKTSystem:
         ai = _csr(jac_ineq, (self.n_ineq, self.n))
         if self._seen != self.full.n_analyses:
             self._seen = self.full.n_analyses
-            f = self.full
-            self._k = sp.csr_matrix(
-                (f._full_data, f._pattern.full_indices, f._pattern.full_indptr),
-                shape=(self.dim, self.dim),
-            )
             self._red = None
-            if not self.strict and f._pattern.analysis.flops > AUTO_MAX_FLOPS:
+            if not self.strict and self.full._pattern.analysis.flops > AUTO_MAX_FLOPS:
                 self._values = False
                 return
             try:
@@ -140,20 +134,12 @@ class ReducedKKTSystem:
         if not self._active:
             return self.full.factorize(diagonal, static_reg)
         self.n_reduced += 1
-        f = self.full
-        matrix_values(
-            f._base,
-            f._diag_slot,
-            diagonal,
-            self.n,
-            0.0,
-            f._pattern.full_src,
-            f._full_data,
-            f._factor_data,
-        )  # fmt: skip  (K itself, for the refinement residuals)
         return inertia
 
     def matvec(self, v: np.ndarray) -> np.ndarray:
+        """``K v`` with the last factorized matrix."""
+        if self._active:
+            return self._red.matvec(np.asarray(v, dtype=np.float64), self._diag)
         return self.full.matvec(v)
 
     def solve(
@@ -166,16 +152,16 @@ class ReducedKKTSystem:
         rhs = np.asarray(rhs, dtype=np.float64)
         if rhs.shape != (self.dim,):
             raise InputError(f"KKTSystem.solve: rhs has shape {rhs.shape}, expected ({self.dim},)")
-        red, k = self._red, self._k  # K over the full system's value array
+        red, diag = self._red, self._diag
         inner = INNER_RATIO * ratio_max
-        x = red.solve_once(rhs, k, inner)
-        res = rhs - k @ x
+        x = red.solve_once(rhs, diag, inner)
+        res = rhs - red.matvec(x, diag)
         ratio = _ratio(res, x, rhs)
         for _ in range(max_refinement):
             if ratio <= ratio_max:
                 break
-            x_new = x + red.solve_once(res, k, inner)
-            res_new = rhs - k @ x_new
+            x_new = x + red.solve_once(res, diag, inner)
+            res_new = rhs - red.matvec(x_new, diag)
             ratio_new = _ratio(res_new, x_new, rhs)
             if not ratio_new < ratio:
                 break

@@ -27,6 +27,8 @@ from mbplan.solvers.reduced_kernels import (
     bt_solve,
     csr_matvec,
     group_values,
+    kkt_matvec,
+    lower_ends,
     rows_matvec,
     rows_t_matvec,
     s_apply,
@@ -149,7 +151,7 @@ class Reduction:
         self.ok = False
 
     _WORK = ("M", "new_rows", "lbuf", "ebuf", "lu", "piv", "work", "hr_base", "dt_data", "ttt",
-             "sigma", "ai_scaled")  # fmt: skip
+             "sigma", "ai_scaled", "ae_data", "ai_data")  # fmt: skip
     _MATRICES = ("T", "Tt", "hs", "W", "Hr", "ak", "Ar", "AIr", "AIt")
 
     def fresh(self) -> Reduction:
@@ -352,6 +354,8 @@ class Reduction:
         is_y = np.zeros(me, bool)
         is_y[self.y_rows] = True
         self.kept = np.flatnonzero(~is_y)
+        self.ae_p, self.ae_i, self.ae_data = ae.indptr, ae.indices, np.zeros(ae.nnz)
+        self.ai_p, self.ai_i, self.ai_data = ai.indptr, ai.indices, np.zeros(ai.nnz)
         sub = ae[self.kept]
         sub.sort_indices()
         ae_pos = sp.csr_matrix(
@@ -366,8 +370,12 @@ class Reduction:
         hr = _product_pattern((self.Tt, self.W), (self.AIt, self.AIr))
         self.Hr = sp.csr_matrix(sp.tril(hr, format="csr"))
         self.Hr.sort_indices()
+        ends = lambda a, b: lower_ends(a.indptr, a.indices, b.indptr, b.indices)  # noqa: E731
+        self.tw_end, self.tt_end = ends(self.Tt, self.W), ends(self.Tt, self.T)
+        self.fold_end = ends(self.AIt, self.AIr)
         self.air_rows = np.repeat(np.arange(self.mi), np.diff(self.AIr.indptr))
         self.sigma = np.zeros(self.mi)
+        self.all_kept, self.all_ineq = np.arange(len(self.kept)), np.arange(self.mi)
         self.ai_scaled = np.zeros(self.AIr.nnz)
         self.work = np.zeros(max(self.nr, 1))
         self.hr_base = np.zeros(self.Hr.nnz)
@@ -380,6 +388,8 @@ class Reduction:
         """``M_j``, ``E``, ``T``, ``Tᵀ H_sym T``, ``A_E,kept T``, ``A_I T`` for new values
         (``H``, ``A_E`` and ``A_I`` with this reduction's patterns); False on a breakdown."""
         self.ok = False
+        self.ae_data[:] = ae.data
+        self.ai_data[:] = ai.data
         if len(self.M) and not group_values(
             ae.data, self.g_cancel, self.h_cancel, self.g_outer, self.h_outer, self.M,
             self.new_rows,
@@ -398,7 +408,8 @@ class Reduction:
         self.hs.data[:] = 0.0
         self.hs.data[self.hs_slot] = hess.data[self.hs_src]
         self._product(self.hs, T, self.W)
-        self._product(Tt, self.W, self.Hr, lower=True)
+        self.Hr.data[:] = 0.0
+        self._add_lower(Tt, self.W, self.W.data, self.tw_end)
         self.hr_base[:] = self.Hr.data
         self.ttt_ok = False
         self.ak.data[:] = ae.data[self.ak_src]
@@ -408,14 +419,19 @@ class Reduction:
         self.ok = bool(np.isfinite(self.hr_base).all())
         return self.ok
 
-    def _product(
-        self, a: sp.csr_matrix, b: sp.csr_matrix, c: sp.csr_matrix, lower: bool = False
-    ) -> None:
-        """``c = a @ b`` (``lower``: its lower triangle) in ``c``'s pattern."""
+    def _product(self, a: sp.csr_matrix, b: sp.csr_matrix, c: sp.csr_matrix) -> None:
+        """``c = a @ b`` in ``c``'s pattern."""
         c.data[:] = 0.0
-        kernel = spgemm_lower if lower else spgemm
-        kernel(a.indptr, a.indices, a.data, b.indptr, b.indices, b.data, c.indptr, c.indices,
+        spgemm(a.indptr, a.indices, a.data, b.indptr, b.indices, b.data, c.indptr, c.indices,
                c.data, self.work)  # fmt: skip
+
+    def _add_lower(
+        self, a: sp.csr_matrix, b: sp.csr_matrix, b_data: np.ndarray, ends: np.ndarray
+    ) -> None:
+        """``H_r += tril(a @ b)`` with ``b``'s values ``b_data`` (``ends``: :func:`lower_ends`)."""
+        hr = self.Hr
+        spgemm_lower(a.indptr, a.indices, a.data, b.indptr, b.indices, b_data, ends, hr.indptr,
+                     hr.indices, hr.data, self.work)  # fmt: skip
 
     def factorize(self, diagonal: np.ndarray, static_reg: float) -> Inertia | None:
         """Factorize ``K_r`` for ``K``'s diagonal (``Tᵀ D_x T`` added to ``Tᵀ H T``; the
@@ -430,26 +446,22 @@ class Reduction:
             self.Hr.data[:] = self.hr_base
         elif np.all(dx == dx[0]):  # δ_w (+ζ) I: Tᵀ D T = d TᵀT, TᵀT once per matrix
             if not self.ttt_ok:
-                self._product(self.Tt, self.T, self.Hr, lower=True)
+                self.Hr.data[:] = 0.0
+                self._add_lower(self.Tt, self.T, self.T.data, self.tt_end)
                 self.ttt[:] = self.Hr.data
                 self.ttt_ok = True
             np.multiply(self.ttt, dx[0], out=self.Hr.data)
             self.Hr.data += self.hr_base
         else:
-            T = self.T
-            self.dt_data[:] = T.data * dx[self.t_rows]
+            np.multiply(self.T.data, dx[self.t_rows], out=self.dt_data)
             self.Hr.data[:] = self.hr_base
-            tt, hr = self.Tt, self.Hr
-            spgemm_lower(tt.indptr, tt.indices, tt.data, T.indptr, T.indices, self.dt_data,
-                         hr.indptr, hr.indices, hr.data, self.work)  # fmt: skip
+            self._add_lower(self.Tt, self.T, self.dt_data, self.tt_end)
         np.divide(-1.0, d_i, out=self.sigma)
         np.multiply(self.AIr.data, self.sigma[self.air_rows], out=self.ai_scaled)
-        at, ar, hr = self.AIt, self.AIr, self.Hr
-        spgemm_lower(at.indptr, at.indices, at.data, ar.indptr, ar.indices, self.ai_scaled,
-                     hr.indptr, hr.indices, hr.data, self.work)  # fmt: skip
-        if not np.isfinite(hr.data).all():
+        self._add_lower(self.AIt, self.AIr, self.ai_scaled, self.fold_end)
+        if not np.isfinite(self.Hr.data).all():
             return None
-        self.kkt.set_matrices(hr, self.Ar, None)
+        self.kkt.set_matrices(self.Hr, self.Ar, None)
         diag_r = np.concatenate([np.zeros(self.nr), diagonal[n + self.kept]])
         inertia = self.kkt.factorize(diag_r, max(static_reg, REDUCED_STATIC_REG))
         if inertia is None:
@@ -457,28 +469,39 @@ class Reduction:
         m = len(self.dep)
         return Inertia(inertia.positive + m, inertia.negative + m + self.mi, 0)
 
-    def solve_once(self, b: np.ndarray, k: sp.csr_matrix, ratio_max: float) -> np.ndarray:
-        """``K⁻¹ b`` through the reduction (module docstring; ``k``: ``K``, full symmetric
-        pattern), ``K_r`` solved to the residual ratio ``ratio_max``."""
-        n, me, nr = self.n, self.me, self.nr
+    def matvec(self, x: np.ndarray, diagonal: np.ndarray) -> np.ndarray:
+        """``K x`` for the values of :meth:`set_values` and ``K``'s ``diagonal``."""
+        hs = self.hs
+        return kkt_matvec(hs.indptr, hs.indices, hs.data, self.ae_p, self.ae_i, self.ae_data,
+                          self.ai_p, self.ai_i, self.ai_data, diagonal, x)  # fmt: skip
+
+    def solve_once(self, b: np.ndarray, diagonal: np.ndarray, ratio_max: float) -> np.ndarray:
+        """``K⁻¹ b`` through the reduction (module docstring; ``diagonal``: ``K``'s), ``K_r``
+        solved to the residual ratio ``ratio_max``."""
+        n, me, nr, dep = self.n, self.me, self.nr, self.dep
         bx, be, bi = b[:n], b[n : n + me], b[n + me :]
         blk = (self.lbuf, self.shape, self.loff, self.cptr, self.cblk, self.ccol, self.lu,
                self.lu_off, self.piv, self.uoff)  # fmt: skip
         xu = b_solve(s_apply(be, self.tgt, self.src, self.sub, self.M, False)[self.y_rows], *blk)
-        kv = rows_t_matvec(k.indptr, k.indices, k.data, self.dep, xu, len(b))  # K[:, dep] x_U
-        at, ar, T = self.AIt, self.AIr, self.T
-        rz = bi - kv[n + me :]
-        rx = csr_matvec(self.Tt.indptr, self.Tt.indices, self.Tt.data, bx - kv[:n])
+        hs, ak, at, ar, T, Tt = self.hs, self.ak, self.AIt, self.AIr, self.T, self.Tt
+        v = np.zeros(n)
+        v[dep] = xu
+        kv = rows_t_matvec(hs.indptr, hs.indices, hs.data, dep, xu, n)  # (K [x_U; 0])_x
+        kv[dep] += diagonal[dep] * xu
+        rz = bi - csr_matvec(self.ai_p, self.ai_i, self.ai_data, v)
+        rx = csr_matvec(Tt.indptr, Tt.indices, Tt.data, bx - kv)
         rx += csr_matvec(at.indptr, at.indices, at.data, self.sigma * rz)
-        xr = self.kkt.solve(np.concatenate([rx, (be - kv[n : n + me])[self.kept]]), 10, ratio_max)[
-            0
-        ]
+        re = be[self.kept] - csr_matvec(ak.indptr, ak.indices, ak.data, v)
+        xr = self.kkt.solve(np.concatenate([rx, re]), 10, ratio_max)[0]
         w = np.zeros(len(b))
         w[:n] = csr_matvec(T.indptr, T.indices, T.data, xr[:nr])
-        w[self.dep] += xu
+        w[dep] += xu
         w[n + self.kept] = xr[nr:]
-        w[n + me :] = self.sigma * (csr_matvec(ar.indptr, ar.indices, ar.data, xr[:nr]) - rz)
-        kw = rows_matvec(k.indptr, k.indices, k.data, self.dep, w)  # (K w)[dep]
-        w[n + self.y_rows] = bt_solve(bx[self.dep] - kw, *blk)
+        wz = self.sigma * (csr_matvec(ar.indptr, ar.indices, ar.data, xr[:nr]) - rz)
+        w[n + me :] = wz
+        kw = rows_matvec(hs.indptr, hs.indices, hs.data, dep, w[:n]) + diagonal[dep] * w[dep]
+        at_w = rows_t_matvec(ak.indptr, ak.indices, ak.data, self.all_kept, xr[nr:], n)
+        at_w += rows_t_matvec(self.ai_p, self.ai_i, self.ai_data, self.all_ineq, wz, n)
+        w[n + self.y_rows] = bt_solve(bx[dep] - kw - at_w[dep], *blk)
         w[n : n + me] = s_apply(w[n : n + me], self.tgt, self.src, self.sub, self.M, True)
         return w
