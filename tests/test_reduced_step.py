@@ -7,6 +7,7 @@ import pytest
 
 from mbplan.benchmarks.speed_tasks import chain_task, maximal_ripm_problem
 from mbplan.errors import InputError
+from mbplan.formulations.maximal_layout import JointEliminationPlans
 from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
 from mbplan.solvers import RIPMOptions, solve_ripm
 from mbplan.solvers.elimination import EliminationPlan
@@ -29,13 +30,18 @@ def _kkt(problem, x0, seed):
     return full, red, -rng.uniform(0.5, 2.0, problem.n_ineq) / z, rng
 
 
-@pytest.fixture(scope="module", params=["chain4", "chain8", "iiwa"])
+@pytest.fixture(
+    scope="module", params=["chain4", "chain8", "iiwa", "chain4+wrench", "iiwa+wrench"]
+)
 def systems(request):
-    if request.param == "iiwa":
+    task, _, wrench = request.param.partition("+")
+    if task == "iiwa":
         ocp = iiwa_obstacle(iiwa_obstacle_starts(3, 0, "com")[1], N=6, constraint="com")
         problem, x0 = maximal_ripm_problem(ocp)
     else:
-        problem, x0 = maximal_ripm_problem(chain_task(int(request.param[5:]), N=5), "linear")
+        problem, x0 = maximal_ripm_problem(chain_task(int(task[5:]), N=5), "linear")
+    if wrench:  # the joint wrenches eliminated too (inverse dynamics)
+        problem.elimination_plan = JointEliminationPlans(problem, forces=True)
     return problem, x0, *_kkt(problem, x0, 1)
 
 
@@ -105,14 +111,27 @@ def test_nonnegative_inequality_diagonal_goes_to_the_full_factorization(systems)
     assert np.abs(red.solve(b)[0] - full.solve(b)[0]).max() == 0.0
 
 
-def test_ripm_reduced_solve_equals_full():
+@pytest.mark.parametrize("wrench", [False, True])
+def test_ripm_reduced_solve_equals_full(wrench):
     problem, x0 = maximal_ripm_problem(chain_task(4, N=8), "linear")
     opts = RIPMOptions(tol=1e-6, max_iter=100)
     full = solve_ripm(problem, x0, opts)
+    problem.elimination_plan = JointEliminationPlans(problem, forces=wrench)
     red = solve_ripm(problem, x0, opts.replace(kkt_method="reduced"))
     assert full.status.name == red.status.name == "CONVERGED"
     assert abs(full.iterations - red.iterations) <= 1
     assert abs(full.objective - red.objective) <= 1e-6 * max(1.0, abs(full.objective))
+
+
+def test_wrench_blocks_leave_the_generalized_coordinates():
+    """With the joint wrenches eliminated, ``K_r`` keeps per knot and joint its two free state
+    coordinates and one kinematics row (and no inequality rows: folded in)."""
+    problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
+    problem.elimination_plan = JointEliminationPlans(problem, forces=True)
+    red = _kkt(problem, x0, 0)[1]
+    joints = 4  # the chain's bodies
+    assert red.reduction.nr == 2 * joints * 5 - joints  # knot 1: one free coordinate each
+    assert len(red.reduction.kept) == joints * 5 - joints  # steps 1…N-1: one kinematics row
 
 
 def test_kkt_method_choice_and_errors(systems):
