@@ -260,6 +260,13 @@ def spgemm_lower(ap, ai, ax, bp, bi, bx, ends, cp, ci, cx, work) -> None:
 
 
 @nb.njit(cache=True)
+def fold_values(hf, slot, e, f, row, ai, sigma) -> None:
+    """``H_f += A_Iᵀ diag(σ) A_I`` term by term: ``hf[slot] += σ[row] ai[e] ai[f]``."""
+    for t in range(slot.shape[0]):
+        hf[slot[t]] += sigma[row[t]] * ai[e[t]] * ai[f[t]]
+
+
+@nb.njit(cache=True)
 def csr_matvec(indptr, indices, data, x) -> np.ndarray:
     """``A x`` for CSR arrays (one pass, no scipy call overhead)."""
     y = np.zeros(indptr.shape[0] - 1)
@@ -395,6 +402,7 @@ REDUCED_KERNELS = (
     spgemm,
     spgemm_lower,
     lower_ends,
+    fold_values,
     csr_matvec,
     rows_matvec,
     rows_t_matvec,

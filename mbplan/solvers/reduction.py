@@ -26,6 +26,7 @@ from mbplan.solvers.reduced_kernels import (
     block_values,
     bt_solve,
     csr_matvec,
+    fold_values,
     group_values,
     kkt_matvec,
     lower_ends,
@@ -151,8 +152,8 @@ class Reduction:
         self.ok = False
 
     _WORK = ("M", "new_rows", "lbuf", "ebuf", "lu", "piv", "work", "hr_base", "dt_data", "ttt",
-             "sigma", "ai_scaled", "ae_data", "ai_data")  # fmt: skip
-    _MATRICES = ("T", "Tt", "hs", "W", "Hr", "ak", "Ar", "AIr", "AIt")
+             "sigma", "sigma_used", "ae_data", "ai_data")  # fmt: skip
+    _MATRICES = ("T", "Tt", "hs", "hf", "W", "Hr", "ak", "Ar")
 
     def fresh(self) -> Reduction:
         """A copy sharing the symbolic arrays, with its own work arrays and ``K_r`` system."""
@@ -334,22 +335,34 @@ class Reduction:
         self.t_rows = np.repeat(np.arange(n), np.diff(self.T.indptr))
 
     def _products(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> None:
-        """Patterns of ``H_sym``, ``H_sym T``, ``A_E,kept T``, ``A_I T`` and of ``H_r``, the
-        lower triangle of ``Tᵀ H_sym T + (A_I T)ᵀ Σ (A_I T)`` (the inequality rows folded in)."""
+        """Patterns of ``H_sym`` (with room for ``A_Iᵀ Σ A_I``: ``H_f``, the inequality rows
+        folded in), ``H_f T``, ``A_E,kept T`` and ``H_r = tril(Tᵀ H_f T)``; the slots of the
+        fold's terms."""
         n, me = self.n, self.me
         h_rows = np.repeat(np.arange(n), np.diff(hess.indptr))
         low = np.flatnonzero(h_rows >= hess.indices)
         r, c = h_rows[low], hess.indices[low]
         off = r != c
-        rr = np.concatenate([r, c[off], np.arange(n)])
-        cc = np.concatenate([c, r[off], np.arange(n)])
-        src = np.concatenate([low, low[off], -np.ones(n, np.int64)])
+        fold = _product_pattern((_transpose(ai)[0], ai)).tocoo()
+        rr = np.concatenate([r, c[off], np.arange(n), fold.row])
+        cc = np.concatenate([c, r[off], np.arange(n), fold.col])
+        src = np.concatenate([low, low[off], -np.ones(n + fold.nnz, np.int64)])
         keys, inv = np.unique(rr * n + cc, return_inverse=True)
         self.hs = sp.csr_matrix(
             (np.zeros(len(keys)), keys % n, np.searchsorted(keys // n, np.arange(n + 1))),
             shape=(n, n),
         )
         self.hs_slot, self.hs_src = inv[src >= 0], src[src >= 0]
+        self.hf = sp.csr_matrix((np.zeros(len(keys)), self.hs.indices, self.hs.indptr), (n, n))
+        # per pair of entries (e, f) of an inequality row: its slot in H_f
+        lens = np.diff(ai.indptr).astype(np.int64)
+        sq = lens * lens
+        self.fold_row = np.repeat(np.arange(self.mi), sq)
+        t = np.arange(len(self.fold_row)) - np.repeat(np.cumsum(sq) - sq, sq)
+        width, start = np.repeat(lens, sq), np.repeat(ai.indptr[:-1].astype(np.int64), sq)
+        self.fold_e, self.fold_f = start + t // width, start + t % width
+        cols = (ai.indices[self.fold_e][:, None], ai.indices[self.fold_f][:, None])
+        self.fold_slot = _Slots(self.hs)(*cols).reshape(-1)
         self.W = _product_pattern((self.hs, self.T))
         is_y = np.zeros(me, bool)
         is_y[self.y_rows] = True
@@ -365,18 +378,13 @@ class Reduction:
         self.ak = sp.csr_matrix((np.zeros(sub.nnz), ae_pos.indices, ae_pos.indptr), shape=sub.shape)
         self.ak_src = ae_pos.data.astype(np.int64) - 1
         self.Ar = _product_pattern((self.ak, self.T))
-        self.AIr = _product_pattern((ai, self.T))
-        self.AIt, self.ait_src = _transpose(self.AIr)
-        hr = _product_pattern((self.Tt, self.W), (self.AIt, self.AIr))
-        self.Hr = sp.csr_matrix(sp.tril(hr, format="csr"))
+        self.Hr = sp.csr_matrix(sp.tril(_product_pattern((self.Tt, self.W)), format="csr"))
         self.Hr.sort_indices()
         ends = lambda a, b: lower_ends(a.indptr, a.indices, b.indptr, b.indices)  # noqa: E731
         self.tw_end, self.tt_end = ends(self.Tt, self.W), ends(self.Tt, self.T)
-        self.fold_end = ends(self.AIt, self.AIr)
-        self.air_rows = np.repeat(np.arange(self.mi), np.diff(self.AIr.indptr))
         self.sigma = np.zeros(self.mi)
+        self.sigma_used = np.full(self.mi, np.nan)  # Σ of hr_base (nan: to be computed)
         self.all_kept, self.all_ineq = np.arange(len(self.kept)), np.arange(self.mi)
-        self.ai_scaled = np.zeros(self.AIr.nnz)
         self.work = np.zeros(max(self.nr, 1))
         self.hr_base = np.zeros(self.Hr.nnz)
         self.dt_data = np.zeros(self.T.nnz)
@@ -385,8 +393,9 @@ class Reduction:
 
     # ------------------------------------------------------------------ numeric
     def set_values(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> bool:
-        """``M_j``, ``E``, ``T``, ``Tᵀ H_sym T``, ``A_E,kept T``, ``A_I T`` for new values
-        (``H``, ``A_E`` and ``A_I`` with this reduction's patterns); False on a breakdown."""
+        """``M_j``, ``E``, ``T``, ``A_E,kept T`` for new values (``H``, ``A_E`` and ``A_I`` with
+        this reduction's patterns; ``Tᵀ H_f T`` follows in :meth:`factorize`, with ``Σ``);
+        False on a breakdown."""
         self.ok = False
         self.ae_data[:] = ae.data
         self.ai_data[:] = ai.data
@@ -407,16 +416,11 @@ class Reduction:
         Tt.data[:] = T.data[self.tt_src]
         self.hs.data[:] = 0.0
         self.hs.data[self.hs_slot] = hess.data[self.hs_src]
-        self._product(self.hs, T, self.W)
-        self.Hr.data[:] = 0.0
-        self._add_lower(Tt, self.W, self.W.data, self.tw_end)
-        self.hr_base[:] = self.Hr.data
+        self.sigma_used[:] = np.nan
         self.ttt_ok = False
         self.ak.data[:] = ae.data[self.ak_src]
         self._product(self.ak, T, self.Ar)
-        self._product(ai, T, self.AIr)
-        self.AIt.data[:] = self.AIr.data[self.ait_src]
-        self.ok = bool(np.isfinite(self.hr_base).all())
+        self.ok = bool(np.isfinite(T.data).all())
         return self.ok
 
     def _product(self, a: sp.csr_matrix, b: sp.csr_matrix, c: sp.csr_matrix) -> None:
@@ -441,6 +445,20 @@ class Reduction:
         d_i = diagonal[n + me :]
         if not self.ok or np.any(diagonal[n + self.y_rows] != 0.0) or not np.all(d_i < 0.0):
             return None
+        np.divide(-1.0, d_i, out=self.sigma)
+        if not np.array_equal(self.sigma, self.sigma_used):  # Tᵀ H_f T for this Σ
+            hf = self.hf
+            hf.data[:] = self.hs.data
+            fold_values(hf.data, self.fold_slot, self.fold_e, self.fold_f, self.fold_row,
+                        self.ai_data, self.sigma)  # fmt: skip
+            self._product(hf, self.T, self.W)
+            self.Hr.data[:] = 0.0
+            self._add_lower(self.Tt, self.W, self.W.data, self.tw_end)
+            self.hr_base[:] = self.Hr.data
+            self.sigma_used[:] = self.sigma
+            if not np.isfinite(self.hr_base).all():
+                self.sigma_used[:] = np.nan
+                return None
         dx = diagonal[:n]
         if not dx.any():
             self.Hr.data[:] = self.hr_base
@@ -456,11 +474,6 @@ class Reduction:
             np.multiply(self.T.data, dx[self.t_rows], out=self.dt_data)
             self.Hr.data[:] = self.hr_base
             self._add_lower(self.Tt, self.T, self.dt_data, self.tt_end)
-        np.divide(-1.0, d_i, out=self.sigma)
-        np.multiply(self.AIr.data, self.sigma[self.air_rows], out=self.ai_scaled)
-        self._add_lower(self.AIt, self.AIr, self.ai_scaled, self.fold_end)
-        if not np.isfinite(self.Hr.data).all():
-            return None
         self.kkt.set_matrices(self.Hr, self.Ar, None)
         diag_r = np.concatenate([np.zeros(self.nr), diagonal[n + self.kept]])
         inertia = self.kkt.factorize(diag_r, max(static_reg, REDUCED_STATIC_REG))
@@ -483,25 +496,26 @@ class Reduction:
         blk = (self.lbuf, self.shape, self.loff, self.cptr, self.cblk, self.ccol, self.lu,
                self.lu_off, self.piv, self.uoff)  # fmt: skip
         xu = b_solve(s_apply(be, self.tgt, self.src, self.sub, self.M, False)[self.y_rows], *blk)
-        hs, ak, at, ar, T, Tt = self.hs, self.ak, self.AIt, self.AIr, self.T, self.Tt
+        hs, ak, T, Tt = self.hs, self.ak, self.T, self.Tt
+        ai = (self.ai_p, self.ai_i, self.ai_data)
         v = np.zeros(n)
         v[dep] = xu
         kv = rows_t_matvec(hs.indptr, hs.indices, hs.data, dep, xu, n)  # (K [x_U; 0])_x
         kv[dep] += diagonal[dep] * xu
-        rz = bi - csr_matvec(self.ai_p, self.ai_i, self.ai_data, v)
+        rz = bi - csr_matvec(*ai, v)
+        kv -= rows_t_matvec(*ai, self.all_ineq, self.sigma * rz, n)  # the folded rows
         rx = csr_matvec(Tt.indptr, Tt.indices, Tt.data, bx - kv)
-        rx += csr_matvec(at.indptr, at.indices, at.data, self.sigma * rz)
         re = be[self.kept] - csr_matvec(ak.indptr, ak.indices, ak.data, v)
         xr = self.kkt.solve(np.concatenate([rx, re]), 10, ratio_max)[0]
         w = np.zeros(len(b))
         w[:n] = csr_matvec(T.indptr, T.indices, T.data, xr[:nr])
+        wz = self.sigma * (csr_matvec(*ai, w[:n]) - rz)
         w[dep] += xu
         w[n + self.kept] = xr[nr:]
-        wz = self.sigma * (csr_matvec(ar.indptr, ar.indices, ar.data, xr[:nr]) - rz)
         w[n + me :] = wz
         kw = rows_matvec(hs.indptr, hs.indices, hs.data, dep, w[:n]) + diagonal[dep] * w[dep]
         at_w = rows_t_matvec(ak.indptr, ak.indices, ak.data, self.all_kept, xr[nr:], n)
-        at_w += rows_t_matvec(self.ai_p, self.ai_i, self.ai_data, self.all_ineq, wz, n)
+        at_w += rows_t_matvec(*ai, self.all_ineq, wz, n)
         w[n + self.y_rows] = bt_solve(bx[dep] - kw - at_w[dep], *blk)
         w[n : n + me] = s_apply(w[n : n + me], self.tgt, self.src, self.sub, self.M, True)
         return w
