@@ -75,6 +75,24 @@ def test_reduced_inertia_and_step_equal_the_full_factorization(systems, delta_w)
     assert np.abs(full.matvec(x_red) - b).max() <= 1e-10 * scale
 
 
+def test_new_values_without_inequality_rows_are_reduced_afresh(systems):
+    """No inequality rows (``Σ`` empty): every new matrix of the same pattern gets its own
+    ``Tᵀ H T``; steps and inertia follow the full factorization's matrix by matrix."""
+    problem, x0, _, _, _, rng = systems
+    full = KKTSystem(problem.n, problem.n_eq, 0)
+    red = ReducedKKTSystem(problem.n, problem.n_eq, 0, problem.elimination_plan, strict=True)
+    diag = np.concatenate([np.full(problem.n, 1e-3), np.zeros(problem.n_eq)])
+    b = rng.normal(size=full.dim)
+    for scale in (1.0, 3.0):
+        ev = problem.evaluate(x0, scale, rng.normal(size=problem.n_eq), np.ones(problem.n_ineq))
+        for kkt in (full, red):
+            kkt.set_matrices(ev.hessian_lower, ev.eq_jacobian, None)
+        assert red.factorize(diag, 1e-9) == full.factorize(diag, 1e-9)
+        x_full, (x_red, ratio) = full.solve(b)[0], red.solve(b)
+        assert red.n_fallbacks == 0 and ratio <= 1e-10
+        assert np.abs(x_red - x_full).max() <= 1e-6 * np.abs(x_full).max()
+
+
 def test_singular_matrix_is_rejected_by_both(systems):
     """``H = 0``, ``A_I = 0``: the matrix is singular on ``A_E``'s null space; each method either
     reports a wrong inertia or a solve whose residual refinement cannot reduce."""

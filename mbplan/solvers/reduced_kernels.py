@@ -9,7 +9,7 @@ import numba as nb
 import numpy as np
 
 PIVOT_TOL = 1e-12
-"""A block's LU (or a group's Gram Cholesky) breaks down on a pivot below this times the
+"""A block's or a group's LU breaks down on a pivot below this times the
 block's largest entry: the caller then factorizes the full matrix."""
 
 
@@ -19,84 +19,6 @@ def _gather(data, slot, out) -> None:
     for a in range(slot.shape[0]):
         for q in range(slot.shape[1]):
             out[a, q] = data[slot[a, q]] if slot[a, q] >= 0 else 0.0
-
-
-@nb.njit(cache=True)
-def group_values(ae, g_cancel, h_cancel, g_outer, h_outer, M, new_rows) -> bool:
-    """Per group ``j``: ``M_j = A_h Gᵀ (G Gᵀ)⁻¹`` on the cancelled columns (``G``: the source
-    rows, ``A_h``: the subtracted rows) and the new rows ``M_j A[sources] - A[subtract]`` on the
-    outer columns. ``g_cancel`` ``(J, g, c)``, ``h_cancel`` ``(J, r, c)``, ``g_outer``
-    ``(J, g, o)``, ``h_outer`` ``(J, r, o)``: slots of the entries in ``ae`` (``-1``: zero;
-    a padded source row is all ``-1`` and gets a unit Gram pivot). Products skip the zeros
-    column by column. False on a breakdown."""
-    J, g, c = g_cancel.shape
-    r, o = h_cancel.shape[1], g_outer.shape[2]
-    G, Hc = np.empty((g, c)), np.empty((r, c))
-    Go, Ho = np.empty((g, o)), np.empty((r, o))
-    gram, C, X = np.empty((g, g)), np.zeros((g, g)), np.empty((r, g))
-    gi, hi = np.empty(g, np.int64), np.empty(r, np.int64)
-    for j in range(J):
-        _gather(ae, g_cancel[j], G)
-        _gather(ae, h_cancel[j], Hc)
-        gram[:, :] = 0.0
-        X[:, :] = 0.0
-        for q in range(c):  # gram = G Gᵀ, X = Hc Gᵀ over each column's nonzeros
-            ng = nh = 0
-            for a in range(g):
-                if G[a, q] != 0.0:
-                    gi[ng] = a
-                    ng += 1
-            for a in range(r):
-                if Hc[a, q] != 0.0:
-                    hi[nh] = a
-                    nh += 1
-            for u in range(ng):
-                ga = G[gi[u], q]
-                for v in range(u + 1):
-                    gram[gi[u], gi[v]] += ga * G[gi[v], q]
-                for v in range(nh):
-                    X[hi[v], gi[u]] += Hc[hi[v], q] * ga
-        scale = 0.0
-        for a in range(g):
-            scale = max(scale, gram[a, a])
-        for a in range(g):
-            if gram[a, a] == 0.0:
-                gram[a, a] = 1.0  # a padded row
-        for a in range(g):  # Cholesky gram = C Cᵀ (gram's lower triangle)
-            for b in range(a, g):
-                t = gram[b, a]
-                for q in range(a):
-                    t -= C[b, q] * C[a, q]
-                if b == a:
-                    if not t > PIVOT_TOL * scale:
-                        return False
-                    C[a, a] = np.sqrt(t)
-                else:
-                    C[b, a] = t / C[a, a]
-        for i in range(r):  # X gram⁻¹, row by row
-            for a in range(g):
-                t = X[i, a]
-                for q in range(a):
-                    t -= C[a, q] * X[i, q]
-                X[i, a] = t / C[a, a]
-            for a in range(g - 1, -1, -1):
-                t = X[i, a]
-                for q in range(a + 1, g):
-                    t -= C[q, a] * X[i, q]
-                X[i, a] = t / C[a, a]
-        M[j] = X
-        _gather(ae, g_outer[j], Go)
-        _gather(ae, h_outer[j], Ho)
-        for i in range(r):
-            for q in range(o):
-                new_rows[j, i, q] = -Ho[i, q]
-        for a in range(g):
-            for q in range(o):
-                v = Go[a, q]
-                if v != 0.0:
-                    for i in range(r):
-                        new_rows[j, i, q] += X[i, a] * v
-    return True
 
 
 @nb.njit(cache=True)
@@ -166,6 +88,44 @@ def _lu_solve_t(A, piv, x) -> None:
         p = piv[k]
         if p != k:
             x[k], x[p] = x[p], x[k]
+
+
+@nb.njit(cache=True)
+def group_values(ae, g_sel, h_sel, pad, g_outer, h_outer, M, new_rows) -> bool:
+    """Per group ``j``: ``M_j = A_h G⁻¹`` on ``g`` selected cancelled columns (``G``: the source
+    rows there, square; ``A_h``: the subtracted rows), and the new rows
+    ``M_j A[sources] - A[subtract]`` on the outer columns. ``g_sel`` ``(J, g, g)``, ``h_sel``
+    ``(J, r, g)``, ``g_outer`` ``(J, g, o)``, ``h_outer`` ``(J, r, o)``: slots of the entries in
+    ``ae`` (``-1``: zero); a padded source row (``pad``) gets a unit pivot. False on a
+    breakdown (:func:`_lu`)."""
+    J, g = g_sel.shape[0], g_sel.shape[1]
+    r, o = h_sel.shape[1], g_outer.shape[2]
+    A, Hs = np.empty((g, g)), np.empty((r, g))
+    Go, Ho = np.empty((g, o)), np.empty((r, o))
+    piv = np.empty(g, np.int64)
+    for j in range(J):
+        _gather(ae, g_sel[j], A)
+        for a in range(g):
+            if pad[j, a]:
+                A[a, a] = 1.0
+        if not _lu(A, piv):
+            return False
+        _gather(ae, h_sel[j], Hs)
+        for i in range(r):
+            _lu_solve_t(A, piv, Hs[i])
+        M[j] = Hs
+        _gather(ae, g_outer[j], Go)
+        _gather(ae, h_outer[j], Ho)
+        for i in range(r):
+            for q in range(o):
+                new_rows[j, i, q] = -Ho[i, q]
+        for a in range(g):
+            for q in range(o):
+                v = Go[a, q]
+                if v != 0.0:
+                    for i in range(r):
+                        new_rows[j, i, q] += Hs[i, a] * v
+    return True
 
 
 @nb.njit(cache=True)

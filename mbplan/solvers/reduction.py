@@ -164,12 +164,14 @@ class Reduction:
             m = getattr(self, name)
             setattr(new, name, sp.csr_matrix((m.data.copy(), m.indices, m.indptr), shape=m.shape))
         new.kkt = KKTSystem(self.nr, len(self.kept), 0, **self.factor_options)
-        new.ok = False
+        new.ok = new.hr_ok = False
         return new
 
     # ------------------------------------------------------------------ symbolic
     def _groups(self, plan: EliminationPlan, ae: sp.csr_matrix, slots: _Slots) -> None:
-        """Slots of the groups' entries; the replaced rows from QR pivoting of ``M_j``."""
+        """Slots of the groups' entries: as many cancelled columns as source rows (QR pivoting
+        of the first values), the outer columns; the replaced rows from QR pivoting of
+        ``M_j``."""
         src, sub, can = plan.group_sources, plan.group_subtract, plan.group_cancel
         J = plan.n_groups
         r = sub.shape[1] if J else 0
@@ -183,15 +185,23 @@ class Reduction:
         self.outer = -np.ones((J, o), np.int64)
         for j, c in enumerate(outer):
             self.outer[j, : len(c)] = c
-        self.g_cancel = slots(src, can)
-        self.h_cancel = slots(sub, can)
+        g_cancel = slots(src, can)
+        dense = np.where(g_cancel >= 0, ae.data[g_cancel], 0.0)
+        sel = -np.ones(src.shape, np.int64)
+        for j in range(J):
+            valid = src[j] >= 0
+            chosen = can[j][_pivots(dense[j][valid])[: valid.sum()]]
+            if np.any(chosen < 0):
+                raise InputError("EliminationPlan: a group's source rows are rank deficient")
+            sel[j, valid] = chosen
+        self.g_sel, self.h_sel, self.pad = slots(src, sel), slots(sub, sel), src < 0
         self.g_outer = slots(src, self.outer)
         self.h_outer = slots(sub, self.outer)
         self.src, self.sub = src, sub
         self.M = np.zeros((J, r, src.shape[1]))
         self.new_rows = np.zeros((J, r, o))
         if J and not group_values(
-            ae.data, self.g_cancel, self.h_cancel, self.g_outer, self.h_outer, self.M,
+            ae.data, self.g_sel, self.h_sel, self.pad, self.g_outer, self.h_outer, self.M,
             self.new_rows,
         ):  # fmt: skip
             raise InputError("EliminationPlan: a group's source rows are rank deficient")
@@ -383,7 +393,8 @@ class Reduction:
         ends = lambda a, b: lower_ends(a.indptr, a.indices, b.indptr, b.indices)  # noqa: E731
         self.tw_end, self.tt_end = ends(self.Tt, self.W), ends(self.Tt, self.T)
         self.sigma = np.zeros(self.mi)
-        self.sigma_used = np.full(self.mi, np.nan)  # Σ of hr_base (nan: to be computed)
+        self.sigma_used = np.zeros(self.mi)  # the Σ of hr_base
+        self.hr_ok = False  # hr_base holds Tᵀ H_f T for these values and sigma_used
         self.all_kept, self.all_ineq = np.arange(len(self.kept)), np.arange(self.mi)
         self.work = np.zeros(max(self.nr, 1))
         self.hr_base = np.zeros(self.Hr.nnz)
@@ -400,7 +411,7 @@ class Reduction:
         self.ae_data[:] = ae.data
         self.ai_data[:] = ai.data
         if len(self.M) and not group_values(
-            ae.data, self.g_cancel, self.h_cancel, self.g_outer, self.h_outer, self.M,
+            ae.data, self.g_sel, self.h_sel, self.pad, self.g_outer, self.h_outer, self.M,
             self.new_rows,
         ):  # fmt: skip
             return False
@@ -416,7 +427,7 @@ class Reduction:
         Tt.data[:] = T.data[self.tt_src]
         self.hs.data[:] = 0.0
         self.hs.data[self.hs_slot] = hess.data[self.hs_src]
-        self.sigma_used[:] = np.nan
+        self.hr_ok = False
         self.ttt_ok = False
         self.ak.data[:] = ae.data[self.ak_src]
         self._product(self.ak, T, self.Ar)
@@ -446,7 +457,7 @@ class Reduction:
         if not self.ok or np.any(diagonal[n + self.y_rows] != 0.0) or not np.all(d_i < 0.0):
             return None
         np.divide(-1.0, d_i, out=self.sigma)
-        if not np.array_equal(self.sigma, self.sigma_used):  # Tᵀ H_f T for this Σ
+        if not (self.hr_ok and np.array_equal(self.sigma, self.sigma_used)):  # Tᵀ H_f T
             hf = self.hf
             hf.data[:] = self.hs.data
             fold_values(hf.data, self.fold_slot, self.fold_e, self.fold_f, self.fold_row,
@@ -456,8 +467,8 @@ class Reduction:
             self._add_lower(self.Tt, self.W, self.W.data, self.tw_end)
             self.hr_base[:] = self.Hr.data
             self.sigma_used[:] = self.sigma
-            if not np.isfinite(self.hr_base).all():
-                self.sigma_used[:] = np.nan
+            self.hr_ok = bool(np.isfinite(self.hr_base).all())
+            if not self.hr_ok:
                 return None
         dx = diagonal[:n]
         if not dx.any():
