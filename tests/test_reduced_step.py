@@ -30,9 +30,7 @@ def _kkt(problem, x0, seed):
     return full, red, -rng.uniform(0.5, 2.0, problem.n_ineq) / z, rng
 
 
-@pytest.fixture(
-    scope="module", params=["chain4", "chain8", "iiwa", "chain4+wrench", "iiwa+wrench"]
-)
+@pytest.fixture(scope="module", params=["chain4", "chain8", "iiwa", "chain4+wrench", "iiwa+wrench"])
 def systems(request):
     task, _, wrench = request.param.partition("+")
     if task == "iiwa":
