@@ -41,10 +41,11 @@ def _lu(A, piv) -> bool:
             for b in range(r):
                 A[k, b], A[p, b] = A[p, b], A[k, b]
         for a in range(k + 1, r):
-            A[a, k] /= A[k, k]
-            f = A[a, k]
-            for b in range(k + 1, r):
-                A[a, b] -= f * A[k, b]
+            if A[a, k] != 0.0:  # the blocks are sparse: skip the zero multipliers
+                A[a, k] /= A[k, k]
+                f = A[a, k]
+                for b in range(k + 1, r):
+                    A[a, b] -= f * A[k, b]
     return True
 
 
