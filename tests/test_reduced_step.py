@@ -7,7 +7,8 @@ import pytest
 
 from mbplan.benchmarks.speed_tasks import chain_task, maximal_ripm_problem
 from mbplan.errors import InputError
-from mbplan.formulations.maximal_layout import JointEliminationPlans
+from mbplan.formulations import maximal_layout
+from mbplan.formulations.maximal_layout import JointEliminationPlans, joint_elimination_plan
 from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
 from mbplan.solvers import RIPMOptions, solve_ripm
 from mbplan.solvers.elimination import EliminationPlan
@@ -38,8 +39,8 @@ def systems(request):
         problem, x0 = maximal_ripm_problem(ocp)
     else:
         problem, x0 = maximal_ripm_problem(chain_task(int(task[5:]), N=5), "linear")
-    if wrench:  # the joint wrenches eliminated too (inverse dynamics)
-        problem.elimination_plan = JointEliminationPlans(problem, forces=True)
+    # the joints alone, or the joint wrenches eliminated too (inverse dynamics)
+    problem.elimination_plan = JointEliminationPlans(problem, forces=bool(wrench))
     return problem, x0, *_kkt(problem, x0, 1)
 
 
@@ -137,6 +138,16 @@ def test_ripm_reduced_solve_equals_full(wrench):
     assert full.status.name == red.status.name == "CONVERGED"
     assert abs(full.iterations - red.iterations) <= 1
     assert abs(full.objective - red.objective) <= 1e-6 * max(1.0, abs(full.objective))
+
+
+def test_default_plan_eliminates_the_wrenches_of_shallow_trees(monkeypatch):
+    problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
+    jac = problem.evaluate(x0, 1.0).eq_jacobian
+    blocks = joint_elimination_plan(problem, jac, forces=False).n_blocks
+    assert blocks == 4 * 5  # a state block per body and knot
+    assert joint_elimination_plan(problem, jac).n_blocks == 2 * blocks  # and a wrench block
+    monkeypatch.setattr(maximal_layout, "WRENCH_MAX_DEPTH", 3)
+    assert joint_elimination_plan(problem, jac).n_blocks == blocks
 
 
 def test_wrench_blocks_leave_the_generalized_coordinates():
