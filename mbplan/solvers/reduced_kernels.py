@@ -58,17 +58,21 @@ def _lu_solve(A, piv, X) -> None:
         if p != k:
             for c in range(X.shape[1]):
                 X[k, c], X[p, c] = X[p, c], X[k, c]
-    for c in range(X.shape[1]):
-        for a in range(r):
-            t = X[a, c]
-            for b in range(a):
-                t -= A[a, b] * X[b, c]
-            X[a, c] = t
-        for a in range(r - 1, -1, -1):
-            t = X[a, c]
-            for b in range(a + 1, r):
-                t -= A[a, b] * X[b, c]
-            X[a, c] = t / A[a, a]
+    q = X.shape[1]
+    for a in range(r):  # row by row: contiguous updates over the columns, zeros skipped
+        for b in range(a):
+            f = A[a, b]
+            if f != 0.0:
+                for c in range(q):
+                    X[a, c] -= f * X[b, c]
+    for a in range(r - 1, -1, -1):
+        for b in range(a + 1, r):
+            f = A[a, b]
+            if f != 0.0:
+                for c in range(q):
+                    X[a, c] -= f * X[b, c]
+        for c in range(q):
+            X[a, c] /= A[a, a]
 
 
 @nb.njit(cache=True)
