@@ -196,6 +196,38 @@ def spgemm(ap, ai, ax, bp, bi, bx, cp, ci, cx, work) -> None:
 
 
 @nb.njit(cache=True)
+def times_t(hx, row_seg, seg_ptr, seg_block, seg_e, seg_arg, ebuf, eoff, shape, reach_red,
+            reach_ptr, wp, wi, wx, work) -> None:  # fmt: skip
+    """``W = H T`` into ``W``'s fixed CSR pattern, ``T`` given by the blocks (identity on the
+    kept columns, ``-E_b`` on block ``b``'s dependent rows over its reach): row by row, each
+    segment of ``H``'s entries on one block's dependent columns is summed densely over the
+    block's reach (contiguous rows of ``E_b``), then scattered once (segments from
+    :meth:`~mbplan.solvers.reduction_symbolic.ReductionSymbolic._segments`; ``work``: zeros of
+    length ``n_r``, left zero)."""
+    acc = np.zeros(np.max(shape[:, 2]) if shape.shape[0] else 0)
+    for i in range(row_seg.shape[0] - 1):
+        for s in range(row_seg[i], row_seg[i + 1]):
+            b = seg_block[s]
+            if b < 0:
+                for t in range(seg_ptr[s], seg_ptr[s + 1]):
+                    work[seg_arg[t]] += hx[seg_e[t]]
+                continue
+            m = shape[b, 2]
+            for q in range(m):
+                acc[q] = 0.0
+            for t in range(seg_ptr[s], seg_ptr[s + 1]):
+                a, off = hx[seg_e[t]], eoff[b] + seg_arg[t] * m
+                for q in range(m):
+                    acc[q] -= a * ebuf[off + q]
+            rc = reach_ptr[b]
+            for q in range(m):
+                work[reach_red[rc + q]] += acc[q]
+        for kc in range(wp[i], wp[i + 1]):
+            wx[kc] = work[wi[kc]]
+            work[wi[kc]] = 0.0
+
+
+@nb.njit(cache=True)
 def lower_ends(ap, ai, bp, bi) -> np.ndarray:
     """Per entry ``(i, k)`` of ``A``: the end of row ``k`` of ``B`` (sorted column indices)
     within the lower triangle of row ``i`` of ``A B`` (symbolic, for :func:`spgemm_lower`)."""
@@ -366,6 +398,7 @@ REDUCED_KERNELS = (
     block_values,
     spgemm,
     spgemm_lower,
+    times_t,
     lower_ends,
     fold_values,
     csr_matvec,

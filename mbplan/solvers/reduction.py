@@ -31,6 +31,7 @@ from mbplan.solvers.reduced_kernels import (
     s_apply,
     spgemm,
     spgemm_lower,
+    times_t,
 )
 from mbplan.solvers.reduction_symbolic import ReductionSymbolic, Slots
 
@@ -175,7 +176,10 @@ class Reduction(ReductionSymbolic):
             hf.data[:] = self.hs.data
             fold_values(hf.data, self.fold_slot, self.fold_e, self.fold_f, self.fold_row,
                         self.ai_data, self.sigma)  # fmt: skip
-            self._product(hf, self.T, self.W)
+            W = self.W
+            times_t(hf.data, self.row_seg, self.seg_ptr, self.seg_block, self.seg_e,
+                    self.seg_arg, self.ebuf, self.eoff, self.shape, self.reach_red,
+                    self.reach_ptr, W.indptr, W.indices, W.data, self.work)  # fmt: skip
             self.Hr.data[:] = 0.0
             self._add_lower(self.Tt, self.W, self.W.data, self.tw_end)
             self.hr_base[:] = self.Hr.data

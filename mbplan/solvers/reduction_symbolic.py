@@ -246,6 +246,9 @@ class ReductionSymbolic:
         self.t_e_src = e_id[self.t_e]
         self.Tt, self.tt_src = _transpose(self.T)
         self.t_rows = np.repeat(np.arange(n), np.diff(self.T.indptr))
+        self.red_of = red_of
+        self.reach_red = np.concatenate([red_of[c] for c in self.reach]) if self.reach else cols
+        self.reach_ptr = np.concatenate([[0], np.cumsum([len(c) for c in self.reach])])
 
     def _products(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> None:
         """Patterns of ``H_sym`` (with room for ``A_Iᵀ Σ A_I``: ``H_f``, the inequality rows
@@ -277,6 +280,7 @@ class ReductionSymbolic:
         cols = (ai.indices[self.fold_e][:, None], ai.indices[self.fold_f][:, None])
         self.fold_slot = Slots(self.hs)(*cols).reshape(-1)
         self.W = _product_pattern((self.hs, self.T))
+        self._segments()
         is_y = np.zeros(me, bool)
         is_y[self.y_rows] = True
         self.kept = np.flatnonzero(~is_y)
@@ -304,3 +308,25 @@ class ReductionSymbolic:
         self.dt_data = np.zeros(self.T.nnz)
         self.ttt = np.zeros(self.Hr.nnz)  # TᵀT in Hr's pattern
         self.ttt_ok = False
+
+    def _segments(self) -> None:
+        """``H_f``'s entries row by row in segments of one block's dependent columns (``-1``:
+        the kept columns), for :func:`~mbplan.solvers.reduced_kernels.times_t`: per segment its
+        block and entries, per entry its ``H_f`` slot and the dependent column's row in the
+        block's ``E`` (the kept column's reduced index)."""
+        n, hf = self.n, self.hs
+        block_of, local = -np.ones(n, np.int64), np.zeros(n, np.int64)
+        for b in range(len(self.shape)):
+            dep = self.dep[self.uoff[b] : self.uoff[b + 1]]
+            block_of[dep], local[dep] = b, np.arange(len(dep))
+        rows = np.repeat(np.arange(n), np.diff(hf.indptr))
+        blk = block_of[hf.indices]
+        self.seg_e = np.lexsort((blk, rows))
+        r_s, b_s, c_s = rows[self.seg_e], blk[self.seg_e], hf.indices[self.seg_e]
+        new = np.ones(len(r_s), bool)
+        new[1:] = (r_s[1:] != r_s[:-1]) | (b_s[1:] != b_s[:-1])
+        starts = np.flatnonzero(new)
+        self.seg_block = b_s[starts]
+        self.seg_ptr = np.append(starts, len(r_s))
+        self.row_seg = np.searchsorted(r_s[starts], np.arange(n + 1))
+        self.seg_arg = np.where(b_s >= 0, local[c_s], self.red_of[c_s])
