@@ -1,6 +1,8 @@
-"""A/B of the RIPM's per-iteration profile with ``kkt_method="reduced"``: this tree (with and
-without the joint-wrench blocks of the maximal formulation's plan) against a baseline checkout,
-interleaved, each round a fresh process per variant in alternating order.
+"""A/B of the RIPM's per-iteration profile with ``kkt_method="reduced"``: this tree (variants
+``joints``: the maximal formulation's plan without the joint-wrench blocks, ``joints+wrench``:
+with them, the default for trees at most ``WRENCH_MAX_DEPTH`` deep) against a baseline
+checkout (its default plan), interleaved, each round a fresh process per variant in
+alternating order.
 
 Per task and component: the minimum over rounds per case, the median over cases (ms per
 iteration), with the iteration counts (they must agree). Only these side-by-side ratios mean
