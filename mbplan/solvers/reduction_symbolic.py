@@ -247,8 +247,8 @@ class ReductionSymbolic:
         self.Tt, self.tt_src = _transpose(self.T)
         self.t_rows = np.repeat(np.arange(n), np.diff(self.T.indptr))
         self.red_of = red_of
-        self.reach_red = np.concatenate([red_of[c] for c in self.reach]) if self.reach else cols
-        self.reach_ptr = np.concatenate([[0], np.cumsum([len(c) for c in self.reach])])
+        self.reach_red = np.concatenate([red_of[c] for c in self.reach] + [cols[:0]])
+        self.reach_ptr = np.concatenate([[0], np.cumsum([len(c) for c in self.reach])]).astype(int)
 
     def _products(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> None:
         """Patterns of ``H_sym`` (with room for ``A_Iᵀ Σ A_I``: ``H_f``, the inequality rows
