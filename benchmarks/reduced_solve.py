@@ -103,7 +103,7 @@ def kkt_parts(task: str, repeats: int, seed: int = 0) -> dict:
     return {
         "task": task,
         "dim": systems["full"].dim,
-        "reduced_dim": red.nr + len(red.kept) + red.mi,
+        "reduced_dim": red.kkt.dim,
         "mflop_full": systems["full"].analysis.flops / 1e6,
         "mflop_reduced_ldl": red.kkt.analysis.flops / 1e6,
         "inertia_equal": i_f == i_r,
@@ -223,7 +223,7 @@ def markdown(parts: list[dict], rows: list[dict], load: str) -> str:
         "",
         "## One KKT at the warm start (ms, min)",
         "",
-        "| task | dim → reduced | Mflop full / reduced LDLᵀ | set_matrices full / red. | "
+        "| task | dim → factorized K_r | Mflop full / reduced LDLᵀ | set_matrices full / red. | "
         "factorize full / red. | solve full / red. | factor+solve+set, red. / full | "
         "inertia equal | step rel. diff |",
         "|---|---:|---:|---:|---:|---:|---:|---|---:|",

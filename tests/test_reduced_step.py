@@ -7,6 +7,8 @@ import pytest
 
 from mbplan.benchmarks.speed_tasks import chain_task, maximal_ripm_problem
 from mbplan.errors import InputError
+from mbplan.formulations import maximal_layout
+from mbplan.formulations.maximal_layout import JointEliminationPlans, joint_elimination_plan
 from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
 from mbplan.solvers import RIPMOptions, solve_ripm
 from mbplan.solvers.elimination import EliminationPlan
@@ -29,13 +31,16 @@ def _kkt(problem, x0, seed):
     return full, red, -rng.uniform(0.5, 2.0, problem.n_ineq) / z, rng
 
 
-@pytest.fixture(scope="module", params=["chain4", "chain8", "iiwa"])
+@pytest.fixture(scope="module", params=["chain4", "chain8", "iiwa", "chain4+wrench", "iiwa+wrench"])
 def systems(request):
-    if request.param == "iiwa":
+    task, _, wrench = request.param.partition("+")
+    if task == "iiwa":
         ocp = iiwa_obstacle(iiwa_obstacle_starts(3, 0, "com")[1], N=6, constraint="com")
         problem, x0 = maximal_ripm_problem(ocp)
     else:
-        problem, x0 = maximal_ripm_problem(chain_task(int(request.param[5:]), N=5), "linear")
+        problem, x0 = maximal_ripm_problem(chain_task(int(task[5:]), N=5), "linear")
+    # the joints alone, or the joint wrenches eliminated too (inverse dynamics)
+    problem.elimination_plan = JointEliminationPlans(problem, forces=bool(wrench))
     return problem, x0, *_kkt(problem, x0, 1)
 
 
@@ -69,6 +74,24 @@ def test_reduced_inertia_and_step_equal_the_full_factorization(systems, delta_w)
     assert np.abs(full.matvec(x_red) - b).max() <= 1e-10 * scale
 
 
+def test_new_values_without_inequality_rows_are_reduced_afresh(systems):
+    """No inequality rows (``Σ`` empty): every new matrix of the same pattern gets its own
+    ``Tᵀ H T``; steps and inertia follow the full factorization's matrix by matrix."""
+    problem, x0, _, _, _, rng = systems
+    full = KKTSystem(problem.n, problem.n_eq, 0)
+    red = ReducedKKTSystem(problem.n, problem.n_eq, 0, problem.elimination_plan, strict=True)
+    diag = np.concatenate([np.full(problem.n, 1e-3), np.zeros(problem.n_eq)])
+    b = rng.normal(size=full.dim)
+    for scale in (1.0, 3.0):
+        ev = problem.evaluate(x0, scale, rng.normal(size=problem.n_eq), np.ones(problem.n_ineq))
+        for kkt in (full, red):
+            kkt.set_matrices(ev.hessian_lower, ev.eq_jacobian, None)
+        assert red.factorize(diag, 1e-9) == full.factorize(diag, 1e-9)
+        x_full, (x_red, ratio) = full.solve(b)[0], red.solve(b)
+        assert red.n_fallbacks == 0 and ratio <= 1e-10
+        assert np.abs(x_red - x_full).max() <= 1e-6 * np.abs(x_full).max()
+
+
 def test_singular_matrix_is_rejected_by_both(systems):
     """``H = 0``, ``A_I = 0``: the matrix is singular on ``A_E``'s null space; each method either
     reports a wrong inertia or a solve whose residual refinement cannot reduce."""
@@ -94,14 +117,48 @@ def test_regularized_jacobian_block_goes_to_the_full_factorization(systems):
     assert np.abs(red.solve(b)[0] - full.solve(b)[0]).max() == 0.0
 
 
-def test_ripm_reduced_solve_equals_full():
+def test_nonnegative_inequality_diagonal_goes_to_the_full_factorization(systems):
+    """The inequality rows are folded into ``K_r`` only for ``D_I < 0`` (the RIPM's ``-Σ⁻¹``)."""
+    problem, _, full, red, sigma, rng = systems
+    diag = _diag(problem, 1e-4, 0.0, -sigma)
+    reduced = red.n_reduced
+    assert red.factorize(diag, 1e-9) == full.factorize(diag, 1e-9)
+    assert red.n_reduced == reduced
+    b = rng.normal(size=full.dim)
+    assert np.abs(red.solve(b)[0] - full.solve(b)[0]).max() == 0.0
+
+
+@pytest.mark.parametrize("wrench", [False, True])
+def test_ripm_reduced_solve_equals_full(wrench):
     problem, x0 = maximal_ripm_problem(chain_task(4, N=8), "linear")
     opts = RIPMOptions(tol=1e-6, max_iter=100)
     full = solve_ripm(problem, x0, opts)
+    problem.elimination_plan = JointEliminationPlans(problem, forces=wrench)
     red = solve_ripm(problem, x0, opts.replace(kkt_method="reduced"))
     assert full.status.name == red.status.name == "CONVERGED"
     assert abs(full.iterations - red.iterations) <= 1
     assert abs(full.objective - red.objective) <= 1e-6 * max(1.0, abs(full.objective))
+
+
+def test_default_plan_eliminates_the_wrenches_of_shallow_trees(monkeypatch):
+    problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
+    jac = problem.evaluate(x0, 1.0).eq_jacobian
+    blocks = joint_elimination_plan(problem, jac, forces=False).n_blocks
+    assert blocks == 4 * 5  # a state block per body and knot
+    assert joint_elimination_plan(problem, jac).n_blocks == 2 * blocks  # and a wrench block
+    monkeypatch.setattr(maximal_layout, "WRENCH_MAX_DEPTH", 3)
+    assert joint_elimination_plan(problem, jac).n_blocks == blocks
+
+
+def test_wrench_blocks_leave_the_generalized_coordinates():
+    """With the joint wrenches eliminated, ``K_r`` keeps per knot and joint its two free state
+    coordinates and one kinematics row (and no inequality rows: folded in)."""
+    problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
+    problem.elimination_plan = JointEliminationPlans(problem, forces=True)
+    red = _kkt(problem, x0, 0)[1]
+    joints = 4  # the chain's bodies
+    assert red.reduction.nr == 2 * joints * 5 - joints  # knot 1: one free coordinate each
+    assert len(red.reduction.kept) == joints * 5 - joints  # steps 1…N-1: one kinematics row
 
 
 def test_kkt_method_choice_and_errors(systems):

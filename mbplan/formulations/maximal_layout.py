@@ -24,6 +24,7 @@ class MaximalLayout:
     parent: np.ndarray  # (nb,) parent body, -1 for the world; parent < child
     s_cols: np.ndarray  # (N+1, nb, 12) R, F, p, v tangent coordinates
     lam_cols: np.ndarray  # (N+1, nb, 5)
+    tau_cols: np.ndarray  # (N+1, nb, 1) the joint's torque (force) of the step ending at the knot
     kin_rows: np.ndarray  # (N, nb, 6) equality rows of step k
     dyn_rows: np.ndarray  # (N, nb, 6)
     con_rows: np.ndarray  # (N+1, nb, 5) joint constraint h(X_{k+1}) of the body's joint, on s_k
@@ -35,6 +36,21 @@ class MaximalLayout:
     @property
     def nb(self) -> int:
         return self.kin_rows.shape[1]
+
+    @property
+    def depth(self) -> int:
+        """Bodies on the longest path from the world."""
+        d = np.zeros(self.nb, np.int64)
+        for c, p in enumerate(self.parent):
+            d[c] = 1 + (d[p] if p >= 0 else 0)
+        return int(d.max(initial=0))
+
+
+WRENCH_MAX_DEPTH = 16
+"""The default plan eliminates the joint wrenches too (:func:`joint_elimination_plan`) for body
+trees at most this deep: their blocks are dense over the free coordinates of a body's whole
+path, so their cost grows with the depth (iiwa, chain4…16: 0.9–1.0× the joints-only step's
+time per iteration; chain32: ~1.3×; docs/ripm-speed.md, session 7)."""
 
 
 def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
@@ -51,10 +67,12 @@ def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
 
     s_cols = np.concatenate([cols(n) for n in ("R", "F", "p", "v")], axis=2)
     lam_cols = cols("lam")
+    tau = v.blocks.get("tau")
+    tau_cols = cols("tau") if tau is not None and tau.count == nb else -np.ones((knots, nb, 1), int)
     body_of_col = np.full(problem.n, -1, np.int64)
     knot_of_col = np.full(problem.n, -1, np.int64)
     kk, bb = np.meshgrid(np.arange(knots), np.arange(nb), indexing="ij")
-    for c in (s_cols, lam_cols):
+    for c in (s_cols, lam_cols, tau_cols):
         free = c >= 0
         body_of_col[c[free]] = np.broadcast_to(bb[..., None], c.shape)[free]
         knot_of_col[c[free]] = np.broadcast_to(kk[..., None], c.shape)[free]
@@ -82,18 +100,31 @@ def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
     if np.any(parent >= np.arange(nb)):
         raise InputError("maximal_layout: bodies must be numbered parents first")
     return MaximalLayout(
-        problem.n, problem.n_eq, problem.n_ineq, parent, s_cols, lam_cols, kin_rows, dyn_rows,
-        con_rows,
+        problem.n, problem.n_eq, problem.n_ineq, parent, s_cols, lam_cols, tau_cols, kin_rows,
+        dyn_rows, con_rows,
     )  # fmt: skip
 
 
-def joint_elimination_plan(problem, eq_jacobian: sp.spmatrix) -> EliminationPlan:
+def joint_elimination_plan(
+    problem, eq_jacobian: sp.spmatrix, forces: bool | None = None
+) -> EliminationPlan:
     """The joints eliminated knot by knot (:mod:`mbplan.benchmarks.reduced_kkt`, stage 1): for
     steps ``k = 1…N-1`` five of each body's kinematics rows become ``M g - h`` (``h`` its joint
     constraint on ``s_k``, cancelling ``s_k`` of the body and its parent); at knots ``1…N`` the
     block of a body is its state ``s_k`` with those rows of step ``k-1`` (step 0: its six
-    kinematics rows) and ``h`` at knot ``k`` as local rows."""
+    kinematics rows) and ``h`` at knot ``k`` as local rows. ``forces``: then, at knots ``1…N``
+    and bodies from the leaves to the root, a block of the body's joint wrench (``λ_k`` and
+    ``τ_k``) with its six dynamics rows of step ``k-1`` (inverse dynamics: they touch the
+    states, which are blocks before, and the wrenches of its children; the reduced matrix shrinks
+    ~5×, the reduction's products grow: docs/ripm-speed.md, session 7). ``None``: the wrench
+    blocks when every joint has a torque and the tree is at most :data:`WRENCH_MAX_DEPTH`
+    deep."""
     lay = maximal_layout(problem, eq_jacobian)
+    actuated = bool(np.all(lay.tau_cols[1:] >= 0))
+    if forces is None:
+        forces = actuated and lay.depth <= WRENCH_MAX_DEPTH
+    elif forces and not actuated:
+        raise InputError("joint_elimination_plan: the wrench blocks need a torque on every joint")
     N, nb, parent = lay.N, lay.nb, lay.parent
     pad6 = -np.ones(6, np.int64)
     pad12 = -np.ones(12, np.int64)
@@ -115,6 +146,12 @@ def joint_elimination_plan(problem, eq_jacobian: sp.spmatrix) -> EliminationPlan
                 np.concatenate([lay.kin_rows[0, c] if k == 1 else pad6, lay.con_rows[k, c]])
             )
             cols.append(lay.s_cols[k, c])
+    if forces:
+        for k in range(1, N + 1):
+            for c in range(nb - 1, -1, -1):
+                groups.append(-1)
+                rows.append(np.concatenate([lay.dyn_rows[k - 1, c], -np.ones(5, np.int64)]))
+                cols.append(np.concatenate([lay.lam_cols[k, c], lay.tau_cols[k, c], pad6]))
 
     def stack(a: list, width: int) -> np.ndarray:
         return np.asarray(a, np.int64).reshape(len(a), width)
@@ -128,10 +165,11 @@ def joint_elimination_plan(problem, eq_jacobian: sp.spmatrix) -> EliminationPlan
 class JointEliminationPlans:
     """``problem.elimination_plan`` of a maximal-coordinate problem: the
     :func:`joint_elimination_plan` of the equality Jacobian's pattern, kept for the last
-    pattern (every solve of the problem asks for it)."""
+    pattern (every solve of the problem asks for it); ``forces``: with the joint-wrench blocks
+    (``None``: :func:`joint_elimination_plan`'s rule)."""
 
-    def __init__(self, problem) -> None:
-        self.problem = problem
+    def __init__(self, problem, forces: bool | None = None) -> None:
+        self.problem, self.forces = problem, forces
         self._key: tuple[bytes, bytes] | None = None
         self._plan: EliminationPlan | None = None
 
@@ -139,5 +177,5 @@ class JointEliminationPlans:
         jac = sp.csr_matrix(eq_jacobian)
         key = (jac.indptr.tobytes(), jac.indices.tobytes())
         if key != self._key or self._plan is None:
-            self._plan, self._key = joint_elimination_plan(self.problem, jac), key
+            self._plan, self._key = joint_elimination_plan(self.problem, jac, self.forces), key
         return self._plan

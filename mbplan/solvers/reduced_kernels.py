@@ -9,7 +9,7 @@ import numba as nb
 import numpy as np
 
 PIVOT_TOL = 1e-12
-"""A block's LU (or a group's Gram Cholesky) breaks down on a pivot below this times the
+"""A block's or a group's LU breaks down on a pivot below this times the
 block's largest entry: the caller then factorizes the full matrix."""
 
 
@@ -19,84 +19,6 @@ def _gather(data, slot, out) -> None:
     for a in range(slot.shape[0]):
         for q in range(slot.shape[1]):
             out[a, q] = data[slot[a, q]] if slot[a, q] >= 0 else 0.0
-
-
-@nb.njit(cache=True)
-def group_values(ae, g_cancel, h_cancel, g_outer, h_outer, M, new_rows) -> bool:
-    """Per group ``j``: ``M_j = A_h Gᵀ (G Gᵀ)⁻¹`` on the cancelled columns (``G``: the source
-    rows, ``A_h``: the subtracted rows) and the new rows ``M_j A[sources] - A[subtract]`` on the
-    outer columns. ``g_cancel`` ``(J, g, c)``, ``h_cancel`` ``(J, r, c)``, ``g_outer``
-    ``(J, g, o)``, ``h_outer`` ``(J, r, o)``: slots of the entries in ``ae`` (``-1``: zero;
-    a padded source row is all ``-1`` and gets a unit Gram pivot). Products skip the zeros
-    column by column. False on a breakdown."""
-    J, g, c = g_cancel.shape
-    r, o = h_cancel.shape[1], g_outer.shape[2]
-    G, Hc = np.empty((g, c)), np.empty((r, c))
-    Go, Ho = np.empty((g, o)), np.empty((r, o))
-    gram, C, X = np.empty((g, g)), np.zeros((g, g)), np.empty((r, g))
-    gi, hi = np.empty(g, np.int64), np.empty(r, np.int64)
-    for j in range(J):
-        _gather(ae, g_cancel[j], G)
-        _gather(ae, h_cancel[j], Hc)
-        gram[:, :] = 0.0
-        X[:, :] = 0.0
-        for q in range(c):  # gram = G Gᵀ, X = Hc Gᵀ over each column's nonzeros
-            ng = nh = 0
-            for a in range(g):
-                if G[a, q] != 0.0:
-                    gi[ng] = a
-                    ng += 1
-            for a in range(r):
-                if Hc[a, q] != 0.0:
-                    hi[nh] = a
-                    nh += 1
-            for u in range(ng):
-                ga = G[gi[u], q]
-                for v in range(u + 1):
-                    gram[gi[u], gi[v]] += ga * G[gi[v], q]
-                for v in range(nh):
-                    X[hi[v], gi[u]] += Hc[hi[v], q] * ga
-        scale = 0.0
-        for a in range(g):
-            scale = max(scale, gram[a, a])
-        for a in range(g):
-            if gram[a, a] == 0.0:
-                gram[a, a] = 1.0  # a padded row
-        for a in range(g):  # Cholesky gram = C Cᵀ (gram's lower triangle)
-            for b in range(a, g):
-                t = gram[b, a]
-                for q in range(a):
-                    t -= C[b, q] * C[a, q]
-                if b == a:
-                    if not t > PIVOT_TOL * scale:
-                        return False
-                    C[a, a] = np.sqrt(t)
-                else:
-                    C[b, a] = t / C[a, a]
-        for i in range(r):  # X gram⁻¹, row by row
-            for a in range(g):
-                t = X[i, a]
-                for q in range(a):
-                    t -= C[a, q] * X[i, q]
-                X[i, a] = t / C[a, a]
-            for a in range(g - 1, -1, -1):
-                t = X[i, a]
-                for q in range(a + 1, g):
-                    t -= C[q, a] * X[i, q]
-                X[i, a] = t / C[a, a]
-        M[j] = X
-        _gather(ae, g_outer[j], Go)
-        _gather(ae, h_outer[j], Ho)
-        for i in range(r):
-            for q in range(o):
-                new_rows[j, i, q] = -Ho[i, q]
-        for a in range(g):
-            for q in range(o):
-                v = Go[a, q]
-                if v != 0.0:
-                    for i in range(r):
-                        new_rows[j, i, q] += X[i, a] * v
-    return True
 
 
 @nb.njit(cache=True)
@@ -119,10 +41,11 @@ def _lu(A, piv) -> bool:
             for b in range(r):
                 A[k, b], A[p, b] = A[p, b], A[k, b]
         for a in range(k + 1, r):
-            A[a, k] /= A[k, k]
-            f = A[a, k]
-            for b in range(k + 1, r):
-                A[a, b] -= f * A[k, b]
+            if A[a, k] != 0.0:  # the blocks are sparse: skip the zero multipliers
+                A[a, k] /= A[k, k]
+                f = A[a, k]
+                for b in range(k + 1, r):
+                    A[a, b] -= f * A[k, b]
     return True
 
 
@@ -135,17 +58,21 @@ def _lu_solve(A, piv, X) -> None:
         if p != k:
             for c in range(X.shape[1]):
                 X[k, c], X[p, c] = X[p, c], X[k, c]
-    for c in range(X.shape[1]):
-        for a in range(r):
-            t = X[a, c]
-            for b in range(a):
-                t -= A[a, b] * X[b, c]
-            X[a, c] = t
-        for a in range(r - 1, -1, -1):
-            t = X[a, c]
-            for b in range(a + 1, r):
-                t -= A[a, b] * X[b, c]
-            X[a, c] = t / A[a, a]
+    q = X.shape[1]
+    for a in range(r):  # row by row: contiguous updates over the columns, zeros skipped
+        for b in range(a):
+            f = A[a, b]
+            if f != 0.0:
+                for c in range(q):
+                    X[a, c] -= f * X[b, c]
+    for a in range(r - 1, -1, -1):
+        for b in range(a + 1, r):
+            f = A[a, b]
+            if f != 0.0:
+                for c in range(q):
+                    X[a, c] -= f * X[b, c]
+        for c in range(q):
+            X[a, c] /= A[a, a]
 
 
 @nb.njit(cache=True)
@@ -166,6 +93,44 @@ def _lu_solve_t(A, piv, x) -> None:
         p = piv[k]
         if p != k:
             x[k], x[p] = x[p], x[k]
+
+
+@nb.njit(cache=True)
+def group_values(ae, g_sel, h_sel, pad, g_outer, h_outer, M, new_rows) -> bool:
+    """Per group ``j``: ``M_j = A_h G⁻¹`` on ``g`` selected cancelled columns (``G``: the source
+    rows there, square; ``A_h``: the subtracted rows), and the new rows
+    ``M_j A[sources] - A[subtract]`` on the outer columns. ``g_sel`` ``(J, g, g)``, ``h_sel``
+    ``(J, r, g)``, ``g_outer`` ``(J, g, o)``, ``h_outer`` ``(J, r, o)``: slots of the entries in
+    ``ae`` (``-1``: zero); a padded source row (``pad``) gets a unit pivot. False on a
+    breakdown (:func:`_lu`)."""
+    J, g = g_sel.shape[0], g_sel.shape[1]
+    r, o = h_sel.shape[1], g_outer.shape[2]
+    A, Hs = np.empty((g, g)), np.empty((r, g))
+    Go, Ho = np.empty((g, o)), np.empty((r, o))
+    piv = np.empty(g, np.int64)
+    for j in range(J):
+        _gather(ae, g_sel[j], A)
+        for a in range(g):
+            if pad[j, a]:
+                A[a, a] = 1.0
+        if not _lu(A, piv):
+            return False
+        _gather(ae, h_sel[j], Hs)
+        for i in range(r):
+            _lu_solve_t(A, piv, Hs[i])
+        M[j] = Hs
+        _gather(ae, g_outer[j], Go)
+        _gather(ae, h_outer[j], Ho)
+        for i in range(r):
+            for q in range(o):
+                new_rows[j, i, q] = -Ho[i, q]
+        for a in range(g):
+            for q in range(o):
+                v = Go[a, q]
+                if v != 0.0:
+                    for i in range(r):
+                        new_rows[j, i, q] += Hs[i, a] * v
+    return True
 
 
 @nb.njit(cache=True)
@@ -231,19 +196,71 @@ def spgemm(ap, ai, ax, bp, bi, bx, cp, ci, cx, work) -> None:
 
 
 @nb.njit(cache=True)
-def spgemm_lower(ap, ai, ax, bp, bi, bx, cp, ci, cx, work) -> None:
-    """``C += tril(A B)`` into ``C``'s fixed lower CSR pattern (``B`` with sorted column
-    indices; :func:`spgemm`'s other conventions)."""
+def times_t(hx, row_seg, seg_ptr, seg_block, seg_e, seg_arg, ebuf, eoff, shape, reach_red,
+            reach_ptr, wp, wi, wx, work) -> None:  # fmt: skip
+    """``W = H T`` into ``W``'s fixed CSR pattern, ``T`` given by the blocks (identity on the
+    kept columns, ``-E_b`` on block ``b``'s dependent rows over its reach): row by row, each
+    segment of ``H``'s entries on one block's dependent columns is summed densely over the
+    block's reach (contiguous rows of ``E_b``), then scattered once (segments from
+    :meth:`~mbplan.solvers.reduction_symbolic.ReductionSymbolic._segments`; ``work``: zeros of
+    length ``n_r``, left zero)."""
+    acc = np.zeros(np.max(shape[:, 2]) if shape.shape[0] else 0)
+    for i in range(row_seg.shape[0] - 1):
+        for s in range(row_seg[i], row_seg[i + 1]):
+            b = seg_block[s]
+            if b < 0:
+                for t in range(seg_ptr[s], seg_ptr[s + 1]):
+                    work[seg_arg[t]] += hx[seg_e[t]]
+                continue
+            m = shape[b, 2]
+            for q in range(m):
+                acc[q] = 0.0
+            for t in range(seg_ptr[s], seg_ptr[s + 1]):
+                a, off = hx[seg_e[t]], eoff[b] + seg_arg[t] * m
+                for q in range(m):
+                    acc[q] -= a * ebuf[off + q]
+            rc = reach_ptr[b]
+            for q in range(m):
+                work[reach_red[rc + q]] += acc[q]
+        for kc in range(wp[i], wp[i + 1]):
+            wx[kc] = work[wi[kc]]
+            work[wi[kc]] = 0.0
+
+
+@nb.njit(cache=True)
+def lower_ends(ap, ai, bp, bi) -> np.ndarray:
+    """Per entry ``(i, k)`` of ``A``: the end of row ``k`` of ``B`` (sorted column indices)
+    within the lower triangle of row ``i`` of ``A B`` (symbolic, for :func:`spgemm_lower`)."""
+    ends = np.empty(ai.shape[0], np.int64)
+    for i in range(ap.shape[0] - 1):
+        for ka in range(ap[i], ap[i + 1]):
+            k = ai[ka]
+            kb = bp[k]
+            while kb < bp[k + 1] and bi[kb] <= i:
+                kb += 1
+            ends[ka] = kb
+    return ends
+
+
+@nb.njit(cache=True)
+def spgemm_lower(ap, ai, ax, bp, bi, bx, ends, cp, ci, cx, work) -> None:
+    """``C += tril(A B)`` into ``C``'s fixed lower CSR pattern (``ends`` from
+    :func:`lower_ends`; :func:`spgemm`'s other conventions)."""
     for i in range(ap.shape[0] - 1):
         for ka in range(ap[i], ap[i + 1]):
             k, a = ai[ka], ax[ka]
-            for kb in range(bp[k], bp[k + 1]):
-                if bi[kb] > i:
-                    break
+            for kb in range(bp[k], ends[ka]):
                 work[bi[kb]] += a * bx[kb]
         for kc in range(cp[i], cp[i + 1]):
             cx[kc] += work[ci[kc]]
             work[ci[kc]] = 0.0
+
+
+@nb.njit(cache=True)
+def fold_values(hf, slot, e, f, row, ai, sigma) -> None:
+    """``H_f += A_Iᵀ diag(σ) A_I`` term by term: ``hf[slot] += σ[row] ai[e] ai[f]``."""
+    for t in range(slot.shape[0]):
+        hf[slot[t]] += sigma[row[t]] * ai[e[t]] * ai[f[t]]
 
 
 @nb.njit(cache=True)
@@ -255,6 +272,51 @@ def csr_matvec(indptr, indices, data, x) -> np.ndarray:
         for e in range(indptr[i], indptr[i + 1]):
             t += data[e] * x[indices[e]]
         y[i] = t
+    return y
+
+
+@nb.njit(cache=True)
+def rows_matvec(indptr, indices, data, rows, x) -> np.ndarray:
+    """``(A x)[rows]`` for CSR arrays."""
+    y = np.zeros(rows.shape[0])
+    for k in range(rows.shape[0]):
+        t = 0.0
+        for e in range(indptr[rows[k]], indptr[rows[k] + 1]):
+            t += data[e] * x[indices[e]]
+        y[k] = t
+    return y
+
+
+@nb.njit(cache=True)
+def rows_t_matvec(indptr, indices, data, rows, v, n) -> np.ndarray:
+    """``A[rows]ᵀ v`` (length ``n``) for CSR arrays: for a symmetric ``A``, ``A[:, rows] v``."""
+    y = np.zeros(n)
+    for k in range(rows.shape[0]):
+        vk = v[k]
+        if vk != 0.0:
+            for e in range(indptr[rows[k]], indptr[rows[k] + 1]):
+                y[indices[e]] += data[e] * vk
+    return y
+
+
+@nb.njit(cache=True)
+def kkt_matvec(hp, hi, hx, ep, ei, ex, ip, ii, ix, diag, x) -> np.ndarray:
+    """``K x`` from its blocks: ``H`` (full symmetric CSR), ``A_E``, ``A_I`` (CSR) and the
+    diagonal ``diag`` (module :mod:`mbplan.solvers.linear_solver`'s ``K``)."""
+    n, me = hp.shape[0] - 1, ep.shape[0] - 1
+    y = diag * x
+    for i in range(n):
+        t = 0.0
+        for e in range(hp[i], hp[i + 1]):
+            t += hx[e] * x[hi[e]]
+        y[i] += t
+    for off, p, idx, v in ((n, ep, ei, ex), (n + me, ip, ii, ix)):
+        for r in range(p.shape[0] - 1):
+            t, xr = 0.0, x[off + r]
+            for e in range(p[r], p[r + 1]):
+                t += v[e] * x[idx[e]]
+                y[idx[e]] += v[e] * xr
+            y[off + r] += t
     return y
 
 
@@ -336,7 +398,13 @@ REDUCED_KERNELS = (
     block_values,
     spgemm,
     spgemm_lower,
+    times_t,
+    lower_ends,
+    fold_values,
     csr_matvec,
+    rows_matvec,
+    rows_t_matvec,
+    kkt_matvec,
     b_solve,
     bt_solve,
     s_apply,

@@ -7,14 +7,18 @@ dependent, rest, local rows) with ``B`` square lower block triangular. Then
 ``inertia(K) = inertia(K_r) + (m, m, 0)`` (``m`` dependent columns) and ``K x = b`` takes
 ``x_U = B⁻¹ b_Y``, ``x_R = K_r⁻¹ (b_R - C x_U)``, ``x_Y = B⁻ᵀ (b_U - G x_U - Cᵀ x_R)``.
 
-``K_r = [[Tᵀ (H + D_x) T, (A_E,kept T)ᵀ, (A_I T)ᵀ], [·, D_kept, 0], [·, 0, D_I]]`` is
-factorized by a :class:`KKTSystem` of its own; every solve is refined against the full ``K``.
+``K_r = [[Tᵀ (H + D_x) T, (A_E,kept T)ᵀ, (A_I T)ᵀ], [·, D_kept, 0], [·, 0, D_I]]`` has its
+inequality rows folded in (``D_I < 0``, ``Σ = -D_I⁻¹``: inertia ``(0, m_I, 0)``) and the rest,
+``[[Tᵀ (H + D_x) T + (A_I T)ᵀ Σ (A_I T), (A_E,kept T)ᵀ], [·, D_kept]]``, is factorized by a
+:class:`KKTSystem` of its own; a solve refines ``K_r``'s solve to a tenth of the requested
+residual ratio, then against the full ``K`` (IPOPT's ratio).
+
 The symbolic phase (once per pattern) picks the replaced rows and dependent columns by QR
 with column pivoting on the first matrix's values and builds every index array; the numeric
 phase is compiled (:mod:`mbplan.solvers.reduction`, :mod:`mbplan.solvers.reduced_kernels`).
-The full factorization is the
-fallback: a nonzero diagonal on an eliminated row (``δ_c > 0``, restoration), a pivot
-breakdown in the reduction or in ``K_r``, or a refined solve that does not converge.
+The full factorization is the fallback: a nonzero diagonal on an eliminated row (``δ_c > 0``,
+restoration), a pivot breakdown in the reduction or in ``K_r``, or a refined solve that does
+not converge.
 """
 
 from __future__ import annotations
@@ -26,7 +30,6 @@ import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.solvers.elimination import EliminationPlan
-from mbplan.solvers.kkt_scatter import matrix_values
 from mbplan.solvers.linear_solver import Inertia, KKTSystem, _csr
 from mbplan.solvers.reduction import Reduction, reduction
 
@@ -44,6 +47,11 @@ AUTO_MAX_FLOPS = 4e9
 many multiply-adds: above it the reduction's per-knot dense blocks (dense over each body's
 ancestors) and the reduced matrix's small supernodes cost more than the full supernodal
 factorization saves (chain64: 9.2e9, reduced 1.4× slower; chain16 0.59×; docs/ripm-speed.md)."""
+
+
+INNER_RATIO = 0.1
+"""Each solve through the reduction refines ``K_r``'s solve to this times the requested residual
+ratio: one pass then usually meets the ratio against ``K`` (docs/ripm-speed.md, session 7)."""
 
 
 class ReducedKKTSystem:
@@ -97,13 +105,8 @@ class ReducedKKTSystem:
         ai = _csr(jac_ineq, (self.n_ineq, self.n))
         if self._seen != self.full.n_analyses:
             self._seen = self.full.n_analyses
-            f = self.full
-            self._k = sp.csr_matrix(
-                (f._full_data, f._pattern.full_indices, f._pattern.full_indptr),
-                shape=(self.dim, self.dim),
-            )
             self._red = None
-            if not self.strict and f._pattern.analysis.flops > AUTO_MAX_FLOPS:
+            if not self.strict and self.full._pattern.analysis.flops > AUTO_MAX_FLOPS:
                 self._values = False
                 return
             try:
@@ -131,20 +134,12 @@ class ReducedKKTSystem:
         if not self._active:
             return self.full.factorize(diagonal, static_reg)
         self.n_reduced += 1
-        f = self.full
-        matrix_values(
-            f._base,
-            f._diag_slot,
-            diagonal,
-            self.n,
-            0.0,
-            f._pattern.full_src,
-            f._full_data,
-            f._factor_data,
-        )  # fmt: skip  (K itself, for the refinement residuals)
         return inertia
 
     def matvec(self, v: np.ndarray) -> np.ndarray:
+        """``K v`` with the last factorized matrix."""
+        if self._active:
+            return self._red.matvec(np.asarray(v, dtype=np.float64), self._diag)
         return self.full.matvec(v)
 
     def solve(
@@ -157,15 +152,16 @@ class ReducedKKTSystem:
         rhs = np.asarray(rhs, dtype=np.float64)
         if rhs.shape != (self.dim,):
             raise InputError(f"KKTSystem.solve: rhs has shape {rhs.shape}, expected ({self.dim},)")
-        red, matvec = self._red, self._k.dot  # K over the full system's value array
-        x = red.solve_once(rhs, matvec)
-        res = rhs - matvec(x)
+        red, diag = self._red, self._diag
+        inner = INNER_RATIO * ratio_max
+        x = red.solve_once(rhs, diag, inner)
+        res = rhs - red.matvec(x, diag)
         ratio = _ratio(res, x, rhs)
         for _ in range(max_refinement):
             if ratio <= ratio_max:
                 break
-            x_new = x + red.solve_once(res, matvec)
-            res_new = rhs - matvec(x_new)
+            x_new = x + red.solve_once(res, diag, inner)
+            res_new = rhs - red.matvec(x_new, diag)
             ratio_new = _ratio(res_new, x_new, rhs)
             if not ratio_new < ratio:
                 break
