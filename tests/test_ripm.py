@@ -558,18 +558,19 @@ def test_initial_equality_multipliers_option():
         RIPMOptions(constr_mult_init_max=-1.0)
 
 
-def test_the_jacobian_only_start_evaluation_only_when_needed():
-    """The start evaluates the Jacobians alone for the slacks and the least-squares ``y₀``
-    (its rounding, not the Hessian evaluation's), then with the Hessian; with ``y₀`` given (or
-    ``constr_mult_init_max = 0``) and ``s₀`` given (or no inequalities) only with the Hessian.
-    A non-finite start is a numerical error either way."""
-    cold = solve_ripm(hs071(), HS071_X0, max_iter=3)
+def test_the_start_evaluates_again_only_for_a_kept_least_squares_y0():
+    """The start evaluates once, with the Hessian, and takes the slacks and the least-squares
+    ``y₀`` from it; it evaluates again only when that ``y₀`` is kept (the Hessian of the
+    Lagrangian depends on it). A non-finite start is a numerical error either way."""
+    cold = solve_ripm(hs071(), HS071_X0, max_iter=3)  # y₀ = 0.596 kept
     assert cold.n_evaluations == cold.iterations + 2
+    dropped = solve_ripm(hs071(), HS071_X0, max_iter=3, constr_mult_init_max=0.5)
+    assert dropped.n_evaluations == dropped.iterations + 1
     warm = {"y0": cold.y, "z0": cold.z, "s0": cold.s}
     once = solve_ripm(hs071(), cold.x, max_iter=3, **warm)
-    twice = solve_ripm(hs071(), cold.x, max_iter=3, **{**warm, "s0": None})
+    slacks = solve_ripm(hs071(), cold.x, max_iter=3, **{**warm, "s0": None})
     assert once.n_evaluations == once.iterations + 1
-    assert twice.n_evaluations == twice.iterations + 2
+    assert slacks.n_evaluations == slacks.iterations + 1
     parabola = EuclideanNLP(
         1, lambda x: (x[0] - 1) ** 2, lambda x: 2 * (x - 1), lambda x, s, y, z: np.array([[2 * s]])
     )

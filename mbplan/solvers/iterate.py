@@ -128,29 +128,24 @@ class IterateState:
     the iterate ``x, s, y, z`` with its evaluation ``ev``, and ``mu``.
     """
 
-    def _evaluate(
-        self, x: Point, y: np.ndarray, z: np.ndarray, hessian: bool = True
-    ) -> NLPEvaluation | None:
-        """The problem at ``x`` (the Lagrangian's Hessian with ``σ, y, z``), or ``None`` if
+    def _evaluate(self, x: Point, y: np.ndarray, z: np.ndarray) -> NLPEvaluation | None:
+        """The problem at ``x`` with the Lagrangian's Hessian for ``σ, y, z``, or ``None`` if
         something is not finite."""
         self.sh.n_eval += 1
-        ev: NLPEvaluation = self.p.evaluate(x, self.sigma, y, z, hessian)
-        h = ev.hessian_lower if hessian else None
+        ev: NLPEvaluation = self.p.evaluate(x, self.sigma, y, z)
+        h = ev.hessian_lower
         if not finite(
             ev.objective, ev.gradient, ev.eq, ev.ineq, ev.eq_jacobian.data, ev.ineq_jacobian.data,
-            0.0 if h is None else h.data,
+            h.data,
         ):  # fmt: skip
             return None
         shapes = (_shape(ev.gradient), _shape(ev.eq), _shape(ev.ineq))
-        shapes += (ev.eq_jacobian.shape, ev.ineq_jacobian.shape)
-        if h is not None:
-            shapes += (h.shape,)
+        shapes += (ev.eq_jacobian.shape, ev.ineq_jacobian.shape, h.shape)
         expected = ((self.n,), (self.me,), (self.mi,), (self.me, self.n), (self.mi, self.n))
-        if hessian:
-            expected += ((self.n, self.n),)
+        expected += ((self.n, self.n),)
         if shapes != expected:  # the compiled kernels index by these shapes unchecked
             raise InputError(
-                "problem returned gradient, eq, ineq, their Jacobians (and the Hessian) of "
+                "problem returned gradient, eq, ineq, their Jacobians and the Hessian of "
                 f"shapes {shapes}, expected {expected}"
             )
         return ev

@@ -46,7 +46,7 @@ import functools
 import itertools
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -175,6 +175,41 @@ class _KKTPattern:
     full_indptr: np.ndarray
     full_indices: np.ndarray
     analysis: Analysis
+    blocks: tuple[_BlockPattern, _BlockPattern, _BlockPattern]  # the blocks' patterns (copies)
+    sign: np.ndarray  # expected pivot signs in pivot order: + primal, - dual
+    spare: list[_Workspace] = field(default_factory=list, compare=False)
+
+    def workspace(self) -> _Workspace:
+        """A released workspace of this pattern, or a new one."""
+        try:
+            return self.spare.pop()  # atomic: threads never share one
+        except IndexError:
+            return _Workspace(self)
+
+    def release(self, ws: _Workspace) -> None:
+        """Keep ``ws`` for the next system of this pattern (a few, if small)."""
+        if len(self.spare) < _SPARES and len(ws.solver.lbuf) <= _SPARE_MAX_ENTRIES:
+            self.spare.append(ws)
+
+
+_SPARES = 2
+_SPARE_MAX_ENTRIES = 1 << 20
+"""Released workspaces kept per pattern (:meth:`_KKTPattern.release`): at most this many, each
+with at most this many factor entries (8 MB): a new system of a small pattern (a solve's
+least-squares and Newton systems, each case of a task family) then allocates nothing, while a
+large one's allocation costs little beside its factorization."""
+
+
+class _Workspace:
+    """The arrays one KKT system writes: ``K``'s values in the lower pattern (without and with
+    the diagonal and regularization) and in the full pattern, and the numeric factorization."""
+
+    def __init__(self, pat: _KKTPattern) -> None:
+        nnz = len(pat.indices)
+        self.base = np.zeros(nnz)
+        self.full_data = np.zeros(len(pat.full_src))
+        self.factor_data = np.zeros(nnz)
+        self.solver = SupernodalLDL(pat.analysis)
 
 
 _PATTERNS: OrderedDict[tuple, _KKTPattern] = OrderedDict()
@@ -226,6 +261,7 @@ def _kkt_pattern(
     f_rows = np.concatenate([rows, cols[off]])
     f_cols = np.concatenate([cols, rows[off]])
     order = np.lexsort((f_cols, f_rows))
+    hit_analysis = analysis(indptr, indices, ordering)
     hit = _KKTPattern(
         h_src=np.flatnonzero(h_mask),
         h_slot=h_slot,
@@ -239,7 +275,12 @@ def _kkt_pattern(
             np.int32
         ),
         full_indices=f_cols[order].astype(np.int32),
-        analysis=analysis(indptr, indices, ordering),
+        analysis=hit_analysis,
+        blocks=tuple(
+            _BlockPattern(a.shape, a.indptr.copy(), a.indices.copy())
+            for a in (hess, jac_eq, jac_in)
+        ),
+        sign=np.where(hit_analysis.perm < n, 1.0, -1.0),
     )
     with _ANALYSES_LOCK:
         _PATTERNS[key] = hit
@@ -278,18 +319,28 @@ class KKTSystem:
     # ------------------------------------------------------------------ pattern
     def _build_pattern(self, hess: sp.csr_matrix, jac_eq: sp.csr_matrix, jac_in: sp.csr_matrix):
         pat = _kkt_pattern(self.n, self.n_eq, self.n_ineq, hess, jac_eq, jac_in, self.ordering)
-        self._pattern = pat
+        self._release()
+        self._pattern, self._patterns = pat, pat.blocks
         self._diag_slot = pat.diag_slot
         self._indptr, self._indices = pat.indptr, pat.indices
-        nnz = len(pat.indices)
-        self._base = np.zeros(nnz)
-        self._full_data = np.zeros(len(pat.full_src))  # K in the full symmetric pattern
+        self._ws = ws = pat.workspace()
+        self._base = ws.base
+        self._full_data = ws.full_data  # K in the full symmetric pattern
         # the factorized values, entry by entry of the lower CSR arrays (= upper CSC arrays)
-        self._factor_data = np.zeros(nnz)
-        self._solver = SupernodalLDL(pat.analysis)
+        self._factor_data = ws.factor_data
+        self._solver = ws.solver
         # expected pivot signs in pivot order (perturbed pivots get them): + primal, - dual
-        self._sign = np.where(pat.analysis.perm < self.n, 1.0, -1.0)
+        self._sign = pat.sign
         self.n_analyses += 1
+
+    def _release(self) -> None:
+        """Hand the workspace back to its pattern (the system is gone or changes pattern)."""
+        ws, self._ws = getattr(self, "_ws", None), None
+        if ws is not None:
+            self._pattern.release(ws)
+
+    def __del__(self) -> None:
+        self._release()
 
     def set_matrices(
         self,
@@ -309,9 +360,6 @@ class KKTSystem:
         new = (hess, jac_eq, jac_ineq)
         if not all(_same_pattern(a, b) for a, b in zip(new, self._patterns, strict=True)):
             self._build_pattern(*new)
-            self._patterns = tuple(
-                _BlockPattern(a.shape, a.indptr.copy(), a.indices.copy()) for a in new
-            )
         pat = self._pattern
         h_data, h_src, h_slot = (
             (hess.data, pat.h_src, pat.h_slot) if not zero_hessian else (_NONE_F, _NONE, _NONE)
