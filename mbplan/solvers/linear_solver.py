@@ -47,13 +47,19 @@ import itertools
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba, numba_cached
 from mbplan.errors import InputError
-from mbplan.solvers.kkt_scatter import SCATTER_KERNELS, matrix_values, same_arrays, scatter_blocks
+from mbplan.solvers.kkt_scatter import (
+    SCATTER_KERNELS,
+    matrix_values,
+    same_csr_pattern,
+    scatter_blocks,
+)
 from mbplan.solvers.ldl_kernels import NUMERIC_KERNELS
 from mbplan.solvers.ldl_solve import SOLVE_KERNELS
 from mbplan.solvers.ldl_symbolic import SYMBOLIC_KERNELS, Analysis
@@ -106,8 +112,7 @@ def _same_pattern(a: sp.csr_matrix | _BlockPattern, b: _BlockPattern | None) -> 
     return (
         b is not None
         and a.shape == b.shape
-        and same_arrays(a.indptr, b.indptr)
-        and same_arrays(a.indices, b.indices)
+        and same_csr_pattern(a.indptr, a.indices, b.indptr, b.indices)
     )
 
 
@@ -178,6 +183,13 @@ class _KKTPattern:
     blocks: tuple[_BlockPattern, _BlockPattern, _BlockPattern]  # the blocks' patterns (copies)
     sign: np.ndarray  # expected pivot signs in pivot order: + primal, - dual
     spare: list[_Workspace] = field(default_factory=list, compare=False)
+    spares: ClassVar[int] = 2
+    spare_max_entries: ClassVar[int] = 1 << 20
+    """Released workspaces kept (:meth:`release`): at most ``spares``, each with at most
+    ``spare_max_entries`` factor entries (8 MB): a new system of a small pattern (a solve's
+    least-squares and Newton systems, each case of a task family) then allocates nothing, while
+    a large one's allocation costs little beside its factorization. (Class attributes: a
+    system's ``__del__`` may run at interpreter exit, after the module's globals are gone.)"""
 
     def workspace(self) -> _Workspace:
         """A released workspace of this pattern, or a new one."""
@@ -188,16 +200,8 @@ class _KKTPattern:
 
     def release(self, ws: _Workspace) -> None:
         """Keep ``ws`` for the next system of this pattern (a few, if small)."""
-        if len(self.spare) < _SPARES and len(ws.solver.lbuf) <= _SPARE_MAX_ENTRIES:
+        if len(self.spare) < self.spares and len(ws.solver.lbuf) <= self.spare_max_entries:
             self.spare.append(ws)
-
-
-_SPARES = 2
-_SPARE_MAX_ENTRIES = 1 << 20
-"""Released workspaces kept per pattern (:meth:`_KKTPattern.release`): at most this many, each
-with at most this many factor entries (8 MB): a new system of a small pattern (a solve's
-least-squares and Newton systems, each case of a task family) then allocates nothing, while a
-large one's allocation costs little beside its factorization."""
 
 
 class _Workspace:
@@ -357,9 +361,11 @@ class KKTSystem:
         hess = self._patterns[0] if zero_hessian else _csr(hessian, (n, n))
         if hess is None:
             hess = _empty_csr((n, n))
-        new = (hess, jac_eq, jac_ineq)
-        if not all(_same_pattern(a, b) for a, b in zip(new, self._patterns, strict=True)):
-            self._build_pattern(*new)
+        h0, e0, i0 = self._patterns
+        if not (
+            _same_pattern(hess, h0) and _same_pattern(jac_eq, e0) and _same_pattern(jac_ineq, i0)
+        ):
+            self._build_pattern(hess, jac_eq, jac_ineq)
         pat = self._pattern
         h_data, h_src, h_slot = (
             (hess.data, pat.h_src, pat.h_slot) if not zero_hessian else (_NONE_F, _NONE, _NONE)

@@ -14,6 +14,7 @@ import numba as nb
 import numpy as np
 
 _BLOCK = 128  # NumPy's PW_BLOCKSIZE
+U64 = nb.uint64  # unsigned indices: no negative-index wraparound code in the scattered loops
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -110,7 +111,7 @@ def _add_transpose_times(indptr, indices, data, x, out) -> None:  # pragma: no c
     for i in range(indptr.shape[0] - 1):
         xi = x[i]
         for k in range(indptr[i], indptr[i + 1]):
-            out[indices[k]] += data[k] * xi
+            out[U64(indices[U64(k)])] += data[U64(k)] * xi
 
 
 @nb.njit(cache=True, error_model="numpy")
