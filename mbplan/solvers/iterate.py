@@ -27,6 +27,7 @@ from mbplan.solvers.ripm_kernels import (
     frac_to_boundary,
     measures,
     pairwise_sum,
+    safeguarded_duals,
 )
 
 EPS = float(np.finfo(float).eps)
@@ -51,6 +52,9 @@ class Trial:
     p: np.ndarray | None = None
     n: np.ndarray | None = None
     xi: np.ndarray | None = None
+    ev: NLPEvaluation | None = None  # the evaluation with the Hessian at y, z (see _trial_at)
+    y: np.ndarray | None = None
+    z: np.ndarray | None = None
 
 
 @dataclass
@@ -192,9 +196,20 @@ class IterateState:
             self.x, self.s, ev.objective, ev.eq, ev.ineq, self.ep, self.en, self.xi
         )
 
-    def _trial_at(self, step: Step, alpha: float) -> Trial | None:
-        """The point ``R_x(α dx)``, ``s + α ds`` (and elastics), or ``None`` if not finite."""
+    def _trial_at(self, step: Step, alpha: float, evaluate: bool = False) -> Trial | None:
+        """The point ``R_x(α dx)``, ``s + α ds`` (and elastics), or ``None`` if not finite.
+        ``evaluate`` (main phase): the evaluation with the Hessian at the multipliers the step
+        would be accepted with, its values those of the trial (:attr:`Trial.ev`); the values
+        alone if that evaluation is not finite."""
         x = self.p.retract(self.x, alpha * step.dx)
+        if evaluate:
+            s = self.s + alpha * step.ds
+            y, z, _ = self._multipliers_at(step, alpha, s)
+            ev = self._evaluate(x, y, z)
+            if ev is not None:
+                trial = self._make_trial(x, s, ev.objective, ev.eq, ev.ineq)
+                trial.ev, trial.y, trial.z = ev, y, z
+                return trial
         vals = self._values(x)
         if vals is None:
             return None
@@ -203,6 +218,21 @@ class IterateState:
             p, n = self.ep + alpha * step.dp, self.en + alpha * step.dn
             xi = self.xi + alpha * step.dx
         return self._make_trial(x, self.s + alpha * step.ds, *vals, p, n, xi)
+
+    def _multipliers_at(
+        self, step: Step, alpha: float, s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, float]:
+        """``y + α dy``, ``z`` after its own step ``α_z`` (WB eq. 15) within
+        ``[μ/(κ_Σ s), κ_Σ μ/s]`` (WB eq. 16) for the slacks ``s``, and ``α_z``."""
+        alpha_z = frac_to_boundary(self.z, step.dz, self.tau)
+        if self.resto:
+            alpha_z = min(
+                alpha_z,
+                frac_to_boundary(self.zp, step.dzp, self.tau),
+                frac_to_boundary(self.zn, step.dzn, self.tau),
+            )
+        z = safeguarded_duals(self.z, step.dz, alpha_z, s, self.mu, self.o.kappa_sigma)
+        return self.y + alpha * step.dy, z, alpha_z
 
     def _scalings(self, y_sum: float, z_sum: float) -> tuple[float, float]:
         """``s_d``, ``s_c`` of WB eq. 5 (multipliers averaged per component, as in IPOPT) from

@@ -98,7 +98,8 @@ class FilterLineSearch:
         alpha, n_trials, n_nan = alpha_max, 0, 0
         while n_trials < o.max_ls_trials and (n_trials == 0 or alpha >= alpha_min):
             n_trials += 1
-            trial = self._trial_at(step, alpha)
+            # the first trial is usually accepted: evaluated with its multipliers at once
+            trial = self._trial_at(step, alpha, evaluate=n_trials == 1 and not self.resto)
             if trial is None:
                 n_nan += 1
             else:

@@ -14,7 +14,8 @@ loop, accept, record, stop. ``z`` takes its own fraction-to-boundary step ``α_z
 is kept within ``[μ/(κ_Σ s), κ_Σ μ/s]`` (WB eq. 16); termination when ``E_0 ≤ ε_tol``.
 
 Every linear-algebra object is sparse with a fixed pattern; one iteration costs one
-``problem.evaluate``, one ``problem.values`` per trial and a few sparse LDLᵀ factorizations
+``problem.evaluate`` (at the first trial point, with the multipliers it would be accepted with:
+usually it is), one ``problem.values`` per further trial and a few sparse LDLᵀ factorizations
 (one symbolic analysis per pattern).
 """
 
@@ -38,7 +39,6 @@ from mbplan.solvers.iterate import (
     IterateState,
     amax,
     finite,
-    frac_to_boundary,
     transpose_times,
 )
 from mbplan.solvers.line_search import FilterLineSearch, Search
@@ -274,7 +274,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
             )
             if tiny_step:  # IPOPT's tiny-step rule: accept the full step without line search
                 alpha = self._alpha_max(step)
-                trial = self._trial_at(step, alpha)
+                trial = self._trial_at(step, alpha, evaluate=not self.resto)
                 search = Search(trial, step, alpha, 1, "T", all_nan=trial is None)
             else:
                 search = self._line_search(step, self.cur)
@@ -301,26 +301,22 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         """Take the step: primal with α, ``y`` with α, ``z`` with its own α_z (WB eq. 15-16)."""
         o = self.o
         trial, step, alpha = search.trial, search.step, search.alpha
-        alpha_z = frac_to_boundary(self.z, step.dz, self.tau)
-        if self.resto:
-            alpha_z = min(
-                alpha_z,
-                frac_to_boundary(self.zp, step.dzp, self.tau),
-                frac_to_boundary(self.zn, step.dzn, self.tau),
-            )
         if search.tag[0] == "h":
             self._augment_filter(self.cur.theta, self.cur.phi)
-        y = self.y + alpha * step.dy
         s = trial.s
-        z = safeguarded_duals(self.z, step.dz, alpha_z, s, self.mu, o.kappa_sigma)  # WB eq. 16
+        y, z, alpha_z = self._multipliers_at(step, alpha, s)
         if self.resto:
             p, n = trial.p, trial.n
             self.zp = safeguarded_duals(self.zp, step.dzp, alpha_z, p, self.mu, o.kappa_sigma)
             self.zn = safeguarded_duals(self.zn, step.dzn, alpha_z, n, self.mu, o.kappa_sigma)
             self.ep, self.en, self.xi = p, n, trial.xi
-        ev = self._evaluate(trial.x, y, z)
+        ev = trial.ev  # evaluated with these multipliers by the line search
         if ev is None:
-            raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the accepted point")
+            ev = self._evaluate(trial.x, y, z)
+            if ev is None:
+                raise Stop(
+                    RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the accepted point"
+                )
         self.x, self.s, self.y, self.z, self.ev = trial.x, s, y, z, ev
         self.sh.iter += 1
         self.last = {
