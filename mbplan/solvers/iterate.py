@@ -49,12 +49,12 @@ class Trial:
     c: np.ndarray
     theta: float
     phi: float
+    log_s: float  # Σ log s (φ_μ's barrier term without μ)
     p: np.ndarray | None = None
     n: np.ndarray | None = None
     xi: np.ndarray | None = None
-    ev: NLPEvaluation | None = None  # the evaluation with the Hessian at y, z (see _trial_at)
-    y: np.ndarray | None = None
-    z: np.ndarray | None = None
+    ev: NLPEvaluation | None = None  # with the Hessian at ``multipliers`` (see _trial_at)
+    multipliers: tuple[np.ndarray, np.ndarray, float] | None = None  # y, z, α_z
 
 
 @dataclass
@@ -182,13 +182,14 @@ class IterateState:
         if p is not None:
             c += n - p
             theta = abs_sum(c)
-        phi = self.sigma * f - self.mu * (pairwise_sum(np.log(s)) if len(s) else 0.0)
+        log_s = pairwise_sum(np.log(s)) if len(s) else 0.0
+        phi = self.sigma * f - self.mu * log_s
         if p is not None:
             phi += self.rho * float(np.sum(p) + np.sum(n))
             phi -= self.mu * float(np.sum(np.log(p)) + np.sum(np.log(n)))
             if xi is not None:
                 phi += 0.5 * self.zeta * float(xi @ xi)
-        return Trial(x, s, f, h, g, c, theta, phi, p, n, xi)
+        return Trial(x, s, f, h, g, c, theta, phi, log_s, p, n, xi)
 
     def _current_trial(self) -> Trial:
         ev = self.ev
@@ -204,11 +205,11 @@ class IterateState:
         x = self.p.retract(self.x, alpha * step.dx)
         if evaluate:
             s = self.s + alpha * step.ds
-            y, z, _ = self._multipliers_at(step, alpha, s)
-            ev = self._evaluate(x, y, z)
+            multipliers = self._multipliers_at(step, alpha, s)
+            ev = self._evaluate(x, *multipliers[:2])
             if ev is not None:
                 trial = self._make_trial(x, s, ev.objective, ev.eq, ev.ineq)
-                trial.ev, trial.y, trial.z = ev, y, z
+                trial.ev, trial.multipliers = ev, multipliers
                 return trial
         vals = self._values(x)
         if vals is None:

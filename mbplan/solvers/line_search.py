@@ -81,7 +81,7 @@ class FilterLineSearch:
 
     def _slope(self, step: Step) -> float:
         """Directional derivative of ``φ_μ`` along the step."""
-        gphi = self.sigma * float(self.ev.gradient @ step.dx)
+        gphi = self.sigma * float(np.dot(self.ev.gradient, step.dx))
         gphi -= self.mu * ratio_sum(step.ds, self.s)
         if self.resto:
             gphi += self.rho * float(np.sum(step.dp) + np.sum(step.dn))

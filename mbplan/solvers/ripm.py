@@ -266,8 +266,8 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
                 self._fail_or_restore("inertia correction failed (δ_w > δ_w,max)")
                 continue
             step, dw = computed
-            if self.mu != mu:  # φ_μ with the step's μ (probing sets it)
-                self.cur = self._current_trial()
+            if self.mu != mu:  # φ_μ with the step's μ (probing sets it, in the main phase)
+                self.cur.phi = self.sigma * self.cur.f - self.mu * self.cur.log_s
             tiny_step = (
                 self.inf_pr < 1e-4
                 and max(amax(step.dx), amax(step.ds / (1 + self.s))) < o.tiny_step_tol
@@ -303,14 +303,13 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         trial, step, alpha = search.trial, search.step, search.alpha
         if search.tag[0] == "h":
             self._augment_filter(self.cur.theta, self.cur.phi)
-        s = trial.s
-        y, z, alpha_z = self._multipliers_at(step, alpha, s)
+        s, ev = trial.s, trial.ev  # evaluated with its multipliers by the line search
+        y, z, alpha_z = trial.multipliers or self._multipliers_at(step, alpha, s)
         if self.resto:
             p, n = trial.p, trial.n
             self.zp = safeguarded_duals(self.zp, step.dzp, alpha_z, p, self.mu, o.kappa_sigma)
             self.zn = safeguarded_duals(self.zn, step.dzn, alpha_z, n, self.mu, o.kappa_sigma)
             self.ep, self.en, self.xi = p, n, trial.xi
-        ev = trial.ev  # evaluated with these multipliers by the line search
         if ev is None:
             ev = self._evaluate(trial.x, y, z)
             if ev is None:
