@@ -594,3 +594,41 @@ def test_wrong_constraint_lengths_are_input_errors():
     )
     with pytest.raises(InputError, match="shapes"):
         solve_ripm(prob, np.zeros(2))
+
+
+@pytest.mark.parametrize(
+    ("make", "x0"),
+    [
+        (lambda: BandedControlNLP(nx=4, nu=2, horizon=20), None),
+        (_outside_disc, np.array([0.0, 1e-3])),  # rejected first trials, second-order corrections
+        (_wachter_biegler, np.array([-0.4, 1.0, 1.0])),  # restoration phase
+    ],
+)
+def test_first_trials_evaluated_with_their_multipliers_take_the_same_steps(make, x0, monkeypatch):
+    """The line search evaluates its first trial with the Hessian at the multipliers the step
+    would be accepted with, and the accepted point reuses that evaluation: the iterates are
+    those of the values-then-evaluate order, one ``values`` call fewer per accepted first trial
+    and one evaluation more per rejected one."""
+    from mbplan.solvers.iterate import IterateState
+
+    problem = make()
+    x0 = problem.initial_guess() if x0 is None else x0
+    fast = solve_ripm(problem, x0)
+    trial_at = IterateState._trial_at
+    monkeypatch.setattr(
+        IterateState,
+        "_trial_at",
+        lambda self, step, alpha, evaluate=False: trial_at(self, step, alpha),
+    )
+    plain = solve_ripm(problem, x0)
+    assert fast.iterations == plain.iterations and fast.status == plain.status
+    np.testing.assert_array_equal(fast.history.kkt_error, plain.history.kkt_error)
+    np.testing.assert_array_equal(fast.history.objective, plain.history.objective)
+    np.testing.assert_array_equal(
+        np.concatenate([fast.y, fast.z]), np.concatenate([plain.y, plain.z])
+    )
+    assert fast.n_trial_evaluations < plain.n_trial_evaluations
+    assert (
+        fast.n_evaluations + fast.n_trial_evaluations
+        <= plain.n_evaluations + plain.n_trial_evaluations
+    )

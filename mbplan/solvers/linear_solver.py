@@ -254,6 +254,7 @@ def _kkt_pattern(
     keys = np.concatenate([r.astype(np.int64) * N + c for r, c in sources])
     unique, slot = np.unique(keys, return_inverse=True)
     sizes = np.cumsum([0] + [len(r) for r, _ in sources])
+    slot = slot.astype(np.int32)  # int32 index arrays, as the pattern's: half the traffic
     h_slot, e_slot, i_slot, diag_slot = (slot[a:b] for a, b in itertools.pairwise(sizes))
     rows = unique // N
     cols = unique % N
@@ -267,14 +268,16 @@ def _kkt_pattern(
     order = np.lexsort((f_cols, f_rows))
     hit_analysis = analysis(indptr, indices, ordering)
     hit = _KKTPattern(
-        h_src=np.flatnonzero(h_mask),
+        h_src=np.flatnonzero(h_mask).astype(np.int32),
         h_slot=h_slot,
         e_slot=e_slot,
         i_slot=i_slot,
         diag_slot=diag_slot,
         indptr=indptr,
         indices=indices,
-        full_src=np.concatenate([np.arange(len(unique)), np.flatnonzero(off)])[order],
+        full_src=np.concatenate([np.arange(len(unique)), np.flatnonzero(off)])[order].astype(
+            np.int32
+        ),
         full_indptr=np.concatenate([[0], np.cumsum(np.bincount(f_rows, minlength=N))]).astype(
             np.int32
         ),
