@@ -104,7 +104,6 @@ def test_systems_sharing_a_pattern_share_the_analysis_not_the_factors():
     np.testing.assert_allclose(_dense(hess, jac_e, jac_i, d1) @ sol, rhs, atol=1e-8)
 
 
-
 def test_a_released_workspace_serves_the_next_system_of_its_pattern():
     """A system hands its work arrays back to its pattern when it is gone (or changes pattern);
     the next system of that pattern takes them and factorizes and solves exactly as a fresh one,
@@ -135,6 +134,7 @@ def test_a_released_workspace_serves_the_next_system_of_its_pattern():
     fourth = KKTSystem(60, 24, 12)
     np.testing.assert_array_equal(solve(fourth)[1][0], expected[1][0])
     assert fourth._solver is arrays[1]  # released by the change of pattern
+
 
 def _grid_blocks(rng, knots, bodies, dim=3):
     """A time × body grid of dense ``dim`` blocks (the maximal-coordinate KKT structure):
