@@ -14,10 +14,10 @@ those."""
 
 
 def finite_vector(v: np.ndarray) -> bool:
-    """No NaN or infinity in the 1-D float64 array ``v``. Up to :data:`_DOT_MAX` entries its
-    ``v·v`` is finite (one BLAS ``ddot``: no temporary and, unlike NumPy's ``dot``, no overflow
-    warning; NaN or ±∞ anywhere makes it NaN or +∞), else every entry is (``v·v`` overflows
-    from entries ≥ 1e154 on)."""
-    if 0 < v.size <= _DOT_MAX and math.isfinite(ddot(v, v)):
+    """No NaN or infinity in the 1-D float64 array ``v`` (true if empty). Up to
+    :data:`_DOT_MAX` entries its ``v·v`` is finite (one BLAS ``ddot``: no temporary and, unlike
+    NumPy's ``dot``, no overflow warning; NaN or ±∞ anywhere makes it NaN or +∞), else every
+    entry is (``v·v`` overflows from entries ≥ 1e154 on)."""
+    if v.size == 0 or (v.size <= _DOT_MAX and math.isfinite(ddot(v, v))):
         return True
     return bool(np.isfinite(v).all())

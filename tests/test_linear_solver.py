@@ -104,6 +104,38 @@ def test_systems_sharing_a_pattern_share_the_analysis_not_the_factors():
     np.testing.assert_allclose(_dense(hess, jac_e, jac_i, d1) @ sol, rhs, atol=1e-8)
 
 
+def test_a_released_workspace_serves_the_next_system_of_its_pattern():
+    """A system hands its work arrays back to its pattern when it is gone (or changes pattern);
+    the next system of that pattern takes them and factorizes and solves exactly as a fresh one,
+    while systems alive at once never share them."""
+    rng = np.random.default_rng(5)
+    hess, jac_e, jac_i = _kkt_blocks(rng, 60, 24, 12, 0.08, None)
+    d = np.concatenate([np.full(60, 2.0), np.full(24, -1e-2), -np.ones(12)])
+    rhs = rng.normal(size=96)
+
+    def solve(kkt):
+        kkt.set_matrices(hess, jac_e, jac_i)
+        inertia = kkt.factorize(d, static_reg=1e-9)
+        return inertia, kkt.solve(rhs)
+
+    first = KKTSystem(60, 24, 12)
+    expected = solve(first)
+    arrays = first._factor_data, first._solver
+    del first
+    second = KKTSystem(60, 24, 12)
+    got = solve(second)
+    assert second._factor_data is arrays[0] and second._solver is arrays[1]  # reused
+    assert got[0] == expected[0] and got[1][1] == expected[1][1]
+    np.testing.assert_array_equal(got[1][0], expected[1][0])
+    third = KKTSystem(60, 24, 12)
+    solve(third)
+    assert third._solver is not second._solver and third._factor_data is not arrays[0]
+    second.set_matrices(*_kkt_blocks(rng, 60, 24, 12, 0.08, None))  # another pattern
+    fourth = KKTSystem(60, 24, 12)
+    np.testing.assert_array_equal(solve(fourth)[1][0], expected[1][0])
+    assert fourth._solver is arrays[1]  # released by the change of pattern
+
+
 def _grid_blocks(rng, knots, bodies, dim=3):
     """A time × body grid of dense ``dim`` blocks (the maximal-coordinate KKT structure):
     ``H`` couples each block to itself, equality rows tie a block to its neighbour in time and

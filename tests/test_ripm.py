@@ -558,18 +558,19 @@ def test_initial_equality_multipliers_option():
         RIPMOptions(constr_mult_init_max=-1.0)
 
 
-def test_the_jacobian_only_start_evaluation_only_when_needed():
-    """The start evaluates the Jacobians alone for the slacks and the least-squares ``y₀``
-    (its rounding, not the Hessian evaluation's), then with the Hessian; with ``y₀`` given (or
-    ``constr_mult_init_max = 0``) and ``s₀`` given (or no inequalities) only with the Hessian.
-    A non-finite start is a numerical error either way."""
-    cold = solve_ripm(hs071(), HS071_X0, max_iter=3)
+def test_the_start_evaluates_again_only_for_a_kept_least_squares_y0():
+    """The start evaluates once, with the Hessian, and takes the slacks and the least-squares
+    ``y₀`` from it; it evaluates again only when that ``y₀`` is kept (the Hessian of the
+    Lagrangian depends on it). A non-finite start is a numerical error either way."""
+    cold = solve_ripm(hs071(), HS071_X0, max_iter=3)  # y₀ = 0.596 kept
     assert cold.n_evaluations == cold.iterations + 2
+    dropped = solve_ripm(hs071(), HS071_X0, max_iter=3, constr_mult_init_max=0.5)
+    assert dropped.n_evaluations == dropped.iterations + 1
     warm = {"y0": cold.y, "z0": cold.z, "s0": cold.s}
     once = solve_ripm(hs071(), cold.x, max_iter=3, **warm)
-    twice = solve_ripm(hs071(), cold.x, max_iter=3, **{**warm, "s0": None})
+    slacks = solve_ripm(hs071(), cold.x, max_iter=3, **{**warm, "s0": None})
     assert once.n_evaluations == once.iterations + 1
-    assert twice.n_evaluations == twice.iterations + 2
+    assert slacks.n_evaluations == slacks.iterations + 1
     parabola = EuclideanNLP(
         1, lambda x: (x[0] - 1) ** 2, lambda x: 2 * (x - 1), lambda x, s, y, z: np.array([[2 * s]])
     )
@@ -593,3 +594,41 @@ def test_wrong_constraint_lengths_are_input_errors():
     )
     with pytest.raises(InputError, match="shapes"):
         solve_ripm(prob, np.zeros(2))
+
+
+@pytest.mark.parametrize(
+    ("make", "x0"),
+    [
+        (lambda: BandedControlNLP(nx=4, nu=2, horizon=20), None),
+        (_outside_disc, np.array([0.0, 1e-3])),  # rejected first trials, second-order corrections
+        (_wachter_biegler, np.array([-0.4, 1.0, 1.0])),  # restoration phase
+    ],
+)
+def test_first_trials_evaluated_with_their_multipliers_take_the_same_steps(make, x0, monkeypatch):
+    """The line search evaluates its first trial with the Hessian at the multipliers the step
+    would be accepted with, and the accepted point reuses that evaluation: the iterates are
+    those of the values-then-evaluate order, one ``values`` call fewer per accepted first trial
+    and one evaluation more per rejected one."""
+    from mbplan.solvers.iterate import IterateState
+
+    problem = make()
+    x0 = problem.initial_guess() if x0 is None else x0
+    fast = solve_ripm(problem, x0)
+    trial_at = IterateState._trial_at
+    monkeypatch.setattr(
+        IterateState,
+        "_trial_at",
+        lambda self, step, alpha, evaluate=False: trial_at(self, step, alpha),
+    )
+    plain = solve_ripm(problem, x0)
+    assert fast.iterations == plain.iterations and fast.status == plain.status
+    np.testing.assert_array_equal(fast.history.kkt_error, plain.history.kkt_error)
+    np.testing.assert_array_equal(fast.history.objective, plain.history.objective)
+    np.testing.assert_array_equal(
+        np.concatenate([fast.y, fast.z]), np.concatenate([plain.y, plain.z])
+    )
+    assert fast.n_trial_evaluations < plain.n_trial_evaluations
+    assert (
+        fast.n_evaluations + fast.n_trial_evaluations
+        <= plain.n_evaluations + plain.n_trial_evaluations
+    )

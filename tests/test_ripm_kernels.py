@@ -45,7 +45,12 @@ def test_step_and_safeguard_kernels_match_numpy(n):
     s, z = _vec(rng, n, positive=True), _vec(rng, n, positive=True)
     dz, ds = _vec(rng, n), _vec(rng, n)
     mu, tau, kappa = 0.1, 0.99, 1e10
-    assert np.array_equal(k.slack_step(s, z, dz, mu), -s + mu / z - s * dz / z)
+    none = np.zeros(0)
+    assert np.array_equal(k.slack_step(s, z, dz, mu, none), -s + mu / z - s * dz / z)
+    shift = _vec(rng, n)
+    want = -s + mu / z - s * dz / z
+    want -= shift / z
+    assert np.array_equal(k.slack_step(s, z, dz, mu, shift), want)
     neg = ds < 0
     ftb = float(min(1.0, (-tau * s[neg] / ds[neg]).min())) if neg.any() else 1.0
     assert k.frac_to_boundary(s, ds, tau) == ftb
@@ -53,6 +58,22 @@ def test_step_and_safeguard_kernels_match_numpy(n):
     clipped = np.clip(z + 0.3 * dz, mu / (kappa * s), kappa * mu / s)
     assert np.array_equal(k.safeguarded_duals(z, dz, 0.3, s, mu, kappa), clipped)
     assert k.complementarity_error(s, z, mu) == (np.abs(s * z - mu).max() if n else 0.0)
+
+
+@pytest.mark.parametrize("n", [1, 5, 200, 1031])
+def test_mehrotra_kernels_match_numpy(n):
+    """The probing oracle's averages and the corrector's shift are the NumPy expressions of
+    the barrier strategy and the Newton step they replace."""
+    rng = np.random.default_rng(11 + n)
+    s, z = _vec(rng, n, positive=True), _vec(rng, n, positive=True)
+    ds, dz = _vec(rng, n), _vec(rng, n)
+    tau = 0.995
+    assert k.mean_product(s, z) == float(np.mean(s * z))
+    a_p, a_d = k.frac_to_boundary(s, ds, tau), k.frac_to_boundary(z, dz, tau)
+    mu_aff = float(np.mean((s + a_p * ds) * (z + a_d * dz)))
+    assert k.affine_complementarity(s, ds, z, dz, tau) == mu_aff
+    shift, reach = k.corrector_shift(s, ds, z, dz, tau)
+    assert np.array_equal(shift, (a_p * a_d) * (ds * dz)) and reach == min(a_p, a_d)
 
 
 @pytest.mark.parametrize(("me", "mi"), [(30, 0), (0, 20), (30, 20)])
@@ -65,8 +86,13 @@ def test_newton_system_kernels_match_numpy(me, mi):
     lower = -c
     lower[me:] += s - mu / z
     rhs = np.empty(n + me + mi)
-    k.newton_rhs(r_d, c, me, s, z, mu, rhs)
+    k.newton_rhs(r_d, c, me, s, z, mu, np.zeros(0), rhs)
     assert np.array_equal(rhs, np.concatenate([-r_d, lower]))
+    shift = _vec(rng, mi)
+    k.newton_rhs(r_d, c, me, s, z, mu, shift, rhs)
+    want = np.concatenate([-r_d, lower])
+    want[n + me :] += shift / z
+    assert np.array_equal(rhs, want)
     dual = np.full(me + mi, -dc)
     dual[me:] -= s / z
     diagonal = np.empty(n + me + mi)

@@ -12,7 +12,8 @@ import math
 
 import numpy as np
 
-from mbplan.solvers.iterate import EPS, Step, frac_to_boundary
+from mbplan.solvers.iterate import EPS, Step
+from mbplan.solvers.ripm_kernels import affine_complementarity, mean_product
 
 MU_MIN = 1e-14
 """The smallest μ the barrier strategies choose (the role of IPOPT's ``mu_min``): the
@@ -66,12 +67,9 @@ class BarrierStrategy:
         self.probe_pending = False
         mu_avg = self._avg_compl()
         aff = self._affine_step()
-        tau = self.tau
-        a_p = frac_to_boundary(self.s, aff.ds, tau)
-        a_d = frac_to_boundary(self.z, aff.dz, tau)
-        mu_aff = float(np.mean((self.s + a_p * aff.ds) * (self.z + a_d * aff.dz)))
+        mu_aff = affine_complementarity(self.s, aff.ds, self.z, aff.dz, self.tau)
         sigma = min((mu_aff / mu_avg) ** 3, 1.0) if mu_avg > 0 else 0.0
-        self._set_mu(float(np.clip(sigma * mu_avg, self._mu_floor(), self.mu_max)))
+        self._set_mu(min(max(sigma * mu_avg, self._mu_floor()), self.mu_max))
         return aff
 
     def _mu_floor(self) -> float:
@@ -85,7 +83,7 @@ class BarrierStrategy:
             self.filter = []
 
     def _avg_compl(self) -> float:
-        return float(np.mean(self.s * self.z)) if self.mi else 0.0
+        return mean_product(self.s, self.z) if self.mi else 0.0
 
     def _loqo_mu(self) -> float:
         """LOQO's oracle (Vanderbei & Shanno 1999; IPOPT's ``mu_oracle=loqo``):

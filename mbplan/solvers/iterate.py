@@ -27,6 +27,7 @@ from mbplan.solvers.ripm_kernels import (
     frac_to_boundary,
     measures,
     pairwise_sum,
+    safeguarded_duals,
 )
 
 EPS = float(np.finfo(float).eps)
@@ -48,9 +49,12 @@ class Trial:
     c: np.ndarray
     theta: float
     phi: float
+    log_s: float  # Σ log s (φ_μ's barrier term without μ)
     p: np.ndarray | None = None
     n: np.ndarray | None = None
     xi: np.ndarray | None = None
+    ev: NLPEvaluation | None = None  # with the Hessian at ``multipliers`` (see _trial_at)
+    multipliers: tuple[np.ndarray, np.ndarray, float] | None = None  # y, z, α_z
 
 
 @dataclass
@@ -128,29 +132,24 @@ class IterateState:
     the iterate ``x, s, y, z`` with its evaluation ``ev``, and ``mu``.
     """
 
-    def _evaluate(
-        self, x: Point, y: np.ndarray, z: np.ndarray, hessian: bool = True
-    ) -> NLPEvaluation | None:
-        """The problem at ``x`` (the Lagrangian's Hessian with ``σ, y, z``), or ``None`` if
+    def _evaluate(self, x: Point, y: np.ndarray, z: np.ndarray) -> NLPEvaluation | None:
+        """The problem at ``x`` with the Lagrangian's Hessian for ``σ, y, z``, or ``None`` if
         something is not finite."""
         self.sh.n_eval += 1
-        ev: NLPEvaluation = self.p.evaluate(x, self.sigma, y, z, hessian)
-        h = ev.hessian_lower if hessian else None
+        ev: NLPEvaluation = self.p.evaluate(x, self.sigma, y, z)
+        h = ev.hessian_lower
         if not finite(
             ev.objective, ev.gradient, ev.eq, ev.ineq, ev.eq_jacobian.data, ev.ineq_jacobian.data,
-            0.0 if h is None else h.data,
+            h.data,
         ):  # fmt: skip
             return None
         shapes = (_shape(ev.gradient), _shape(ev.eq), _shape(ev.ineq))
-        shapes += (ev.eq_jacobian.shape, ev.ineq_jacobian.shape)
-        if h is not None:
-            shapes += (h.shape,)
+        shapes += (ev.eq_jacobian.shape, ev.ineq_jacobian.shape, h.shape)
         expected = ((self.n,), (self.me,), (self.mi,), (self.me, self.n), (self.mi, self.n))
-        if hessian:
-            expected += ((self.n, self.n),)
+        expected += ((self.n, self.n),)
         if shapes != expected:  # the compiled kernels index by these shapes unchecked
             raise InputError(
-                "problem returned gradient, eq, ineq, their Jacobians (and the Hessian) of "
+                "problem returned gradient, eq, ineq, their Jacobians and the Hessian of "
                 f"shapes {shapes}, expected {expected}"
             )
         return ev
@@ -183,13 +182,14 @@ class IterateState:
         if p is not None:
             c += n - p
             theta = abs_sum(c)
-        phi = self.sigma * f - self.mu * (pairwise_sum(np.log(s)) if len(s) else 0.0)
+        log_s = pairwise_sum(np.log(s)) if len(s) else 0.0
+        phi = self.sigma * f - self.mu * log_s
         if p is not None:
             phi += self.rho * float(np.sum(p) + np.sum(n))
             phi -= self.mu * float(np.sum(np.log(p)) + np.sum(np.log(n)))
             if xi is not None:
                 phi += 0.5 * self.zeta * float(xi @ xi)
-        return Trial(x, s, f, h, g, c, theta, phi, p, n, xi)
+        return Trial(x, s, f, h, g, c, theta, phi, log_s, p, n, xi)
 
     def _current_trial(self) -> Trial:
         ev = self.ev
@@ -197,9 +197,20 @@ class IterateState:
             self.x, self.s, ev.objective, ev.eq, ev.ineq, self.ep, self.en, self.xi
         )
 
-    def _trial_at(self, step: Step, alpha: float) -> Trial | None:
-        """The point ``R_x(α dx)``, ``s + α ds`` (and elastics), or ``None`` if not finite."""
+    def _trial_at(self, step: Step, alpha: float, evaluate: bool = False) -> Trial | None:
+        """The point ``R_x(α dx)``, ``s + α ds`` (and elastics), or ``None`` if not finite.
+        ``evaluate`` (main phase): the evaluation with the Hessian at the multipliers the step
+        would be accepted with, its values those of the trial (:attr:`Trial.ev`); the values
+        alone if that evaluation is not finite."""
         x = self.p.retract(self.x, alpha * step.dx)
+        if evaluate:
+            s = self.s + alpha * step.ds
+            multipliers = self._multipliers_at(step, alpha, s)
+            ev = self._evaluate(x, *multipliers[:2])
+            if ev is not None:
+                trial = self._make_trial(x, s, ev.objective, ev.eq, ev.ineq)
+                trial.ev, trial.multipliers = ev, multipliers
+                return trial
         vals = self._values(x)
         if vals is None:
             return None
@@ -208,6 +219,21 @@ class IterateState:
             p, n = self.ep + alpha * step.dp, self.en + alpha * step.dn
             xi = self.xi + alpha * step.dx
         return self._make_trial(x, self.s + alpha * step.ds, *vals, p, n, xi)
+
+    def _multipliers_at(
+        self, step: Step, alpha: float, s: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, float]:
+        """``y + α dy``, ``z`` after its own step ``α_z`` (WB eq. 15) within
+        ``[μ/(κ_Σ s), κ_Σ μ/s]`` (WB eq. 16) for the slacks ``s``, and ``α_z``."""
+        alpha_z = frac_to_boundary(self.z, step.dz, self.tau)
+        if self.resto:
+            alpha_z = min(
+                alpha_z,
+                frac_to_boundary(self.zp, step.dzp, self.tau),
+                frac_to_boundary(self.zn, step.dzn, self.tau),
+            )
+        z = safeguarded_duals(self.z, step.dz, alpha_z, s, self.mu, self.o.kappa_sigma)
+        return self.y + alpha * step.dy, z, alpha_z
 
     def _scalings(self, y_sum: float, z_sum: float) -> tuple[float, float]:
         """``s_d``, ``s_c`` of WB eq. 5 (multipliers averaged per component, as in IPOPT) from

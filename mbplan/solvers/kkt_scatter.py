@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numba as nb
 
+U64 = nb.uint64  # unsigned indices: no negative-index wraparound code in the scatters
+
 
 @nb.njit(cache=True)
 def same_arrays(a, b) -> bool:
@@ -21,16 +23,22 @@ def same_arrays(a, b) -> bool:
 
 
 @nb.njit(cache=True)
+def same_csr_pattern(indptr_a, indices_a, indptr_b, indices_b) -> bool:
+    """Equal CSR index arrays (:func:`same_arrays` of both pairs in one call)."""
+    return same_arrays(indptr_a, indptr_b) and same_arrays(indices_a, indices_b)
+
+
+@nb.njit(cache=True)
 def scatter_blocks(base, h_data, h_src, h_slot, e_data, e_slot, i_data, i_slot) -> None:
     """``base = 0``, then ``base[h_slot] = h_data[h_src]``, ``base[e_slot] = e_data``,
     ``base[i_slot] = i_data``."""
     base[:] = 0.0
     for q in range(h_slot.shape[0]):
-        base[h_slot[q]] = h_data[h_src[q]]
+        base[U64(h_slot[q])] = h_data[U64(h_src[q])]
     for q in range(e_slot.shape[0]):
-        base[e_slot[q]] = e_data[q]
+        base[U64(e_slot[q])] = e_data[q]
     for q in range(i_slot.shape[0]):
-        base[i_slot[q]] = i_data[q]
+        base[U64(i_slot[q])] = i_data[q]
 
 
 @nb.njit(cache=True)
@@ -42,14 +50,14 @@ def matrix_values(base, diag_slot, diagonal, n, static_reg, full_src, full, valu
     for e in range(base.shape[0]):
         values[e] = base[e]
     for i in range(diag_slot.shape[0]):
-        values[diag_slot[i]] += diagonal[i]
+        values[U64(diag_slot[i])] += diagonal[i]
     for e in range(full_src.shape[0]):
-        full[e] = values[full_src[e]]
+        full[e] = values[U64(full_src[e])]
     if static_reg:
         for i in range(n):
-            values[diag_slot[i]] += static_reg
+            values[U64(diag_slot[i])] += static_reg
         for i in range(n, diag_slot.shape[0]):
-            values[diag_slot[i]] -= static_reg
+            values[U64(diag_slot[i])] -= static_reg
 
 
-SCATTER_KERNELS = (same_arrays, scatter_blocks, matrix_values)
+SCATTER_KERNELS = (same_arrays, same_csr_pattern, scatter_blocks, matrix_values)

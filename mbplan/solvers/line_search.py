@@ -81,7 +81,7 @@ class FilterLineSearch:
 
     def _slope(self, step: Step) -> float:
         """Directional derivative of ``φ_μ`` along the step."""
-        gphi = self.sigma * float(self.ev.gradient @ step.dx)
+        gphi = self.sigma * float(np.dot(self.ev.gradient, step.dx))
         gphi -= self.mu * ratio_sum(step.ds, self.s)
         if self.resto:
             gphi += self.rho * float(np.sum(step.dp) + np.sum(step.dn))
@@ -98,7 +98,8 @@ class FilterLineSearch:
         alpha, n_trials, n_nan = alpha_max, 0, 0
         while n_trials < o.max_ls_trials and (n_trials == 0 or alpha >= alpha_min):
             n_trials += 1
-            trial = self._trial_at(step, alpha)
+            # the first trial is usually accepted: evaluated with its multipliers at once
+            trial = self._trial_at(step, alpha, evaluate=n_trials == 1 and not self.resto)
             if trial is None:
                 n_nan += 1
             else:

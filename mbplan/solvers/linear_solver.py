@@ -46,14 +46,20 @@ import functools
 import itertools
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba, numba_cached
 from mbplan.errors import InputError
-from mbplan.solvers.kkt_scatter import SCATTER_KERNELS, matrix_values, same_arrays, scatter_blocks
+from mbplan.solvers.kkt_scatter import (
+    SCATTER_KERNELS,
+    matrix_values,
+    same_csr_pattern,
+    scatter_blocks,
+)
 from mbplan.solvers.ldl_kernels import NUMERIC_KERNELS
 from mbplan.solvers.ldl_solve import SOLVE_KERNELS
 from mbplan.solvers.ldl_symbolic import SYMBOLIC_KERNELS, Analysis
@@ -106,8 +112,7 @@ def _same_pattern(a: sp.csr_matrix | _BlockPattern, b: _BlockPattern | None) -> 
     return (
         b is not None
         and a.shape == b.shape
-        and same_arrays(a.indptr, b.indptr)
-        and same_arrays(a.indices, b.indices)
+        and same_csr_pattern(a.indptr, a.indices, b.indptr, b.indices)
     )
 
 
@@ -175,6 +180,40 @@ class _KKTPattern:
     full_indptr: np.ndarray
     full_indices: np.ndarray
     analysis: Analysis
+    blocks: tuple[_BlockPattern, _BlockPattern, _BlockPattern]  # the blocks' patterns (copies)
+    sign: np.ndarray  # expected pivot signs in pivot order: + primal, - dual
+    spare: list[_Workspace] = field(default_factory=list, compare=False)
+    spares: ClassVar[int] = 2
+    spare_max_entries: ClassVar[int] = 1 << 20
+    """Released workspaces kept (:meth:`release`): at most ``spares``, each with at most
+    ``spare_max_entries`` factor entries (8 MB): a new system of a small pattern (a solve's
+    least-squares and Newton systems, each case of a task family) then allocates nothing, while
+    a large one's allocation costs little beside its factorization. (Class attributes: a
+    system's ``__del__`` may run at interpreter exit, after the module's globals are gone.)"""
+
+    def workspace(self) -> _Workspace:
+        """A released workspace of this pattern, or a new one."""
+        try:
+            return self.spare.pop()  # atomic: threads never share one
+        except IndexError:
+            return _Workspace(self)
+
+    def release(self, ws: _Workspace) -> None:
+        """Keep ``ws`` for the next system of this pattern (a few, if small)."""
+        if len(self.spare) < self.spares and len(ws.solver.lbuf) <= self.spare_max_entries:
+            self.spare.append(ws)
+
+
+class _Workspace:
+    """The arrays one KKT system writes: ``K``'s values in the lower pattern (without and with
+    the diagonal and regularization) and in the full pattern, and the numeric factorization."""
+
+    def __init__(self, pat: _KKTPattern) -> None:
+        nnz = len(pat.indices)
+        self.base = np.zeros(nnz)
+        self.full_data = np.zeros(len(pat.full_src))
+        self.factor_data = np.zeros(nnz)
+        self.solver = SupernodalLDL(pat.analysis)
 
 
 _PATTERNS: OrderedDict[tuple, _KKTPattern] = OrderedDict()
@@ -215,6 +254,7 @@ def _kkt_pattern(
     keys = np.concatenate([r.astype(np.int64) * N + c for r, c in sources])
     unique, slot = np.unique(keys, return_inverse=True)
     sizes = np.cumsum([0] + [len(r) for r, _ in sources])
+    slot = slot.astype(np.int32)  # int32 index arrays, as the pattern's: half the traffic
     h_slot, e_slot, i_slot, diag_slot = (slot[a:b] for a, b in itertools.pairwise(sizes))
     rows = unique // N
     cols = unique % N
@@ -226,20 +266,28 @@ def _kkt_pattern(
     f_rows = np.concatenate([rows, cols[off]])
     f_cols = np.concatenate([cols, rows[off]])
     order = np.lexsort((f_cols, f_rows))
+    hit_analysis = analysis(indptr, indices, ordering)
     hit = _KKTPattern(
-        h_src=np.flatnonzero(h_mask),
+        h_src=np.flatnonzero(h_mask).astype(np.int32),
         h_slot=h_slot,
         e_slot=e_slot,
         i_slot=i_slot,
         diag_slot=diag_slot,
         indptr=indptr,
         indices=indices,
-        full_src=np.concatenate([np.arange(len(unique)), np.flatnonzero(off)])[order],
+        full_src=np.concatenate([np.arange(len(unique)), np.flatnonzero(off)])[order].astype(
+            np.int32
+        ),
         full_indptr=np.concatenate([[0], np.cumsum(np.bincount(f_rows, minlength=N))]).astype(
             np.int32
         ),
         full_indices=f_cols[order].astype(np.int32),
-        analysis=analysis(indptr, indices, ordering),
+        analysis=hit_analysis,
+        blocks=tuple(
+            _BlockPattern(a.shape, a.indptr.copy(), a.indices.copy())
+            for a in (hess, jac_eq, jac_in)
+        ),
+        sign=np.where(hit_analysis.perm < n, 1.0, -1.0),
     )
     with _ANALYSES_LOCK:
         _PATTERNS[key] = hit
@@ -278,18 +326,28 @@ class KKTSystem:
     # ------------------------------------------------------------------ pattern
     def _build_pattern(self, hess: sp.csr_matrix, jac_eq: sp.csr_matrix, jac_in: sp.csr_matrix):
         pat = _kkt_pattern(self.n, self.n_eq, self.n_ineq, hess, jac_eq, jac_in, self.ordering)
-        self._pattern = pat
+        self._release()
+        self._pattern, self._patterns = pat, pat.blocks
         self._diag_slot = pat.diag_slot
         self._indptr, self._indices = pat.indptr, pat.indices
-        nnz = len(pat.indices)
-        self._base = np.zeros(nnz)
-        self._full_data = np.zeros(len(pat.full_src))  # K in the full symmetric pattern
+        self._ws = ws = pat.workspace()
+        self._base = ws.base
+        self._full_data = ws.full_data  # K in the full symmetric pattern
         # the factorized values, entry by entry of the lower CSR arrays (= upper CSC arrays)
-        self._factor_data = np.zeros(nnz)
-        self._solver = SupernodalLDL(pat.analysis)
+        self._factor_data = ws.factor_data
+        self._solver = ws.solver
         # expected pivot signs in pivot order (perturbed pivots get them): + primal, - dual
-        self._sign = np.where(pat.analysis.perm < self.n, 1.0, -1.0)
+        self._sign = pat.sign
         self.n_analyses += 1
+
+    def _release(self) -> None:
+        """Hand the workspace back to its pattern (the system is gone or changes pattern)."""
+        ws, self._ws = getattr(self, "_ws", None), None
+        if ws is not None:
+            self._pattern.release(ws)
+
+    def __del__(self) -> None:
+        self._release()
 
     def set_matrices(
         self,
@@ -306,12 +364,11 @@ class KKTSystem:
         hess = self._patterns[0] if zero_hessian else _csr(hessian, (n, n))
         if hess is None:
             hess = _empty_csr((n, n))
-        new = (hess, jac_eq, jac_ineq)
-        if not all(_same_pattern(a, b) for a, b in zip(new, self._patterns, strict=True)):
-            self._build_pattern(*new)
-            self._patterns = tuple(
-                _BlockPattern(a.shape, a.indptr.copy(), a.indices.copy()) for a in new
-            )
+        h0, e0, i0 = self._patterns
+        if not (
+            _same_pattern(hess, h0) and _same_pattern(jac_eq, e0) and _same_pattern(jac_ineq, i0)
+        ):
+            self._build_pattern(hess, jac_eq, jac_ineq)
         pat = self._pattern
         h_data, h_src, h_slot = (
             (hess.data, pat.h_src, pat.h_slot) if not zero_hessian else (_NONE_F, _NONE, _NONE)

@@ -24,7 +24,9 @@ from __future__ import annotations
 import numpy as np
 
 from mbplan.solvers.iterate import Step, amax, finite, frac_to_boundary
-from mbplan.solvers.ripm_kernels import newton_diagonal, newton_rhs, slack_step
+from mbplan.solvers.ripm_kernels import corrector_shift, newton_diagonal, newton_rhs, slack_step
+
+_NO_SHIFT = np.zeros(0)
 
 
 class NewtonStep:
@@ -35,9 +37,8 @@ class NewtonStep:
         correction's)."""
         self.rhs_c = c  # the rows' linearization the solution satisfies (see _split)
         rhs = np.empty(self.n + self.m)
-        newton_rhs(self.r_d, c, self.me, self.s, self.z, self.mu, rhs)
-        if self.compl_shift is not None:  # μe - shift on the complementarity row
-            rhs[self.n + self.me :] += self.compl_shift / self.z
+        shift = _NO_SHIFT if self.compl_shift is None else self.compl_shift
+        newton_rhs(self.r_d, c, self.me, self.s, self.z, self.mu, shift, rhs)
         if self.resto:
             lam, lower = self._lam(), rhs[self.n :]
             lower += (self.mu - self.ep * (self.rho - lam)) / self.zp
@@ -62,21 +63,13 @@ class NewtonStep:
         finally:
             self.mu = saved
 
-    def _corrector_shift(self, aff: Step) -> np.ndarray:
-        """Mehrotra's second-order term ``(α_p Δs_aff)(α_d Δz_aff)`` with the affine step's
-        fraction-to-boundary step lengths: a long affine step corrects fully, a cut one
-        little (the unscaled term lost iterations on the iiwa; docs/ripm-speed.md, session 6)."""
-        a_p = frac_to_boundary(self.s, aff.ds, self.tau)
-        a_d = frac_to_boundary(self.z, aff.dz, self.tau)
-        return (a_p * a_d) * (aff.ds * aff.dz)
-
-    def _safeguarded_corrector(self, corrected: np.ndarray, aff: Step) -> Step:
+    def _safeguarded_corrector(self, corrected: np.ndarray, aff_reach: float) -> Step:
         """The corrected step if its fraction-to-boundary step ``min(α_s, α_z)`` (WB eq. 15) is
-        at least the affine step's; otherwise the uncorrected step (one more solve) if that one
-        reaches farther."""
+        at least the affine step's (``aff_reach``); otherwise the uncorrected step (one more
+        solve) if that one reaches farther."""
         step = self._split(corrected)
         reach = self._boundary_step(step)
-        if reach >= self._boundary_step(aff):
+        if reach >= aff_reach:
             return step
         shift, self.compl_shift = self.compl_shift, None
         plain = self._split(self._solve(self._rhs(self.r_c)))
@@ -98,9 +91,9 @@ class NewtonStep:
         n, me = self.n, self.me
         dlam = sol[n:]
         dz = dlam[me:]
-        ds = slack_step(self.s, self.z, dz, self.mu)
-        if self.compl_shift is not None:
-            ds -= self.compl_shift / self.z
+        ds = slack_step(
+            self.s, self.z, dz, self.mu, _NO_SHIFT if self.compl_shift is None else self.compl_shift
+        )
         step = Step(sol[:n], ds, dlam[:me], dz)
         if self.resto:
             self._elastic_steps(step, dlam)
@@ -156,7 +149,9 @@ class NewtonStep:
                     aff = self._probe_mu()
                 if o.corrector and self.mi and not self.resto:
                     aff = aff or self._affine_step()
-                    self.compl_shift = self._corrector_shift(aff)
+                    self.compl_shift, aff_reach = corrector_shift(
+                        self.s, aff.ds, self.z, aff.dz, self.tau
+                    )
                 rhs = self._rhs(self.r_c)
                 sol, ratio = self.kkt.solve(rhs, o.max_refinement_steps, o.residual_ratio_max)
                 if dc == 0.0 and m > 0 and ratio > o.residual_ratio_max and finite(sol):
@@ -173,7 +168,7 @@ class NewtonStep:
                     else:
                         self.n_perturbed = 0
                     if self.compl_shift is not None:
-                        return self._safeguarded_corrector(sol, aff), dw
+                        return self._safeguarded_corrector(sol, aff_reach), dw
                     return self._split(sol), dw
                 pretend_singular = singular = True  # IPOPT: refinement failed
             if singular and dc == 0.0 and m > 0:

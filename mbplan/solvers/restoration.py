@@ -80,7 +80,7 @@ class Restoration:
         self.x, self.s, self.y, self.z, self.ev = x, s, y, z, ev
         if not keep_multipliers and o.resto_ls_multipliers and self.me:
             y_ls = self._least_squares_y(ev)
-            if np.any(y_ls):
+            if y_ls is not None and np.any(y_ls):
                 self.y = y_ls
                 ev = self._evaluate(x, self.y, self.z)
                 if ev is None:

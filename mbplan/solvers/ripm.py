@@ -14,7 +14,8 @@ loop, accept, record, stop. ``z`` takes its own fraction-to-boundary step ``α_z
 is kept within ``[μ/(κ_Σ s), κ_Σ μ/s]`` (WB eq. 16); termination when ``E_0 ≤ ε_tol``.
 
 Every linear-algebra object is sparse with a fixed pattern; one iteration costs one
-``problem.evaluate``, one ``problem.values`` per trial and a few sparse LDLᵀ factorizations
+``problem.evaluate`` (at the first trial point, with the multipliers it would be accepted with:
+usually it is), one ``problem.values`` per further trial and a few sparse LDLᵀ factorizations
 (one symbolic analysis per pattern).
 """
 
@@ -38,7 +39,6 @@ from mbplan.solvers.iterate import (
     IterateState,
     amax,
     finite,
-    frac_to_boundary,
     transpose_times,
 )
 from mbplan.solvers.line_search import FilterLineSearch, Search
@@ -150,10 +150,9 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
 
     # ------------------------------------------------------------------ start
     def _initialize(self, x0: Point, y0, z0, s0) -> None:
-        """The starting iterate: slacks from a Jacobian-only evaluation, ``y`` by least squares
-        with its Jacobian (WB) unless given, then the evaluation with the Hessian. Without
-        slacks or least squares to compute (``y0`` given or ``constr_mult_init_max = 0``, and
-        ``s0`` given or no inequalities) the first evaluation is skipped."""
+        """The starting iterate: the evaluation with the Hessian at ``y0`` (0 unless given), the
+        slacks from it, ``y`` by least squares with its Jacobian (WB) unless given; a kept
+        least-squares ``y`` is evaluated again (the Hessian of the Lagrangian depends on it)."""
         o = self.o
         self.mu = o.mu_init
         self.tau = max(o.tau_min, 1 - self.mu)
@@ -172,25 +171,27 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
             for a, a0 in ((self.z, z0), (self.s, s0))
         ):
             raise InputError("s0 and z0 must be finite and positive, y0 finite")
-        least_squares = y0 is None and self.me > 0 and o.constr_mult_init_max > 0
-        if least_squares or (s0 is None and self.mi > 0):
-            ev = self._evaluate(x0, self.y, self.z, hessian=False)
-            if ev is None:
-                raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite evaluation at the initial point")
-            if s0 is None:
-                self.s = np.maximum(-ev.ineq, o.bound_push)
-            if least_squares:
-                self.y = self._least_squares_y(ev)
         self.ev = self._evaluate(x0, self.y, self.z)
         if self.ev is None:
             raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the initial point")
+        if s0 is None and self.mi > 0:
+            self.s = np.maximum(-self.ev.ineq, o.bound_push)
+        if y0 is None and self.me > 0 and o.constr_mult_init_max > 0:
+            self.y = self._least_squares_y(self.ev)
+            if self.y is not None:  # kept: the Hessian of the Lagrangian with it
+                self.ev = self._evaluate(x0, self.y, self.z)
+                if self.ev is None:
+                    raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at y0")
+            else:
+                self.y = np.zeros(self.me)
         theta0 = self._current_trial().theta
         self.mu_max = max(o.mu_init, o.mu_max_fact * self._avg_compl())
         self.theta_max = o.theta_max_fact * max(1.0, theta0)
         self.theta_min = o.theta_min_fact * max(1.0, theta0)
 
-    def _least_squares_y(self, ev: NLPEvaluation) -> np.ndarray:
-        """``y`` minimizing ``‖grad f + A_Eᵀy + A_Iᵀz‖`` (WB), or 0 if it is large."""
+    def _least_squares_y(self, ev: NLPEvaluation) -> np.ndarray | None:
+        """``y`` minimizing ``‖grad f + A_Eᵀy + A_Iᵀz‖`` (WB); ``None`` if it is larger than
+        ``constr_mult_init_max`` (or not computable): ``y = 0`` then."""
         kkt = KKTSystem(
             self.n,
             self.me,
@@ -203,12 +204,12 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         diag[: self.n] = 1.0
         inertia = kkt.factorize(diag, self.o.static_regularization)
         if inertia is None or inertia.zero or inertia.negative != self.me:
-            return np.zeros(self.me)
+            return None
         rhs = np.zeros(self.n + self.me)
         np.negative(ev.gradient + transpose_times(ev.ineq_jacobian, self.z), out=rhs[: self.n])
         sol, _ = kkt.solve(rhs, self.o.max_refinement_steps, self.o.residual_ratio_max)
         y = sol[self.n :]
-        return y if finite(y) and amax(y) <= self.o.constr_mult_init_max else 0 * y
+        return y if finite(y) and amax(y) <= self.o.constr_mult_init_max else None
 
     # ------------------------------------------------------------------ loop
     def run(self, x0: Point, y0, z0, s0) -> RIPMResult:
@@ -265,15 +266,15 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
                 self._fail_or_restore("inertia correction failed (δ_w > δ_w,max)")
                 continue
             step, dw = computed
-            if self.mu != mu:  # φ_μ with the step's μ (probing sets it)
-                self.cur = self._current_trial()
+            if self.mu != mu:  # φ_μ with the step's μ (probing sets it, in the main phase)
+                self.cur.phi = self.sigma * self.cur.f - self.mu * self.cur.log_s
             tiny_step = (
                 self.inf_pr < 1e-4
                 and max(amax(step.dx), amax(step.ds / (1 + self.s))) < o.tiny_step_tol
             )
             if tiny_step:  # IPOPT's tiny-step rule: accept the full step without line search
                 alpha = self._alpha_max(step)
-                trial = self._trial_at(step, alpha)
+                trial = self._trial_at(step, alpha, evaluate=not self.resto)
                 search = Search(trial, step, alpha, 1, "T", all_nan=trial is None)
             else:
                 search = self._line_search(step, self.cur)
@@ -300,26 +301,21 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         """Take the step: primal with α, ``y`` with α, ``z`` with its own α_z (WB eq. 15-16)."""
         o = self.o
         trial, step, alpha = search.trial, search.step, search.alpha
-        alpha_z = frac_to_boundary(self.z, step.dz, self.tau)
-        if self.resto:
-            alpha_z = min(
-                alpha_z,
-                frac_to_boundary(self.zp, step.dzp, self.tau),
-                frac_to_boundary(self.zn, step.dzn, self.tau),
-            )
         if search.tag[0] == "h":
             self._augment_filter(self.cur.theta, self.cur.phi)
-        y = self.y + alpha * step.dy
-        s = trial.s
-        z = safeguarded_duals(self.z, step.dz, alpha_z, s, self.mu, o.kappa_sigma)  # WB eq. 16
+        s, ev = trial.s, trial.ev  # evaluated with its multipliers by the line search
+        y, z, alpha_z = trial.multipliers or self._multipliers_at(step, alpha, s)
         if self.resto:
             p, n = trial.p, trial.n
             self.zp = safeguarded_duals(self.zp, step.dzp, alpha_z, p, self.mu, o.kappa_sigma)
             self.zn = safeguarded_duals(self.zn, step.dzn, alpha_z, n, self.mu, o.kappa_sigma)
             self.ep, self.en, self.xi = p, n, trial.xi
-        ev = self._evaluate(trial.x, y, z)
         if ev is None:
-            raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the accepted point")
+            ev = self._evaluate(trial.x, y, z)
+            if ev is None:
+                raise Stop(
+                    RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the accepted point"
+                )
         self.x, self.s, self.y, self.z, self.ev = trial.x, s, y, z, ev
         self.sh.iter += 1
         self.last = {

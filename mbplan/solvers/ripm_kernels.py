@@ -14,6 +14,7 @@ import numba as nb
 import numpy as np
 
 _BLOCK = 128  # NumPy's PW_BLOCKSIZE
+U64 = nb.uint64  # unsigned indices: no negative-index wraparound code in the scattered loops
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -110,7 +111,7 @@ def _add_transpose_times(indptr, indices, data, x, out) -> None:  # pragma: no c
     for i in range(indptr.shape[0] - 1):
         xi = x[i]
         for k in range(indptr[i], indptr[i + 1]):
-            out[indices[k]] += data[k] * xi
+            out[U64(indices[U64(k)])] += data[U64(k)] * xi
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -177,23 +178,34 @@ def newton_diagonal(n, me, primal, dc, s, z, out) -> None:  # pragma: no cover -
 
 
 @nb.njit(cache=True, error_model="numpy")
-def newton_rhs(r_d, c, me, s, z, mu, out) -> None:  # pragma: no cover - numba
-    """The right-hand side ``-(r_d, c - (0, s - μ/z))`` for constraint values ``c``."""
+def newton_rhs(r_d, c, me, s, z, mu, shift, out) -> None:  # pragma: no cover - numba
+    """The right-hand side ``-(r_d, c - (0, s - μ/z))`` for constraint values ``c``, with
+    Mehrotra's corrector ``shift`` (empty: none) as ``+ shift/z`` on the inequality rows (the
+    complementarity row's ``μe - shift``)."""
     n = r_d.shape[0]
     for j in range(n):
         out[j] = -r_d[j]
     for i in range(me):
         out[n + i] = -c[i]
+    shifted = shift.shape[0] > 0
     for i in range(s.shape[0]):
-        out[n + me + i] = -c[me + i] + (s[i] - mu / z[i])
+        v = -c[me + i] + (s[i] - mu / z[i])
+        if shifted:
+            v += shift[i] / z[i]
+        out[n + me + i] = v
 
 
 @nb.njit(cache=True, error_model="numpy")
-def slack_step(s, z, dz, mu) -> np.ndarray:  # pragma: no cover - numba
-    """``ds = -s + μ/z - s∘dz/z`` (the last row of eq. 53)."""
+def slack_step(s, z, dz, mu, shift) -> np.ndarray:  # pragma: no cover - numba
+    """``ds = -s + μ/z - s∘dz/z`` (the last row of eq. 53), ``- shift/z`` with Mehrotra's
+    corrector ``shift`` (empty: none)."""
     ds = np.empty(s.shape[0])
+    shifted = shift.shape[0] > 0
     for i in range(s.shape[0]):
-        ds[i] = -s[i] + mu / z[i] - s[i] * dz[i] / z[i]
+        v = -s[i] + mu / z[i] - s[i] * dz[i] / z[i]
+        if shifted:
+            v -= shift[i] / z[i]
+        ds[i] = v
     return ds
 
 
@@ -205,6 +217,39 @@ def frac_to_boundary(v, dv, tau) -> float:  # pragma: no cover - numba
         if dv[i] < 0:
             out = min(out, -tau * v[i] / dv[i])
     return min(1.0, out)
+
+
+@nb.njit(cache=True, error_model="numpy")
+def mean_product(a, b) -> float:  # pragma: no cover - numba
+    """``np.mean(a * b)`` (bitwise) of two equally long, non-empty vectors."""
+    return pairwise_sum(a * b) / a.shape[0]
+
+
+@nb.njit(cache=True, error_model="numpy")
+def affine_complementarity(s, ds, z, dz, tau) -> float:  # pragma: no cover - numba
+    """Mehrotra's ``μ_aff``: the average complementarity ``mean((s + α_p ds)(z + α_d dz))``
+    after the affine step's fraction-to-boundary steps ``α_p``, ``α_d`` (WB eq. 15)."""
+    a_p = frac_to_boundary(s, ds, tau)
+    a_d = frac_to_boundary(z, dz, tau)
+    prod = np.empty(s.shape[0])
+    for i in range(s.shape[0]):
+        prod[i] = (s[i] + a_p * ds[i]) * (z[i] + a_d * dz[i])
+    return pairwise_sum(prod) / s.shape[0]
+
+
+@nb.njit(cache=True, error_model="numpy")
+def corrector_shift(s, ds, z, dz, tau) -> tuple[np.ndarray, float]:  # pragma: no cover - numba
+    """Mehrotra's second-order term ``(α_p Δs_aff)(α_d Δz_aff)`` with the affine step's
+    fraction-to-boundary step lengths (a long affine step corrects fully, a cut one little: the
+    unscaled term lost iterations on the iiwa; docs/ripm-speed.md, session 6), and the affine
+    step's reach ``min(α_p, α_d)``."""
+    a_p = frac_to_boundary(s, ds, tau)
+    a_d = frac_to_boundary(z, dz, tau)
+    scale = a_p * a_d
+    out = np.empty(s.shape[0])
+    for i in range(s.shape[0]):
+        out[i] = scale * (ds[i] * dz[i])
+    return out, min(a_p, a_d)
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -245,6 +290,9 @@ RIPM_KERNELS = (
     newton_rhs,
     slack_step,
     frac_to_boundary,
+    mean_product,
+    affine_complementarity,
+    corrector_shift,
     ratio_sum,
     constraint_values,
     safeguarded_duals,
