@@ -8,7 +8,7 @@ z, s) with the iteration, evaluation and factorization counts, per case, to comp
 
 The cases: drone 0-7, drone-limits 0-7, iiwa-com 0, chain4, the RIPM tests' small problems
 (restoration, adaptive μ, Mehrotra probing and corrector) from ``tests/test_ripm.py`` and the
-arm sweep's finger_edu tasks (``tests/test_sweep.py``).
+arm sweep's finger_edu tasks (:mod:`mbplan.benchmarks.arm_sweep`).
 """
 
 from __future__ import annotations
@@ -125,17 +125,16 @@ def main() -> None:
 
 def _finger_edu() -> dict[str, str]:
     """The arm sweep's finger_edu tasks as ``plan(ocp, "ripm", warm_start=rest, max_iter=200)``
-    solves them (tests/test_sweep.py): a kept least-squares ``y₀`` and a nearly singular
-    Hessian, sensitive to the last bit (the frame goal takes 75 iterations)."""
-    import test_sweep as t
-
+    solves them (tests/test_sweep.py): a kept least-squares ``y₀`` and a rank-deficient frame
+    goal (a singular KKT matrix)."""
+    from mbplan.benchmarks.arm_sweep import sweep_robot, sweep_tasks
     from mbplan.engine.jit import jit_available
     from mbplan.formulations import maximal
     from mbplan.solvers import solve_ripm
     from mbplan.solvers.dispatch import options_for
 
     results = {}
-    for kind, ocp in t._tasks(t._robot("finger_edu"), seed=len("finger_edu")).items():
+    for kind, ocp in sweep_tasks(sweep_robot("finger_edu"), seed=len("finger_edu")).items():
         nlp, _ = maximal.build(ocp, jit_available())
         x0 = nlp.initial_point(np.repeat(ocp.q0[None], ocp.N + 1, axis=0))
         options = options_for("ripm", tol=1e-6, max_iter=200)
