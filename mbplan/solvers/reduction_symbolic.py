@@ -1,7 +1,7 @@
 """The symbolic phase of :class:`~mbplan.solvers.reduction.Reduction` (once per plan and
-pattern): the replaced rows and dependent columns by QR with column pivoting on the first
-matrix's values, couplings, reach sets, the patterns of ``T``, ``Tᵀ``, ``H_f``, ``H_f T``,
-``A_E,kept T`` and ``H_r``, and every index array of the numeric phase."""
+pattern, :mod:`mbplan.solvers.reduction_layout` for the products): the replaced rows and
+dependent columns by QR with column pivoting on given values, couplings, reach sets and the
+index arrays of the groups' and blocks' values."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.solvers.elimination import EliminationPlan
-from mbplan.solvers.reduced_kernels import group_values, lower_ends
+from mbplan.solvers.reduced_kernels import group_values
 
 
 class Slots:
@@ -30,33 +30,17 @@ class Slots:
         hit = ok & (self.keys[pos] == want) if len(self.keys) else ok & False
         return np.where(hit, pos, -1)
 
+    def pairs(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Slots of the entries ``(rows[t], cols[t])`` (``-1``: not stored)."""
+        want = np.asarray(rows, np.int64) * self.n + np.asarray(cols, np.int64)
+        pos = np.minimum(np.searchsorted(self.keys, want), max(len(self.keys) - 1, 0))
+        hit = self.keys[pos] == want if len(self.keys) else want < 0
+        return np.where(hit, pos, -1)
+
 
 def _pivots(m: np.ndarray) -> np.ndarray:
     """Column order of a QR with column pivoting (the first ``rank`` are well conditioned)."""
     return sla.qr(m, pivoting=True, mode="r")[1]
-
-
-def _product_pattern(*pairs: tuple[sp.csr_matrix, sp.csr_matrix]) -> sp.csr_matrix:
-    """The structural pattern of ``Σ a @ b`` over the pairs (values of ones: no cancellation),
-    zero values."""
-
-    def one(m: sp.csr_matrix) -> sp.csr_matrix:
-        return sp.csr_matrix((np.ones(m.nnz), m.indices, m.indptr), shape=m.shape)
-
-    p = sp.csr_matrix(sum(one(a) @ one(b) for a, b in pairs))
-    p.sort_indices()
-    p.data[:] = 0.0
-    return p
-
-
-def _transpose(m: sp.csr_matrix) -> tuple[sp.csr_matrix, np.ndarray]:
-    """``mᵀ``'s pattern (zero values, sorted) and where each of its entries is in ``m.data``."""
-    pos = sp.csr_matrix((np.arange(m.nnz, dtype=float) + 1, m.indices, m.indptr), shape=m.shape)
-    pos_t = pos.T.tocsr()
-    pos_t.sort_indices()
-    shape = (m.shape[1], m.shape[0])
-    t = sp.csr_matrix((np.zeros(pos_t.nnz), pos_t.indices, pos_t.indptr), shape=shape)
-    return t, pos_t.data.astype(np.int64) - 1
 
 
 def _rows_of(a: sp.csr_matrix, row: int) -> np.ndarray:
@@ -165,168 +149,85 @@ class ReductionSymbolic:
             dep.append(own[np.sort(piv[:nr])])
             free.append(own[np.sort(piv[nr:])])
             couple.append(others)
-        reach = []
-        cptr, cblk, ccol, fmap, rmap = [0], [], [], [], []
-        fmap_off, rmap_off = [], []
-        shape = np.zeros((B, 4), np.int64)
-        l_dst_a, l_src_a, l_dst_n, l_src_n = [], [], [], []
-        loff = [0]
-        for b in range(B):
-            R = list(free[b])
-            for i in couple[b]:
-                R += [c for c in reach[i] if c not in set(R)]
-            reach.append(np.array(R, np.int64))
-            rpos = {int(c): q for q, c in enumerate(R)}
-            lc = list(dep[b]) + list(free[b])
-            for i in couple[b]:
-                cblk.append(i)
-                ccol.append(len(lc))
-                lc += list(dep[i]) + list(free[i])
-                fmap_off.append(len(fmap))
-                fmap += [rpos[int(c)] for c in free[i]]
-                rmap_off.append(len(rmap))
-                rmap += [rpos[int(c)] for c in reach[i]]
-            cptr.append(len(cblk))
-            nr, w = len(rows_of_block[b]), len(lc)
-            shape[b] = (nr, w, len(R), len(free[b]))
-            lpos = {int(c): q for q, c in enumerate(lc)}
-            for (a, c), (kind, s) in entries[b].items():
-                dst = loff[-1] + a * w + lpos[c]
-                (l_dst_a if kind == "a" else l_dst_n).append(dst)
-                (l_src_a if kind == "a" else l_src_n).append(s)
-            loff.append(loff[-1] + nr * w)
-        i64 = lambda x: np.asarray(x, np.int64)  # noqa: E731
-        self.shape, self.loff = shape, i64(loff)
-        self.l_dst_a, self.l_src_a = i64(l_dst_a), i64(l_src_a)
-        self.l_dst_n, self.l_src_n = i64(l_dst_n), i64(l_src_n)
-        self.cptr, self.cblk, self.ccol = i64(cptr), i64(cblk), i64(ccol)
-        self.fmap_off, self.fmap = i64(fmap_off), i64(fmap)
-        self.rmap_off, self.rmap = i64(rmap_off), i64(rmap)
-        self.eoff = i64(np.concatenate([[0], np.cumsum(shape[:, 0] * shape[:, 2])]))
-        self.lu_off = i64(np.concatenate([[0], np.cumsum(shape[:, 0] ** 2)]))
-        self.uoff = i64(np.concatenate([[0], np.cumsum(shape[:, 0])]))
-        self.lbuf = np.zeros(self.loff[-1])
-        self.ebuf = np.zeros(self.eoff[-1])
-        self.lu = np.zeros(self.lu_off[-1])
-        self.piv = np.zeros(self.uoff[-1], np.int64)
+        self._block_entries(entries, dep, free, couple, [len(x) for x in rows_of_block])
         self.dep = np.concatenate(dep) if B else np.zeros(0, np.int64)
         self.y_rows = np.concatenate(rows_of_block) if B else np.zeros(0, np.int64)
-        self.reach = reach
         if len(np.unique(self.y_rows)) != len(self.y_rows):
             raise InputError("EliminationPlan: a local row in two blocks")
 
-    def _transform(self) -> None:
-        """The pattern of ``T`` (``n × n_r``: identity on the kept columns, ``-E`` on the
-        dependent rows) and of ``Tᵀ``, and where ``E``'s entries land."""
-        n = self.n
-        is_dep = np.zeros(n, bool)
-        is_dep[self.dep] = True
-        self.red_cols = np.flatnonzero(~is_dep)
-        self.nr = len(self.red_cols)
-        red_of = -np.ones(n, np.int64)
-        red_of[self.red_cols] = np.arange(self.nr)
-        rows = [self.red_cols]
-        cols = [np.arange(self.nr)]
-        e_id = [-np.ones(self.nr, np.int64)]
-        u = 0
-        for b in range(len(self.shape)):
-            r, nrb = self.shape[b, 0], self.shape[b, 2]
-            deps = self.dep[u : u + r]
-            rows.append(np.repeat(deps, nrb))
-            cols.append(np.tile(red_of[self.reach[b]], r))
-            e_id.append(self.eoff[b] + np.arange(r * nrb))
-            u += r
-        rows, cols, e_id = (np.concatenate(x) for x in (rows, cols, e_id))
-        order = np.lexsort((cols, rows))
-        rows, cols, e_id = rows[order], cols[order], e_id[order]
-        self.T = sp.csr_matrix(
-            (np.ones(len(rows)), cols, np.searchsorted(rows, np.arange(n + 1))), shape=(n, self.nr)
-        )
-        self.t_e = np.flatnonzero(e_id >= 0)
-        self.t_e_src = e_id[self.t_e]
-        self.Tt, self.tt_src = _transpose(self.T)
-        self.t_rows = np.repeat(np.arange(n), np.diff(self.T.indptr))
-        self.red_of = red_of
-        self.reach_red = np.concatenate([red_of[c] for c in self.reach] + [cols[:0]])
-        self.reach_ptr = np.concatenate([[0], np.cumsum([len(c) for c in self.reach])]).astype(int)
-
-    def _products(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> None:
-        """Patterns of ``H_sym`` (with room for ``A_Iᵀ Σ A_I``: ``H_f``, the inequality rows
-        folded in), ``H_f T``, ``A_E,kept T`` and ``H_r = tril(Tᵀ H_f T)``; the slots of the
-        fold's terms."""
-        n, me = self.n, self.me
-        h_rows = np.repeat(np.arange(n), np.diff(hess.indptr))
-        low = np.flatnonzero(h_rows >= hess.indices)
-        r, c = h_rows[low], hess.indices[low]
-        off = r != c
-        fold = _product_pattern((_transpose(ai)[0], ai)).tocoo()
-        rr = np.concatenate([r, c[off], np.arange(n), fold.row])
-        cc = np.concatenate([c, r[off], np.arange(n), fold.col])
-        src = np.concatenate([low, low[off], -np.ones(n + fold.nnz, np.int64)])
-        keys, inv = np.unique(rr * n + cc, return_inverse=True)
-        self.hs = sp.csr_matrix(
-            (np.zeros(len(keys)), keys % n, np.searchsorted(keys // n, np.arange(n + 1))),
-            shape=(n, n),
-        )
-        self.hs_slot, self.hs_src = inv[src >= 0], src[src >= 0]
-        self.hf = sp.csr_matrix((np.zeros(len(keys)), self.hs.indices, self.hs.indptr), (n, n))
-        # per pair of entries (e, f) of an inequality row: its slot in H_f
-        lens = np.diff(ai.indptr).astype(np.int64)
-        sq = lens * lens
-        self.fold_row = np.repeat(np.arange(self.mi), sq)
-        t = np.arange(len(self.fold_row)) - np.repeat(np.cumsum(sq) - sq, sq)
-        width, start = np.repeat(lens, sq), np.repeat(ai.indptr[:-1].astype(np.int64), sq)
-        self.fold_e, self.fold_f = start + t // width, start + t % width
-        cols = (ai.indices[self.fold_e][:, None], ai.indices[self.fold_f][:, None])
-        self.fold_slot = Slots(self.hs)(*cols).reshape(-1)
-        self.W = _product_pattern((self.hs, self.T))
-        self._segments()
-        is_y = np.zeros(me, bool)
-        is_y[self.y_rows] = True
-        self.kept = np.flatnonzero(~is_y)
-        self.ae_p, self.ae_i, self.ae_data = ae.indptr, ae.indices, np.zeros(ae.nnz)
-        self.ai_p, self.ai_i, self.ai_data = ai.indptr, ai.indices, np.zeros(ai.nnz)
-        sub = ae[self.kept]
-        sub.sort_indices()
-        ae_pos = sp.csr_matrix(
-            (np.arange(ae.nnz, dtype=float) + 1, ae.indices, ae.indptr), shape=ae.shape
-        )[self.kept]
-        ae_pos.sort_indices()
-        self.ak = sp.csr_matrix((np.zeros(sub.nnz), ae_pos.indices, ae_pos.indptr), shape=sub.shape)
-        self.ak_src = ae_pos.data.astype(np.int64) - 1
-        self.Ar = _product_pattern((self.ak, self.T))
-        self.Hr = sp.csr_matrix(sp.tril(_product_pattern((self.Tt, self.W)), format="csr"))
-        self.Hr.sort_indices()
-        ends = lambda a, b: lower_ends(a.indptr, a.indices, b.indptr, b.indices)  # noqa: E731
-        self.tw_end, self.tt_end = ends(self.Tt, self.W), ends(self.Tt, self.T)
-        self.sigma = np.zeros(self.mi)
-        self.sigma_used = np.zeros(self.mi)  # the Σ of hr_base
-        self.hr_ok = False  # hr_base holds Tᵀ H_f T for these values and sigma_used
-        self.all_kept, self.all_ineq = np.arange(len(self.kept)), np.arange(self.mi)
-        self.work = np.zeros(max(self.nr, 1))
-        self.hr_base = np.zeros(self.Hr.nnz)
-        self.dt_data = np.zeros(self.T.nnz)
-        self.ttt = np.zeros(self.Hr.nnz)  # TᵀT in Hr's pattern
-        self.ttt_ok = False
-
-    def _segments(self) -> None:
-        """``H_f``'s entries row by row in segments of one block's dependent columns (``-1``:
-        the kept columns), for :func:`~mbplan.solvers.reduced_kernels.times_t`: per segment its
-        block and entries, per entry its ``H_f`` slot and the dependent column's row in the
-        block's ``E`` (the kept column's reduced index)."""
-        n, hf = self.n, self.hs
-        block_of, local = -np.ones(n, np.int64), np.zeros(n, np.int64)
-        for b in range(len(self.shape)):
-            dep = self.dep[self.uoff[b] : self.uoff[b + 1]]
-            block_of[dep], local[dep] = b, np.arange(len(dep))
-        rows = np.repeat(np.arange(n), np.diff(hf.indptr))
-        blk = block_of[hf.indices]
-        self.seg_e = np.lexsort((blk, rows))
-        r_s, b_s, c_s = rows[self.seg_e], blk[self.seg_e], hf.indices[self.seg_e]
-        new = np.ones(len(r_s), bool)
-        new[1:] = (r_s[1:] != r_s[:-1]) | (b_s[1:] != b_s[:-1])
-        starts = np.flatnonzero(new)
-        self.seg_block = b_s[starts]
-        self.seg_ptr = np.append(starts, len(r_s))
-        self.row_seg = np.searchsorted(r_s[starts], np.arange(n + 1))
-        self.seg_arg = np.where(b_s >= 0, local[c_s], self.red_of[c_s])
+    def _block_entries(self, entries: list[dict], dep: list, free: list, couple: list,
+                       n_rows: list[int]) -> None:  # fmt: skip
+        """Per block its sorted reach ``R_b`` (own free columns and the coupled blocks' reach),
+        ``shape[b] = (r_b, |R_b|)``, and where each entry of its local rows goes: the values
+        ``lval`` (``A_E``'s entries first, ``lval[t] = ae[la_src[t]]``, then the groups' new
+        rows', ``new_rows.flat[ln_src]``), from there to ``L_b[:, dep]`` (``a_src`` → ``a_dst``
+        in ``lu``), to the right-hand side of ``E_b`` (a free column: ``fe_src`` → ``fe_dst``
+        in ``ebuf``; both lists per block at ``a_ptr``, ``fe_ptr``) or to coupling ``k`` (a coupled block's dependent column ``p``: ``nz_a``,
+        ``nz_p``, ``nz_src``, sorted by row, at ``nz_ptr[k]``; ``rmap``: the coupled block's
+        reach in ``R_b``)."""
+        B = len(entries)
+        shape = np.zeros((B, 2), np.int64)
+        self.reach, cptr, cblk, rmap, rmap_off = [], [0], [], [], []
+        kinds, srcs, owner = [], [], []  # per entry: from ae or new_rows, its source, (b, a, c)
+        rposs = []
+        for b in range(B):
+            R = np.unique(np.concatenate([free[b], *(self.reach[i] for i in couple[b])]))
+            self.reach.append(R.astype(np.int64))
+            rpos = {int(c): q for q, c in enumerate(R)}
+            rposs.append(rpos)
+            for i in couple[b]:
+                cblk.append(i)
+                rmap_off.append(len(rmap))
+                rmap += [rpos[int(c)] for c in self.reach[i]]
+            cptr.append(len(cblk))
+            shape[b] = (n_rows[b], len(R))
+            for (a, c), (kind, src) in sorted(entries[b].items()):
+                kinds.append(kind == "n")
+                srcs.append(src)
+                owner.append((b, a, c))
+        i64 = lambda x: np.asarray(x, np.int64)  # noqa: E731
+        r, m = shape[:, 0], shape[:, 1]
+        self.shape = shape
+        self.eoff = i64(np.concatenate([[0], np.cumsum(r * m)]))
+        self.lu_off = i64(np.concatenate([[0], np.cumsum(r * r)]))
+        self.uoff = i64(np.concatenate([[0], np.cumsum(r)]))
+        order = np.argsort(kinds, kind="stable")  # A_E's entries first
+        kinds, srcs = np.asarray(kinds, bool)[order], i64(srcs)[order]
+        self.la_src, self.ln_src = srcs[~kinds], srcs[kinds]
+        lval_of = np.empty(len(order), np.int64)
+        lval_of[order] = np.arange(len(order))
+        lval_of, lu_off, eoff = lval_of.tolist(), self.lu_off.tolist(), self.eoff.tolist()
+        r, m = r.tolist(), m.tolist()
+        col_of = {}  # column -> (block, position among its dependent / reach columns)
+        for b in range(B):
+            for p, c in enumerate(dep[b]):
+                col_of[int(c)] = ("dep", b, p)
+        a_src, a_dst, fe_src, fe_dst, a_blk, fe_blk = [], [], [], [], [], []
+        nz = [[] for _ in cblk]
+        coupling = {(b, int(cblk[k])): k for b in range(B) for k in range(cptr[b], cptr[b + 1])}
+        for t, (b, a, c) in enumerate(owner):
+            kind = col_of.get(c)
+            if kind is not None and kind[1] == b:
+                a_src.append(lval_of[t])
+                a_dst.append(lu_off[b] + a * r[b] + kind[2])
+                a_blk.append(b)
+            elif kind is not None:
+                nz[coupling[(b, kind[1])]].append((a, kind[2], lval_of[t]))
+            else:
+                fe_src.append(lval_of[t])
+                fe_dst.append(eoff[b] + a * m[b] + rposs[b][c])
+                fe_blk.append(b)
+        self.cptr, self.cblk = i64(cptr), i64(cblk)
+        self.rmap_off, self.rmap = i64(rmap_off + [len(rmap)]), i64(rmap)
+        self.a_src, self.a_dst = i64(a_src), i64(a_dst)
+        self.fe_src, self.fe_dst = i64(fe_src), i64(fe_dst)
+        self.a_ptr = i64(np.searchsorted(i64(a_blk), np.arange(B + 1)))
+        self.fe_ptr = i64(np.searchsorted(i64(fe_blk), np.arange(B + 1)))
+        entries_nz = [sorted(x) for x in nz]
+        self.nz_ptr = i64(np.concatenate([[0], np.cumsum([len(x) for x in entries_nz])]))
+        flat = np.array([e for x in entries_nz for e in x], np.int64).reshape(-1, 3)
+        self.nz_a, self.nz_p, self.nz_src = flat[:, 0].copy(), flat[:, 1].copy(), flat[:, 2].copy()
+        self.lval = np.zeros(len(order))
+        self.ebuf = np.zeros(self.eoff[-1])
+        self.lu = np.zeros(self.lu_off[-1])
+        self.piv = np.zeros(self.uoff[-1], np.int64)

@@ -1,0 +1,195 @@
+"""Compiled solve of :class:`~mbplan.solvers.reduction.Reduction` (the module docstring of
+:mod:`mbplan.solvers.reduced_step`): the right-hand side of ``K_r`` and the recovered step
+around ``K_r``'s own solve, and ``K``'s residual with IPOPT's ratio. The arrays come in tuples
+of one meaning each (``h``, ``ai``, ``ak``: CSR arrays of ``H``, ``A_I``, ``A_E,kept``;
+``grp``: the row groups; ``blk``: the blocks' ``B``; ``tr``: ``T`` by blocks)."""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from mbplan.solvers.numba_borrow import borrowed
+from mbplan.solvers.reduced_kernels import U64, b_solve, bt_solve
+from mbplan.solvers.reduced_products import t_apply, tt_apply
+
+_FAST = {"cache": True, "fastmath": {"contract", "reassoc"}, "error_model": "numpy"}
+
+
+@nb.njit(**_FAST)
+def _group_rows(b, out, tgt, src, sub, M) -> None:
+    """``out[tgt[j, i]] = Σ_g M[j, i, g] b[src[j, g]] - b[sub[j, i]]`` (``S b`` on the replaced
+    rows)."""
+    J, r, g = M.shape
+    for j in range(J):
+        for i in range(r):
+            t = -b[U64(sub[j, i])]
+            for q in range(g):
+                s = src[j, q]
+                if s >= 0:
+                    t += M[j, i, q] * b[U64(s)]
+            out[U64(tgt[j, i])] = t
+
+
+@nb.njit(**_FAST)
+def _group_rows_t(v, tgt, src, sub, M, vt) -> None:
+    """``v ← Sᵀ v`` in place (``vt``: scratch of ``J r``: the replaced rows' values, read
+    before any is changed)."""
+    J, r, g = M.shape
+    for j in range(J):
+        for i in range(r):
+            t = U64(tgt[j, i])
+            vt[j * r + i] = v[t]
+            v[t] = 0.0
+    for j in range(J):
+        for i in range(r):
+            x = vt[j * r + i]
+            v[U64(sub[j, i])] -= x
+            for q in range(g):
+                s = src[j, q]
+                if s >= 0:
+                    v[U64(s)] += M[j, i, q] * x
+
+
+@nb.njit(**_FAST)
+def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr, xu, rz, rhs_r,
+               vx, kv, se) -> None:  # fmt: skip
+    """``x_U = B⁻¹ (S b_E)[Y]`` into ``xu``; ``r_z = b_I - A_I x_U`` into ``rz``; ``K_r``'s
+    right-hand side ``[Tᵀ (b_x - (H + D_x)[:, U] x_U - A_Iᵀ Σ r_z); b_E,kept - A_E,kept x_U]``
+    into ``rhs_r``. ``vx``, ``kv`` (length ``n``), ``se`` (``m_E``): scratch."""
+    b, diag, sigma, dep = borrowed(b), borrowed(diag), borrowed(sigma), borrowed(dep)
+    y_rows, kept, xu, rz = borrowed(y_rows), borrowed(kept), borrowed(xu), borrowed(rz)
+    rhs_r, vx, kv, se = borrowed(rhs_r), borrowed(vx), borrowed(kv), borrowed(se)
+    hp, hi, hx = borrowed(h[0]), borrowed(h[1]), borrowed(h[2])
+    ip, ii, ix = borrowed(ai[0]), borrowed(ai[1]), borrowed(ai[2])
+    kp, ki, kx = borrowed(ak[0]), borrowed(ak[1]), borrowed(ak[2])
+    tgt, src, sub, M = borrowed(grp[0]), borrowed(grp[1]), borrowed(grp[2]), borrowed(grp[3])
+    lval, shape, uoff, cptr = borrowed(blk[0]), borrowed(blk[1]), borrowed(blk[2]), borrowed(blk[3])
+    cblk, nz_ptr, nz_a, nz_p = borrowed(blk[4]), borrowed(blk[5]), borrowed(blk[6]), borrowed(blk[7])
+    nz_src, lu, lu_off, piv = borrowed(blk[8]), borrowed(blk[9]), borrowed(blk[10]), borrowed(blk[11])
+    red_cols, ebuf, eoff = borrowed(tr[0]), borrowed(tr[1]), borrowed(tr[2])
+    reach_red, reach_ptr, tmp = borrowed(tr[3]), borrowed(tr[4]), borrowed(tr[5])
+    be = b[n : n + me]
+    for i in range(me):
+        se[i] = be[i]
+    _group_rows(be, se, tgt, src, sub, M)
+    for k in range(y_rows.shape[0]):
+        xu[k] = se[U64(y_rows[k])]
+    b_solve(xu, lval, shape, uoff, cptr, cblk, nz_ptr, nz_a, nz_p, nz_src, lu, lu_off, piv)
+    for i in range(n):
+        vx[i] = 0.0
+        kv[i] = b[i]
+    for k in range(dep.shape[0]):  # kv = b_x - (H + D_x)[:, U] x_U (H symmetric: its rows U)
+        j, v = U64(dep[k]), xu[k]
+        vx[j] = v
+        kv[j] -= diag[j] * v
+        for e in range(hp[j], hp[j + 1]):
+            kv[U64(hi[e])] -= hx[e] * v
+    for r in range(rz.shape[0]):  # r_z, and kv += A_Iᵀ Σ r_z
+        t = 0.0
+        for e in range(ip[r], ip[r + 1]):
+            t += ix[e] * vx[U64(ii[e])]
+        rz[r] = b[U64(n + me + r)] - t
+        s = sigma[r] * rz[r]
+        for e in range(ip[r], ip[r + 1]):
+            kv[U64(ii[e])] += ix[e] * s
+    nr = red_cols.shape[0]
+    tt_apply(kv, rhs_r, red_cols, dep, ebuf, eoff, shape, reach_red, reach_ptr, uoff, tmp)
+    for r in range(kept.shape[0]):
+        t = 0.0
+        for e in range(kp[r], kp[r + 1]):
+            t += kx[e] * vx[U64(ki[e])]
+        rhs_r[U64(nr + r)] = be[U64(kept[r])] - t
+
+
+@nb.njit(**_FAST)
+def expand_solution(b, xr, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr, xu,
+                    rz, w, atw, yv) -> None:  # fmt: skip
+    """The step ``w`` from ``K_r``'s solution ``xr`` and :func:`reduce_rhs`'s ``xu``, ``rz``:
+    ``w_x = T xr_x + [x_U]``, ``w_E,kept = xr_E``, ``w_I = Σ (A_I T xr_x - r_z)``,
+    ``w_Y = B⁻ᵀ (b_U - ((H + D_x) w_x)_U - (A_E,keptᵀ w_E,kept + A_Iᵀ w_I)_U)``, then ``Sᵀ`` on
+    ``w_E``. ``atw``, ``yv``: scratch of lengths ``n`` and ``|U|`` (``≥ J r``)."""
+    b, xr, diag, sigma, dep = borrowed(b), borrowed(xr), borrowed(diag), borrowed(sigma), borrowed(dep)  # fmt: skip
+    y_rows, kept, xu, rz = borrowed(y_rows), borrowed(kept), borrowed(xu), borrowed(rz)
+    w, atw, yv = borrowed(w), borrowed(atw), borrowed(yv)
+    hp, hi, hx = borrowed(h[0]), borrowed(h[1]), borrowed(h[2])
+    ip, ii, ix = borrowed(ai[0]), borrowed(ai[1]), borrowed(ai[2])
+    kp, ki, kx = borrowed(ak[0]), borrowed(ak[1]), borrowed(ak[2])
+    tgt, src, sub, M = borrowed(grp[0]), borrowed(grp[1]), borrowed(grp[2]), borrowed(grp[3])
+    lval, shape, uoff, cptr = borrowed(blk[0]), borrowed(blk[1]), borrowed(blk[2]), borrowed(blk[3])
+    cblk, nz_ptr, nz_a, nz_p = borrowed(blk[4]), borrowed(blk[5]), borrowed(blk[6]), borrowed(blk[7])
+    nz_src, lu, lu_off, piv = borrowed(blk[8]), borrowed(blk[9]), borrowed(blk[10]), borrowed(blk[11])
+    red_cols, ebuf, eoff = borrowed(tr[0]), borrowed(tr[1]), borrowed(tr[2])
+    reach_red, reach_ptr, tmp = borrowed(tr[3]), borrowed(tr[4]), borrowed(tr[5])
+    nr = red_cols.shape[0]
+    t_apply(xr, w, red_cols, dep, ebuf, eoff, shape, reach_red, reach_ptr, uoff, tmp)
+    for i in range(n):
+        atw[i] = 0.0
+    for r in range(kept.shape[0]):
+        v = xr[U64(nr + r)]
+        w[U64(n + kept[r])] = v
+        for e in range(kp[r], kp[r + 1]):
+            atw[U64(ki[e])] += kx[e] * v
+    for r in range(rz.shape[0]):
+        t = 0.0
+        for e in range(ip[r], ip[r + 1]):
+            t += ix[e] * w[U64(ii[e])]
+        wz = sigma[r] * (t - rz[r])
+        w[U64(n + me + r)] = wz
+        for e in range(ip[r], ip[r + 1]):
+            atw[U64(ii[e])] += ix[e] * wz
+    for k in range(dep.shape[0]):  # w_x = T xr_x + [x_U] (after A_I T xr_x: r_z holds A_I x_U)
+        w[U64(dep[k])] += xu[k]
+    for k in range(dep.shape[0]):
+        j = U64(dep[k])
+        t = diag[j] * w[j]
+        for e in range(hp[j], hp[j + 1]):
+            t += hx[e] * w[U64(hi[e])]
+        yv[k] = b[j] - t - atw[j]
+    bt_solve(yv, lval, shape, uoff, cptr, cblk, nz_ptr, nz_a, nz_p, nz_src, lu, lu_off, piv)
+    for k in range(y_rows.shape[0]):
+        w[U64(n + y_rows[k])] = yv[k]
+    _group_rows_t(w[n : n + me], tgt, src, sub, M, yv)
+
+
+@nb.njit(**_FAST)
+def _jacobian_residual(off, p, idx, v, x, res) -> None:
+    """``res -= [Aᵀ x[off:]; A x]`` for a Jacobian block at row offset ``off``."""
+    for r in range(p.shape[0] - 1):
+        t, xr = 0.0, x[U64(off + r)]
+        for e in range(p[r], p[r + 1]):
+            c = U64(idx[e])
+            t += v[e] * x[c]
+            res[c] -= v[e] * xr
+        res[U64(off + r)] -= t
+
+
+@nb.njit(**_FAST)
+def residual(hp, hi, hx, ep, ei, ex, ip, ii, ix, diag, x, b, res) -> float:
+    """``res = b - K x`` (``K`` from its blocks: ``H`` full symmetric CSR, ``A_E``, ``A_I``, the
+    diagonal) and IPOPT's ratio ``‖res‖∞ / (min(‖x‖∞, 1e6 ‖b‖∞) + ‖b‖∞)``."""
+    hp, hi, hx, ep = borrowed(hp), borrowed(hi), borrowed(hx), borrowed(ep)
+    ei, ex, ip, ii = borrowed(ei), borrowed(ex), borrowed(ip), borrowed(ii)
+    ix, diag, x, b, res = borrowed(ix), borrowed(diag), borrowed(x), borrowed(b), borrowed(res)
+    n, me = hp.shape[0] - 1, ep.shape[0] - 1
+    for i in range(x.shape[0]):
+        res[i] = b[i] - diag[i] * x[i]
+    for i in range(n):
+        t = 0.0
+        for e in range(hp[i], hp[i + 1]):
+            t += hx[e] * x[U64(hi[e])]
+        res[i] -= t
+    _jacobian_residual(n, ep, ei, ex, x, res)
+    _jacobian_residual(n + me, ip, ii, ix, x, res)
+    nr = nx = nb_ = 0.0
+    for i in range(x.shape[0]):
+        nr = max(nr, abs(res[i]))
+        nx = max(nx, abs(x[i]))
+        nb_ = max(nb_, abs(b[i]))
+    den = min(nx, 1e6 * nb_) + nb_
+    if den > 0:
+        return nr / den
+    return 0.0 if nr == 0 else np.inf
+
+
+SOLVE_KERNELS = (reduce_rhs, expand_solution, residual)
