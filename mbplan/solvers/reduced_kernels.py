@@ -24,10 +24,15 @@ _FAST = {"cache": True, "fastmath": {"contract", "reassoc"}, "error_model": "num
 def _lu(A, piv) -> bool:
     """In-place LU with partial pivoting (``piv``: row swaps); False on a tiny pivot."""
     r = A.shape[0]
-    scale = 0.0
-    for a in range(r):
-        for b in range(r):
-            scale = max(scale, abs(A[a, b]))
+    flat = A.reshape(-1)
+    s0 = s1 = s2 = s3 = 0.0  # four chains: the maximum has no reassociation
+    n4 = r * r - r * r % 4
+    for t in range(0, n4, 4):
+        s0, s1 = max(s0, abs(flat[t])), max(s1, abs(flat[t + 1]))
+        s2, s3 = max(s2, abs(flat[t + 2])), max(s3, abs(flat[t + 3]))
+    for t in range(n4, r * r):
+        s0 = max(s0, abs(flat[t]))
+    scale = max(max(s0, s1), max(s2, s3))
     for k in range(r):
         p = k
         for a in range(k + 1, r):
@@ -121,6 +126,37 @@ def _lu_solve_t(A, piv, x) -> None:
 
 
 @nb.njit(**_FAST)
+def _lu_solve_t_rows(A, piv, X) -> None:
+    """``X ← A⁻ᵀ X`` with the factors of :func:`_lu` (``X``: ``(r, q)``), row by row: contiguous
+    updates over the columns, zero factors skipped."""
+    r, q = A.shape[0], X.shape[1]
+    for a in range(r):  # Uᵀ
+        xa, ua = X[a], A[a]
+        inv = 1.0 / ua[a]
+        for c in range(q):
+            xa[c] *= inv
+        for b in range(a + 1, r):
+            f = ua[b]
+            if f != 0.0:
+                xb = X[b]
+                for c in range(q):
+                    xb[c] -= f * xa[c]
+    for a in range(r - 1, -1, -1):  # Lᵀ (unit)
+        xa, la = X[a], A[a]
+        for b in range(a):
+            f = la[b]
+            if f != 0.0:
+                xb = X[b]
+                for c in range(q):
+                    xb[c] -= f * xa[c]
+    for k in range(r - 1, -1, -1):
+        p = piv[k]
+        if p != k:
+            for c in range(q):
+                X[k, c], X[p, c] = X[p, c], X[k, c]
+
+
+@nb.njit(**_FAST)
 def _gather(data, slot, out) -> None:
     """``out = data[slot]`` (``0`` where ``slot < 0``), 2-D."""
     for a in range(slot.shape[0]):
@@ -131,19 +167,18 @@ def _gather(data, slot, out) -> None:
 
 
 @nb.njit(**_FAST)
-def group_values(ae, g_sel, h_sel, pad, g_outer, h_outer, M, new_rows) -> bool:
+def group_values(ae, g_sel, h_sel, pad, g_outer, h_outer, M, new_rows, A, X, piv) -> bool:
     """Per group ``j``: ``M_j = A_h G⁻¹`` on ``g`` selected cancelled columns (``G``: the source
     rows there, square; ``A_h``: the subtracted rows), and the new rows
     ``M_j A[sources] - A[subtract]`` on the outer columns. ``g_sel`` ``(J, g, g)``, ``h_sel``
     ``(J, r, g)``, ``g_outer`` ``(J, g, o)``, ``h_outer`` ``(J, r, o)``: slots of the entries in
-    ``ae`` (``-1``: zero); a padded source row (``pad``) gets a unit pivot. False on a
-    breakdown (:func:`_lu`)."""
+    ``ae`` (``-1``: zero); a padded source row (``pad``) gets a unit pivot. ``A`` ``(g, g)``,
+    ``X`` ``(g, r)``, ``piv``: scratch. False on a breakdown (:func:`_lu`)."""
     ae, g_sel, h_sel, pad = borrowed(ae), borrowed(g_sel), borrowed(h_sel), borrowed(pad)
     g_outer, h_outer, M, new_rows = borrowed(g_outer), borrowed(h_outer), borrowed(M), borrowed(new_rows)  # fmt: skip
+    A, X, piv = borrowed(A), borrowed(X), borrowed(piv)
     J, g = g_sel.shape[0], g_sel.shape[1]
     r, o = h_sel.shape[1], g_outer.shape[2]
-    A, Go = np.empty((g, g)), np.empty((g, o))
-    piv = np.empty(g, np.int64)
     for j in range(J):
         _gather(ae, g_sel[j], A)
         for a in range(g):
@@ -151,20 +186,29 @@ def group_values(ae, g_sel, h_sel, pad, g_outer, h_outer, M, new_rows) -> bool:
                 A[a, a] = 1.0
         if not _lu(A, piv):
             return False
-        Hs, nr = M[j], new_rows[j]
-        _gather(ae, h_sel[j], Hs)
+        Mj, nr, hs, go = M[j], new_rows[j], h_sel[j], g_outer[j]
+        for a in range(g):  # Mⱼᵀ = G⁻ᵀ A_hᵀ
+            xa = X[a]
+            for i in range(r):
+                s = hs[i, a]
+                xa[i] = ae[U64(s)] if s >= 0 else 0.0
+        _lu_solve_t_rows(A, piv, X)
         for i in range(r):
-            _lu_solve_t(A, piv, Hs[i])
-        _gather(ae, g_outer[j], Go)
+            for a in range(g):
+                Mj[i, a] = X[a, i]
         _gather(ae, h_outer[j], nr)
         for i in range(r):
-            ni, hi = nr[i], Hs[i]
+            ni = nr[i]
             for q in range(o):
                 ni[q] = -ni[q]
-            for a in range(g):
-                f, ga = hi[a], Go[a]
-                for q in range(o):
-                    ni[q] += f * ga[q]
+        for a in range(g):
+            xa = X[a]
+            for q in range(o):
+                s = go[a, q]
+                if s >= 0:
+                    v = ae[U64(s)]
+                    for i in range(r):
+                        nr[i, q] += xa[i] * v
     return True
 
 
@@ -261,12 +305,11 @@ def bt_solve(x, lval, shape, uoff, cptr, cblk, nz_ptr, nz_a, nz_p, nz_src, lu, l
 
 @nb.njit(**_FAST)
 def copy_values(hess, hs, hs_slot, hs_src, ae, ak, ak_src, ebuf) -> bool:
-    """``hs = 0``, ``hs[hs_slot] = hess[hs_src]`` (``H`` symmetric in ``H_f``'s pattern),
-    ``ak = ae[ak_src]`` (``A_E``'s kept rows); whether ``E`` (``ebuf``) is finite."""
+    """``hs[hs_slot] = hess[hs_src]`` (``H`` symmetric in ``H_f``'s pattern: its other slots
+    stay zero), ``ak = ae[ak_src]`` (``A_E``'s kept rows); whether ``E`` (``ebuf``) is
+    finite."""
     hess, hs, hs_slot, hs_src = borrowed(hess), borrowed(hs), borrowed(hs_slot), borrowed(hs_src)
     ae, ak, ak_src, ebuf = borrowed(ae), borrowed(ak), borrowed(ak_src), borrowed(ebuf)
-    for e in range(hs.shape[0]):
-        hs[e] = 0.0
     for t in range(hs_slot.shape[0]):
         hs[U64(hs_slot[t])] = hess[U64(hs_src[t])]
     for t in range(ak_src.shape[0]):

@@ -15,50 +15,45 @@ _FAST = {"cache": True, "fastmath": {"contract", "reassoc"}, "error_model": "num
 
 
 @nb.njit(**_FAST)
-def _times_t(x, row_seg, seg_ptr, seg_block, seg_e, seg_arg, ebuf, eoff, shape, reach_red,
-             reach_ptr, ostart, olen, ocol, out, work, acc) -> None:  # fmt: skip
-    """``X T`` row by row: each segment of ``X``'s row on one block's dependent columns
-    (``seg_block < 0``: on kept columns, ``seg_arg`` their reduced index) is summed densely over
-    the block's reach (contiguous rows of ``E_b``, ``seg_arg`` the row) and scattered once into
-    ``work`` (zeros of length ``n_r``, left zero); row ``i``'s result is gathered at
-    ``ocol[ostart[i] : ostart[i] + olen[i]]`` into the same positions of ``out``."""
-    for i in range(row_seg.shape[0] - 1):
-        for s in range(row_seg[i], row_seg[i + 1]):
-            b, t0, t1 = seg_block[s], seg_ptr[s], seg_ptr[s + 1]
-            if b < 0:
-                for t in range(t0, t1):
-                    work[U64(seg_arg[t])] += x[U64(seg_e[t])]
-                continue
-            m, eo = shape[b, 1], eoff[b]
-            a = x[U64(seg_e[t0])]
-            ep = ebuf[U64(eo + seg_arg[t0] * m) :]
+def _times_t(x, seg_ptr, seg_block, seg_e, seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape,
+             out, acc) -> None:  # fmt: skip
+    """``out = X T`` in its rows' result layouts, segment by segment: a segment of a row's
+    entries on one block's dependent columns is summed densely over the block's reach
+    (contiguous rows of ``E_b``, ``seg_arg`` the row) and added at ``pos[seg_map[s]:]``
+    relative to its row's result ``seg_out[s]``; a kept column's entry at ``seg_arg``
+    (:meth:`~mbplan.solvers.reduction_layout.ReductionLayout._segments`)."""
+    for e in range(out.shape[0]):
+        out[e] = 0.0
+    for s in range(seg_block.shape[0]):
+        b, t0, t1 = seg_block[s], seg_ptr[s], seg_ptr[s + 1]
+        ov = out[U64(seg_out[s]) :]
+        if b < 0:
+            for t in range(t0, t1):
+                ov[U64(seg_arg[t])] += x[U64(seg_e[t])]
+            continue
+        m, eo = shape[b, 1], eoff[b]
+        a = x[U64(seg_e[t0])]
+        ep = ebuf[U64(eo + seg_arg[t0] * m) :]
+        for q in range(m):
+            acc[q] = a * ep[q]
+        for t in range(t0 + 1, t1):
+            a = x[U64(seg_e[t])]
+            ep = ebuf[U64(eo + seg_arg[t] * m) :]
             for q in range(m):
-                acc[q] = a * ep[q]
-            for t in range(t0 + 1, t1):
-                a = x[U64(seg_e[t])]
-                ep = ebuf[U64(eo + seg_arg[t] * m) :]
-                for q in range(m):
-                    acc[q] += a * ep[q]
-            rr = reach_red[U64(reach_ptr[b]) :]
-            for q in range(m):
-                work[U64(rr[q])] -= acc[q]
-        o0 = ostart[i]
-        oc, ov = ocol[U64(o0) :], out[U64(o0) :]
-        for t in range(olen[i]):
-            c = U64(oc[t])
-            ov[t] = work[c]
-            work[c] = 0.0
+                acc[q] += a * ep[q]
+        pm = pos[U64(seg_map[s]) :]
+        for q in range(m):
+            ov[U64(pm[q])] -= acc[q]
 
 
 @nb.njit(**_FAST)
-def times_t(x, row_seg, seg_ptr, seg_block, seg_e, seg_arg, ebuf, eoff, shape, reach_red,
-            reach_ptr, ostart, olen, ocol, out, work, acc) -> None:  # fmt: skip
+def times_t(x, seg_ptr, seg_block, seg_e, seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape,
+            out, acc) -> None:  # fmt: skip
     """:func:`_times_t` on borrowed arguments."""
     _times_t(
-        borrowed(x), borrowed(row_seg), borrowed(seg_ptr), borrowed(seg_block), borrowed(seg_e),
-        borrowed(seg_arg), borrowed(ebuf), borrowed(eoff), borrowed(shape), borrowed(reach_red),
-        borrowed(reach_ptr), borrowed(ostart), borrowed(olen), borrowed(ocol), borrowed(out),
-        borrowed(work), borrowed(acc),
+        borrowed(x), borrowed(seg_ptr), borrowed(seg_block), borrowed(seg_e), borrowed(seg_arg),
+        borrowed(seg_out), borrowed(seg_map), borrowed(pos), borrowed(ebuf), borrowed(eoff),
+        borrowed(shape), borrowed(out), borrowed(acc),
     )  # fmt: skip
 
 
@@ -69,27 +64,36 @@ def _tw_lower(hr, wbuf, kw_pos, kw_slot, panel_off, pwidth, ebuf, eoff, shape, r
     then per block ``-E_bᵀ P_b`` (``P_b``: ``W``'s dependent rows of the block, dense
     ``r × pwidth[b]`` at ``panel_off[b]`` over the sorted union of their columns), row ``q`` of
     it over the prefix of the union below the diagonal (slots ``lo_slot[lo_ptr[g]:lo_ptr[g+1]]``,
-    ``g = reach_ptr[b] + q``)."""
+    ``g = reach_ptr[b] + q``), four rows at a time over the longest of their prefixes (the
+    reach is sorted: the last one's; ``acc``: scratch of four times the widest panel)."""
     for t in range(kw_pos.shape[0]):
         hr[U64(kw_slot[t])] += wbuf[U64(kw_pos[t])]
     for b in range(shape.shape[0]):
         r, m, eo = shape[b, 0], shape[b, 1], eoff[b]
-        u, po = pwidth[b], panel_off[b]
-        for q in range(m):
-            g = reach_ptr[b] + q
-            s0 = lo_ptr[g]
-            end = lo_ptr[g + 1] - s0
-            for t in range(end):
-                acc[t] = 0.0
+        u, po, rp = pwidth[b], panel_off[b], reach_ptr[b]
+        for q0 in range(0, m, 4):
+            nq = min(4, m - q0)
+            w = lo_ptr[rp + q0 + nq] - lo_ptr[rp + q0 + nq - 1]
+            c0, c1, c2, c3 = acc[:w], acc[w : 2 * w], acc[2 * w : 3 * w], acc[3 * w : 4 * w]
+            for t in range(w):
+                c0[t] = c1[t] = c2[t] = c3[t] = 0.0
             for p in range(r):
-                e = ebuf[U64(eo + p * m + q)]
-                if e != 0.0:
-                    pp = wbuf[U64(po + p * u) :]
-                    for t in range(end):
-                        acc[t] += e * pp[t]
-            ls = lo_slot[U64(s0) :]
-            for t in range(end):
-                hr[U64(ls[t])] -= acc[t]
+                pp, ep = wbuf[U64(po + p * u) :], ebuf[U64(eo + p * m + q0) :]
+                e0 = ep[0]
+                e1 = ep[1] if nq > 1 else 0.0
+                e2 = ep[2] if nq > 2 else 0.0
+                e3 = ep[3] if nq > 3 else 0.0
+                for t in range(w):
+                    x = pp[t]
+                    c0[t] += e0 * x
+                    c1[t] += e1 * x
+                    c2[t] += e2 * x
+                    c3[t] += e3 * x
+            for k in range(nq):
+                s0 = lo_ptr[rp + q0 + k]
+                ls, ck = lo_slot[U64(s0) :], acc[U64(k * w) :]
+                for t in range(lo_ptr[rp + q0 + k + 1] - s0):
+                    hr[U64(ls[t])] -= ck[t]
 
 
 @nb.njit(**_FAST)
@@ -117,28 +121,33 @@ def _tdt_lower(hr, d, dep, red_cols, ebuf, eoff, shape, uoff, tt_off, tt_slot, d
 
 
 @nb.njit(**_FAST)
-def hr_values(hs, hf, fold_slot, fold_e, fold_f, fold_row, ai, sigma, row_seg, seg_ptr,
-              seg_block, seg_e, seg_arg, ebuf, eoff, shape, reach_red, reach_ptr, ostart, olen,
-              ocol, wbuf, kw_pos, kw_slot, panel_off, pwidth, lo_ptr, lo_slot, hr, work,
-              acc) -> bool:  # fmt: skip
+def hr_values(hs, hf, fold_slot, ai_p, ai, sigma, seg_ptr, seg_block, seg_e,
+              seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape, reach_ptr, wbuf, kw_pos,
+              kw_slot, panel_off, pwidth, lo_ptr, lo_slot, hr, acc) -> bool:  # fmt: skip
     """``hr = tril(Tᵀ H_f T)``, ``H_f = H + A_Iᵀ diag(σ) A_I`` (``hs``: ``H``'s values in
-    ``H_f``'s pattern; the fold term by term, ``hf[slot] += σ[row] ai[e] ai[f]``); ``W = H_f T``
+    ``H_f``'s pattern; the fold row by row of ``A_I`` (CSR ``ai_p``, ``ai``), pair by pair of its
+    entries into ``fold_slot``); ``W = H_f T``
     in ``wbuf`` (:func:`_times_t`, :func:`_tw_lower`). False if a value is not finite."""
-    hs, hf, fold_slot, fold_e = borrowed(hs), borrowed(hf), borrowed(fold_slot), borrowed(fold_e)
-    fold_f, fold_row, ai, sigma = borrowed(fold_f), borrowed(fold_row), borrowed(ai), borrowed(sigma)  # fmt: skip
-    row_seg, seg_ptr, seg_block = borrowed(row_seg), borrowed(seg_ptr), borrowed(seg_block)
-    seg_e, seg_arg, ebuf, eoff = borrowed(seg_e), borrowed(seg_arg), borrowed(ebuf), borrowed(eoff)
-    shape, reach_red, reach_ptr = borrowed(shape), borrowed(reach_red), borrowed(reach_ptr)
-    ostart, olen, ocol, wbuf = borrowed(ostart), borrowed(olen), borrowed(ocol), borrowed(wbuf)
-    kw_pos, kw_slot, panel_off = borrowed(kw_pos), borrowed(kw_slot), borrowed(panel_off)
+    hs, hf, fold_slot = borrowed(hs), borrowed(hf), borrowed(fold_slot)
+    ai_p, ai, sigma = borrowed(ai_p), borrowed(ai), borrowed(sigma)
+    seg_ptr, seg_block, seg_e = borrowed(seg_ptr), borrowed(seg_block), borrowed(seg_e)
+    seg_arg, seg_out, seg_map, pos = borrowed(seg_arg), borrowed(seg_out), borrowed(seg_map), borrowed(pos)  # fmt: skip
+    ebuf, eoff, shape, reach_ptr = borrowed(ebuf), borrowed(eoff), borrowed(shape), borrowed(reach_ptr)  # fmt: skip
+    wbuf, kw_pos, kw_slot, panel_off = borrowed(wbuf), borrowed(kw_pos), borrowed(kw_slot), borrowed(panel_off)  # fmt: skip
     pwidth, lo_ptr, lo_slot = borrowed(pwidth), borrowed(lo_ptr), borrowed(lo_slot)
-    hr, work, acc = borrowed(hr), borrowed(work), borrowed(acc)
+    hr, acc = borrowed(hr), borrowed(acc)
     for e in range(hs.shape[0]):
         hf[e] = hs[e]
-    for t in range(fold_slot.shape[0]):
-        hf[U64(fold_slot[t])] += sigma[U64(fold_row[t])] * ai[U64(fold_e[t])] * ai[U64(fold_f[t])]
-    _times_t(hf, row_seg, seg_ptr, seg_block, seg_e, seg_arg, ebuf, eoff, shape, reach_red,
-             reach_ptr, ostart, olen, ocol, wbuf, work, acc)  # fmt: skip
+    t = 0
+    for r in range(ai_p.shape[0] - 1):  # A_Iᵀ Σ A_I row by row, entry pairs in fold_slot order
+        p0, p1 = ai_p[r], ai_p[r + 1]
+        for e in range(p0, p1):
+            ve = sigma[r] * ai[e]
+            for f in range(p0, p1):
+                hf[U64(fold_slot[t])] += ve * ai[f]
+                t += 1
+    _times_t(hf, seg_ptr, seg_block, seg_e, seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape,
+             wbuf, acc)  # fmt: skip
     for e in range(hr.shape[0]):
         hr[e] = 0.0
     _tw_lower(hr, wbuf, kw_pos, kw_slot, panel_off, pwidth, ebuf, eoff, shape, reach_ptr, lo_ptr,

@@ -143,8 +143,8 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         self.dep_key = (self.g_sel.tobytes(), self.tgt.tobytes(), self.dep.tobytes())  # the choice
         self._tuples()
 
-    _WORK = ("M", "new_rows", "lval", "ebuf", "lu", "piv", "hf_data", "wbuf", "hr_base", "ttt",
-             "sigma", "sigma_used", "ae_data", "ai_data", "work", "acc", "tmp", "xu", "rz", "yv",
+    _WORK = ("M", "new_rows", "g_a", "g_x", "g_piv", "lval", "ebuf", "lu", "piv", "hf_data", "wbuf", "hr_base", "ttt",
+             "sigma", "sigma_used", "ae_data", "ai_data", "acc", "tmp", "xu", "rz", "yv",
              "vx", "kv", "se", "rhs_r")  # fmt: skip
     _MATRICES = ("hs", "ak", "Ar", "Hr")
 
@@ -171,7 +171,6 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         self._blk = (self.lval, self.shape, self.uoff, self.cptr, self.cblk, self.nz_ptr, self.nz_a,
                      self.nz_p, self.nz_src, self.lu, self.lu_off, self.piv)  # fmt: skip
         self._tr = (self.red_cols, self.ebuf, self.eoff, self.reach_red, self.reach_ptr, self.tmp)
-        self._eblk = (self.ebuf, self.eoff, self.shape, self.reach_red, self.reach_ptr)
 
     # ------------------------------------------------------------------ numeric
     def set_values(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> bool:
@@ -183,7 +182,7 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         self.ai_data[:] = ai.data
         if len(self.M) and not group_values(
             ae.data, self.g_sel, self.h_sel, self.pad, self.g_outer, self.h_outer, self.M,
-            self.new_rows,
+            self.new_rows, self.g_a, self.g_x, self.g_piv,
         ):  # fmt: skip
             return False
         if not block_values(
@@ -196,7 +195,7 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         if not copy_values(hess.data, self.hs.data, self.hs_slot, self.hs_src, ae.data,
                            self.ak.data, self.ak_src, self.ebuf):  # fmt: skip
             return False
-        times_t(self.ak.data, *self.ak_seg, *self._eblk, *self.ar_out, self.Ar.data, self.work,
+        times_t(self.ak.data, *self.ak_seg, self.ebuf, self.eoff, self.shape, self.Ar.data,
                 self.acc)  # fmt: skip
         self.ok = True
         return True
@@ -212,10 +211,10 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         if not self.hr_ok or status == 1:  # Tᵀ H_f T for new values or a new Σ
             self.sigma_used[:] = self.sigma
             self.hr_ok = hr_values(
-                self.hs.data, self.hf_data, self.fold_slot, self.fold_e, self.fold_f,
-                self.fold_row, self.ai_data, self.sigma, *self.hs_seg, *self._eblk, self.ostart,
-                self.olen, self.ocol, self.wbuf, self.kw_pos, self.kw_slot, self.panel_off,
-                self.pwidth, self.lo_ptr, self.lo_slot, self.hr_base, self.work, self.acc,
+                self.hs.data, self.hf_data, self.fold_slot, self.ai_p, self.ai_data, self.sigma,
+                *self.hs_seg, self.ebuf, self.eoff,
+                self.shape, self.reach_ptr, self.wbuf, self.kw_pos, self.kw_slot, self.panel_off,
+                self.pwidth, self.lo_ptr, self.lo_slot, self.hr_base, self.acc,
             )  # fmt: skip
             if not self.hr_ok:
                 return None

@@ -86,13 +86,14 @@ class ReductionLayout:
         )
         self.ak_src = ae_pos.data.astype(_I64) - 1
         self.Ar = _product_pattern((self.ak, self.T))
-        self.ak_seg = self._segments(self.ak)
-        self.ar_out = (self.Ar.indptr[:-1].astype(_I64), np.diff(self.Ar.indptr).astype(_I64),
-                       self.Ar.indices.astype(_I64))  # fmt: skip
+        rows = np.arange(len(self.kept))
+        self.ak_seg = self._segments(
+            self.ak, self.Ar.indptr[:-1], np.repeat(rows, np.diff(self.Ar.indptr)),
+            self.Ar.indices, rows,
+        )  # fmt: skip
         m = self.shape[:, 1] if len(self.shape) else np.zeros(1, _I64)
         width = max(int(m.max(initial=0)), int(self.pwidth.max(initial=0)), 1)
-        self.acc, self.tmp = np.zeros(width), np.zeros(width)
-        self.work = np.zeros(max(self.nr, 1))
+        self.acc, self.tmp = np.zeros(4 * width), np.zeros(width)
         self.sigma, self.sigma_used = np.zeros(self.mi), np.zeros(self.mi)
         self.hr_ok = False  # hr_base holds Tᵀ H_f T for these values and sigma_used
         self.ttt_ok = False  # ttt holds Tᵀ T for these values
@@ -105,7 +106,7 @@ class ReductionLayout:
     def _fold_pattern(self, hess: sp.csr_matrix, ai: sp.csr_matrix) -> None:
         """``H_f``'s pattern (``H`` symmetric, the diagonal, ``A_Iᵀ A_I``), where ``H``'s lower
         entries land (``hs_slot`` ← ``hess.data[hs_src]``) and, per pair of entries ``(e, f)``
-        of an inequality row, its slot in ``H_f``."""
+        of an inequality row (row by row, ``e`` then ``f`` in row order), its slot in ``H_f``."""
         n = self.n
         h_rows = np.repeat(np.arange(n), np.diff(hess.indptr))
         low = np.flatnonzero(h_rows >= hess.indices)
@@ -124,18 +125,16 @@ class ReductionLayout:
         self.hf_data = np.zeros(len(keys))
         lens = np.diff(ai.indptr).astype(_I64)
         sq = lens * lens
-        self.fold_row = np.repeat(np.arange(self.mi), sq)
-        t = np.arange(len(self.fold_row)) - np.repeat(np.cumsum(sq) - sq, sq)
+        t = np.arange(sq.sum()) - np.repeat(np.cumsum(sq) - sq, sq)
         width, start = np.repeat(lens, sq), np.repeat(ai.indptr[:-1].astype(_I64), sq)
-        self.fold_e, self.fold_f = start + t // width, start + t % width
-        self.fold_slot = Slots(self.hs).pairs(ai.indices[self.fold_e], ai.indices[self.fold_f])
-        self.hs_seg = self._segments(self.hs)
+        fold_e, fold_f = start + t // width, start + t % width
+        self.fold_slot = Slots(self.hs).pairs(ai.indices[fold_e], ai.indices[fold_f])
 
     def _w_layout(self) -> None:
         """``W = H_f T`` in ``wbuf``: block ``b``'s dependent rows as a dense panel
         (``r_b × pwidth[b]`` at ``panel_off[b]``) over ``U_b``, the sorted union of their
         columns, then the kept rows (their own columns); per row of ``H_f`` where it goes
-        (``ostart``, ``olen``, the column of each position ``ocol``)."""
+        (``ostart``; the row and column of each position: ``orow``, ``ocol``)."""
         P = _product_pattern((self.hs, self.T))
         B, uoff = len(self.shape), self.uoff
         U = [np.unique(np.concatenate([np.zeros(0, _I64), *_csr_rows(P, self.dep[uoff[b] : uoff[b + 1]])])) for b in range(B)]  # fmt: skip
@@ -143,21 +142,24 @@ class ReductionLayout:
         self.pwidth = np.array([len(u) for u in U], _I64)
         sizes = self.shape[:, 0] * self.pwidth if B else np.zeros(0, _I64)
         self.panel_off = np.concatenate([[0], np.cumsum(sizes)]).astype(_I64)
-        ostart, olen = np.zeros(self.n, _I64), np.zeros(self.n, _I64)
+        ostart = np.zeros(self.n, _I64)
         for b in range(B):
             dep = self.dep[uoff[b] : uoff[b + 1]]
             ostart[dep] = self.panel_off[b] + np.arange(len(dep)) * self.pwidth[b]
-            olen[dep] = self.pwidth[b]
         kept_rows = _csr_rows(P, self.red_cols)
         klen = np.array([len(c) for c in kept_rows], _I64)
         ostart[self.red_cols] = self.panel_off[-1] + np.concatenate([[0], np.cumsum(klen)[:-1]])
-        olen[self.red_cols] = klen
-        self.ostart, self.olen = ostart, olen
-        self.ocol = np.concatenate(
+        self.ostart = ostart
+        ocol = np.concatenate(
             [*(np.tile(U[b], self.shape[b, 0]) for b in range(B)), *kept_rows, np.zeros(0, _I64)]
         ).astype(_I64)
-        self.wbuf = np.zeros(len(self.ocol))
+        self.wbuf = np.zeros(len(ocol))
         self._kept_rows = kept_rows
+        orow = np.concatenate([*(np.repeat(self.dep[uoff[b] : uoff[b + 1]], self.pwidth[b]) for b in range(B)), *(np.full(len(c), k) for k, c in zip(self.red_cols, kept_rows)), np.zeros(0, _I64)])  # fmt: skip
+        row_key = np.arange(self.n)  # rows with the same output columns share their maps
+        for b in range(B):
+            row_key[self.dep[uoff[b] : uoff[b + 1]]] = self.n + b
+        self.hs_seg = self._segments(self.hs, ostart, orow, ocol, row_key)
 
     def _hr_layout(self) -> None:
         """``H_r``'s lower pattern and the slots of ``tril(Tᵀ W)``'s terms (the kept rows'
@@ -203,16 +205,33 @@ class ReductionLayout:
         if min(self.kw_slot.min(initial=0), self.lo_slot.min(initial=0), self.tt_slot.min(initial=0)) < 0:  # fmt: skip
             raise ValueError("reduction layout: a product term outside H_r's pattern")
 
-    def _segments(self, x: sp.csr_matrix) -> tuple[np.ndarray, ...]:
-        """``x``'s entries row by row in segments of one block's dependent columns (``-1``: the
-        kept columns), for :func:`~mbplan.solvers.reduced_products.times_t`: ``(row_seg,
-        seg_ptr, seg_block, seg_e, seg_arg)``: per row its segments, per segment its entries
-        and block, per entry its position in ``x.data`` and the dependent column's row in the
-        block's ``E`` (the kept column's reduced index)."""
+    def _segments(
+        self, x: sp.csr_matrix, ostart: np.ndarray, orow: np.ndarray, ocol: np.ndarray,
+        row_key: np.ndarray,
+    ) -> tuple[np.ndarray, ...]:  # fmt: skip
+        """For :func:`~mbplan.solvers.reduced_products.times_t` (``X T`` for ``x``'s pattern,
+        row ``i``'s result at ``out[ostart[i] + k]`` over its sorted columns, position by position
+        ``orow``, ``ocol``): ``x``'s entries row by row in segments of one block's dependent
+        columns (``seg_block``; ``-1``: the kept columns), per segment its entries ``seg_e``
+        (positions in ``x.data``) and its row's ``seg_out = ostart[i]``; per entry ``seg_arg``:
+        the dependent column's row in the block's ``E`` (a kept column: its position in the
+        row's result); per block segment ``seg_map``: where the block's reach lies in the row's
+        result (``pos[seg_map[s] + q]``, shared by rows of equal ``row_key``)."""
         block_of, local = -np.ones(self.n, _I64), np.zeros(self.n, _I64)
         for b in range(len(self.shape)):
             dep = self.dep[self.uoff[b] : self.uoff[b + 1]]
             block_of[dep], local[dep] = b, np.arange(len(dep))
+        nr = max(self.nr, 1)
+        okey = np.asarray(orow, _I64) * nr + np.asarray(ocol, _I64)
+        order = np.argsort(okey, kind="stable")
+
+        def where(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:  # positions in out
+            want = rows * nr + cols
+            at = order[np.minimum(np.searchsorted(okey[order], want), len(order) - 1)]
+            if np.any(okey[at] != want):
+                raise ValueError("reduction layout: a product term outside its row's pattern")
+            return at
+
         rows = np.repeat(np.arange(x.shape[0]), np.diff(x.indptr))
         blk = block_of[x.indices]
         seg_e = np.lexsort((blk, rows))
@@ -220,7 +239,21 @@ class ReductionLayout:
         new = np.ones(len(r_s), bool)
         new[1:] = (r_s[1:] != r_s[:-1]) | (b_s[1:] != b_s[:-1])
         starts = np.flatnonzero(new)
-        row_seg = np.searchsorted(r_s[starts], np.arange(x.shape[0] + 1))
-        seg_arg = np.where(b_s >= 0, local[c_s], self.red_of[c_s])
-        return (row_seg.astype(_I64), np.append(starts, len(r_s)).astype(_I64),
-                b_s[starts].astype(_I64), seg_e.astype(_I64), seg_arg.astype(_I64))  # fmt: skip
+        seg_row, seg_block = r_s[starts], b_s[starts]
+        seg_out = np.asarray(ostart, _I64)[seg_row]
+        kept = b_s < 0
+        seg_arg = local[c_s]
+        seg_arg[kept] = where(r_s[kept], self.red_of[c_s[kept]]) - np.asarray(ostart)[r_s[kept]]
+        maps, pos, seg_map = {}, [], np.zeros(len(starts), _I64)
+        for s, (i, b) in enumerate(zip(seg_row.tolist(), seg_block.tolist(), strict=True)):
+            if b < 0:
+                continue
+            key = (int(row_key[i]), b)
+            if key not in maps:
+                maps[key] = sum(len(p) for p in pos)
+                reach = self.reach_red[self.reach_ptr[b] : self.reach_ptr[b + 1]]
+                pos.append(where(np.full(len(reach), i), reach) - ostart[i])
+            seg_map[s] = maps[key]
+        pos = np.concatenate([*pos, np.zeros(0, _I64)]).astype(_I64)
+        return (np.append(starts, len(r_s)).astype(_I64), seg_block.astype(_I64),
+                seg_e.astype(_I64), seg_arg.astype(_I64), seg_out, seg_map, pos)  # fmt: skip

@@ -85,11 +85,13 @@ class ReductionSymbolic:
         self.g_outer = slots(src, self.outer)
         self.h_outer = slots(sub, self.outer)
         self.src, self.sub = src, sub
-        self.M = np.zeros((J, r, src.shape[1]))
+        g = src.shape[1]
+        self.M = np.zeros((J, r, g))
         self.new_rows = np.zeros((J, r, o))
+        self.g_a, self.g_x, self.g_piv = np.zeros((g, g)), np.zeros((g, r)), np.zeros(g, np.int64)
         if J and not group_values(
             ae.data, self.g_sel, self.h_sel, self.pad, self.g_outer, self.h_outer, self.M,
-            self.new_rows,
+            self.new_rows, self.g_a, self.g_x, self.g_piv,
         ):  # fmt: skip
             raise InputError("EliminationPlan: a group's source rows are rank deficient")
         self.tgt = np.zeros((J, r), np.int64)
