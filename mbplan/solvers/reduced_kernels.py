@@ -86,46 +86,6 @@ def _lu_solve(A, piv, X) -> None:
 
 
 @nb.njit(**_FAST)
-def _lu_solve_vec(A, piv, x) -> None:
-    """``x ← A⁻¹ x`` (one right-hand side)."""
-    r = A.shape[0]
-    for k in range(r):
-        p = piv[k]
-        if p != k:
-            x[k], x[p] = x[p], x[k]
-    for a in range(r):
-        t = x[a]
-        for b in range(a):
-            t -= A[a, b] * x[b]
-        x[a] = t
-    for a in range(r - 1, -1, -1):
-        t = x[a]
-        for b in range(a + 1, r):
-            t -= A[a, b] * x[b]
-        x[a] = t / A[a, a]
-
-
-@nb.njit(**_FAST)
-def _lu_solve_t(A, piv, x) -> None:
-    """``x ← A⁻ᵀ x`` with the factors of :func:`_lu`."""
-    r = A.shape[0]
-    for a in range(r):  # Uᵀ
-        t = x[a]
-        for b in range(a):
-            t -= A[b, a] * x[b]
-        x[a] = t / A[a, a]
-    for a in range(r - 1, -1, -1):  # Lᵀ (unit)
-        t = x[a]
-        for b in range(a + 1, r):
-            t -= A[b, a] * x[b]
-        x[a] = t
-    for k in range(r - 1, -1, -1):
-        p = piv[k]
-        if p != k:
-            x[k], x[p] = x[p], x[k]
-
-
-@nb.njit(**_FAST)
 def _lu_solve_t_rows(A, piv, X) -> None:
     """``X ← A⁻ᵀ X`` with the factors of :func:`_lu` (``X``: ``(r, q)``), row by row: contiguous
     updates over the columns, zero factors skipped."""
@@ -215,7 +175,8 @@ def group_values(ae, g_sel, h_sel, pad, g_outer, h_outer, M, new_rows, A, X, piv
 @nb.njit(**_FAST)
 def block_values(
     ae, new_rows, la_src, ln_src, lval, shape, eoff, lu_off, uoff, a_ptr, a_src, a_dst, fe_ptr,
-    fe_src, fe_dst, cptr, cblk, nz_ptr, nz_a, nz_p, nz_src, rmap_off, rmap, lu, piv, ebuf, tmp,
+    fe_src, fe_dst, cptr, cblk, nz_ptr, nz_a, nz_p, nz_src, rmap_off, rmap, lu, piv, dinv, ebuf,
+    tmp,
 ) -> bool:  # fmt: skip
     """The local rows' entries ``lval`` (from ``ae`` and the groups' new rows), then per block in
     plan order ``E_b = L_b[:, dep]⁻¹ (L_b[:, free] - Σ_i L_b[:, dep_i] E_i)`` over its sorted
@@ -223,15 +184,17 @@ def block_values(
     ``i = cblk[k]`` by their entries ``nz_*[nz_ptr[k]:nz_ptr[k+1]]`` (row, dependent column,
     value), summed densely over ``i``'s reach and scattered by ``rmap`` (index arrays:
     :meth:`~mbplan.solvers.reduction_symbolic.ReductionSymbolic._block_entries`). LU factors of
-    ``L_b[:, dep]`` kept in ``lu`` / ``piv`` (at ``lu_off`` / ``uoff``) for the solves;
-    ``tmp``: scratch of the largest reach. False on a breakdown."""
+    ``L_b[:, dep]`` in ``lu`` / ``piv`` (at ``lu_off`` / ``uoff``) and the reciprocals of ``U``'s
+    diagonal in ``dinv`` for the solves; ``tmp``: scratch of the largest reach. False on a
+    breakdown."""
     ae, new_rows, la_src, ln_src = borrowed(ae), borrowed(new_rows), borrowed(la_src), borrowed(ln_src)  # fmt: skip
     lval, shape, eoff, lu_off = borrowed(lval), borrowed(shape), borrowed(eoff), borrowed(lu_off)
     uoff, a_ptr, a_src, a_dst = borrowed(uoff), borrowed(a_ptr), borrowed(a_src), borrowed(a_dst)
     fe_ptr, fe_src, fe_dst, cptr = borrowed(fe_ptr), borrowed(fe_src), borrowed(fe_dst), borrowed(cptr)  # fmt: skip
     cblk, nz_ptr, nz_a, nz_p = borrowed(cblk), borrowed(nz_ptr), borrowed(nz_a), borrowed(nz_p)
     nz_src, rmap_off, rmap = borrowed(nz_src), borrowed(rmap_off), borrowed(rmap)
-    lu, piv, ebuf, tmp = borrowed(lu), borrowed(piv), borrowed(ebuf), borrowed(tmp)
+    lu, piv, dinv = borrowed(lu), borrowed(piv), borrowed(dinv)
+    ebuf, tmp = borrowed(ebuf), borrowed(tmp)
     na = la_src.shape[0]
     for t in range(na):
         lval[t] = ae[U64(la_src[t])]
@@ -272,35 +235,73 @@ def block_values(
         if not _lu(A, pb):
             return False
         _lu_solve(A, pb, ebuf[eo : eo + r * m].reshape(r, m))
+        for a in range(r):
+            dinv[U64(uoff[b] + a)] = 1.0 / A[a, a]
     return True
 
 
 @nb.njit(**_FAST)
-def b_solve(x, lval, shape, uoff, cptr, cblk, nz_ptr, nz_a, nz_p, nz_src, lu, lu_off, piv) -> None:
-    """``x ← B⁻¹ x``, ``B`` lower block triangular: per block ``L_b[:, dep]`` on the diagonal and
-    ``L_b[:, dep_i]`` below (entries of :func:`block_values`; ``x``: blocks' local rows /
-    dependent columns at ``uoff``)."""
+def b_solve(x, lval, shape, uoff, bc_ptr, bc_row, bc_col, bc_val, lu, lu_off, piv, dinv) -> None:
+    """``x ← B⁻¹ x``, ``B`` lower block triangular (``x``: blocks' local rows / dependent
+    columns at ``uoff``): per block its entries below the diagonal by row (``bc_*`` at
+    ``bc_ptr[b]``: row, column and value in ``lval``), then ``L_b[:, dep]⁻¹`` (its LU factors,
+    ``dinv``: the reciprocals of ``U``'s diagonal)."""
     for b in range(shape.shape[0]):
         r, ub = shape[b, 0], uoff[b]
-        for k in range(cptr[b], cptr[b + 1]):
-            ui = uoff[cblk[k]]
-            for t in range(nz_ptr[k], nz_ptr[k + 1]):
-                x[U64(ub + nz_a[t])] -= lval[U64(nz_src[t])] * x[U64(ui + nz_p[t])]
-        A = lu[lu_off[b] : lu_off[b] + r * r].reshape(r, r)
-        _lu_solve_vec(A, piv[ub : ub + r], x[ub : ub + r])
+        t, t1 = bc_ptr[b], bc_ptr[b + 1]
+        while t < t1:
+            row = U64(bc_row[t])
+            acc = x[row]
+            while t < t1 and bc_row[t] == row:
+                acc -= lval[U64(bc_val[t])] * x[U64(bc_col[t])]
+                t += 1
+            x[row] = acc
+        A, xb, pb = lu[U64(lu_off[b]) :], x[U64(ub) :], piv[U64(ub) :]
+        for k in range(r):
+            p = pb[k]
+            if p != k:
+                xb[k], xb[p] = xb[p], xb[k]
+        for a in range(1, r):
+            la, t = A[U64(a * r) :], xb[a]
+            for c in range(a):
+                t -= la[c] * xb[c]
+            xb[a] = t
+        for a in range(r - 1, -1, -1):
+            ua, t = A[U64(a * r) :], xb[a]
+            for c in range(a + 1, r):
+                t -= ua[c] * xb[c]
+            xb[a] = t * dinv[U64(ub + a)]
 
 
 @nb.njit(**_FAST)
-def bt_solve(x, lval, shape, uoff, cptr, cblk, nz_ptr, nz_a, nz_p, nz_src, lu, lu_off, piv) -> None:
-    """``x ← B⁻ᵀ x`` (:func:`b_solve`'s ``B``), blocks in reverse order."""
+def bt_solve(x, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, piv, dinv) -> None:
+    """``x ← B⁻ᵀ x`` (:func:`b_solve`'s ``B``, its entries by column), blocks in reverse
+    order."""
     for b in range(shape.shape[0] - 1, -1, -1):
         r, ub = shape[b, 0], uoff[b]
-        A = lu[lu_off[b] : lu_off[b] + r * r].reshape(r, r)
-        _lu_solve_t(A, piv[ub : ub + r], x[ub : ub + r])
-        for k in range(cptr[b], cptr[b + 1]):
-            ui = uoff[cblk[k]]
-            for t in range(nz_ptr[k], nz_ptr[k + 1]):
-                x[U64(ui + nz_p[t])] -= lval[U64(nz_src[t])] * x[U64(ub + nz_a[t])]
+        A, xb, pb = lu[U64(lu_off[b]) :], x[U64(ub) :], piv[U64(ub) :]
+        for a in range(r):  # Uᵀ
+            t = xb[a]
+            for c in range(a):
+                t -= A[U64(c * r + a)] * xb[c]
+            xb[a] = t * dinv[U64(ub + a)]
+        for a in range(r - 2, -1, -1):  # Lᵀ (unit)
+            t = xb[a]
+            for c in range(a + 1, r):
+                t -= A[U64(c * r + a)] * xb[c]
+            xb[a] = t
+        for k in range(r - 1, -1, -1):
+            p = pb[k]
+            if p != k:
+                xb[k], xb[p] = xb[p], xb[k]
+        t, t1 = bc_ptr[b], bc_ptr[b + 1]
+        while t < t1:
+            col = U64(bt_col[t])
+            acc = x[col]
+            while t < t1 and bt_col[t] == col:
+                acc -= lval[U64(bt_val[t])] * x[U64(bt_row[t])]
+                t += 1
+            x[col] = acc
 
 
 @nb.njit(**_FAST)

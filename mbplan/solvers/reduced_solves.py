@@ -64,9 +64,10 @@ def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr
     ip, ii, ix = borrowed(ai[0]), borrowed(ai[1]), borrowed(ai[2])
     kp, ki, kx = borrowed(ak[0]), borrowed(ak[1]), borrowed(ak[2])
     tgt, src, sub, M = borrowed(grp[0]), borrowed(grp[1]), borrowed(grp[2]), borrowed(grp[3])
-    lval, shape, uoff, cptr = borrowed(blk[0]), borrowed(blk[1]), borrowed(blk[2]), borrowed(blk[3])
-    cblk, nz_ptr, nz_a, nz_p = borrowed(blk[4]), borrowed(blk[5]), borrowed(blk[6]), borrowed(blk[7])
-    nz_src, lu, lu_off, piv = borrowed(blk[8]), borrowed(blk[9]), borrowed(blk[10]), borrowed(blk[11])
+    lval, shape, uoff, bc_ptr = borrowed(blk[0]), borrowed(blk[1]), borrowed(blk[2]), borrowed(blk[3])
+    bc_row, bc_col, bc_val = borrowed(blk[4]), borrowed(blk[5]), borrowed(blk[6])
+    bt_row, bt_col, bt_val = borrowed(blk[7]), borrowed(blk[8]), borrowed(blk[9])
+    lu, lu_off, piv, dinv = borrowed(blk[10]), borrowed(blk[11]), borrowed(blk[12]), borrowed(blk[13])
     red_cols, ebuf, eoff = borrowed(tr[0]), borrowed(tr[1]), borrowed(tr[2])
     reach_red, reach_ptr, tmp = borrowed(tr[3]), borrowed(tr[4]), borrowed(tr[5])
     be = b[n : n + me]
@@ -75,7 +76,7 @@ def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr
     _group_rows(be, se, tgt, src, sub, M)
     for k in range(y_rows.shape[0]):
         xu[k] = se[U64(y_rows[k])]
-    b_solve(xu, lval, shape, uoff, cptr, cblk, nz_ptr, nz_a, nz_p, nz_src, lu, lu_off, piv)
+    b_solve(xu, lval, shape, uoff, bc_ptr, bc_row, bc_col, bc_val, lu, lu_off, piv, dinv)
     for i in range(n):
         vx[i] = 0.0
         kv[i] = b[i]
@@ -116,9 +117,10 @@ def expand_solution(b, xr, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp
     ip, ii, ix = borrowed(ai[0]), borrowed(ai[1]), borrowed(ai[2])
     kp, ki, kx = borrowed(ak[0]), borrowed(ak[1]), borrowed(ak[2])
     tgt, src, sub, M = borrowed(grp[0]), borrowed(grp[1]), borrowed(grp[2]), borrowed(grp[3])
-    lval, shape, uoff, cptr = borrowed(blk[0]), borrowed(blk[1]), borrowed(blk[2]), borrowed(blk[3])
-    cblk, nz_ptr, nz_a, nz_p = borrowed(blk[4]), borrowed(blk[5]), borrowed(blk[6]), borrowed(blk[7])
-    nz_src, lu, lu_off, piv = borrowed(blk[8]), borrowed(blk[9]), borrowed(blk[10]), borrowed(blk[11])
+    lval, shape, uoff, bc_ptr = borrowed(blk[0]), borrowed(blk[1]), borrowed(blk[2]), borrowed(blk[3])
+    bc_row, bc_col, bc_val = borrowed(blk[4]), borrowed(blk[5]), borrowed(blk[6])
+    bt_row, bt_col, bt_val = borrowed(blk[7]), borrowed(blk[8]), borrowed(blk[9])
+    lu, lu_off, piv, dinv = borrowed(blk[10]), borrowed(blk[11]), borrowed(blk[12]), borrowed(blk[13])
     red_cols, ebuf, eoff = borrowed(tr[0]), borrowed(tr[1]), borrowed(tr[2])
     reach_red, reach_ptr, tmp = borrowed(tr[3]), borrowed(tr[4]), borrowed(tr[5])
     nr = red_cols.shape[0]
@@ -146,7 +148,7 @@ def expand_solution(b, xr, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp
         for e in range(hp[j], hp[j + 1]):
             t += hx[e] * w[U64(hi[e])]
         yv[k] = b[j] - t - atw[j]
-    bt_solve(yv, lval, shape, uoff, cptr, cblk, nz_ptr, nz_a, nz_p, nz_src, lu, lu_off, piv)
+    bt_solve(yv, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, piv, dinv)
     for k in range(y_rows.shape[0]):
         w[U64(n + y_rows[k])] = yv[k]
     _group_rows_t(w[n : n + me], tgt, src, sub, M, yv)

@@ -143,7 +143,7 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         self.dep_key = (self.g_sel.tobytes(), self.tgt.tobytes(), self.dep.tobytes())  # the choice
         self._tuples()
 
-    _WORK = ("M", "new_rows", "g_a", "g_x", "g_piv", "lval", "ebuf", "lu", "piv", "hf_data", "wbuf", "hr_base", "ttt",
+    _WORK = ("M", "new_rows", "g_a", "g_x", "g_piv", "lval", "ebuf", "lu", "dinv", "piv", "hf_data", "wbuf", "hr_base", "ttt",
              "sigma", "sigma_used", "ae_data", "ai_data", "acc", "tmp", "xu", "rz", "yv",
              "vx", "kv", "se", "rhs_r")  # fmt: skip
     _MATRICES = ("hs", "ak", "Ar", "Hr")
@@ -168,8 +168,9 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         self._ai = (self.ai_p, self.ai_i, self.ai_data)
         self._ak = (ak.indptr, ak.indices, ak.data)
         self._grp = (self.tgt, self.src, self.sub, self.M)
-        self._blk = (self.lval, self.shape, self.uoff, self.cptr, self.cblk, self.nz_ptr, self.nz_a,
-                     self.nz_p, self.nz_src, self.lu, self.lu_off, self.piv)  # fmt: skip
+        self._blk = (self.lval, self.shape, self.uoff, self.bc_ptr, self.bc_row, self.bc_col,
+                     self.bc_val, self.bt_row, self.bt_col, self.bt_val, self.lu, self.lu_off,
+                     self.piv, self.dinv)  # fmt: skip
         self._tr = (self.red_cols, self.ebuf, self.eoff, self.reach_red, self.reach_ptr, self.tmp)
 
     # ------------------------------------------------------------------ numeric
@@ -189,7 +190,7 @@ class Reduction(ReductionSymbolic, ReductionLayout):
             ae.data, self.new_rows, self.la_src, self.ln_src, self.lval, self.shape, self.eoff,
             self.lu_off, self.uoff, self.a_ptr, self.a_src, self.a_dst, self.fe_ptr, self.fe_src,
             self.fe_dst, self.cptr, self.cblk, self.nz_ptr, self.nz_a, self.nz_p, self.nz_src,
-            self.rmap_off, self.rmap, self.lu, self.piv, self.ebuf, self.tmp,
+            self.rmap_off, self.rmap, self.lu, self.piv, self.dinv, self.ebuf, self.tmp,
         ):  # fmt: skip
             return False
         if not copy_values(hess.data, self.hs.data, self.hs_slot, self.hs_src, ae.data,

@@ -92,7 +92,8 @@ class ReductionLayout:
             self.Ar.indices, rows,
         )  # fmt: skip
         m = self.shape[:, 1] if len(self.shape) else np.zeros(1, _I64)
-        width = max(int(m.max(initial=0)), int(self.pwidth.max(initial=0)), 1)
+        r = self.shape[:, 0] if len(self.shape) else np.zeros(1, _I64)
+        width = max(int(m.max(initial=0)), int(r.max(initial=0)), int(self.pwidth.max(initial=0)), 1)
         self.acc, self.tmp = np.zeros(4 * width), np.zeros(width)
         self.sigma, self.sigma_used = np.zeros(self.mi), np.zeros(self.mi)
         self.hr_ok = False  # hr_base holds Tᵀ H_f T for these values and sigma_used

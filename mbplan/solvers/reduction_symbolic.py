@@ -229,7 +229,17 @@ class ReductionSymbolic:
         self.nz_ptr = i64(np.concatenate([[0], np.cumsum([len(x) for x in entries_nz])]))
         flat = np.array([e for x in entries_nz for e in x], np.int64).reshape(-1, 3)
         self.nz_a, self.nz_p, self.nz_src = flat[:, 0].copy(), flat[:, 1].copy(), flat[:, 2].copy()
+        # the same entries per block as rows and columns of B (its local rows / dependent
+        # columns at uoff), by row for B⁻¹ and by column for B⁻ᵀ
+        k_of = np.repeat(np.arange(len(cblk)), np.diff(self.nz_ptr))
+        b_of = np.searchsorted(self.cptr, k_of, side="right") - 1
+        row = self.uoff[b_of] + self.nz_a
+        col = self.uoff[self.cblk[k_of]] + self.nz_p
+        by_row, by_col = np.lexsort((col, row, b_of)), np.lexsort((row, col, b_of))
+        self.bc_ptr = i64(np.searchsorted(b_of[by_row], np.arange(B + 1)))
+        self.bc_row, self.bc_col, self.bc_val = row[by_row], col[by_row], self.nz_src[by_row]
+        self.bt_row, self.bt_col, self.bt_val = row[by_col], col[by_col], self.nz_src[by_col]
         self.lval = np.zeros(len(order))
         self.ebuf = np.zeros(self.eoff[-1])
-        self.lu = np.zeros(self.lu_off[-1])
+        self.lu, self.dinv = np.zeros(self.lu_off[-1]), np.zeros(self.uoff[-1])
         self.piv = np.zeros(self.uoff[-1], np.int64)
