@@ -244,6 +244,7 @@ def test_rows_and_columns_picked_on_another_problem_are_picked_again(monkeypatch
         assert red.n_fallbacks == 0 and ratio <= 1e-10
         assert np.abs(x_red - x_full).max() <= 1e-6 * np.abs(x_full).max()
         choices.append(red.reduction.dep_key)
-    assert col in np.frombuffer(choices[0][2], np.int64)  # picked on the scaled column
+        if len(choices) == 1:
+            assert col in red.reduction.dep  # picked on the scaled column
     assert choices[1] != choices[0]  # broke down on the zeroed column: picked again
     assert choices[2] == choices[3] == choices[1]  # the new choice is memoized first

@@ -21,8 +21,11 @@ _FAST = {"cache": True, "fastmath": {"contract", "reassoc"}, "error_model": "num
 
 
 @nb.njit(**_FAST)
-def _lu(A, piv) -> bool:
-    """In-place LU with partial pivoting (``piv``: row swaps); False on a tiny pivot."""
+def _lu(A, piv, end) -> bool:
+    """In-place LU with partial pivoting (``piv``: row swaps) of a block upper triangular ``A``
+    (``end[k]``: the end of column ``k``'s diagonal block, below it zeros: the pivot is searched
+    and rows are eliminated within it); False on a pivot below :data:`PIVOT_TOL` times the
+    largest entry."""
     r = A.shape[0]
     flat = A.reshape(-1)
     s0 = s1 = s2 = s3 = 0.0  # four chains: the maximum has no reassociation
@@ -34,8 +37,8 @@ def _lu(A, piv) -> bool:
         s0 = max(s0, abs(flat[t]))
     scale = max(max(s0, s1), max(s2, s3))
     for k in range(r):
-        p = k
-        for a in range(k + 1, r):
+        p, e = k, end[k]
+        for a in range(k + 1, e):
             if abs(A[a, k]) > abs(A[p, k]):
                 p = a
         if not abs(A[p, k]) > PIVOT_TOL * scale:
@@ -45,7 +48,7 @@ def _lu(A, piv) -> bool:
             for b in range(r):
                 A[k, b], A[p, b] = A[p, b], A[k, b]
         ak = A[k, k + 1 :]
-        for a in range(k + 1, r):
+        for a in range(k + 1, e):
             if A[a, k] != 0.0:  # the blocks are sparse: skip the zero multipliers
                 A[a, k] /= A[k, k]
                 f, aa = A[a, k], A[a, k + 1 :]
@@ -55,9 +58,10 @@ def _lu(A, piv) -> bool:
 
 
 @nb.njit(**_FAST)
-def _lu_solve(A, piv, X) -> None:
-    """``X ← A⁻¹ X`` with the factors of :func:`_lu` (``X``: ``(r, q)``), row by row:
-    contiguous updates over the columns, zero factors skipped."""
+def _lu_solve(A, piv, X, begin) -> None:
+    """``X ← A⁻¹ X`` with the factors of :func:`_lu` (``X``: ``(r, q)``; ``begin[a]``: the
+    beginning of row ``a``'s diagonal block, where ``L`` lives), row by row: contiguous
+    updates over the columns, ``U``'s zero factors skipped."""
     r, q = A.shape[0], X.shape[1]
     for k in range(r):
         p = piv[k]
@@ -66,12 +70,10 @@ def _lu_solve(A, piv, X) -> None:
                 X[k, c], X[p, c] = X[p, c], X[k, c]
     for a in range(r):
         xa = X[a]
-        for b in range(a):
-            f = A[a, b]
-            if f != 0.0:
-                xb = X[b]
-                for c in range(q):
-                    xa[c] -= f * xb[c]
+        for b in range(begin[a], a):
+            f, xb = A[a, b], X[b]
+            for c in range(q):
+                xa[c] -= f * xb[c]
     for a in range(r - 1, -1, -1):
         xa = X[a]
         for b in range(a + 1, r):
@@ -86,9 +88,9 @@ def _lu_solve(A, piv, X) -> None:
 
 
 @nb.njit(**_FAST)
-def _lu_solve_t_rows(A, piv, X) -> None:
-    """``X ← A⁻ᵀ X`` with the factors of :func:`_lu` (``X``: ``(r, q)``), row by row: contiguous
-    updates over the columns, zero factors skipped."""
+def _lu_solve_t_rows(A, piv, X, begin) -> None:
+    """``X ← A⁻ᵀ X`` with the factors of :func:`_lu` (``X``: ``(r, q)``, few columns; ``begin``
+    as in :func:`_lu_solve`), row by row without branches."""
     r, q = A.shape[0], X.shape[1]
     for a in range(r):  # Uᵀ
         xa, ua = X[a], A[a]
@@ -96,19 +98,15 @@ def _lu_solve_t_rows(A, piv, X) -> None:
         for c in range(q):
             xa[c] *= inv
         for b in range(a + 1, r):
-            f = ua[b]
-            if f != 0.0:
-                xb = X[b]
-                for c in range(q):
-                    xb[c] -= f * xa[c]
-    for a in range(r - 1, -1, -1):  # Lᵀ (unit)
+            f, xb = ua[b], X[b]
+            for c in range(q):
+                xb[c] -= f * xa[c]
+    for a in range(r - 1, -1, -1):  # Lᵀ (unit), inside the diagonal block
         xa, la = X[a], A[a]
-        for b in range(a):
-            f = la[b]
-            if f != 0.0:
-                xb = X[b]
-                for c in range(q):
-                    xb[c] -= f * xa[c]
+        for b in range(begin[a], a):
+            f, xb = la[b], X[b]
+            for c in range(q):
+                xb[c] -= f * xa[c]
     for k in range(r - 1, -1, -1):
         p = piv[k]
         if p != k:
@@ -127,16 +125,19 @@ def _gather(data, slot, out) -> None:
 
 
 @nb.njit(**_FAST)
-def group_values(ae, g_sel, h_sel, pad, g_outer, h_outer, M, new_rows, A, X, piv) -> bool:
+def group_values(ae, g_sel, h_sel, pad, g_begin, g_end, g_outer, h_outer, M, new_rows, A, X,
+                 piv) -> bool:  # fmt: skip
     """Per group ``j``: ``M_j = A_h G⁻¹`` on ``g`` selected cancelled columns (``G``: the source
     rows there, square; ``A_h``: the subtracted rows), and the new rows
     ``M_j A[sources] - A[subtract]`` on the outer columns. ``g_sel`` ``(J, g, g)``, ``h_sel``
     ``(J, r, g)``, ``g_outer`` ``(J, g, o)``, ``h_outer`` ``(J, r, o)``: slots of the entries in
-    ``ae`` (``-1``: zero); a padded source row (``pad``) gets a unit pivot. ``A`` ``(g, g)``,
-    ``X`` ``(g, r)``, ``piv``: scratch. False on a breakdown (:func:`_lu`)."""
+    ``ae`` (``-1``: zero); a padded source row (``pad``) gets a unit pivot; ``g_begin``,
+    ``g_end``: the diagonal blocks of the sources and columns in block triangular order
+    (:func:`_lu`). ``A``
+    ``(g, g)``, ``X`` ``(g, r)``, ``piv``: scratch. False on a breakdown."""
     ae, g_sel, h_sel, pad = borrowed(ae), borrowed(g_sel), borrowed(h_sel), borrowed(pad)
     g_outer, h_outer, M, new_rows = borrowed(g_outer), borrowed(h_outer), borrowed(M), borrowed(new_rows)  # fmt: skip
-    A, X, piv = borrowed(A), borrowed(X), borrowed(piv)
+    g_begin, g_end, A, X, piv = borrowed(g_begin), borrowed(g_end), borrowed(A), borrowed(X), borrowed(piv)  # fmt: skip
     J, g = g_sel.shape[0], g_sel.shape[1]
     r, o = h_sel.shape[1], g_outer.shape[2]
     for j in range(J):
@@ -144,7 +145,7 @@ def group_values(ae, g_sel, h_sel, pad, g_outer, h_outer, M, new_rows, A, X, piv
         for a in range(g):
             if pad[j, a]:
                 A[a, a] = 1.0
-        if not _lu(A, piv):
+        if not _lu(A, piv, g_end[j]):
             return False
         Mj, nr, hs, go = M[j], new_rows[j], h_sel[j], g_outer[j]
         for a in range(g):  # Mⱼᵀ = G⁻ᵀ A_hᵀ
@@ -152,7 +153,7 @@ def group_values(ae, g_sel, h_sel, pad, g_outer, h_outer, M, new_rows, A, X, piv
             for i in range(r):
                 s = hs[i, a]
                 xa[i] = ae[U64(s)] if s >= 0 else 0.0
-        _lu_solve_t_rows(A, piv, X)
+        _lu_solve_t_rows(A, piv, X, g_begin[j])
         for i in range(r):
             for a in range(g):
                 Mj[i, a] = X[a, i]
@@ -174,7 +175,7 @@ def group_values(ae, g_sel, h_sel, pad, g_outer, h_outer, M, new_rows, A, X, piv
 
 @nb.njit(**_FAST)
 def block_values(
-    ae, new_rows, la_src, ln_src, lval, shape, eoff, lu_off, uoff, a_ptr, a_src, a_dst, fe_ptr,
+    ae, new_rows, la_src, ln_src, lval, shape, eoff, lu_off, uoff, lu_begin, lu_end, a_ptr, a_src, a_dst, fe_ptr,
     fe_src, fe_dst, cptr, cblk, nz_ptr, nz_a, nz_p, nz_src, rmap_off, rmap, lu, piv, dinv, ebuf,
     tmp,
 ) -> bool:  # fmt: skip
@@ -184,12 +185,14 @@ def block_values(
     ``i = cblk[k]`` by their entries ``nz_*[nz_ptr[k]:nz_ptr[k+1]]`` (row, dependent column,
     value), summed densely over ``i``'s reach and scattered by ``rmap`` (index arrays:
     :meth:`~mbplan.solvers.reduction_symbolic.ReductionSymbolic._block_entries`). LU factors of
-    ``L_b[:, dep]`` in ``lu`` / ``piv`` (at ``lu_off`` / ``uoff``) and the reciprocals of ``U``'s
+    ``L_b[:, dep]`` (its local rows and dependent columns in block triangular order, the
+    diagonal blocks' ends in ``lu_end``) in ``lu`` / ``piv`` (at ``lu_off`` / ``uoff``) and the reciprocals of ``U``'s
     diagonal in ``dinv`` for the solves; ``tmp``: scratch of the largest reach. False on a
     breakdown."""
     ae, new_rows, la_src, ln_src = borrowed(ae), borrowed(new_rows), borrowed(la_src), borrowed(ln_src)  # fmt: skip
     lval, shape, eoff, lu_off = borrowed(lval), borrowed(shape), borrowed(eoff), borrowed(lu_off)
     uoff, a_ptr, a_src, a_dst = borrowed(uoff), borrowed(a_ptr), borrowed(a_src), borrowed(a_dst)
+    lu_begin, lu_end = borrowed(lu_begin), borrowed(lu_end)
     fe_ptr, fe_src, fe_dst, cptr = borrowed(fe_ptr), borrowed(fe_src), borrowed(fe_dst), borrowed(cptr)  # fmt: skip
     cblk, nz_ptr, nz_a, nz_p = borrowed(cblk), borrowed(nz_ptr), borrowed(nz_a), borrowed(nz_p)
     nz_src, rmap_off, rmap = borrowed(nz_src), borrowed(rmap_off), borrowed(rmap)
@@ -232,20 +235,22 @@ def block_values(
             lu[U64(a_dst[t])] = lval[U64(a_src[t])]
         A = lu[lo : lo + r * r].reshape(r, r)
         pb = piv[uoff[b] : uoff[b] + r]
-        if not _lu(A, pb):
+        if not _lu(A, pb, lu_end[uoff[b] : uoff[b] + r]):
             return False
-        _lu_solve(A, pb, ebuf[eo : eo + r * m].reshape(r, m))
+        _lu_solve(A, pb, ebuf[eo : eo + r * m].reshape(r, m), lu_begin[uoff[b] : uoff[b] + r])
         for a in range(r):
             dinv[U64(uoff[b] + a)] = 1.0 / A[a, a]
     return True
 
 
 @nb.njit(**_FAST)
-def b_solve(x, lval, shape, uoff, bc_ptr, bc_row, bc_col, bc_val, lu, lu_off, piv, dinv) -> None:
+def b_solve(x, lval, shape, uoff, bc_ptr, bc_row, bc_col, bc_val, lu, lu_off, piv, dinv,
+            lu_begin) -> None:  # fmt: skip
     """``x ← B⁻¹ x``, ``B`` lower block triangular (``x``: blocks' local rows / dependent
     columns at ``uoff``): per block its entries below the diagonal by row (``bc_*`` at
     ``bc_ptr[b]``: row, column and value in ``lval``), then ``L_b[:, dep]⁻¹`` (its LU factors,
-    ``dinv``: the reciprocals of ``U``'s diagonal)."""
+    ``dinv``: the reciprocals of ``U``'s diagonal, ``L`` inside the diagonal blocks from
+    ``lu_begin``)."""
     for b in range(shape.shape[0]):
         r, ub = shape[b, 0], uoff[b]
         t, t1 = bc_ptr[b], bc_ptr[b + 1]
@@ -261,9 +266,10 @@ def b_solve(x, lval, shape, uoff, bc_ptr, bc_row, bc_col, bc_val, lu, lu_off, pi
             p = pb[k]
             if p != k:
                 xb[k], xb[p] = xb[p], xb[k]
+        lb = lu_begin[U64(ub) :]
         for a in range(1, r):
             la, t = A[U64(a * r) :], xb[a]
-            for c in range(a):
+            for c in range(lb[a], a):
                 t -= la[c] * xb[c]
             xb[a] = t
         for a in range(r - 1, -1, -1):
@@ -274,7 +280,8 @@ def b_solve(x, lval, shape, uoff, bc_ptr, bc_row, bc_col, bc_val, lu, lu_off, pi
 
 
 @nb.njit(**_FAST)
-def bt_solve(x, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, piv, dinv) -> None:
+def bt_solve(x, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, piv, dinv,
+             lu_end) -> None:  # fmt: skip
     """``x ← B⁻ᵀ x`` (:func:`b_solve`'s ``B``, its entries by column), blocks in reverse
     order."""
     for b in range(shape.shape[0] - 1, -1, -1):
@@ -285,9 +292,10 @@ def bt_solve(x, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, p
             for c in range(a):
                 t -= A[U64(c * r + a)] * xb[c]
             xb[a] = t * dinv[U64(ub + a)]
-        for a in range(r - 2, -1, -1):  # Lᵀ (unit)
+        le = lu_end[U64(ub) :]
+        for a in range(r - 2, -1, -1):  # Lᵀ (unit), inside the diagonal block
             t = xb[a]
-            for c in range(a + 1, r):
+            for c in range(a + 1, le[a]):
                 t -= A[U64(c * r + a)] * xb[c]
             xb[a] = t
         for k in range(r - 1, -1, -1):

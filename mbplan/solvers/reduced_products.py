@@ -15,18 +15,16 @@ _FAST = {"cache": True, "fastmath": {"contract", "reassoc"}, "error_model": "num
 
 
 @nb.njit(**_FAST)
-def _times_t(x, seg_ptr, seg_block, seg_e, seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape,
-             out, acc) -> None:  # fmt: skip
-    """``out = X T`` in its rows' result layouts, segment by segment: a segment of a row's
-    entries on one block's dependent columns is summed densely over the block's reach
-    (contiguous rows of ``E_b``, ``seg_arg`` the row) and added at ``pos[seg_map[s]:]``
-    relative to its row's result ``seg_out[s]``; a kept column's entry at ``seg_arg``
+def _segments_into(x, s0, s1, off, seg_ptr, seg_block, seg_e, seg_arg, seg_out, seg_map, pos,
+                   ebuf, eoff, shape, out, acc) -> None:  # fmt: skip
+    """Segments ``s0 … s1`` of ``X T`` added into ``out`` (rows' results at ``seg_out - off``):
+    a segment of a row's entries on one block's dependent columns is summed densely over the
+    block's reach (contiguous rows of ``E_b``, ``seg_arg`` the row) and added at
+    ``pos[seg_map[s]:]`` relative to its row's result; a kept column's entry at ``seg_arg``
     (:meth:`~mbplan.solvers.reduction_layout.ReductionLayout._segments`)."""
-    for e in range(out.shape[0]):
-        out[e] = 0.0
-    for s in range(seg_block.shape[0]):
+    for s in range(s0, s1):
         b, t0, t1 = seg_block[s], seg_ptr[s], seg_ptr[s + 1]
-        ov = out[U64(seg_out[s]) :]
+        ov = out[U64(seg_out[s] - off) :]
         if b < 0:
             for t in range(t0, t1):
                 ov[U64(seg_arg[t])] += x[U64(seg_e[t])]
@@ -49,51 +47,47 @@ def _times_t(x, seg_ptr, seg_block, seg_e, seg_arg, seg_out, seg_map, pos, ebuf,
 @nb.njit(**_FAST)
 def times_t(x, seg_ptr, seg_block, seg_e, seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape,
             out, acc) -> None:  # fmt: skip
-    """:func:`_times_t` on borrowed arguments."""
-    _times_t(
-        borrowed(x), borrowed(seg_ptr), borrowed(seg_block), borrowed(seg_e), borrowed(seg_arg),
-        borrowed(seg_out), borrowed(seg_map), borrowed(pos), borrowed(ebuf), borrowed(eoff),
-        borrowed(shape), borrowed(out), borrowed(acc),
-    )  # fmt: skip
+    """``out = X T`` in its rows' result layouts (:func:`_segments_into`)."""
+    x, seg_ptr, seg_block, seg_e = borrowed(x), borrowed(seg_ptr), borrowed(seg_block), borrowed(seg_e)  # fmt: skip
+    seg_arg, seg_out, seg_map, pos = borrowed(seg_arg), borrowed(seg_out), borrowed(seg_map), borrowed(pos)  # fmt: skip
+    ebuf, eoff, shape, out, acc = borrowed(ebuf), borrowed(eoff), borrowed(shape), borrowed(out), borrowed(acc)  # fmt: skip
+    for e in range(out.shape[0]):
+        out[e] = 0.0
+    _segments_into(x, 0, seg_block.shape[0], 0, seg_ptr, seg_block, seg_e, seg_arg, seg_out,
+                   seg_map, pos, ebuf, eoff, shape, out, acc)  # fmt: skip
 
 
 @nb.njit(**_FAST)
-def _tw_lower(hr, wbuf, kw_pos, kw_slot, panel_off, pwidth, ebuf, eoff, shape, reach_ptr, lo_ptr,
-              lo_slot, acc) -> None:  # fmt: skip
-    """``hr += tril(Tᵀ W)``: the kept rows of ``W`` (entries ``kw_pos`` → slots ``kw_slot``),
-    then per block ``-E_bᵀ P_b`` (``P_b``: ``W``'s dependent rows of the block, dense
-    ``r × pwidth[b]`` at ``panel_off[b]`` over the sorted union of their columns), row ``q`` of
-    it over the prefix of the union below the diagonal (slots ``lo_slot[lo_ptr[g]:lo_ptr[g+1]]``,
+def _tp_lower(hr, panel, b, ebuf, eoff, shape, pwidth, reach_ptr, lo_ptr, lo_slot, acc) -> None:
+    """``hr += tril(-E_bᵀ P_b)``, ``P_b`` (``panel``: ``W``'s dependent rows of block ``b``,
+    dense ``r × pwidth[b]`` over the sorted union of their columns), row ``q`` over the prefix
+    of the union below the diagonal (slots ``lo_slot[lo_ptr[g]:lo_ptr[g+1]]``,
     ``g = reach_ptr[b] + q``), four rows at a time over the longest of their prefixes (the
     reach is sorted: the last one's; ``acc``: scratch of four times the widest panel)."""
-    for t in range(kw_pos.shape[0]):
-        hr[U64(kw_slot[t])] += wbuf[U64(kw_pos[t])]
-    for b in range(shape.shape[0]):
-        r, m, eo = shape[b, 0], shape[b, 1], eoff[b]
-        u, po, rp = pwidth[b], panel_off[b], reach_ptr[b]
-        for q0 in range(0, m, 4):
-            nq = min(4, m - q0)
-            w = lo_ptr[rp + q0 + nq] - lo_ptr[rp + q0 + nq - 1]
-            c0, c1, c2, c3 = acc[:w], acc[w : 2 * w], acc[2 * w : 3 * w], acc[3 * w : 4 * w]
+    r, m, eo, u, rp = shape[b, 0], shape[b, 1], eoff[b], pwidth[b], reach_ptr[b]
+    for q0 in range(0, m, 4):
+        nq = min(4, m - q0)
+        w = lo_ptr[rp + q0 + nq] - lo_ptr[rp + q0 + nq - 1]
+        c0, c1, c2, c3 = acc[:w], acc[w : 2 * w], acc[2 * w : 3 * w], acc[3 * w : 4 * w]
+        for t in range(w):
+            c0[t] = c1[t] = c2[t] = c3[t] = 0.0
+        for p in range(r):
+            pp, ep = panel[U64(p * u) :], ebuf[U64(eo + p * m + q0) :]
+            e0 = ep[0]
+            e1 = ep[1] if nq > 1 else 0.0
+            e2 = ep[2] if nq > 2 else 0.0
+            e3 = ep[3] if nq > 3 else 0.0
             for t in range(w):
-                c0[t] = c1[t] = c2[t] = c3[t] = 0.0
-            for p in range(r):
-                pp, ep = wbuf[U64(po + p * u) :], ebuf[U64(eo + p * m + q0) :]
-                e0 = ep[0]
-                e1 = ep[1] if nq > 1 else 0.0
-                e2 = ep[2] if nq > 2 else 0.0
-                e3 = ep[3] if nq > 3 else 0.0
-                for t in range(w):
-                    x = pp[t]
-                    c0[t] += e0 * x
-                    c1[t] += e1 * x
-                    c2[t] += e2 * x
-                    c3[t] += e3 * x
-            for k in range(nq):
-                s0 = lo_ptr[rp + q0 + k]
-                ls, ck = lo_slot[U64(s0) :], acc[U64(k * w) :]
-                for t in range(lo_ptr[rp + q0 + k + 1] - s0):
-                    hr[U64(ls[t])] -= ck[t]
+                v = pp[t]
+                c0[t] += e0 * v
+                c1[t] += e1 * v
+                c2[t] += e2 * v
+                c3[t] += e3 * v
+        for k in range(nq):
+            s0 = lo_ptr[rp + q0 + k]
+            ls, ck = lo_slot[U64(s0) :], acc[U64(k * w) :]
+            for t in range(lo_ptr[rp + q0 + k + 1] - s0):
+                hr[U64(ls[t])] -= ck[t]
 
 
 @nb.njit(**_FAST)
@@ -121,21 +115,23 @@ def _tdt_lower(hr, d, dep, red_cols, ebuf, eoff, shape, uoff, tt_off, tt_slot, d
 
 
 @nb.njit(**_FAST)
-def hr_values(hs, hf, fold_slot, ai_p, ai, sigma, seg_ptr, seg_block, seg_e,
-              seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape, reach_ptr, wbuf, kw_pos,
-              kw_slot, panel_off, pwidth, lo_ptr, lo_slot, hr, acc) -> bool:  # fmt: skip
+def hr_values(hs, hf, fold_slot, ai_p, ai, sigma, seg_ptr, seg_block, seg_e, seg_arg, seg_out,
+              seg_map, pos, bseg_ptr, ebuf, eoff, shape, reach_ptr, panel_off, pwidth, pbuf, kbuf,
+              kw_pos, kw_slot, lo_ptr, lo_slot, hr, acc) -> bool:  # fmt: skip
     """``hr = tril(Tᵀ H_f T)``, ``H_f = H + A_Iᵀ diag(σ) A_I`` (``hs``: ``H``'s values in
     ``H_f``'s pattern; the fold row by row of ``A_I`` (CSR ``ai_p``, ``ai``), pair by pair of its
-    entries into ``fold_slot``); ``W = H_f T``
-    in ``wbuf`` (:func:`_times_t`, :func:`_tw_lower`). False if a value is not finite."""
+    entries into ``fold_slot``): ``W = H_f T`` block by block (:func:`_segments_into`, its
+    segments from ``bseg_ptr[b]``), each panel into ``hr`` while in cache (:func:`_tp_lower`),
+    then ``W``'s kept rows (``kbuf``: entries ``kw_pos`` → slots ``kw_slot``). False if a value
+    is not finite."""
     hs, hf, fold_slot = borrowed(hs), borrowed(hf), borrowed(fold_slot)
     ai_p, ai, sigma = borrowed(ai_p), borrowed(ai), borrowed(sigma)
     seg_ptr, seg_block, seg_e = borrowed(seg_ptr), borrowed(seg_block), borrowed(seg_e)
     seg_arg, seg_out, seg_map, pos = borrowed(seg_arg), borrowed(seg_out), borrowed(seg_map), borrowed(pos)  # fmt: skip
-    ebuf, eoff, shape, reach_ptr = borrowed(ebuf), borrowed(eoff), borrowed(shape), borrowed(reach_ptr)  # fmt: skip
-    wbuf, kw_pos, kw_slot, panel_off = borrowed(wbuf), borrowed(kw_pos), borrowed(kw_slot), borrowed(panel_off)  # fmt: skip
-    pwidth, lo_ptr, lo_slot = borrowed(pwidth), borrowed(lo_ptr), borrowed(lo_slot)
-    hr, acc = borrowed(hr), borrowed(acc)
+    bseg_ptr, ebuf, eoff, shape = borrowed(bseg_ptr), borrowed(ebuf), borrowed(eoff), borrowed(shape)  # fmt: skip
+    reach_ptr, panel_off, pwidth = borrowed(reach_ptr), borrowed(panel_off), borrowed(pwidth)
+    pbuf, kbuf, kw_pos, kw_slot = borrowed(pbuf), borrowed(kbuf), borrowed(kw_pos), borrowed(kw_slot)  # fmt: skip
+    lo_ptr, lo_slot, hr, acc = borrowed(lo_ptr), borrowed(lo_slot), borrowed(hr), borrowed(acc)
     for e in range(hs.shape[0]):
         hf[e] = hs[e]
     t = 0
@@ -146,12 +142,21 @@ def hr_values(hs, hf, fold_slot, ai_p, ai, sigma, seg_ptr, seg_block, seg_e,
             for f in range(p0, p1):
                 hf[U64(fold_slot[t])] += ve * ai[f]
                 t += 1
-    _times_t(hf, seg_ptr, seg_block, seg_e, seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape,
-             wbuf, acc)  # fmt: skip
     for e in range(hr.shape[0]):
         hr[e] = 0.0
-    _tw_lower(hr, wbuf, kw_pos, kw_slot, panel_off, pwidth, ebuf, eoff, shape, reach_ptr, lo_ptr,
-              lo_slot, acc)  # fmt: skip
+    B = shape.shape[0]
+    for b in range(B):
+        for e in range(shape[b, 0] * pwidth[b]):
+            pbuf[e] = 0.0
+        _segments_into(hf, bseg_ptr[b], bseg_ptr[b + 1], panel_off[b], seg_ptr, seg_block, seg_e,
+                       seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape, pbuf, acc)  # fmt: skip
+        _tp_lower(hr, pbuf, b, ebuf, eoff, shape, pwidth, reach_ptr, lo_ptr, lo_slot, acc)
+    for e in range(kbuf.shape[0]):
+        kbuf[e] = 0.0
+    _segments_into(hf, bseg_ptr[B], bseg_ptr[B + 1], panel_off[B], seg_ptr, seg_block, seg_e,
+                   seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape, kbuf, acc)  # fmt: skip
+    for t in range(kw_pos.shape[0]):
+        hr[U64(kw_slot[t])] += kbuf[U64(kw_pos[t])]
     ok = 0.0
     for e in range(hr.shape[0]):
         ok += hr[e] * 0.0

@@ -68,6 +68,7 @@ def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr
     bc_row, bc_col, bc_val = borrowed(blk[4]), borrowed(blk[5]), borrowed(blk[6])
     bt_row, bt_col, bt_val = borrowed(blk[7]), borrowed(blk[8]), borrowed(blk[9])
     lu, lu_off, piv, dinv = borrowed(blk[10]), borrowed(blk[11]), borrowed(blk[12]), borrowed(blk[13])
+    lu_begin, lu_end = borrowed(blk[14]), borrowed(blk[15])
     red_cols, ebuf, eoff = borrowed(tr[0]), borrowed(tr[1]), borrowed(tr[2])
     reach_red, reach_ptr, tmp = borrowed(tr[3]), borrowed(tr[4]), borrowed(tr[5])
     be = b[n : n + me]
@@ -76,7 +77,7 @@ def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr
     _group_rows(be, se, tgt, src, sub, M)
     for k in range(y_rows.shape[0]):
         xu[k] = se[U64(y_rows[k])]
-    b_solve(xu, lval, shape, uoff, bc_ptr, bc_row, bc_col, bc_val, lu, lu_off, piv, dinv)
+    b_solve(xu, lval, shape, uoff, bc_ptr, bc_row, bc_col, bc_val, lu, lu_off, piv, dinv, lu_begin)
     for i in range(n):
         vx[i] = 0.0
         kv[i] = b[i]
@@ -121,6 +122,7 @@ def expand_solution(b, xr, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp
     bc_row, bc_col, bc_val = borrowed(blk[4]), borrowed(blk[5]), borrowed(blk[6])
     bt_row, bt_col, bt_val = borrowed(blk[7]), borrowed(blk[8]), borrowed(blk[9])
     lu, lu_off, piv, dinv = borrowed(blk[10]), borrowed(blk[11]), borrowed(blk[12]), borrowed(blk[13])
+    lu_begin, lu_end = borrowed(blk[14]), borrowed(blk[15])
     red_cols, ebuf, eoff = borrowed(tr[0]), borrowed(tr[1]), borrowed(tr[2])
     reach_red, reach_ptr, tmp = borrowed(tr[3]), borrowed(tr[4]), borrowed(tr[5])
     nr = red_cols.shape[0]
@@ -148,7 +150,7 @@ def expand_solution(b, xr, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp
         for e in range(hp[j], hp[j + 1]):
             t += hx[e] * w[U64(hi[e])]
         yv[k] = b[j] - t - atw[j]
-    bt_solve(yv, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, piv, dinv)
+    bt_solve(yv, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, piv, dinv, lu_end)
     for k in range(y_rows.shape[0]):
         w[U64(n + y_rows[k])] = yv[k]
     _group_rows_t(w[n : n + me], tgt, src, sub, M, yv)

@@ -89,8 +89,8 @@ class ReductionLayout:
         rows = np.arange(len(self.kept))
         self.ak_seg = self._segments(
             self.ak, self.Ar.indptr[:-1], np.repeat(rows, np.diff(self.Ar.indptr)),
-            self.Ar.indices, rows,
-        )  # fmt: skip
+            self.Ar.indices, rows, rows,
+        )[0]  # fmt: skip
         m = self.shape[:, 1] if len(self.shape) else np.zeros(1, _I64)
         r = self.shape[:, 0] if len(self.shape) else np.zeros(1, _I64)
         width = max(int(m.max(initial=0)), int(r.max(initial=0)), int(self.pwidth.max(initial=0)), 1)
@@ -132,10 +132,12 @@ class ReductionLayout:
         self.fold_slot = Slots(self.hs).pairs(ai.indices[fold_e], ai.indices[fold_f])
 
     def _w_layout(self) -> None:
-        """``W = H_f T`` in ``wbuf``: block ``b``'s dependent rows as a dense panel
-        (``r_b × pwidth[b]`` at ``panel_off[b]``) over ``U_b``, the sorted union of their
-        columns, then the kept rows (their own columns); per row of ``H_f`` where it goes
-        (``ostart``; the row and column of each position: ``orow``, ``ocol``)."""
+        """``W = H_f T`` block by block: block ``b``'s dependent rows as a dense panel
+        (``r_b × pwidth[b]``, at ``panel_off[b]`` of a virtual buffer, computed in ``pbuf``) over
+        ``U_b``, the sorted union of their columns, then the kept rows (their own columns, in
+        ``kbuf``, at ``panel_off[B]``); per row of ``H_f`` where it goes (``ostart``; the row and
+        column of each position: ``orow``, ``ocol``); block ``b``'s segments from
+        ``bseg_ptr[b]``, the kept rows' from ``bseg_ptr[B]``."""
         P = _product_pattern((self.hs, self.T))
         B, uoff = len(self.shape), self.uoff
         U = [np.unique(np.concatenate([np.zeros(0, _I64), *_csr_rows(P, self.dep[uoff[b] : uoff[b + 1]])])) for b in range(B)]  # fmt: skip
@@ -154,13 +156,19 @@ class ReductionLayout:
         ocol = np.concatenate(
             [*(np.tile(U[b], self.shape[b, 0]) for b in range(B)), *kept_rows, np.zeros(0, _I64)]
         ).astype(_I64)
-        self.wbuf = np.zeros(len(ocol))
         self._kept_rows = kept_rows
         orow = np.concatenate([*(np.repeat(self.dep[uoff[b] : uoff[b + 1]], self.pwidth[b]) for b in range(B)), *(np.full(len(c), k) for k, c in zip(self.red_cols, kept_rows)), np.zeros(0, _I64)])  # fmt: skip
         row_key = np.arange(self.n)  # rows with the same output columns share their maps
         for b in range(B):
             row_key[self.dep[uoff[b] : uoff[b + 1]]] = self.n + b
-        self.hs_seg = self._segments(self.hs, ostart, orow, ocol, row_key)
+        rank = np.empty(self.n, _I64)  # the blocks' dependent rows first, block by block
+        rank[np.concatenate([self.dep, self.red_cols])] = np.arange(self.n)
+        self.hs_seg, seg_row = self._segments(self.hs, ostart, orow, ocol, row_key, rank)
+        row_block = np.full(self.n, B, _I64)
+        row_block[self.dep] = np.repeat(np.arange(B), np.diff(uoff))
+        self.bseg_ptr = np.searchsorted(row_block[seg_row], np.arange(B + 2)).astype(_I64)
+        self.pbuf = np.zeros(max(int(sizes.max(initial=0)), 1))
+        self.kbuf = np.zeros(max(int(klen.sum()), 1))
 
     def _hr_layout(self) -> None:
         """``H_r``'s lower pattern and the slots of ``tril(Tᵀ W)``'s terms (the kept rows'
@@ -173,7 +181,7 @@ class ReductionLayout:
             low = np.flatnonzero(c <= i)
             rows.append(np.full(len(low), i, _I64))
             cols.append(c[low])
-            kw_pos.append(self.ostart[self.red_cols[i]] + low)
+            kw_pos.append(self.ostart[self.red_cols[i]] - self.panel_off[-1] + low)
         n_kept = sum(len(r) for r in rows)
         lo_len, tt_pairs = [], []
         for b in range(B):
@@ -208,8 +216,8 @@ class ReductionLayout:
 
     def _segments(
         self, x: sp.csr_matrix, ostart: np.ndarray, orow: np.ndarray, ocol: np.ndarray,
-        row_key: np.ndarray,
-    ) -> tuple[np.ndarray, ...]:  # fmt: skip
+        row_key: np.ndarray, rank: np.ndarray,
+    ) -> tuple[tuple[np.ndarray, ...], np.ndarray]:  # fmt: skip
         """For :func:`~mbplan.solvers.reduced_products.times_t` (``X T`` for ``x``'s pattern,
         row ``i``'s result at ``out[ostart[i] + k]`` over its sorted columns, position by position
         ``orow``, ``ocol``): ``x``'s entries row by row in segments of one block's dependent
@@ -217,7 +225,8 @@ class ReductionLayout:
         (positions in ``x.data``) and its row's ``seg_out = ostart[i]``; per entry ``seg_arg``:
         the dependent column's row in the block's ``E`` (a kept column: its position in the
         row's result); per block segment ``seg_map``: where the block's reach lies in the row's
-        result (``pos[seg_map[s] + q]``, shared by rows of equal ``row_key``)."""
+        result (``pos[seg_map[s] + q]``, shared by rows of equal ``row_key``). Rows in the order
+        of ``rank``; also each segment's row."""
         block_of, local = -np.ones(self.n, _I64), np.zeros(self.n, _I64)
         for b in range(len(self.shape)):
             dep = self.dep[self.uoff[b] : self.uoff[b + 1]]
@@ -225,17 +234,18 @@ class ReductionLayout:
         nr = max(self.nr, 1)
         okey = np.asarray(orow, _I64) * nr + np.asarray(ocol, _I64)
         order = np.argsort(okey, kind="stable")
+        sorted_keys = okey[order]
 
         def where(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:  # positions in out
             want = rows * nr + cols
-            at = order[np.minimum(np.searchsorted(okey[order], want), len(order) - 1)]
+            at = order[np.minimum(np.searchsorted(sorted_keys, want), len(order) - 1)]
             if np.any(okey[at] != want):
                 raise ValueError("reduction layout: a product term outside its row's pattern")
             return at
 
         rows = np.repeat(np.arange(x.shape[0]), np.diff(x.indptr))
         blk = block_of[x.indices]
-        seg_e = np.lexsort((blk, rows))
+        seg_e = np.lexsort((blk, np.asarray(rank)[rows]))
         r_s, b_s, c_s = rows[seg_e], blk[seg_e], x.indices[seg_e]
         new = np.ones(len(r_s), bool)
         new[1:] = (r_s[1:] != r_s[:-1]) | (b_s[1:] != b_s[:-1])
@@ -245,16 +255,17 @@ class ReductionLayout:
         kept = b_s < 0
         seg_arg = local[c_s]
         seg_arg[kept] = where(r_s[kept], self.red_of[c_s[kept]]) - np.asarray(ostart)[r_s[kept]]
-        maps, pos, seg_map = {}, [], np.zeros(len(starts), _I64)
+        maps, pos, seg_map, size = {}, [], np.zeros(len(starts), _I64), 0
         for s, (i, b) in enumerate(zip(seg_row.tolist(), seg_block.tolist(), strict=True)):
             if b < 0:
                 continue
             key = (int(row_key[i]), b)
             if key not in maps:
-                maps[key] = sum(len(p) for p in pos)
+                maps[key] = size
                 reach = self.reach_red[self.reach_ptr[b] : self.reach_ptr[b + 1]]
                 pos.append(where(np.full(len(reach), i), reach) - ostart[i])
+                size += len(reach)
             seg_map[s] = maps[key]
         pos = np.concatenate([*pos, np.zeros(0, _I64)]).astype(_I64)
         return (np.append(starts, len(r_s)).astype(_I64), seg_block.astype(_I64),
-                seg_e.astype(_I64), seg_arg.astype(_I64), seg_out, seg_map, pos)  # fmt: skip
+                seg_e.astype(_I64), seg_arg.astype(_I64), seg_out, seg_map, pos), seg_row  # fmt: skip

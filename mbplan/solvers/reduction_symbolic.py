@@ -5,9 +5,12 @@ index arrays of the groups' and blocks' values."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components, maximum_bipartite_matching
 
 from mbplan.errors import InputError
 from mbplan.solvers.elimination import EliminationPlan
@@ -41,6 +44,44 @@ class Slots:
 def _pivots(m: np.ndarray) -> np.ndarray:
     """Column order of a QR with column pivoting (the first ``rank`` are well conditioned)."""
     return sla.qr(m, pivoting=True, mode="r")[1]
+
+
+def _btf(pattern: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Row and column orders making the square boolean ``pattern`` block upper triangular with
+    irreducible diagonal blocks (a matching on the diagonal, then the strong components in
+    topological order), and per position the beginning and the end of its diagonal block."""
+    return _btf_of(pattern.shape[0], np.packbits(pattern).tobytes())
+
+
+@functools.lru_cache(maxsize=4096)
+def _btf_of(g: int, packed: bytes) -> tuple[np.ndarray, ...]:
+    pattern = np.unpackbits(np.frombuffer(packed, np.uint8), count=g * g).reshape(g, g) > 0
+    match = maximum_bipartite_matching(sp.csr_matrix(pattern.astype(float)), perm_type="column")
+    if np.any(match < 0):
+        raise InputError("EliminationPlan: a group's or block's matrix is structurally singular")
+    diag = pattern[:, match]  # row i -> column i: an edge i -> k for every entry (i, k)
+    n_comp, label = connected_components(sp.csr_matrix(diag), directed=True, connection="strong")
+    succ = [set() for _ in range(n_comp)]
+    for i, k in zip(*np.nonzero(diag), strict=True):
+        if label[i] != label[k]:
+            succ[label[i]].add(label[k])
+    indegree = np.zeros(n_comp, np.int64)
+    for c in range(n_comp):
+        for k in succ[c]:
+            indegree[k] += 1
+    order, ready = [], [c for c in range(n_comp) if indegree[c] == 0]
+    while ready:
+        c = ready.pop()
+        order.append(c)
+        for k in sorted(succ[c]):
+            indegree[k] -= 1
+            if indegree[k] == 0:
+                ready.append(k)
+    rows = np.concatenate([np.flatnonzero(label == c) for c in order] + [np.zeros(0, np.int64)])
+    sizes = np.bincount(label, minlength=n_comp)[order]
+    end = np.repeat(np.cumsum(sizes), sizes).astype(np.int64)
+    begin = np.repeat(np.cumsum(sizes) - sizes, sizes).astype(np.int64)
+    return rows.astype(np.int64), match[rows].astype(np.int64), begin, end
 
 
 def _rows_of(a: sp.csr_matrix, row: int) -> np.ndarray:
@@ -81,6 +122,11 @@ class ReductionSymbolic:
             if np.any(chosen < 0):
                 raise InputError("EliminationPlan: a group's source rows are rank deficient")
             sel[j, valid] = chosen
+        src, self.g_begin, self.g_end = src.copy(), np.zeros(src.shape, np.int64), np.zeros(src.shape, np.int64)  # fmt: skip
+        pattern = (slots(src, sel) >= 0) | np.eye(src.shape[1], dtype=bool)[None] * (src < 0)[..., None]  # fmt: skip
+        for j in range(J):  # sources and selected columns in block triangular order
+            rows, cols, self.g_begin[j], self.g_end[j] = _btf(pattern[j])
+            src[j], sel[j] = src[j][rows], sel[j][cols]
         self.g_sel, self.h_sel, self.pad = slots(src, sel), slots(sub, sel), src < 0
         self.g_outer = slots(src, self.outer)
         self.h_outer = slots(sub, self.outer)
@@ -90,8 +136,8 @@ class ReductionSymbolic:
         self.new_rows = np.zeros((J, r, o))
         self.g_a, self.g_x, self.g_piv = np.zeros((g, g)), np.zeros((g, r)), np.zeros(g, np.int64)
         if J and not group_values(
-            ae.data, self.g_sel, self.h_sel, self.pad, self.g_outer, self.h_outer, self.M,
-            self.new_rows, self.g_a, self.g_x, self.g_piv,
+            ae.data, self.g_sel, self.h_sel, self.pad, self.g_begin, self.g_end, self.g_outer, self.h_outer,
+            self.M, self.new_rows, self.g_a, self.g_x, self.g_piv,
         ):  # fmt: skip
             raise InputError("EliminationPlan: a group's source rows are rank deficient")
         self.tgt = np.zeros((J, r), np.int64)
@@ -129,7 +175,7 @@ class ReductionSymbolic:
                     ent[(len(rows) - 1, int(ae.indices[e]))] = ("a", e)
             rows_of_block.append(np.array(rows, np.int64))
             entries.append(ent)
-        dep, free, couple = [], [], []
+        dep, free, couple, lu_begin, lu_end = [], [], [], [], []
         for b in range(B):
             own = plan.block_cols[b][plan.block_cols[b] >= 0]
             touched = {c for _, c in entries[b]}
@@ -142,15 +188,26 @@ class ReductionSymbolic:
                     "the blocks before it"
                 )
             nr = len(rows_of_block[b])
-            dense = np.zeros((nr, len(own)))
+            dense, stored = np.zeros((nr, len(own))), np.zeros((nr, len(own)), bool)
             pos = {int(c): q for q, c in enumerate(own)}
             for (a, c), (kind, s) in entries[b].items():
                 if c in pos:
                     dense[a, pos[c]] = ae.data[s] if kind == "a" else self.new_rows.reshape(-1)[s]
+                    stored[a, pos[c]] = True
             piv = _pivots(dense)
-            dep.append(own[np.sort(piv[:nr])])
+            d = np.sort(piv[:nr])
+            rows, cols, begin, end = _btf(stored[:, d])  # rows, dependent columns: triangular
+            new_row = np.empty(nr, np.int64)
+            new_row[rows] = np.arange(nr)
+            entries[b] = {(int(new_row[a]), c): v for (a, c), v in entries[b].items()}
+            rows_of_block[b] = rows_of_block[b][rows]
+            dep.append(own[d[cols]])
             free.append(own[np.sort(piv[nr:])])
             couple.append(others)
+            lu_begin.append(begin)
+            lu_end.append(end)
+        self.lu_begin = np.concatenate([*lu_begin, np.zeros(0, np.int64)])
+        self.lu_end = np.concatenate([*lu_end, np.zeros(0, np.int64)])
         self._block_entries(entries, dep, free, couple, [len(x) for x in rows_of_block])
         self.dep = np.concatenate(dep) if B else np.zeros(0, np.int64)
         self.y_rows = np.concatenate(rows_of_block) if B else np.zeros(0, np.int64)
