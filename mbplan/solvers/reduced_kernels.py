@@ -313,14 +313,17 @@ def bt_solve(x, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, p
 
 
 @nb.njit(**_FAST)
-def copy_values(hess, hs, hs_slot, hs_src, ae, ak, ak_src, ebuf) -> bool:
-    """``hs[hs_slot] = hess[hs_src]`` (``H`` symmetric in ``H_f``'s pattern: its other slots
-    stay zero), ``ak = ae[ak_src]`` (``A_E``'s kept rows); whether ``E`` (``ebuf``) is
-    finite."""
-    hess, hs, hs_slot, hs_src = borrowed(hess), borrowed(hs), borrowed(hs_slot), borrowed(hs_src)
-    ae, ak, ak_src, ebuf = borrowed(ae), borrowed(ak), borrowed(ak_src), borrowed(ebuf)
-    for t in range(hs_slot.shape[0]):
-        hs[U64(hs_slot[t])] = hess[U64(hs_src[t])]
+def copy_values(hess, hl, hl_src, hd, hd_src, ae, ak, ak_src, ebuf) -> bool:
+    """``hl = hess[hl_src]`` (``H``'s strictly lower part), ``hd = hess[hd_src]`` (its
+    diagonal, ``-1``: zero), ``ak = ae[ak_src]`` (``A_E``'s kept rows); whether ``E``
+    (``ebuf``) is finite."""
+    hess, hl, hl_src, hd = borrowed(hess), borrowed(hl), borrowed(hl_src), borrowed(hd)
+    hd_src, ae, ak, ak_src, ebuf = borrowed(hd_src), borrowed(ae), borrowed(ak), borrowed(ak_src), borrowed(ebuf)  # fmt: skip
+    for t in range(hl_src.shape[0]):
+        hl[t] = hess[U64(hl_src[t])]
+    for i in range(hd_src.shape[0]):
+        s = hd_src[i]
+        hd[i] = hess[U64(s)] if s >= 0 else 0.0
     for t in range(ak_src.shape[0]):
         ak[t] = ae[U64(ak_src[t])]
     z = 0.0

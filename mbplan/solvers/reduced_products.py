@@ -115,16 +115,17 @@ def _tdt_lower(hr, d, dep, red_cols, ebuf, eoff, shape, uoff, tt_off, tt_slot, d
 
 
 @nb.njit(**_FAST)
-def hr_values(hs, hf, fold_slot, ai_p, ai, sigma, seg_ptr, seg_block, seg_e, seg_arg, seg_out,
+def hr_values(hl, hl_lo, hl_up, hd, hd_slot, hf, fold_slot, ai_p, ai, sigma, seg_ptr, seg_block, seg_e, seg_arg, seg_out,
               seg_map, pos, bseg_ptr, ebuf, eoff, shape, reach_ptr, panel_off, pwidth, pbuf, kbuf,
               kw_pos, kw_slot, lo_ptr, lo_slot, hr, acc) -> bool:  # fmt: skip
-    """``hr = tril(Tᵀ H_f T)``, ``H_f = H + A_Iᵀ diag(σ) A_I`` (``hs``: ``H``'s values in
-    ``H_f``'s pattern; the fold row by row of ``A_I`` (CSR ``ai_p``, ``ai``), pair by pair of its
+    """``hr = tril(Tᵀ H_f T)``, ``H_f = H + A_Iᵀ diag(σ) A_I`` (``H``: strictly lower ``hl`` at
+    slots ``hl_lo`` and ``hl_up`` of ``H_f``, diagonal ``hd`` at ``hd_slot``; the fold row by row of ``A_I`` (CSR ``ai_p``, ``ai``), pair by pair of its
     entries into ``fold_slot``): ``W = H_f T`` block by block (:func:`_segments_into`, its
     segments from ``bseg_ptr[b]``), each panel into ``hr`` while in cache (:func:`_tp_lower`),
     then ``W``'s kept rows (``kbuf``: entries ``kw_pos`` → slots ``kw_slot``). False if a value
     is not finite."""
-    hs, hf, fold_slot = borrowed(hs), borrowed(hf), borrowed(fold_slot)
+    hl, hl_lo, hl_up, hd = borrowed(hl), borrowed(hl_lo), borrowed(hl_up), borrowed(hd)
+    hd_slot, hf, fold_slot = borrowed(hd_slot), borrowed(hf), borrowed(fold_slot)
     ai_p, ai, sigma = borrowed(ai_p), borrowed(ai), borrowed(sigma)
     seg_ptr, seg_block, seg_e = borrowed(seg_ptr), borrowed(seg_block), borrowed(seg_e)
     seg_arg, seg_out, seg_map, pos = borrowed(seg_arg), borrowed(seg_out), borrowed(seg_map), borrowed(pos)  # fmt: skip
@@ -132,8 +133,13 @@ def hr_values(hs, hf, fold_slot, ai_p, ai, sigma, seg_ptr, seg_block, seg_e, seg
     reach_ptr, panel_off, pwidth = borrowed(reach_ptr), borrowed(panel_off), borrowed(pwidth)
     pbuf, kbuf, kw_pos, kw_slot = borrowed(pbuf), borrowed(kbuf), borrowed(kw_pos), borrowed(kw_slot)  # fmt: skip
     lo_ptr, lo_slot, hr, acc = borrowed(lo_ptr), borrowed(lo_slot), borrowed(hr), borrowed(acc)
-    for e in range(hs.shape[0]):
-        hf[e] = hs[e]
+    for e in range(hf.shape[0]):
+        hf[e] = 0.0
+    for t in range(hl.shape[0]):
+        hf[U64(hl_lo[t])] = hl[t]
+        hf[U64(hl_up[t])] = hl[t]
+    for i in range(hd.shape[0]):
+        hf[U64(hd_slot[i])] = hd[i]
     t = 0
     for r in range(ai_p.shape[0] - 1):  # A_Iᵀ Σ A_I row by row, entry pairs in fold_slot order
         p0, p1 = ai_p[r], ai_p[r + 1]

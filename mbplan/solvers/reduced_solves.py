@@ -52,15 +52,28 @@ def _group_rows_t(v, tgt, src, sub, M, vt) -> None:
 
 
 @nb.njit(**_FAST)
+def _sym_lower_sub(hp, hi, hx, hd, x, y) -> None:
+    """``y -= H x``, ``H`` from its strictly lower CSR part and its diagonal ``hd``."""
+    for i in range(hp.shape[0] - 1):
+        xi, t = x[i], hd[i] * x[i]
+        for e in range(hp[i], hp[i + 1]):
+            j = U64(hi[e])
+            t += hx[e] * x[j]
+            y[j] -= hx[e] * xi
+        y[i] -= t
+
+
+@nb.njit(**_FAST)
 def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr, xu, rz, rhs_r,
                vx, kv, se) -> None:  # fmt: skip
     """``x_U = B⁻¹ (S b_E)[Y]`` into ``xu``; ``r_z = b_I - A_I x_U`` into ``rz``; ``K_r``'s
     right-hand side ``[Tᵀ (b_x - (H + D_x)[:, U] x_U - A_Iᵀ Σ r_z); b_E,kept - A_E,kept x_U]``
-    into ``rhs_r``. ``vx``, ``kv`` (length ``n``), ``se`` (``m_E``): scratch."""
+    into ``rhs_r`` (``h``: ``H``'s strictly lower CSR arrays and diagonal). ``vx``, ``kv``
+    (length ``n``), ``se`` (``m_E``): scratch."""
     b, diag, sigma, dep = borrowed(b), borrowed(diag), borrowed(sigma), borrowed(dep)
     y_rows, kept, xu, rz = borrowed(y_rows), borrowed(kept), borrowed(xu), borrowed(rz)
     rhs_r, vx, kv, se = borrowed(rhs_r), borrowed(vx), borrowed(kv), borrowed(se)
-    hp, hi, hx = borrowed(h[0]), borrowed(h[1]), borrowed(h[2])
+    hp, hi, hx, hd = borrowed(h[0]), borrowed(h[1]), borrowed(h[2]), borrowed(h[3])
     ip, ii, ix = borrowed(ai[0]), borrowed(ai[1]), borrowed(ai[2])
     kp, ki, kx = borrowed(ak[0]), borrowed(ak[1]), borrowed(ak[2])
     tgt, src, sub, M = borrowed(grp[0]), borrowed(grp[1]), borrowed(grp[2]), borrowed(grp[3])
@@ -81,12 +94,11 @@ def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr
     for i in range(n):
         vx[i] = 0.0
         kv[i] = b[i]
-    for k in range(dep.shape[0]):  # kv = b_x - (H + D_x)[:, U] x_U (H symmetric: its rows U)
+    for k in range(dep.shape[0]):  # kv = b_x - (H + D_x) [x_U; 0]
         j, v = U64(dep[k]), xu[k]
         vx[j] = v
         kv[j] -= diag[j] * v
-        for e in range(hp[j], hp[j + 1]):
-            kv[U64(hi[e])] -= hx[e] * v
+    _sym_lower_sub(hp, hi, hx, hd, vx, kv)
     for r in range(rz.shape[0]):  # r_z, and kv += A_Iᵀ Σ r_z
         t = 0.0
         for e in range(ip[r], ip[r + 1]):
@@ -106,15 +118,15 @@ def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr
 
 @nb.njit(**_FAST)
 def expand_solution(b, xr, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr, xu,
-                    rz, w, atw, yv) -> None:  # fmt: skip
+                    rz, w, atw, yv, hw) -> None:  # fmt: skip
     """The step ``w`` from ``K_r``'s solution ``xr`` and :func:`reduce_rhs`'s ``xu``, ``rz``:
     ``w_x = T xr_x + [x_U]``, ``w_E,kept = xr_E``, ``w_I = Σ (A_I T xr_x - r_z)``,
     ``w_Y = B⁻ᵀ (b_U - ((H + D_x) w_x)_U - (A_E,keptᵀ w_E,kept + A_Iᵀ w_I)_U)``, then ``Sᵀ`` on
-    ``w_E``. ``atw``, ``yv``: scratch of lengths ``n`` and ``|U|`` (``≥ J r``)."""
+    ``w_E``. ``atw``, ``hw``, ``yv``: scratch of lengths ``n``, ``n`` and ``|U|`` (``≥ J r``)."""
     b, xr, diag, sigma, dep = borrowed(b), borrowed(xr), borrowed(diag), borrowed(sigma), borrowed(dep)  # fmt: skip
     y_rows, kept, xu, rz = borrowed(y_rows), borrowed(kept), borrowed(xu), borrowed(rz)
-    w, atw, yv = borrowed(w), borrowed(atw), borrowed(yv)
-    hp, hi, hx = borrowed(h[0]), borrowed(h[1]), borrowed(h[2])
+    w, atw, yv, hw = borrowed(w), borrowed(atw), borrowed(yv), borrowed(hw)
+    hp, hi, hx, hd = borrowed(h[0]), borrowed(h[1]), borrowed(h[2]), borrowed(h[3])
     ip, ii, ix = borrowed(ai[0]), borrowed(ai[1]), borrowed(ai[2])
     kp, ki, kx = borrowed(ak[0]), borrowed(ak[1]), borrowed(ak[2])
     tgt, src, sub, M = borrowed(grp[0]), borrowed(grp[1]), borrowed(grp[2]), borrowed(grp[3])
@@ -144,12 +156,11 @@ def expand_solution(b, xr, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp
             atw[U64(ii[e])] += ix[e] * wz
     for k in range(dep.shape[0]):  # w_x = T xr_x + [x_U] (after A_I T xr_x: r_z holds A_I x_U)
         w[U64(dep[k])] += xu[k]
+    for i in range(n):
+        hw[i] = b[i] - atw[i] - diag[i] * w[i]
+    _sym_lower_sub(hp, hi, hx, hd, w, hw)  # b_x - A_E,keptᵀ w_E - A_Iᵀ w_I - (H + D_x) w_x
     for k in range(dep.shape[0]):
-        j = U64(dep[k])
-        t = diag[j] * w[j]
-        for e in range(hp[j], hp[j + 1]):
-            t += hx[e] * w[U64(hi[e])]
-        yv[k] = b[j] - t - atw[j]
+        yv[k] = hw[U64(dep[k])]
     bt_solve(yv, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, piv, dinv, lu_end)
     for k in range(y_rows.shape[0]):
         w[U64(n + y_rows[k])] = yv[k]
@@ -169,20 +180,17 @@ def _jacobian_residual(off, p, idx, v, x, res) -> None:
 
 
 @nb.njit(**_FAST)
-def residual(hp, hi, hx, ep, ei, ex, ip, ii, ix, diag, x, b, res) -> float:
-    """``res = b - K x`` (``K`` from its blocks: ``H`` full symmetric CSR, ``A_E``, ``A_I``, the
-    diagonal) and IPOPT's ratio ``‖res‖∞ / (min(‖x‖∞, 1e6 ‖b‖∞) + ‖b‖∞)``."""
-    hp, hi, hx, ep = borrowed(hp), borrowed(hi), borrowed(hx), borrowed(ep)
+def residual(hp, hi, hx, hd, ep, ei, ex, ip, ii, ix, diag, x, b, res) -> float:
+    """``res = b - K x`` (``K`` from its blocks: ``H`` as strictly lower CSR and diagonal
+    ``hd``, ``A_E``, ``A_I``, the diagonal) and IPOPT's ratio
+    ``‖res‖∞ / (min(‖x‖∞, 1e6 ‖b‖∞) + ‖b‖∞)``."""
+    hp, hi, hx, hd, ep = borrowed(hp), borrowed(hi), borrowed(hx), borrowed(hd), borrowed(ep)
     ei, ex, ip, ii = borrowed(ei), borrowed(ex), borrowed(ip), borrowed(ii)
     ix, diag, x, b, res = borrowed(ix), borrowed(diag), borrowed(x), borrowed(b), borrowed(res)
     n, me = hp.shape[0] - 1, ep.shape[0] - 1
     for i in range(x.shape[0]):
         res[i] = b[i] - diag[i] * x[i]
-    for i in range(n):
-        t = 0.0
-        for e in range(hp[i], hp[i + 1]):
-            t += hx[e] * x[U64(hi[e])]
-        res[i] -= t
+    _sym_lower_sub(hp, hi, hx, hd, x, res)
     _jacobian_residual(n, ep, ei, ex, x, res)
     _jacobian_residual(n + me, ip, ii, ix, x, res)
     nr = nx = nb_ = 0.0

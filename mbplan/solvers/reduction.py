@@ -160,8 +160,8 @@ class Reduction(ReductionSymbolic, ReductionLayout):
 
     _WORK = ("M", "new_rows", "g_a", "g_x", "g_piv", "lval", "ebuf", "lu", "dinv", "piv", "hf_data", "pbuf", "kbuf", "hr_base", "ttt",
              "sigma", "sigma_used", "ae_data", "ai_data", "acc", "tmp", "xu", "rz", "yv",
-             "vx", "kv", "se", "rhs_r")  # fmt: skip
-    _MATRICES = ("hs", "ak", "Ar", "Hr")
+             "vx", "kv", "se", "rhs_r", "hw", "hd")  # fmt: skip
+    _MATRICES = ("hl", "ak", "Ar", "Hr")
 
     def fresh(self) -> Reduction:
         """A copy sharing the symbolic arrays, with its own work arrays and ``K_r`` system."""
@@ -178,8 +178,8 @@ class Reduction(ReductionSymbolic, ReductionLayout):
 
     def _tuples(self) -> None:
         """The solve kernels' argument tuples (:mod:`mbplan.solvers.reduced_solves`)."""
-        hs, ak = self.hs, self.ak
-        self._h = (hs.indptr, hs.indices, hs.data)
+        hl, ak = self.hl, self.ak
+        self._h = (hl.indptr, hl.indices, hl.data, self.hd)
         self._ai = (self.ai_p, self.ai_i, self.ai_data)
         self._ak = (ak.indptr, ak.indices, ak.data)
         self._grp = (self.tgt, self.src, self.sub, self.M)
@@ -208,7 +208,7 @@ class Reduction(ReductionSymbolic, ReductionLayout):
             self.rmap_off, self.rmap, self.lu, self.piv, self.dinv, self.ebuf, self.tmp,
         ):  # fmt: skip
             return False
-        if not copy_values(hess.data, self.hs.data, self.hs_slot, self.hs_src, ae.data,
+        if not copy_values(hess.data, self.hl.data, self.hl_src, self.hd, self.hd_src, ae.data,
                            self.ak.data, self.ak_src, self.ebuf):  # fmt: skip
             return False
         times_t(self.ak.data, *self.ak_seg, self.ebuf, self.eoff, self.shape, self.Ar.data,
@@ -227,7 +227,8 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         if not self.hr_ok or status == 1:  # Tᵀ H_f T for new values or a new Σ
             self.sigma_used[:] = self.sigma
             self.hr_ok = hr_values(
-                self.hs.data, self.hf_data, self.fold_slot, self.ai_p, self.ai_data, self.sigma,
+                self.hl.data, self.hl_lo, self.hl_up, self.hd, self.hd_slot, self.hf_data,
+                self.fold_slot, self.ai_p, self.ai_data, self.sigma,
                 *self.hs_seg, self.bseg_ptr, self.ebuf, self.eoff, self.shape, self.reach_ptr,
                 self.panel_off, self.pwidth, self.pbuf, self.kbuf, self.kw_pos, self.kw_slot,
                 self.lo_ptr, self.lo_slot, self.hr_base, self.acc,
@@ -278,5 +279,5 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         reduce_rhs(b, *common, self.xu, self.rz, self.rhs_r, self.vx, self.kv, self.se)
         xr = self.kkt.solve(self.rhs_r, 10, ratio_max)[0]
         w = np.empty(len(b))
-        expand_solution(b, xr, *common, self.xu, self.rz, w, self.kv, self.yv)
+        expand_solution(b, xr, *common, self.xu, self.rz, w, self.kv, self.yv, self.hw)
         return w

@@ -102,12 +102,15 @@ class ReductionLayout:
         ndep = len(self.dep)
         self.xu, self.rz, self.yv = np.zeros(ndep), np.zeros(self.mi), np.zeros(ndep)
         self.vx, self.kv, self.se = np.zeros(self.n), np.zeros(self.n), np.zeros(self.me)
+        self.hw = np.zeros(self.n)
         self.rhs_r = np.zeros(self.nr + len(self.kept))
 
     def _fold_pattern(self, hess: sp.csr_matrix, ai: sp.csr_matrix) -> None:
-        """``H_f``'s pattern (``H`` symmetric, the diagonal, ``A_Iᵀ A_I``), where ``H``'s lower
-        entries land (``hs_slot`` ← ``hess.data[hs_src]``) and, per pair of entries ``(e, f)``
-        of an inequality row (row by row, ``e`` then ``f`` in row order), its slot in ``H_f``."""
+        """``H_f``'s pattern (``H`` symmetric, the diagonal, ``A_Iᵀ A_I``: ``hs``); ``H`` as its
+        strictly lower CSR ``hl`` (values from ``hess.data[hl_src]``; their slots in ``H_f``
+        ``hl_lo`` and mirrored ``hl_up``) and its diagonal ``hd`` (``hd_src``, ``-1``: zero;
+        slots ``hd_slot``); per pair of entries ``(e, f)`` of an inequality row (row by row,
+        ``e`` then ``f`` in row order), its slot in ``H_f``."""
         n = self.n
         h_rows = np.repeat(np.arange(n), np.diff(hess.indptr))
         low = np.flatnonzero(h_rows >= hess.indices)
@@ -122,14 +125,24 @@ class ReductionLayout:
             (np.zeros(len(keys)), keys % n, np.searchsorted(keys // n, np.arange(n + 1))),
             shape=(n, n),
         )
-        self.hs_slot, self.hs_src = inv[src >= 0], src[src >= 0]
         self.hf_data = np.zeros(len(keys))
+        strict = np.flatnonzero(off)  # H's strictly lower entries as CSR, its diagonal apart
+        self.hl = sp.csr_matrix(
+            (np.zeros(len(strict)), c[strict], np.searchsorted(r[strict], np.arange(n + 1))),
+            shape=(n, n),
+        )
+        self.hl_src, self.hd_src = low[strict], -np.ones(n, _I64)
+        self.hd_src[r[~off]] = low[~off]
+        slots = Slots(self.hs)
+        self.hl_lo, self.hl_up = slots.pairs(r[strict], c[strict]), slots.pairs(c[strict], r[strict])
+        self.hd_slot = slots.pairs(np.arange(n), np.arange(n))
+        self.hd = np.zeros(n)
         lens = np.diff(ai.indptr).astype(_I64)
         sq = lens * lens
         t = np.arange(sq.sum()) - np.repeat(np.cumsum(sq) - sq, sq)
         width, start = np.repeat(lens, sq), np.repeat(ai.indptr[:-1].astype(_I64), sq)
         fold_e, fold_f = start + t // width, start + t % width
-        self.fold_slot = Slots(self.hs).pairs(ai.indices[fold_e], ai.indices[fold_f])
+        self.fold_slot = slots.pairs(ai.indices[fold_e], ai.indices[fold_f])
 
     def _w_layout(self) -> None:
         """``W = H_f T`` block by block: block ``b``'s dependent rows as a dense panel
