@@ -30,7 +30,14 @@ import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.solvers.elimination import EliminationPlan
-from mbplan.solvers.linear_solver import Inertia, KKTSystem, _BlockPattern, _csr, _same_pattern
+from mbplan.solvers.linear_solver import (
+    Inertia,
+    KKTSystem,
+    _BlockPattern,
+    _csr,
+    _kkt_pattern,
+    _same_pattern,
+)
 from mbplan.solvers.reduction import Reduction, reduction, repick
 
 
@@ -71,7 +78,6 @@ class ReducedKKTSystem:
         self._red: Reduction | None = None
         self._plan: EliminationPlan | None = None
         self._patterns: tuple[_BlockPattern, ...] = ()
-        self._seen = -1  # full.n_analyses the reduction was built for
         self._active = self._values = self._pending = self._repicked = False
         self._diag = self._hess = np.zeros(0)
         self._reg = 0.0
@@ -96,40 +102,40 @@ class ReducedKKTSystem:
             self.full.set_matrices(hessian, jac_eq, jac_ineq)
             self._values = False
             return
-        hess = _csr(hessian, (self.n, self.n))
-        ae = _csr(jac_eq, (self.n_eq, self.n))
-        ai = _csr(jac_ineq, (self.n_ineq, self.n))
-        blocks = (hess, ae, ai)
-        if self._red is not None and all(map(_same_pattern, blocks, self._patterns)):
-            self._values = self._set_values(hess, ae, ai)
-            if self._values:
-                self._pending, self._hess = True, hess.data.copy()
+        blocks = (
+            _csr(hessian, (self.n, self.n)),
+            _csr(jac_eq, (self.n_eq, self.n)),
+            _csr(jac_ineq, (self.n_ineq, self.n)),
+        )
+        if not (self._patterns and all(map(_same_pattern, blocks, self._patterns))):
+            self._new_pattern(*blocks)
+        self._values = self._red is not None and self._set_values(*blocks)
+        if self._values:
+            self._pending, self._hess = True, blocks[0].data.copy()
+        else:
+            self.full.set_matrices(*blocks)
+
+    def _new_pattern(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> None:
+        """The reduction of a new pattern (``None``: no plan, an unusable one, or under
+        ``"auto"`` a full factorization cheap enough: :data:`AUTO_MAX_FLOPS`)."""
+        self._red, self._plan, self._repicked = None, None, False
+        self._patterns = tuple(
+            _BlockPattern(a.shape, a.indptr.copy(), a.indices.copy()) for a in (hess, ae, ai)
+        )
+        if not self.strict:
+            pattern = _kkt_pattern(self.n, self.n_eq, self.n_ineq, hess, ae, ai, self.ordering)
+            if pattern.analysis.flops > AUTO_MAX_FLOPS:
                 return
-            self.full.set_matrices(hess, ae, ai)
-            return
-        self.full.set_matrices(hess, ae, ai)
-        if self._seen != self.full.n_analyses:
-            self._seen = self.full.n_analyses
-            self._red, self._plan, self._repicked = None, None, False
-            self._patterns = tuple(
-                _BlockPattern(a.shape, a.indptr.copy(), a.indices.copy()) for a in blocks
-            )
-            if not self.strict and self.full._pattern.analysis.flops > AUTO_MAX_FLOPS:
-                self._values = False
-                return
-            try:
-                self._plan = self.plan_of(ae)
-                if self._plan is not None:
-                    self._red = reduction(self._plan, *blocks, self.ordering, self.pivot_threshold)
-            except InputError:
-                if self.strict:
-                    raise
-            except (ValueError, IndexError, KeyError) as err:  # a plan that does not fit
-                if self.strict:
-                    raise InputError(
-                        f"kkt_method='reduced': unusable elimination plan: {err}"
-                    ) from err
-        self._values = self._red is not None and self._set_values(hess, ae, ai)
+        try:
+            self._plan = self.plan_of(ae)
+            if self._plan is not None:
+                self._red = reduction(self._plan, hess, ae, ai, self.ordering, self.pivot_threshold)
+        except InputError:
+            if self.strict:
+                raise
+        except (ValueError, IndexError, KeyError) as err:  # a plan that does not fit
+            if self.strict:
+                raise InputError(f"kkt_method='reduced': unusable elimination plan: {err}") from err
 
     def _set_values(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> bool:
         """The reduction's values; on a breakdown, once per pattern, another choice of its

@@ -9,6 +9,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import threading
+import weakref
 from collections import OrderedDict
 
 import numpy as np
@@ -140,6 +141,7 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         self.factor_options = {"ordering": ordering, "pivot_threshold": pivot_threshold}
         self.kkt = KKTSystem(self.nr, len(self.kept), 0, **self.factor_options)
         self.ok = False
+        self._pool: list[dict] = []  # work arrays of copies no longer alive (:meth:`fresh`)
         self._compact()
         self.dep_key = (self.g_sel.tobytes(), self.tgt.tobytes(), self.dep.tobytes())  # the choice
         self._tuples()
@@ -164,14 +166,22 @@ class Reduction(ReductionSymbolic, ReductionLayout):
     _MATRICES = ("hl", "ak", "Ar", "Hr")
 
     def fresh(self) -> Reduction:
-        """A copy sharing the symbolic arrays, with its own work arrays and ``K_r`` system."""
+        """A copy sharing the symbolic arrays, with its own work arrays, matrices' values and
+        ``K_r`` system: those of a copy no longer alive if there is one (they return to the
+        pool when their copy is collected), else new ones (every one is written before it is
+        read)."""
         new = copy.copy(self)
-        for name in self._WORK:
-            setattr(new, name, getattr(self, name).copy())
-        for name in self._MATRICES:
-            m = getattr(self, name)
-            setattr(new, name, sp.csr_matrix((m.data.copy(), m.indices, m.indptr), shape=m.shape))
-        new.kkt = KKTSystem(self.nr, len(self.kept), 0, **self.factor_options)
+        try:
+            own = self._pool.pop()
+        except IndexError:
+            own = {name: np.empty_like(getattr(self, name)) for name in self._WORK}
+            for name in self._MATRICES:
+                m = getattr(self, name)
+                own[name] = sp.csr_matrix((np.empty_like(m.data), m.indices, m.indptr), m.shape)
+            own["kkt"] = KKTSystem(self.nr, len(self.kept), 0, **self.factor_options)
+        for name, value in own.items():
+            setattr(new, name, value)
+        weakref.finalize(new, self._pool.append, own)
         new.ok = new.hr_ok = new.ttt_ok = False
         new._tuples()
         return new
