@@ -189,22 +189,22 @@ class ReductionLayout:
         to ``R_b[q]``: ``lo_ptr``, ``lo_slot``) and of ``tril(Tᵀ D T)``'s (``diag_slot``, per
         block the lower triangle of ``R_b × R_b`` row by row: ``tt_off``, ``tt_slot``)."""
         B, nr = len(self.shape), self.nr
-        rows, cols, kw_pos = [], [], []
-        for i, c in enumerate(self._kept_rows):  # kept row i of W: reduced row i of H_r
-            low = np.flatnonzero(c <= i)
-            rows.append(np.full(len(low), i, _I64))
-            cols.append(c[low])
-            kw_pos.append(self.ostart[self.red_cols[i]] - self.panel_off[-1] + low)
-        n_kept = sum(len(r) for r in rows)
-        lo_len, tt_pairs = [], []
+        klen = np.array([len(c) for c in self._kept_rows], _I64)
+        kr = np.repeat(np.arange(nr), klen)  # kept row i of W: reduced row i of H_r
+        kc = np.concatenate([*self._kept_rows, np.zeros(0, _I64)]).astype(_I64)
+        low = kc <= kr
+        kw_pos = (self.ostart[self.red_cols] - self.panel_off[-1])[kr] + (np.arange(len(kc)) - np.repeat(np.cumsum(klen) - klen, klen))  # fmt: skip
+        rows, cols = [kr[low]], [kc[low]]
+        lo_len, tt_rows, tt_cols = [], [], []
         for b in range(B):
             R = self.reach_red[self.reach_ptr[b] : self.reach_ptr[b + 1]]
             q, u = np.nonzero(self.union[b][None, :] <= R[:, None])  # prefixes (sorted union)
             lo_len.append(np.bincount(q, minlength=len(R)))
             rows.append(R[q])
             cols.append(self.union[b][u])
-            q2, q1 = np.nonzero(np.tril(np.ones((len(R), len(R)), bool)))
-            tt_pairs.append((R[q2], R[q1]))
+            q2, q1 = np.tril_indices(len(R))
+            tt_rows.append(R[q2])
+            tt_cols.append(R[q1])
         rows.append(np.arange(nr))
         cols.append(np.arange(nr))
         rr, cc = np.concatenate(rows), np.concatenate(cols)
@@ -214,16 +214,18 @@ class ReductionLayout:
             shape=(nr, nr),
         )
         slots = Slots(self.Hr)
-        self.kw_pos = np.concatenate([*kw_pos, np.zeros(0, _I64)]).astype(_I64)
+        n_kept = len(rows[0])
+        self.kw_pos = kw_pos[low].astype(_I64)
         self.kw_slot = slots.pairs(rr[:n_kept], cc[:n_kept])
         self.lo_slot = slots.pairs(rr[n_kept : len(rr) - nr], cc[n_kept : len(cc) - nr])
         self.lo_ptr = np.concatenate([[0], np.cumsum(np.concatenate([*lo_len, np.zeros(0, _I64)]))]).astype(_I64)  # fmt: skip
         self.diag_slot = slots.pairs(np.arange(nr), np.arange(nr))
         m = self.shape[:, 1] if B else np.zeros(0, _I64)
         self.tt_off = np.concatenate([[0], np.cumsum(m * (m + 1) // 2)]).astype(_I64)
-        self.tt_slot = np.concatenate(
-            [*(slots.pairs(a, c) for a, c in tt_pairs), np.zeros(0, _I64)]
-        ).astype(_I64)
+        self.tt_slot = slots.pairs(
+            np.concatenate([*tt_rows, np.zeros(0, _I64)]),
+            np.concatenate([*tt_cols, np.zeros(0, _I64)]),
+        )
         if min(self.kw_slot.min(initial=0), self.lo_slot.min(initial=0), self.tt_slot.min(initial=0)) < 0:  # fmt: skip
             raise ValueError("reduction layout: a product term outside H_r's pattern")
 
@@ -268,17 +270,14 @@ class ReductionLayout:
         kept = b_s < 0
         seg_arg = local[c_s]
         seg_arg[kept] = where(r_s[kept], self.red_of[c_s[kept]]) - np.asarray(ostart)[r_s[kept]]
-        maps, pos, seg_map, size = {}, [], np.zeros(len(starts), _I64), 0
-        for s, (i, b) in enumerate(zip(seg_row.tolist(), seg_block.tolist(), strict=True)):
-            if b < 0:
-                continue
-            key = (int(row_key[i]), b)
-            if key not in maps:
-                maps[key] = size
-                reach = self.reach_red[self.reach_ptr[b] : self.reach_ptr[b + 1]]
-                pos.append(where(np.full(len(reach), i), reach) - ostart[i])
-                size += len(reach)
-            seg_map[s] = maps[key]
-        pos = np.concatenate([*pos, np.zeros(0, _I64)]).astype(_I64)
+        seg_map = np.zeros(len(starts), _I64)
+        blocks = np.flatnonzero(seg_block >= 0)
+        key = np.asarray(row_key, _I64)[seg_row[blocks]] * (len(self.shape) + 1) + seg_block[blocks]
+        _, first, inv = np.unique(key, return_index=True, return_inverse=True)
+        i, b = seg_row[blocks[first]], seg_block[blocks[first]]  # one row per map
+        length = self.reach_ptr[b + 1] - self.reach_ptr[b]
+        at = np.repeat(self.reach_ptr[b] - np.cumsum(length) + length, length) + np.arange(length.sum())  # fmt: skip
+        pos = (where(np.repeat(i, length), self.reach_red[at]) - np.repeat(np.asarray(ostart)[i], length)).astype(_I64)  # fmt: skip
+        seg_map[blocks] = (np.cumsum(length) - length)[inv]
         return (np.append(starts, len(r_s)).astype(_I64), seg_block.astype(_I64),
                 seg_e.astype(_I64), seg_arg.astype(_I64), seg_out, seg_map, pos), seg_row  # fmt: skip

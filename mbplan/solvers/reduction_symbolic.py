@@ -147,145 +147,136 @@ class ReductionSymbolic:
             self.tgt[j] = np.sort(t[_pivots(self.M[j][:, where])[:r]])
 
     def _blocks(self, plan: EliminationPlan, ae: sp.csr_matrix, slots: Slots) -> None:
-        """Local rows, dependent columns (QR pivoting of the first values), couplings, reach
-        sets and the scatter of ``L_b``."""
-        n, B, r = self.n, plan.n_blocks, self.M.shape[1]
-        col_block = -np.ones(n, np.int64)
+        """Local rows, dependent columns (QR pivoting of the first values, then the block
+        triangular order of the square part), couplings, reach sets and where each local row
+        entry goes (:meth:`_block_entries`)."""
+        n, B = self.n, plan.n_blocks
+        col_block, col_local = -np.ones(n, np.int64), np.zeros(n, np.int64)
         for b in range(B):
             own = plan.block_cols[b][plan.block_cols[b] >= 0]
             if np.any(col_block[own] >= 0):
                 raise InputError("EliminationPlan: a column in two blocks")
-            col_block[own] = b
-        rows_of_block, entries = [], []  # per block: local row ids (eq rows), {(a, col): src}
-        for b in range(B):
-            j = plan.block_groups[b]
-            rows, ent = [], {}
-            if j >= 0:
-                for i in range(r):
-                    rows.append(self.tgt[j, i])
-                    for q, c in enumerate(self.outer[j]):
-                        if c >= 0:
-                            ent[(len(rows) - 1, int(c))] = (
-                                "n",
-                                (j * r + i) * self.outer.shape[1] + q,
-                            )
-            for row in plan.block_rows[b][plan.block_rows[b] >= 0]:
-                rows.append(int(row))
-                for e in range(ae.indptr[row], ae.indptr[row + 1]):
-                    ent[(len(rows) - 1, int(ae.indices[e]))] = ("a", e)
-            rows_of_block.append(np.array(rows, np.int64))
-            entries.append(ent)
+            col_block[own], col_local[own] = b, np.arange(len(own))
+        rows_of_block, (eb, ea, ec, ek, es) = self._local_entries(plan, ae)
+        cb = col_block[ec]
+        if np.any((cb < 0) | (cb > eb)):
+            raise InputError(
+                f"EliminationPlan: block {eb[np.flatnonzero((cb < 0) | (cb > eb))[0]]}'s local "
+                "rows touch a column outside it and the blocks before it"
+            )
+        val = np.zeros(len(es))
+        val[ek], val[~ek] = self.new_rows.reshape(-1)[es[ek]], ae.data[es[~ek]]
+        ptr = np.searchsorted(eb, np.arange(B + 1))
         dep, free, couple, lu_begin, lu_end = [], [], [], [], []
         for b in range(B):
             own = plan.block_cols[b][plan.block_cols[b] >= 0]
-            touched = {c for _, c in entries[b]}
-            others = sorted({int(col_block[c]) for c in touched} - {b})
-            if any(c not in set(own) and col_block[c] < 0 for c in touched) or any(
-                i > b for i in others
-            ):
-                raise InputError(
-                    f"EliminationPlan: block {b}'s local rows touch a column outside it and "
-                    "the blocks before it"
-                )
+            t = np.arange(ptr[b], ptr[b + 1])
+            mine = t[cb[t] == b]
             nr = len(rows_of_block[b])
             dense, stored = np.zeros((nr, len(own))), np.zeros((nr, len(own)), bool)
-            pos = {int(c): q for q, c in enumerate(own)}
-            for (a, c), (kind, s) in entries[b].items():
-                if c in pos:
-                    dense[a, pos[c]] = ae.data[s] if kind == "a" else self.new_rows.reshape(-1)[s]
-                    stored[a, pos[c]] = True
+            dense[ea[mine], col_local[ec[mine]]] = val[mine]
+            stored[ea[mine], col_local[ec[mine]]] = True
             piv = _pivots(dense)
             d = np.sort(piv[:nr])
             rows, cols, begin, end = _btf(stored[:, d])  # rows, dependent columns: triangular
             new_row = np.empty(nr, np.int64)
             new_row[rows] = np.arange(nr)
-            entries[b] = {(int(new_row[a]), c): v for (a, c), v in entries[b].items()}
+            ea[t] = new_row[ea[t]]
             rows_of_block[b] = rows_of_block[b][rows]
             dep.append(own[d[cols]])
             free.append(own[np.sort(piv[nr:])])
-            couple.append(others)
+            couple.append(np.unique(cb[t][cb[t] != b]))
             lu_begin.append(begin)
             lu_end.append(end)
         self.lu_begin = np.concatenate([*lu_begin, np.zeros(0, np.int64)])
         self.lu_end = np.concatenate([*lu_end, np.zeros(0, np.int64)])
-        self._block_entries(entries, dep, free, couple, [len(x) for x in rows_of_block])
         self.dep = np.concatenate(dep) if B else np.zeros(0, np.int64)
         self.y_rows = np.concatenate(rows_of_block) if B else np.zeros(0, np.int64)
         if len(np.unique(self.y_rows)) != len(self.y_rows):
             raise InputError("EliminationPlan: a local row in two blocks")
+        self._block_entries((eb, ea, ec, ek, es), dep, free, couple, [len(x) for x in rows_of_block])  # fmt: skip
 
-    def _block_entries(self, entries: list[dict], dep: list, free: list, couple: list,
+    def _local_entries(self, plan: EliminationPlan, ae: sp.csr_matrix) -> tuple[list, tuple]:
+        """Per block its local rows (the group's new rows, then its plan rows) and the entries
+        of these rows as arrays sorted by block, local row and column: block, local row, column,
+        from the groups' new rows (else ``A_E``), source (in ``new_rows.flat`` or ``ae.data``)."""
+        B, r, o = plan.n_blocks, self.M.shape[1], self.outer.shape[1]
+        j = plan.block_groups
+        g = np.flatnonzero(j >= 0)  # the new rows: r per grouped block, dense over its outer cols
+        gb, gi, gq = (x.reshape(-1) for x in np.meshgrid(g, np.arange(r), np.arange(o), indexing="ij"))  # fmt: skip
+        gc = self.outer[j[gb], gq]
+        keep = gc >= 0
+        gb, gi, gq, gc = gb[keep], gi[keep], gq[keep], gc[keep]
+        gs = (j[gb] * r + gi) * o + gq
+        valid = plan.block_rows >= 0  # the plan rows after them
+        rb, rk = np.nonzero(valid)
+        ra = np.where(j[rb] >= 0, r, 0) + np.cumsum(valid, axis=1)[rb, rk] - 1
+        row = plan.block_rows[rb, rk]
+        nnz = np.diff(ae.indptr)[row]
+        at = np.repeat(ae.indptr[row] - np.cumsum(nnz) + nnz, nnz) + np.arange(nnz.sum())
+        eb = np.concatenate([gb, np.repeat(rb, nnz)]).astype(np.int64)
+        ea = np.concatenate([gi, np.repeat(ra, nnz)]).astype(np.int64)
+        ec = np.concatenate([gc, ae.indices[at]]).astype(np.int64)
+        ek = np.concatenate([np.ones(len(gb), bool), np.zeros(len(at), bool)])
+        es = np.concatenate([gs, at]).astype(np.int64)
+        order = np.lexsort((ec, ea, eb))
+        rows = [np.concatenate([self.tgt[j[b]] if j[b] >= 0 else np.zeros(0, np.int64), row[rb == b]]).astype(np.int64) for b in range(B)]  # fmt: skip
+        return rows, (eb[order], ea[order], ec[order], ek[order], es[order])
+
+    def _block_entries(self, entries: tuple, dep: list, free: list, couple: list,
                        n_rows: list[int]) -> None:  # fmt: skip
         """Per block its sorted reach ``R_b`` (own free columns and the coupled blocks' reach),
-        ``shape[b] = (r_b, |R_b|)``, and where each entry of its local rows goes: the values
-        ``lval`` (``A_E``'s entries first, ``lval[t] = ae[la_src[t]]``, then the groups' new
-        rows', ``new_rows.flat[ln_src]``), from there to ``L_b[:, dep]`` (``a_src`` → ``a_dst``
-        in ``lu``), to the right-hand side of ``E_b`` (a free column: ``fe_src`` → ``fe_dst``
-        in ``ebuf``; both lists per block at ``a_ptr``, ``fe_ptr``) or to coupling ``k`` (a coupled block's dependent column ``p``: ``nz_a``,
-        ``nz_p``, ``nz_src``, sorted by row, at ``nz_ptr[k]``; ``rmap``: the coupled block's
-        reach in ``R_b``)."""
-        B = len(entries)
-        shape = np.zeros((B, 2), np.int64)
-        self.reach, cptr, cblk, rmap, rmap_off = [], [0], [], [], []
-        kinds, srcs, owner = [], [], []  # per entry: from ae or new_rows, its source, (b, a, c)
-        rposs = []
+        ``shape[b] = (r_b, |R_b|)``, and where each entry of its local rows (``entries``:
+        :meth:`_local_entries`, local rows in their final order) goes: the values ``lval``
+        (``A_E``'s entries first, ``lval[t] = ae[la_src[t]]``, then the groups' new rows',
+        ``new_rows.flat[ln_src]``), from there to ``L_b[:, dep]`` (``a_src`` → ``a_dst`` in
+        ``lu``), to the right-hand side of ``E_b`` (a free column: ``fe_src`` → ``fe_dst`` in
+        ``ebuf``; both lists per block at ``a_ptr``, ``fe_ptr``) or to coupling ``k`` (a coupled
+        block's dependent column ``p``: ``nz_a``, ``nz_p``, ``nz_src``, sorted by row, at
+        ``nz_ptr[k]``; ``rmap``: the coupled block's reach in ``R_b``)."""
+        n, B = self.n, len(dep)
+        eb, ea, ec, ek, es = entries
+        self.reach, cptr, cblk, rmap = [], [0], [], []
         for b in range(B):
             R = np.unique(np.concatenate([free[b], *(self.reach[i] for i in couple[b])]))
             self.reach.append(R.astype(np.int64))
-            rpos = {int(c): q for q, c in enumerate(R)}
-            rposs.append(rpos)
             for i in couple[b]:
-                cblk.append(i)
-                rmap_off.append(len(rmap))
-                rmap += [rpos[int(c)] for c in self.reach[i]]
+                cblk.append(int(i))
+                rmap.append(np.searchsorted(R, self.reach[i]))
             cptr.append(len(cblk))
-            shape[b] = (n_rows[b], len(R))
-            for (a, c), (kind, src) in sorted(entries[b].items()):
-                kinds.append(kind == "n")
-                srcs.append(src)
-                owner.append((b, a, c))
         i64 = lambda x: np.asarray(x, np.int64)  # noqa: E731
-        r, m = shape[:, 0], shape[:, 1]
-        self.shape = shape
+        r, m = i64(n_rows), i64([len(x) for x in self.reach])
+        self.shape = np.stack([r, m], axis=1) if B else np.zeros((0, 2), np.int64)
         self.eoff = i64(np.concatenate([[0], np.cumsum(r * m)]))
         self.lu_off = i64(np.concatenate([[0], np.cumsum(r * r)]))
         self.uoff = i64(np.concatenate([[0], np.cumsum(r)]))
-        order = np.argsort(kinds, kind="stable")  # A_E's entries first
-        kinds, srcs = np.asarray(kinds, bool)[order], i64(srcs)[order]
-        self.la_src, self.ln_src = srcs[~kinds], srcs[kinds]
+        self.cptr, self.cblk = i64(cptr), i64(cblk)
+        self.rmap_off = i64(np.concatenate([[0], np.cumsum([len(x) for x in rmap])]))
+        self.rmap = i64(np.concatenate([*rmap, np.zeros(0, np.int64)]))
+        order = np.argsort(ek, kind="stable")  # A_E's entries first
+        self.la_src, self.ln_src = es[order][~ek[order]], es[order][ek[order]]
         lval_of = np.empty(len(order), np.int64)
         lval_of[order] = np.arange(len(order))
-        lval_of, lu_off, eoff = lval_of.tolist(), self.lu_off.tolist(), self.eoff.tolist()
-        r, m = r.tolist(), m.tolist()
-        col_of = {}  # column -> (block, position among its dependent / reach columns)
+        dep_block, dep_pos = -np.ones(n, np.int64), np.zeros(n, np.int64)
         for b in range(B):
-            for p, c in enumerate(dep[b]):
-                col_of[int(c)] = ("dep", b, p)
-        a_src, a_dst, fe_src, fe_dst, a_blk, fe_blk = [], [], [], [], [], []
-        nz = [[] for _ in cblk]
-        coupling = {(b, int(cblk[k])): k for b in range(B) for k in range(cptr[b], cptr[b + 1])}
-        for t, (b, a, c) in enumerate(owner):
-            kind = col_of.get(c)
-            if kind is not None and kind[1] == b:
-                a_src.append(lval_of[t])
-                a_dst.append(lu_off[b] + a * r[b] + kind[2])
-                a_blk.append(b)
-            elif kind is not None:
-                nz[coupling[(b, kind[1])]].append((a, kind[2], lval_of[t]))
-            else:
-                fe_src.append(lval_of[t])
-                fe_dst.append(eoff[b] + a * m[b] + rposs[b][c])
-                fe_blk.append(b)
-        self.cptr, self.cblk = i64(cptr), i64(cblk)
-        self.rmap_off, self.rmap = i64(rmap_off + [len(rmap)]), i64(rmap)
-        self.a_src, self.a_dst = i64(a_src), i64(a_dst)
-        self.fe_src, self.fe_dst = i64(fe_src), i64(fe_dst)
-        self.a_ptr = i64(np.searchsorted(i64(a_blk), np.arange(B + 1)))
-        self.fe_ptr = i64(np.searchsorted(i64(fe_blk), np.arange(B + 1)))
-        entries_nz = [sorted(x) for x in nz]
-        self.nz_ptr = i64(np.concatenate([[0], np.cumsum([len(x) for x in entries_nz])]))
-        flat = np.array([e for x in entries_nz for e in x], np.int64).reshape(-1, 3)
-        self.nz_a, self.nz_p, self.nz_src = flat[:, 0].copy(), flat[:, 1].copy(), flat[:, 2].copy()
+            dep_block[dep[b]], dep_pos[dep[b]] = b, np.arange(len(dep[b]))
+        db = dep_block[ec]
+        own, coupled, fr = db == eb, (db >= 0) & (db != eb), db < 0
+        self.a_src = lval_of[own]
+        self.a_dst = self.lu_off[eb[own]] + ea[own] * r[eb[own]] + dep_pos[ec[own]]
+        self.a_ptr = i64(np.searchsorted(eb[own], np.arange(B + 1)))
+        reach_key = np.concatenate([b * n + self.reach[b] for b in range(B)] + [np.zeros(0, np.int64)])  # fmt: skip
+        rstart = np.concatenate([[0], np.cumsum(m)])[:-1] if B else np.zeros(0, np.int64)
+        rpos = np.searchsorted(reach_key, eb[fr] * n + ec[fr]) - rstart[eb[fr]]
+        self.fe_src = lval_of[fr]
+        self.fe_dst = self.eoff[eb[fr]] + ea[fr] * m[eb[fr]] + rpos
+        self.fe_ptr = i64(np.searchsorted(eb[fr], np.arange(B + 1)))
+        k_block = np.repeat(np.arange(B), np.diff(self.cptr))
+        k = np.searchsorted(k_block * B + self.cblk, eb[coupled] * B + db[coupled])
+        nz_a, nz_p, nz_src = ea[coupled], dep_pos[ec[coupled]], lval_of[coupled]
+        by = np.lexsort((nz_p, nz_a, k))
+        self.nz_a, self.nz_p, self.nz_src, k = nz_a[by], nz_p[by], nz_src[by], k[by]
+        self.nz_ptr = i64(np.searchsorted(k, np.arange(len(cblk) + 1)))
         # the same entries per block as rows and columns of B (its local rows / dependent
         # columns at uoff), by row for B⁻¹ and by column for B⁻ᵀ
         k_of = np.repeat(np.arange(len(cblk)), np.diff(self.nz_ptr))
