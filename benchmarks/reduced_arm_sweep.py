@@ -17,9 +17,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path.cwd()))
 
-import mbplan as mb  # noqa: E402
-from mbplan.benchmarks.arm_sweep import sweep_robot, sweep_tasks  # noqa: E402
-from mbplan.robots import available_robots  # noqa: E402
+import mbplan as mb
+from mbplan.benchmarks.arm_sweep import sweep_robot, sweep_tasks
+from mbplan.robots import available_robots
 
 
 def main() -> None:

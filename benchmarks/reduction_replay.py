@@ -172,8 +172,14 @@ def main() -> None:
         print(f"{t:40s} {a:8.3f} {b:8.3f} {b / a:6.2f}")
     tot = {k: sum(v.values()) for k, v in ms.items()}
     print(f"{'total':40s} {tot['base']:8.3f} {tot['tree']:8.3f} {tot['tree'] / tot['base']:6.2f}")
-    print("same inertias:", out["same_inertias"], "steps' relative difference:",
-          out["step_rel_diff"], "reduced, fallbacks:", out["reduced_fallbacks"])
+    print(
+        "same inertias:",
+        out["same_inertias"],
+        "steps' relative difference:",
+        out["step_rel_diff"],
+        "reduced, fallbacks:",
+        out["reduced_fallbacks"],
+    )
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(out, indent=1))

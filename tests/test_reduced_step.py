@@ -13,10 +13,10 @@ from mbplan.formulations import maximal_layout
 from mbplan.formulations.maximal_layout import JointEliminationPlans, joint_elimination_plan
 from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
 from mbplan.solvers import RIPMOptions, solve_ripm
+from mbplan.solvers import reduction as reduction_module
 from mbplan.solvers.elimination import EliminationPlan
 from mbplan.solvers.examples import hs071
 from mbplan.solvers.linear_solver import Inertia, KKTSystem
-from mbplan.solvers import reduction as reduction_module
 from mbplan.solvers.reduced_step import ReducedKKTSystem, kkt_system
 
 

@@ -8,7 +8,6 @@ inner loops are zero-based over contiguous rows, so that they vectorize."""
 from __future__ import annotations
 
 import numba as nb
-import numpy as np
 
 from mbplan.solvers.numba_borrow import borrowed
 
@@ -251,6 +250,9 @@ def b_solve(x, lval, shape, uoff, bc_ptr, bc_row, bc_col, bc_val, lu, lu_off, pi
     ``bc_ptr[b]``: row, column and value in ``lval``), then ``L_b[:, dep]⁻¹`` (its LU factors,
     ``dinv``: the reciprocals of ``U``'s diagonal, ``L`` inside the diagonal blocks from
     ``lu_begin``)."""
+    x, lval, shape, uoff, bc_ptr = borrowed(x), borrowed(lval), borrowed(shape), borrowed(uoff), borrowed(bc_ptr)  # fmt: skip
+    bc_row, bc_col, bc_val, lu = borrowed(bc_row), borrowed(bc_col), borrowed(bc_val), borrowed(lu)
+    lu_off, piv, dinv, lu_begin = borrowed(lu_off), borrowed(piv), borrowed(dinv), borrowed(lu_begin)  # fmt: skip
     for b in range(shape.shape[0]):
         r, ub = shape[b, 0], uoff[b]
         t, t1 = bc_ptr[b], bc_ptr[b + 1]
@@ -284,6 +286,9 @@ def bt_solve(x, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, p
              lu_end) -> None:  # fmt: skip
     """``x ← B⁻ᵀ x`` (:func:`b_solve`'s ``B``, its entries by column), blocks in reverse
     order."""
+    x, lval, shape, uoff, bc_ptr = borrowed(x), borrowed(lval), borrowed(shape), borrowed(uoff), borrowed(bc_ptr)  # fmt: skip
+    bt_row, bt_col, bt_val, lu = borrowed(bt_row), borrowed(bt_col), borrowed(bt_val), borrowed(lu)
+    lu_off, piv, dinv, lu_end = borrowed(lu_off), borrowed(piv), borrowed(dinv), borrowed(lu_end)
     for b in range(shape.shape[0] - 1, -1, -1):
         r, ub = shape[b, 0], uoff[b]
         A, xb, pb = lu[U64(lu_off[b]) :], x[U64(ub) :], piv[U64(ub) :]

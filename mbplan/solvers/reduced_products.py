@@ -186,6 +186,9 @@ def tdt_values(hr, base, d, dep, red_cols, ebuf, eoff, shape, uoff, tt_off, tt_s
 def t_apply(xr, y, red_cols, dep, ebuf, eoff, shape, reach_red, reach_ptr, uoff, tmp) -> None:
     """``y = T xr`` (length ``n``): ``xr`` on the kept columns, ``-E_b xr[R_b]`` on the
     dependent ones."""
+    xr, y, red_cols, dep, ebuf = borrowed(xr), borrowed(y), borrowed(red_cols), borrowed(dep), borrowed(ebuf)  # fmt: skip
+    eoff, shape, reach_red, reach_ptr = borrowed(eoff), borrowed(shape), borrowed(reach_red), borrowed(reach_ptr)  # fmt: skip
+    uoff, tmp = borrowed(uoff), borrowed(tmp)
     for i in range(red_cols.shape[0]):
         y[U64(red_cols[i])] = xr[i]
     for b in range(shape.shape[0]):
@@ -204,6 +207,9 @@ def t_apply(xr, y, red_cols, dep, ebuf, eoff, shape, reach_red, reach_ptr, uoff,
 @nb.njit(**_FAST)
 def tt_apply(v, out, red_cols, dep, ebuf, eoff, shape, reach_red, reach_ptr, uoff, tmp) -> None:
     """``out = Tᵀ v`` (length ``n_r``)."""
+    v, out, red_cols, dep, ebuf = borrowed(v), borrowed(out), borrowed(red_cols), borrowed(dep), borrowed(ebuf)  # fmt: skip
+    eoff, shape, reach_red, reach_ptr = borrowed(eoff), borrowed(shape), borrowed(reach_red), borrowed(reach_ptr)  # fmt: skip
+    uoff, tmp = borrowed(uoff), borrowed(tmp)
     for i in range(red_cols.shape[0]):
         out[i] = v[U64(red_cols[i])]
     for b in range(shape.shape[0]):

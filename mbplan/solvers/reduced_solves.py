@@ -1,8 +1,10 @@
 """Compiled solve of :class:`~mbplan.solvers.reduction.Reduction` (the module docstring of
 :mod:`mbplan.solvers.reduced_step`): the right-hand side of ``K_r`` and the recovered step
 around ``K_r``'s own solve, and ``K``'s residual with IPOPT's ratio. The arrays come in tuples
-of one meaning each (``h``, ``ai``, ``ak``: CSR arrays of ``H``, ``A_I``, ``A_E,kept``;
-``grp``: the row groups; ``blk``: the blocks' ``B``; ``tr``: ``T`` by blocks)."""
+of one meaning each (``h``: ``H``'s strictly lower CSR arrays and diagonal; ``ai``, ``ak``: CSR
+arrays of ``A_I``, ``A_E,kept``; ``grp``: the row groups; ``bf``, ``bb``: the arguments of
+:func:`~mbplan.solvers.reduced_kernels.b_solve` and ``bt_solve`` after the vector; ``tr``: of
+:func:`~mbplan.solvers.reduced_products.t_apply` after the two vectors)."""
 
 from __future__ import annotations
 
@@ -54,6 +56,7 @@ def _group_rows_t(v, tgt, src, sub, M, vt) -> None:
 @nb.njit(**_FAST)
 def _sym_lower_sub(hp, hi, hx, hd, x, y) -> None:
     """``y -= H x``, ``H`` from its strictly lower CSR part and its diagonal ``hd``."""
+    hp, hi, hx, hd, x, y = borrowed(hp), borrowed(hi), borrowed(hx), borrowed(hd), borrowed(x), borrowed(y)  # fmt: skip
     for i in range(hp.shape[0] - 1):
         xi, t = x[i], hd[i] * x[i]
         for e in range(hp[i], hp[i + 1]):
@@ -64,33 +67,23 @@ def _sym_lower_sub(hp, hi, hx, hd, x, y) -> None:
 
 
 @nb.njit(**_FAST)
-def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr, xu, rz, rhs_r,
-               vx, kv, se) -> None:  # fmt: skip
+def reduce_rhs(b, diag, sigma, n, me, y_rows, kept, h, ai, ak, grp, bf, bb, tr, xu, rz, rhs_r, vx,
+               kv, se) -> None:  # fmt: skip
     """``x_U = B⁻¹ (S b_E)[Y]`` into ``xu``; ``r_z = b_I - A_I x_U`` into ``rz``; ``K_r``'s
-    right-hand side ``[Tᵀ (b_x - (H + D_x)[:, U] x_U - A_Iᵀ Σ r_z); b_E,kept - A_E,kept x_U]``
-    into ``rhs_r`` (``h``: ``H``'s strictly lower CSR arrays and diagonal). ``vx``, ``kv``
-    (length ``n``), ``se`` (``m_E``): scratch."""
-    b, diag, sigma, dep = borrowed(b), borrowed(diag), borrowed(sigma), borrowed(dep)
-    y_rows, kept, xu, rz = borrowed(y_rows), borrowed(kept), borrowed(xu), borrowed(rz)
-    rhs_r, vx, kv, se = borrowed(rhs_r), borrowed(vx), borrowed(kv), borrowed(se)
-    hp, hi, hx, hd = borrowed(h[0]), borrowed(h[1]), borrowed(h[2]), borrowed(h[3])
+    right-hand side ``[Tᵀ (b_x - (H + D_x) [x_U; 0] - A_Iᵀ Σ r_z); b_E,kept - A_E,kept x_U]``
+    into ``rhs_r``. ``vx``, ``kv`` (length ``n``), ``se`` (``m_E``): scratch."""
+    b, diag, sigma, y_rows = borrowed(b), borrowed(diag), borrowed(sigma), borrowed(y_rows)
+    kept, xu, rz, rhs_r = borrowed(kept), borrowed(xu), borrowed(rz), borrowed(rhs_r)
+    vx, kv, se, dep = borrowed(vx), borrowed(kv), borrowed(se), borrowed(tr[1])
     ip, ii, ix = borrowed(ai[0]), borrowed(ai[1]), borrowed(ai[2])
     kp, ki, kx = borrowed(ak[0]), borrowed(ak[1]), borrowed(ak[2])
-    tgt, src, sub, M = borrowed(grp[0]), borrowed(grp[1]), borrowed(grp[2]), borrowed(grp[3])
-    lval, shape, uoff, bc_ptr = borrowed(blk[0]), borrowed(blk[1]), borrowed(blk[2]), borrowed(blk[3])
-    bc_row, bc_col, bc_val = borrowed(blk[4]), borrowed(blk[5]), borrowed(blk[6])
-    bt_row, bt_col, bt_val = borrowed(blk[7]), borrowed(blk[8]), borrowed(blk[9])
-    lu, lu_off, piv, dinv = borrowed(blk[10]), borrowed(blk[11]), borrowed(blk[12]), borrowed(blk[13])
-    lu_begin, lu_end = borrowed(blk[14]), borrowed(blk[15])
-    red_cols, ebuf, eoff = borrowed(tr[0]), borrowed(tr[1]), borrowed(tr[2])
-    reach_red, reach_ptr, tmp = borrowed(tr[3]), borrowed(tr[4]), borrowed(tr[5])
     be = b[n : n + me]
     for i in range(me):
         se[i] = be[i]
-    _group_rows(be, se, tgt, src, sub, M)
+    _group_rows(be, se, *grp)
     for k in range(y_rows.shape[0]):
         xu[k] = se[U64(y_rows[k])]
-    b_solve(xu, lval, shape, uoff, bc_ptr, bc_row, bc_col, bc_val, lu, lu_off, piv, dinv, lu_begin)
+    b_solve(xu, *bf)
     for i in range(n):
         vx[i] = 0.0
         kv[i] = b[i]
@@ -98,7 +91,7 @@ def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr
         j, v = U64(dep[k]), xu[k]
         vx[j] = v
         kv[j] -= diag[j] * v
-    _sym_lower_sub(hp, hi, hx, hd, vx, kv)
+    _sym_lower_sub(*h, vx, kv)
     for r in range(rz.shape[0]):  # r_z, and kv += A_Iᵀ Σ r_z
         t = 0.0
         for e in range(ip[r], ip[r + 1]):
@@ -107,8 +100,8 @@ def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr
         s = sigma[r] * rz[r]
         for e in range(ip[r], ip[r + 1]):
             kv[U64(ii[e])] += ix[e] * s
-    nr = red_cols.shape[0]
-    tt_apply(kv, rhs_r, red_cols, dep, ebuf, eoff, shape, reach_red, reach_ptr, uoff, tmp)
+    tt_apply(kv, rhs_r, *tr)
+    nr = tr[0].shape[0]
     for r in range(kept.shape[0]):
         t = 0.0
         for e in range(kp[r], kp[r + 1]):
@@ -117,28 +110,19 @@ def reduce_rhs(b, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr
 
 
 @nb.njit(**_FAST)
-def expand_solution(b, xr, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp, blk, tr, xu,
-                    rz, w, atw, yv, hw) -> None:  # fmt: skip
+def expand_solution(b, xr, diag, sigma, n, me, y_rows, kept, h, ai, ak, grp, bf, bb, tr, xu, rz,
+                    w, atw, yv, hw) -> None:  # fmt: skip
     """The step ``w`` from ``K_r``'s solution ``xr`` and :func:`reduce_rhs`'s ``xu``, ``rz``:
     ``w_x = T xr_x + [x_U]``, ``w_E,kept = xr_E``, ``w_I = Σ (A_I T xr_x - r_z)``,
     ``w_Y = B⁻ᵀ (b_U - ((H + D_x) w_x)_U - (A_E,keptᵀ w_E,kept + A_Iᵀ w_I)_U)``, then ``Sᵀ`` on
     ``w_E``. ``atw``, ``hw``, ``yv``: scratch of lengths ``n``, ``n`` and ``|U|`` (``≥ J r``)."""
-    b, xr, diag, sigma, dep = borrowed(b), borrowed(xr), borrowed(diag), borrowed(sigma), borrowed(dep)  # fmt: skip
-    y_rows, kept, xu, rz = borrowed(y_rows), borrowed(kept), borrowed(xu), borrowed(rz)
-    w, atw, yv, hw = borrowed(w), borrowed(atw), borrowed(yv), borrowed(hw)
-    hp, hi, hx, hd = borrowed(h[0]), borrowed(h[1]), borrowed(h[2]), borrowed(h[3])
+    b, xr, diag, sigma, y_rows = borrowed(b), borrowed(xr), borrowed(diag), borrowed(sigma), borrowed(y_rows)  # fmt: skip
+    kept, xu, rz, w = borrowed(kept), borrowed(xu), borrowed(rz), borrowed(w)
+    atw, yv, hw, dep = borrowed(atw), borrowed(yv), borrowed(hw), borrowed(tr[1])
     ip, ii, ix = borrowed(ai[0]), borrowed(ai[1]), borrowed(ai[2])
     kp, ki, kx = borrowed(ak[0]), borrowed(ak[1]), borrowed(ak[2])
-    tgt, src, sub, M = borrowed(grp[0]), borrowed(grp[1]), borrowed(grp[2]), borrowed(grp[3])
-    lval, shape, uoff, bc_ptr = borrowed(blk[0]), borrowed(blk[1]), borrowed(blk[2]), borrowed(blk[3])
-    bc_row, bc_col, bc_val = borrowed(blk[4]), borrowed(blk[5]), borrowed(blk[6])
-    bt_row, bt_col, bt_val = borrowed(blk[7]), borrowed(blk[8]), borrowed(blk[9])
-    lu, lu_off, piv, dinv = borrowed(blk[10]), borrowed(blk[11]), borrowed(blk[12]), borrowed(blk[13])
-    lu_begin, lu_end = borrowed(blk[14]), borrowed(blk[15])
-    red_cols, ebuf, eoff = borrowed(tr[0]), borrowed(tr[1]), borrowed(tr[2])
-    reach_red, reach_ptr, tmp = borrowed(tr[3]), borrowed(tr[4]), borrowed(tr[5])
-    nr = red_cols.shape[0]
-    t_apply(xr, w, red_cols, dep, ebuf, eoff, shape, reach_red, reach_ptr, uoff, tmp)
+    nr = tr[0].shape[0]
+    t_apply(xr, w, *tr)
     for i in range(n):
         atw[i] = 0.0
     for r in range(kept.shape[0]):
@@ -158,13 +142,13 @@ def expand_solution(b, xr, diag, sigma, n, me, dep, y_rows, kept, h, ai, ak, grp
         w[U64(dep[k])] += xu[k]
     for i in range(n):
         hw[i] = b[i] - atw[i] - diag[i] * w[i]
-    _sym_lower_sub(hp, hi, hx, hd, w, hw)  # b_x - A_E,keptᵀ w_E - A_Iᵀ w_I - (H + D_x) w_x
+    _sym_lower_sub(*h, w, hw)  # b_x - A_E,keptᵀ w_E - A_Iᵀ w_I - (H + D_x) w_x
     for k in range(dep.shape[0]):
         yv[k] = hw[U64(dep[k])]
-    bt_solve(yv, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, piv, dinv, lu_end)
+    bt_solve(yv, *bb)
     for k in range(y_rows.shape[0]):
         w[U64(n + y_rows[k])] = yv[k]
-    _group_rows_t(w[n : n + me], tgt, src, sub, M, yv)
+    _group_rows_t(w[n : n + me], *grp, yv)
 
 
 @nb.njit(**_FAST)

@@ -40,7 +40,6 @@ from mbplan.solvers.linear_solver import (
 )
 from mbplan.solvers.reduction import Reduction, reduction, repick
 
-
 AUTO_MAX_FLOPS = 4e9
 """``kkt_method="auto"`` reduces only KKT matrices whose full factorization needs at most this
 many multiply-adds: above it the reduction's per-knot dense blocks (dense over each body's

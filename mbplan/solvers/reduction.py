@@ -193,10 +193,13 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         self._ai = (self.ai_p, self.ai_i, self.ai_data)
         self._ak = (ak.indptr, ak.indices, ak.data)
         self._grp = (self.tgt, self.src, self.sub, self.M)
-        self._blk = (self.lval, self.shape, self.uoff, self.bc_ptr, self.bc_row, self.bc_col,
-                     self.bc_val, self.bt_row, self.bt_col, self.bt_val, self.lu, self.lu_off,
-                     self.piv, self.dinv, self.lu_begin, self.lu_end)  # fmt: skip
-        self._tr = (self.red_cols, self.ebuf, self.eoff, self.reach_red, self.reach_ptr, self.tmp)
+        blocks = (self.lu, self.lu_off, self.piv, self.dinv)
+        self._bf = (self.lval, self.shape, self.uoff, self.bc_ptr, self.bc_row, self.bc_col,
+                    self.bc_val, *blocks, self.lu_begin)  # fmt: skip
+        self._bb = (self.lval, self.shape, self.uoff, self.bc_ptr, self.bt_row, self.bt_col,
+                    self.bt_val, *blocks, self.lu_end)  # fmt: skip
+        self._tr = (self.red_cols, self.dep, self.ebuf, self.eoff, self.shape, self.reach_red,
+                    self.reach_ptr, self.uoff, self.tmp)  # fmt: skip
 
     # ------------------------------------------------------------------ numeric
     def set_values(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> bool:
@@ -284,8 +287,8 @@ class Reduction(ReductionSymbolic, ReductionLayout):
     def solve_once(self, b: np.ndarray, diagonal: np.ndarray, ratio_max: float) -> np.ndarray:
         """``K⁻¹ b`` through the reduction (module docstring; ``diagonal``: ``K``'s), ``K_r``
         solved to the residual ratio ``ratio_max``."""
-        common = (diagonal, self.sigma, self.n, self.me, self.dep, self.y_rows, self.kept,
-                  self._h, self._ai, self._ak, self._grp, self._blk, self._tr)  # fmt: skip
+        common = (diagonal, self.sigma, self.n, self.me, self.y_rows, self.kept, self._h,
+                  self._ai, self._ak, self._grp, self._bf, self._bb, self._tr)  # fmt: skip
         reduce_rhs(b, *common, self.xu, self.rz, self.rhs_r, self.vx, self.kv, self.se)
         xr = self.kkt.solve(self.rhs_r, 10, ratio_max)[0]
         w = np.empty(len(b))

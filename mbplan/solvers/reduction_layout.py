@@ -93,7 +93,9 @@ class ReductionLayout:
         )[0]  # fmt: skip
         m = self.shape[:, 1] if len(self.shape) else np.zeros(1, _I64)
         r = self.shape[:, 0] if len(self.shape) else np.zeros(1, _I64)
-        width = max(int(m.max(initial=0)), int(r.max(initial=0)), int(self.pwidth.max(initial=0)), 1)
+        width = max(
+            int(m.max(initial=0)), int(r.max(initial=0)), int(self.pwidth.max(initial=0)), 1
+        )
         self.acc, self.tmp = np.zeros(4 * width), np.zeros(width)
         self.sigma, self.sigma_used = np.zeros(self.mi), np.zeros(self.mi)
         self.hr_ok = False  # hr_base holds Tᵀ H_f T for these values and sigma_used
@@ -119,8 +121,7 @@ class ReductionLayout:
         fold = _product_pattern((_transpose(ai), ai)).tocoo()
         rr = np.concatenate([r, c[off], np.arange(n), fold.row])
         cc = np.concatenate([c, r[off], np.arange(n), fold.col])
-        src = np.concatenate([low, low[off], -np.ones(n + fold.nnz, _I64)])
-        keys, inv = np.unique(rr * n + cc, return_inverse=True)
+        keys = np.unique(rr * n + cc)
         self.hs = sp.csr_matrix(
             (np.zeros(len(keys)), keys % n, np.searchsorted(keys // n, np.arange(n + 1))),
             shape=(n, n),
@@ -134,7 +135,10 @@ class ReductionLayout:
         self.hl_src, self.hd_src = low[strict], -np.ones(n, _I64)
         self.hd_src[r[~off]] = low[~off]
         slots = Slots(self.hs)
-        self.hl_lo, self.hl_up = slots.pairs(r[strict], c[strict]), slots.pairs(c[strict], r[strict])
+        self.hl_lo, self.hl_up = (
+            slots.pairs(r[strict], c[strict]),
+            slots.pairs(c[strict], r[strict]),
+        )
         self.hd_slot = slots.pairs(np.arange(n), np.arange(n))
         self.hd = np.zeros(n)
         lens = np.diff(ai.indptr).astype(_I64)
@@ -170,7 +174,10 @@ class ReductionLayout:
             [*(np.tile(U[b], self.shape[b, 0]) for b in range(B)), *kept_rows, np.zeros(0, _I64)]
         ).astype(_I64)
         self._kept_rows = kept_rows
-        orow = np.concatenate([*(np.repeat(self.dep[uoff[b] : uoff[b + 1]], self.pwidth[b]) for b in range(B)), *(np.full(len(c), k) for k, c in zip(self.red_cols, kept_rows)), np.zeros(0, _I64)])  # fmt: skip
+        orow = np.concatenate(
+            [*(np.repeat(self.dep[uoff[b] : uoff[b + 1]], self.pwidth[b]) for b in range(B)),
+             np.repeat(self.red_cols, klen), np.zeros(0, _I64)]
+        )  # fmt: skip
         row_key = np.arange(self.n)  # rows with the same output columns share their maps
         for b in range(B):
             row_key[self.dep[uoff[b] : uoff[b + 1]]] = self.n + b
