@@ -16,10 +16,11 @@ _FAST = {"cache": True, "fastmath": {"contract", "reassoc"}, "error_model": "num
 
 @nb.njit(**_FAST)
 def _segments_into(x, s0, s1, off, seg_ptr, seg_block, seg_e, seg_arg, seg_out, seg_map, pos,
-                   ebuf, eoff, shape, out, acc) -> None:  # fmt: skip
+                   seg_len, ebuf, eoff, shape, out, acc) -> None:  # fmt: skip
     """Segments ``s0 … s1`` of ``X T`` added into ``out`` (rows' results at ``seg_out - off``):
     a segment of a row's entries on one block's dependent columns is summed densely over the
-    block's reach (contiguous rows of ``E_b``, ``seg_arg`` the row) and added at
+    first ``seg_len`` of the block's reach (contiguous rows of ``E_b``, ``seg_arg`` the row) and
+    added at
     ``pos[seg_map[s]:]`` relative to its row's result; a kept column's entry at ``seg_arg``
     (:meth:`~mbplan.solvers.reduction_layout.ReductionLayout._segments`)."""
     for s in range(s0, s1):
@@ -29,32 +30,33 @@ def _segments_into(x, s0, s1, off, seg_ptr, seg_block, seg_e, seg_arg, seg_out, 
             for t in range(t0, t1):
                 ov[U64(seg_arg[t])] += x[U64(seg_e[t])]
             continue
-        m, eo = shape[b, 1], eoff[b]
+        m, eo, ml = shape[b, 1], eoff[b], seg_len[s]
         a = x[U64(seg_e[t0])]
         ep = ebuf[U64(eo + seg_arg[t0] * m) :]
-        for q in range(m):
+        for q in range(ml):
             acc[q] = a * ep[q]
         for t in range(t0 + 1, t1):
             a = x[U64(seg_e[t])]
             ep = ebuf[U64(eo + seg_arg[t] * m) :]
-            for q in range(m):
+            for q in range(ml):
                 acc[q] += a * ep[q]
         pm = pos[U64(seg_map[s]) :]
-        for q in range(m):
+        for q in range(ml):
             ov[U64(pm[q])] -= acc[q]
 
 
 @nb.njit(**_FAST)
-def times_t(x, seg_ptr, seg_block, seg_e, seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape,
-            out, acc) -> None:  # fmt: skip
+def times_t(x, seg_ptr, seg_block, seg_e, seg_arg, seg_out, seg_map, pos, seg_len, ebuf, eoff,
+            shape, out, acc) -> None:  # fmt: skip
     """``out = X T`` in its rows' result layouts (:func:`_segments_into`)."""
     x, seg_ptr, seg_block, seg_e = borrowed(x), borrowed(seg_ptr), borrowed(seg_block), borrowed(seg_e)  # fmt: skip
     seg_arg, seg_out, seg_map, pos = borrowed(seg_arg), borrowed(seg_out), borrowed(seg_map), borrowed(pos)  # fmt: skip
     ebuf, eoff, shape, out, acc = borrowed(ebuf), borrowed(eoff), borrowed(shape), borrowed(out), borrowed(acc)  # fmt: skip
+    seg_len = borrowed(seg_len)
     for e in range(out.shape[0]):
         out[e] = 0.0
     _segments_into(x, 0, seg_block.shape[0], 0, seg_ptr, seg_block, seg_e, seg_arg, seg_out,
-                   seg_map, pos, ebuf, eoff, shape, out, acc)  # fmt: skip
+                   seg_map, pos, seg_len, ebuf, eoff, shape, out, acc)  # fmt: skip
 
 
 @nb.njit(**_FAST)
@@ -116,7 +118,7 @@ def _tdt_lower(hr, d, dep, red_cols, ebuf, eoff, shape, uoff, tt_off, tt_slot, d
 
 @nb.njit(**_FAST)
 def hr_values(hl, hl_lo, hl_up, hd, hd_slot, hf, fold_slot, ai_p, ai, sigma, seg_ptr, seg_block, seg_e, seg_arg, seg_out,
-              seg_map, pos, bseg_ptr, ebuf, eoff, shape, reach_ptr, panel_off, pwidth, pbuf, kbuf,
+              seg_map, pos, seg_len, bseg_ptr, ebuf, eoff, shape, reach_ptr, panel_off, pwidth, pbuf, kbuf,
               kw_pos, kw_slot, lo_ptr, lo_slot, hr, acc) -> bool:  # fmt: skip
     """``hr = tril(Tᵀ H_f T)``, ``H_f = H + A_Iᵀ diag(σ) A_I`` (``H``: strictly lower ``hl`` at
     slots ``hl_lo`` and ``hl_up`` of ``H_f``, diagonal ``hd`` at ``hd_slot``; the fold row by row of ``A_I`` (CSR ``ai_p``, ``ai``), pair by pair of its
@@ -129,6 +131,7 @@ def hr_values(hl, hl_lo, hl_up, hd, hd_slot, hf, fold_slot, ai_p, ai, sigma, seg
     ai_p, ai, sigma = borrowed(ai_p), borrowed(ai), borrowed(sigma)
     seg_ptr, seg_block, seg_e = borrowed(seg_ptr), borrowed(seg_block), borrowed(seg_e)
     seg_arg, seg_out, seg_map, pos = borrowed(seg_arg), borrowed(seg_out), borrowed(seg_map), borrowed(pos)  # fmt: skip
+    seg_len = borrowed(seg_len)
     bseg_ptr, ebuf, eoff, shape = borrowed(bseg_ptr), borrowed(ebuf), borrowed(eoff), borrowed(shape)  # fmt: skip
     reach_ptr, panel_off, pwidth = borrowed(reach_ptr), borrowed(panel_off), borrowed(pwidth)
     pbuf, kbuf, kw_pos, kw_slot = borrowed(pbuf), borrowed(kbuf), borrowed(kw_pos), borrowed(kw_slot)  # fmt: skip
@@ -155,12 +158,12 @@ def hr_values(hl, hl_lo, hl_up, hd, hd_slot, hf, fold_slot, ai_p, ai, sigma, seg
         for e in range(shape[b, 0] * pwidth[b]):
             pbuf[e] = 0.0
         _segments_into(hf, bseg_ptr[b], bseg_ptr[b + 1], panel_off[b], seg_ptr, seg_block, seg_e,
-                       seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape, pbuf, acc)  # fmt: skip
+                       seg_arg, seg_out, seg_map, pos, seg_len, ebuf, eoff, shape, pbuf, acc)  # fmt: skip
         _tp_lower(hr, pbuf, b, ebuf, eoff, shape, pwidth, reach_ptr, lo_ptr, lo_slot, acc)
     for e in range(kbuf.shape[0]):
         kbuf[e] = 0.0
     _segments_into(hf, bseg_ptr[B], bseg_ptr[B + 1], panel_off[B], seg_ptr, seg_block, seg_e,
-                   seg_arg, seg_out, seg_map, pos, ebuf, eoff, shape, kbuf, acc)  # fmt: skip
+                   seg_arg, seg_out, seg_map, pos, seg_len, ebuf, eoff, shape, kbuf, acc)  # fmt: skip
     for t in range(kw_pos.shape[0]):
         hr[U64(kw_slot[t])] += kbuf[U64(kw_pos[t])]
     ok = 0.0

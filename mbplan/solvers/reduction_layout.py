@@ -89,7 +89,7 @@ class ReductionLayout:
         rows = np.arange(len(self.kept))
         self.ak_seg = self._segments(
             self.ak, self.Ar.indptr[:-1], np.repeat(rows, np.diff(self.Ar.indptr)),
-            self.Ar.indices, rows, rows,
+            self.Ar.indices, rows, rows, np.full(len(rows), self.nr),
         )[0]  # fmt: skip
         m = self.shape[:, 1] if len(self.shape) else np.zeros(1, _I64)
         r = self.shape[:, 0] if len(self.shape) else np.zeros(1, _I64)
@@ -183,7 +183,11 @@ class ReductionLayout:
             row_key[self.dep[uoff[b] : uoff[b + 1]]] = self.n + b
         rank = np.empty(self.n, _I64)  # the blocks' dependent rows first, block by block
         rank[np.concatenate([self.dep, self.red_cols])] = np.arange(self.n)
-        self.hs_seg, seg_row = self._segments(self.hs, ostart, orow, ocol, row_key, rank)
+        bound = self.red_of.copy()  # W's entries needed: the lower triangle of Tᵀ W
+        for b in range(B):
+            reach = self.reach_red[self.reach_ptr[b] : self.reach_ptr[b + 1]]
+            bound[self.dep[uoff[b] : uoff[b + 1]]] = reach.max(initial=-1)
+        self.hs_seg, seg_row = self._segments(self.hs, ostart, orow, ocol, row_key, rank, bound)
         row_block = np.full(self.n, B, _I64)
         row_block[self.dep] = np.repeat(np.arange(B), np.diff(uoff))
         self.bseg_ptr = np.searchsorted(row_block[seg_row], np.arange(B + 2)).astype(_I64)
@@ -238,7 +242,7 @@ class ReductionLayout:
 
     def _segments(
         self, x: sp.csr_matrix, ostart: np.ndarray, orow: np.ndarray, ocol: np.ndarray,
-        row_key: np.ndarray, rank: np.ndarray,
+        row_key: np.ndarray, rank: np.ndarray, bound: np.ndarray,
     ) -> tuple[tuple[np.ndarray, ...], np.ndarray]:  # fmt: skip
         """For :func:`~mbplan.solvers.reduced_products.times_t` (``X T`` for ``x``'s pattern,
         row ``i``'s result at ``out[ostart[i] + k]`` over its sorted columns, position by position
@@ -247,8 +251,9 @@ class ReductionLayout:
         (positions in ``x.data``) and its row's ``seg_out = ostart[i]``; per entry ``seg_arg``:
         the dependent column's row in the block's ``E`` (a kept column: its position in the
         row's result); per block segment ``seg_map``: where the block's reach lies in the row's
-        result (``pos[seg_map[s] + q]``, shared by rows of equal ``row_key``). Rows in the order
-        of ``rank``; also each segment's row."""
+        result (``pos[seg_map[s] + q]``, shared by rows of equal ``row_key``) and ``seg_len``:
+        how many of the block's reach columns (sorted) are at most the row's ``bound`` (the
+        others are not needed). Rows in the order of ``rank``; also each segment's row."""
         block_of, local = -np.ones(self.n, _I64), np.zeros(self.n, _I64)
         for b in range(len(self.shape)):
             dep = self.dep[self.uoff[b] : self.uoff[b + 1]]
@@ -286,5 +291,12 @@ class ReductionLayout:
         at = np.repeat(self.reach_ptr[b] - np.cumsum(length) + length, length) + np.arange(length.sum())  # fmt: skip
         pos = (where(np.repeat(i, length), self.reach_red[at]) - np.repeat(np.asarray(ostart)[i], length)).astype(_I64)  # fmt: skip
         seg_map[blocks] = (np.cumsum(length) - length)[inv]
+        seg_len = np.zeros(len(starts), _I64)
+        b, bnd = seg_block[blocks], np.asarray(bound, _I64)[seg_row[blocks]]
+        block_of_reach = np.repeat(np.arange(len(self.shape)), np.diff(self.reach_ptr))
+        reach_key = block_of_reach * (nr + 1) + self.reach_red  # sorted: blocks, then reach
+        seg_len[blocks] = (
+            np.searchsorted(reach_key, b * (nr + 1) + bnd, "right") - self.reach_ptr[b]
+        )
         return (np.append(starts, len(r_s)).astype(_I64), seg_block.astype(_I64),
-                seg_e.astype(_I64), seg_arg.astype(_I64), seg_out, seg_map, pos), seg_row  # fmt: skip
+                seg_e.astype(_I64), seg_arg.astype(_I64), seg_out, seg_map, pos, seg_len), seg_row  # fmt: skip
