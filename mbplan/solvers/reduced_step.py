@@ -14,8 +14,9 @@ inequality rows folded in (``D_I < 0``, ``Σ = -D_I⁻¹``: inertia ``(0, m_I, 0
 residual ratio, then against the full ``K`` (IPOPT's ratio).
 
 The symbolic phase (once per pattern) picks the replaced rows and dependent columns by QR
-with column pivoting on the first matrix's values and builds every index array; the numeric
-phase is compiled (:mod:`mbplan.solvers.reduction`, :mod:`mbplan.solvers.reduced_kernels`).
+with column pivoting on the values of the pattern's first matrix (again on those of a matrix
+they break down on: :func:`~mbplan.solvers.reduction.repick`) and builds every index array;
+the numeric phase is compiled (:mod:`mbplan.solvers.reduction`).
 The full factorization is the fallback: a nonzero diagonal on an eliminated row (``δ_c > 0``,
 restoration), a pivot breakdown in the reduction or in ``K_r``, or a refined solve that does
 not converge.

@@ -1,8 +1,10 @@
 """The two congruences of an :class:`~mbplan.solvers.elimination.EliminationPlan` for
 :class:`~mbplan.solvers.reduced_step.ReducedKKTSystem`: the symbolic phase
-(:mod:`mbplan.solvers.reduction_symbolic`, memoized per process), the numeric phase (compiled
-kernels of :mod:`mbplan.solvers.reduced_kernels`), the factorization of the reduced matrix
-``K_r`` and one solve through the reduction."""
+(:mod:`mbplan.solvers.reduction_symbolic`, :mod:`mbplan.solvers.reduction_layout`, memoized
+per process with the choices of replaced rows and dependent columns made so far), the numeric
+phase (compiled kernels of :mod:`mbplan.solvers.reduced_kernels`,
+:mod:`mbplan.solvers.reduced_products`, :mod:`mbplan.solvers.reduced_solves`), the
+factorization of the reduced matrix ``K_r`` and one solve through the reduction."""
 
 from __future__ import annotations
 
@@ -142,6 +144,8 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         self.kkt = KKTSystem(self.nr, len(self.kept), 0, **self.factor_options)
         self.ok = False
         self._pool: list[dict] = []  # work arrays of copies no longer alive (:meth:`fresh`)
+        for name in ("T", "hs", "union", "reach", "outer", "_kept_rows", "ostart"):
+            delattr(self, name)  # the symbolic phase's own
         self._compact()
         self.dep_key = (self.g_sel.tobytes(), self.tgt.tobytes(), self.dep.tobytes())  # the choice
         self._tuples()
