@@ -1,8 +1,9 @@
 """The arm sweep of ``tests/test_sweep.py`` (every arm, joint and frame goal, N = 6, rest warm
-start) planned by the RIPM with each ``kkt_method`` given: success, iterations and time per task,
-one JSON object on the last line. Run it in two checkouts to compare them.
+start) planned by the RIPM with each ``kkt_method`` given (``auto``: the default) in one process:
+success, iterations and time per task, one JSON object on the last line. Run it in two checkouts
+to compare them (from the root of each: it imports the working directory's ``mbplan``).
 
-    python benchmarks/reduced_arm_sweep.py full,reduced > arm-sweep.json
+    python benchmarks/reduced_arm_sweep.py full,reduced,auto > arm-sweep.json
 """
 
 from __future__ import annotations
@@ -14,21 +15,19 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(ROOT / "tests")]
+sys.path.insert(0, str(Path.cwd()))
 
-from test_sweep import _robot, _tasks  # noqa: E402
-
-import mbplan as mb  # noqa: E402
-from mbplan.robots import available_robots  # noqa: E402
+import mbplan as mb
+from mbplan.benchmarks.arm_sweep import sweep_robot, sweep_tasks
+from mbplan.robots import available_robots
 
 
 def main() -> None:
     methods = sys.argv[1].split(",") if len(sys.argv) > 1 else ["full", "reduced"]
     out = {}
     for name in available_robots():
-        robot = _robot(name)
-        for kind, ocp in _tasks(robot, seed=len(name)).items():
+        robot = sweep_robot(name)
+        for kind, ocp in sweep_tasks(robot, seed=len(name)).items():
             for m in methods:
                 rest = np.repeat(ocp.q0[None], ocp.N + 1, axis=0)
                 t0 = time.perf_counter()

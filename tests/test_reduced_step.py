@@ -2,6 +2,8 @@
 the full LDLᵀ and the dense eigenvalues: same inertia (also wrong and singular), same steps,
 the cases it leaves to the full factorization, and a RIPM solve with kkt_method="reduced"."""
 
+from collections import OrderedDict
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,7 @@ from mbplan.formulations import maximal_layout
 from mbplan.formulations.maximal_layout import JointEliminationPlans, joint_elimination_plan
 from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
 from mbplan.solvers import RIPMOptions, solve_ripm
+from mbplan.solvers import reduction as reduction_module
 from mbplan.solvers.elimination import EliminationPlan
 from mbplan.solvers.examples import hs071
 from mbplan.solvers.linear_solver import Inertia, KKTSystem
@@ -201,3 +204,47 @@ def test_breakdown_and_invalid_plan_fall_back_to_the_full_factorization(systems)
     strict = ReducedKKTSystem(problem.n, problem.n_eq, problem.n_ineq, invalid, strict=True)
     with pytest.raises(InputError, match="no plan here"):
         strict.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+
+
+def test_rows_and_columns_picked_on_another_problem_are_picked_again(monkeypatch):
+    """The replaced rows and dependent columns are picked on the values of the pattern's first
+    matrix and memoized per pattern: a later problem of the same pattern whose values break
+    that choice down gets one picked on its own values (memoized first), not the full
+    factorization for its whole solve (the arm sweep's z1 after the ur arms)."""
+    problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
+    problem.elimination_plan = JointEliminationPlans(problem, forces=True)
+    rng = np.random.default_rng(4)
+    z = rng.uniform(0.5, 2.0, problem.n_ineq)
+    ev = problem.evaluate(x0, 1.0, rng.normal(size=problem.n_eq), z)
+    plan = problem.elimination_plan(ev.eq_jacobian)
+    own = plan.block_cols[0][plan.block_cols[0] >= 0]
+    probe = ReducedKKTSystem(problem.n, problem.n_eq, problem.n_ineq, lambda _: plan)
+    probe.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+    col = np.setdiff1d(own, probe.reduction.dep)[0]  # a free column of block 0
+
+    def scaled(s):  # A_E with that column scaled: the plan's row spans hold for every s
+        jac = ev.eq_jacobian.copy()
+        jac.data[jac.indices == col] *= s
+        return jac
+
+    monkeypatch.setattr(reduction_module, "_REDUCTIONS", OrderedDict())
+    diag = _diag(problem, 1e-4, 0.0, -rng.uniform(0.5, 2.0, problem.n_ineq) / z)
+    b = rng.normal(size=probe.dim)
+    choices = []
+    for s in (1e6, 0.0, 0.0, 1e6):  # the first picks the column, the second zeroes it
+        red = ReducedKKTSystem(problem.n, problem.n_eq, problem.n_ineq, lambda _: plan)
+        full = KKTSystem(problem.n, problem.n_eq, problem.n_ineq)
+        for kkt in (red, full):
+            kkt.set_matrices(ev.hessian_lower, scaled(s), ev.ineq_jacobian)
+        inertia, full_inertia = red.factorize(diag, 1e-9), full.factorize(diag, 1e-9)
+        eig = np.linalg.eigvalsh(full.matrix().toarray())
+        assert red.n_reduced == 1
+        assert inertia == full_inertia == Inertia(int(np.sum(eig > 0)), int(np.sum(eig < 0)), 0)
+        x_full, (x_red, ratio) = full.solve(b)[0], red.solve(b)
+        assert red.n_fallbacks == 0 and ratio <= 1e-10
+        assert np.abs(x_red - x_full).max() <= 1e-6 * np.abs(x_full).max()
+        choices.append(red.reduction.dep_key)
+        if len(choices) == 1:
+            assert col in red.reduction.dep  # picked on the scaled column
+    assert choices[1] != choices[0]  # broke down on the zeroed column: picked again
+    assert choices[2] == choices[3] == choices[1]  # the new choice is memoized first

@@ -1,37 +1,43 @@
-"""Compiled kernels of :class:`~mbplan.solvers.reduced_step.ReducedKKTSystem`: the row groups'
-combinations ``M_j``, the blocks' null-space coefficients ``E`` (small dense LU with partial
-pivoting, block by block in plan order), products with fixed sparsity patterns, and the solves
-with the eliminated pairs' block-triangular ``B`` (:mod:`mbplan.solvers.elimination`)."""
+"""Compiled kernels of :class:`~mbplan.solvers.reduced_step.ReducedKKTSystem`'s values: the row
+groups' combinations ``M_j``, the blocks' null-space coefficients ``E`` (small dense LU with
+partial pivoting, block by block in plan order) and the solves with the eliminated pairs'
+block-triangular ``B`` (:mod:`mbplan.solvers.elimination`). Every entry kernel borrows its
+arguments (:mod:`mbplan.solvers.numba_borrow`: no reference counting of the per-block views);
+inner loops are zero-based over contiguous rows, so that they vectorize."""
 
 from __future__ import annotations
 
 import numba as nb
-import numpy as np
+
+from mbplan.solvers.numba_borrow import borrowed
 
 PIVOT_TOL = 1e-12
 """A block's or a group's LU breaks down on a pivot below this times the
 block's largest entry: the caller then factorizes the full matrix."""
 
-
-@nb.njit(cache=True)
-def _gather(data, slot, out) -> None:
-    """``out = data[slot]`` (``0`` where ``slot < 0``), 2-D."""
-    for a in range(slot.shape[0]):
-        for q in range(slot.shape[1]):
-            out[a, q] = data[slot[a, q]] if slot[a, q] >= 0 else 0.0
+U64 = nb.uint64  # unsigned flat indices: no negative-index wraparound code in the loops
+_FAST = {"cache": True, "fastmath": {"contract", "reassoc"}, "error_model": "numpy"}
 
 
-@nb.njit(cache=True)
-def _lu(A, piv) -> bool:
-    """In-place LU with partial pivoting (``piv``: row swaps); False on a tiny pivot."""
+@nb.njit(**_FAST)
+def _lu(A, piv, end) -> bool:
+    """In-place LU with partial pivoting (``piv``: row swaps) of a block upper triangular ``A``
+    (``end[k]``: the end of column ``k``'s diagonal block, below it zeros: the pivot is searched
+    and rows are eliminated within it); False on a pivot below :data:`PIVOT_TOL` times the
+    largest entry."""
     r = A.shape[0]
-    scale = 0.0
-    for a in range(r):
-        for b in range(r):
-            scale = max(scale, abs(A[a, b]))
+    flat = A.reshape(-1)
+    s0 = s1 = s2 = s3 = 0.0  # four chains: the maximum has no reassociation
+    n4 = r * r - r * r % 4
+    for t in range(0, n4, 4):
+        s0, s1 = max(s0, abs(flat[t])), max(s1, abs(flat[t + 1]))
+        s2, s3 = max(s2, abs(flat[t + 2])), max(s3, abs(flat[t + 3]))
+    for t in range(n4, r * r):
+        s0 = max(s0, abs(flat[t]))
+    scale = max(max(s0, s1), max(s2, s3))
     for k in range(r):
-        p = k
-        for a in range(k + 1, r):
+        p, e = k, end[k]
+        for a in range(k + 1, e):
             if abs(A[a, k]) > abs(A[p, k]):
                 p = a
         if not abs(A[p, k]) > PIVOT_TOL * scale:
@@ -40,372 +46,314 @@ def _lu(A, piv) -> bool:
         if p != k:
             for b in range(r):
                 A[k, b], A[p, b] = A[p, b], A[k, b]
-        for a in range(k + 1, r):
+        ak = A[k, k + 1 :]
+        for a in range(k + 1, e):
             if A[a, k] != 0.0:  # the blocks are sparse: skip the zero multipliers
                 A[a, k] /= A[k, k]
-                f = A[a, k]
-                for b in range(k + 1, r):
-                    A[a, b] -= f * A[k, b]
+                f, aa = A[a, k], A[a, k + 1 :]
+                for b in range(r - k - 1):
+                    aa[b] -= f * ak[b]
     return True
 
 
-@nb.njit(cache=True)
-def _lu_solve(A, piv, X) -> None:
-    """``X ← A⁻¹ X`` with the factors of :func:`_lu` (``X``: ``(r, q)``)."""
-    r = A.shape[0]
+@nb.njit(**_FAST)
+def _lu_solve(A, piv, X, begin) -> None:
+    """``X ← A⁻¹ X`` with the factors of :func:`_lu` (``X``: ``(r, q)``; ``begin[a]``: the
+    beginning of row ``a``'s diagonal block, where ``L`` lives), row by row: contiguous
+    updates over the columns, ``U``'s zero factors skipped."""
+    r, q = A.shape[0], X.shape[1]
     for k in range(r):
         p = piv[k]
         if p != k:
-            for c in range(X.shape[1]):
+            for c in range(q):
                 X[k, c], X[p, c] = X[p, c], X[k, c]
-    q = X.shape[1]
-    for a in range(r):  # row by row: contiguous updates over the columns, zeros skipped
-        for b in range(a):
-            f = A[a, b]
-            if f != 0.0:
-                for c in range(q):
-                    X[a, c] -= f * X[b, c]
+    for a in range(r):
+        xa = X[a]
+        for b in range(begin[a], a):
+            f, xb = A[a, b], X[b]
+            for c in range(q):
+                xa[c] -= f * xb[c]
     for a in range(r - 1, -1, -1):
+        xa = X[a]
         for b in range(a + 1, r):
             f = A[a, b]
             if f != 0.0:
+                xb = X[b]
                 for c in range(q):
-                    X[a, c] -= f * X[b, c]
+                    xa[c] -= f * xb[c]
+        inv = 1.0 / A[a, a]
         for c in range(q):
-            X[a, c] /= A[a, a]
+            xa[c] *= inv
 
 
-@nb.njit(cache=True)
-def _lu_solve_t(A, piv, x) -> None:
-    """``x ← A⁻ᵀ x`` with the factors of :func:`_lu`."""
-    r = A.shape[0]
+@nb.njit(**_FAST)
+def _lu_solve_t_rows(A, piv, X, begin) -> None:
+    """``X ← A⁻ᵀ X`` with the factors of :func:`_lu` (``X``: ``(r, q)``, few columns; ``begin``
+    as in :func:`_lu_solve`), row by row without branches."""
+    r, q = A.shape[0], X.shape[1]
     for a in range(r):  # Uᵀ
-        t = x[a]
-        for b in range(a):
-            t -= A[b, a] * x[b]
-        x[a] = t / A[a, a]
-    for a in range(r - 1, -1, -1):  # Lᵀ (unit)
-        t = x[a]
+        xa, ua = X[a], A[a]
+        inv = 1.0 / ua[a]
+        for c in range(q):
+            xa[c] *= inv
         for b in range(a + 1, r):
-            t -= A[b, a] * x[b]
-        x[a] = t
+            f, xb = ua[b], X[b]
+            for c in range(q):
+                xb[c] -= f * xa[c]
+    for a in range(r - 1, -1, -1):  # Lᵀ (unit), inside the diagonal block
+        xa, la = X[a], A[a]
+        for b in range(begin[a], a):
+            f, xb = la[b], X[b]
+            for c in range(q):
+                xb[c] -= f * xa[c]
     for k in range(r - 1, -1, -1):
         p = piv[k]
         if p != k:
-            x[k], x[p] = x[p], x[k]
+            for c in range(q):
+                X[k, c], X[p, c] = X[p, c], X[k, c]
 
 
-@nb.njit(cache=True)
-def group_values(ae, g_sel, h_sel, pad, g_outer, h_outer, M, new_rows) -> bool:
+@nb.njit(**_FAST)
+def _gather(data, slot, out) -> None:
+    """``out = data[slot]`` (``0`` where ``slot < 0``), 2-D."""
+    for a in range(slot.shape[0]):
+        sa, oa = slot[a], out[a]
+        for q in range(slot.shape[1]):
+            s = sa[q]
+            oa[q] = data[U64(s)] if s >= 0 else 0.0
+
+
+@nb.njit(**_FAST)
+def group_values(ae, g_sel, h_sel, pad, g_begin, g_end, g_outer, h_outer, M, new_rows, A, X,
+                 piv) -> bool:  # fmt: skip
     """Per group ``j``: ``M_j = A_h G⁻¹`` on ``g`` selected cancelled columns (``G``: the source
     rows there, square; ``A_h``: the subtracted rows), and the new rows
     ``M_j A[sources] - A[subtract]`` on the outer columns. ``g_sel`` ``(J, g, g)``, ``h_sel``
     ``(J, r, g)``, ``g_outer`` ``(J, g, o)``, ``h_outer`` ``(J, r, o)``: slots of the entries in
-    ``ae`` (``-1``: zero); a padded source row (``pad``) gets a unit pivot. False on a
-    breakdown (:func:`_lu`)."""
+    ``ae`` (``-1``: zero); a padded source row (``pad``) gets a unit pivot; ``g_begin``,
+    ``g_end``: the diagonal blocks of the sources and columns in block triangular order
+    (:func:`_lu`). ``A``
+    ``(g, g)``, ``X`` ``(g, r)``, ``piv``: scratch. False on a breakdown."""
+    ae, g_sel, h_sel, pad = borrowed(ae), borrowed(g_sel), borrowed(h_sel), borrowed(pad)
+    g_outer, h_outer, M, new_rows = borrowed(g_outer), borrowed(h_outer), borrowed(M), borrowed(new_rows)  # fmt: skip
+    g_begin, g_end, A, X, piv = borrowed(g_begin), borrowed(g_end), borrowed(A), borrowed(X), borrowed(piv)  # fmt: skip
     J, g = g_sel.shape[0], g_sel.shape[1]
     r, o = h_sel.shape[1], g_outer.shape[2]
-    A, Hs = np.empty((g, g)), np.empty((r, g))
-    Go, Ho = np.empty((g, o)), np.empty((r, o))
-    piv = np.empty(g, np.int64)
     for j in range(J):
         _gather(ae, g_sel[j], A)
         for a in range(g):
             if pad[j, a]:
                 A[a, a] = 1.0
-        if not _lu(A, piv):
+        if not _lu(A, piv, g_end[j]):
             return False
-        _gather(ae, h_sel[j], Hs)
-        for i in range(r):
-            _lu_solve_t(A, piv, Hs[i])
-        M[j] = Hs
-        _gather(ae, g_outer[j], Go)
-        _gather(ae, h_outer[j], Ho)
-        for i in range(r):
-            for q in range(o):
-                new_rows[j, i, q] = -Ho[i, q]
-        for a in range(g):
-            for q in range(o):
-                v = Go[a, q]
-                if v != 0.0:
-                    for i in range(r):
-                        new_rows[j, i, q] += Hs[i, a] * v
-    return True
-
-
-@nb.njit(cache=True)
-def block_values(
-    ae, new_rows, l_dst_a, l_src_a, l_dst_n, l_src_n, lbuf, shape, loff, eoff, cptr, cblk,
-    ccol, fmap_off, fmap, rmap_off, rmap, lu, lu_off, piv, uoff, ebuf,
-) -> bool:  # fmt: skip
-    """Local rows ``L_b`` (scattered from ``ae`` and the groups' new rows), then per block in
-    plan order ``E_b = L_b[:, dep]⁻¹ (L_b[:, free] + Σ_i (L_b[:, free_i] - L_b[:, dep_i] E_i))``
-    over its reach ``R_b`` (own free columns first), coupled blocks ``i`` from
-    ``cblk[cptr[b]:cptr[b+1]]`` (columns from ``ccol``, positions of their free columns and
-    reach in ``R_b`` from ``fmap`` / ``rmap``). ``shape[b] = (r, w, |R_b|, f)``; LU factors of
-    ``L_b[:, dep]`` kept in ``lu`` / ``piv`` (at ``lu_off`` / ``uoff``) for the solves. False
-    on a breakdown."""
-    lbuf[:] = 0.0
-    for e in range(l_dst_a.shape[0]):
-        lbuf[l_dst_a[e]] = ae[l_src_a[e]]
-    flat_new = new_rows.reshape(-1)
-    for e in range(l_dst_n.shape[0]):
-        lbuf[l_dst_n[e]] = flat_new[l_src_n[e]]
-    work = np.empty(np.max(shape[:, 0] * shape[:, 2]) if shape.shape[0] else 0)
-    for b in range(shape.shape[0]):
-        r, w, nr, f = shape[b, 0], shape[b, 1], shape[b, 2], shape[b, 3]
-        L = lbuf[loff[b] : loff[b] + r * w].reshape(r, w)
-        rhs = work[: r * nr].reshape(r, nr)
-        rhs[:, :] = 0.0
-        rhs[:, :f] = L[:, r : r + f]
-        for k in range(cptr[b], cptr[b + 1]):
-            i, co = cblk[k], ccol[k]
-            ri, nri, fi = shape[i, 0], shape[i, 2], shape[i, 3]
-            Ei = ebuf[eoff[i] : eoff[i] + ri * nri].reshape(ri, nri)
-            fm = fmap[fmap_off[k] : fmap_off[k] + fi]
-            rm = rmap[rmap_off[k] : rmap_off[k] + nri]
-            for a in range(r):
-                for q in range(fi):
-                    rhs[a, fm[q]] += L[a, co + ri + q]
-                for p in range(ri):
-                    v = L[a, co + p]
-                    if v != 0.0:
-                        for q in range(nri):
-                            rhs[a, rm[q]] -= v * Ei[p, q]
-        A = lu[lu_off[b] : lu_off[b] + r * r].reshape(r, r)
-        A[:, :] = L[:, :r]
-        if not _lu(A, piv[uoff[b] : uoff[b] + r]):
-            return False
-        _lu_solve(A, piv[uoff[b] : uoff[b] + r], rhs)
-        ebuf[eoff[b] : eoff[b] + r * nr] = rhs.reshape(-1)
-    return True
-
-
-@nb.njit(cache=True)
-def spgemm(ap, ai, ax, bp, bi, bx, cp, ci, cx, work) -> None:
-    """``C += A B`` into ``C``'s fixed CSR pattern, a superset of the product's (``work``: zeros
-    of length ``B``'s columns, left zero)."""
-    for i in range(ap.shape[0] - 1):
-        for ka in range(ap[i], ap[i + 1]):
-            k, a = ai[ka], ax[ka]
-            for kb in range(bp[k], bp[k + 1]):
-                work[bi[kb]] += a * bx[kb]
-        for kc in range(cp[i], cp[i + 1]):
-            cx[kc] += work[ci[kc]]
-            work[ci[kc]] = 0.0
-
-
-@nb.njit(cache=True)
-def times_t(hx, row_seg, seg_ptr, seg_block, seg_e, seg_arg, ebuf, eoff, shape, reach_red,
-            reach_ptr, wp, wi, wx, work) -> None:  # fmt: skip
-    """``W = H T`` into ``W``'s fixed CSR pattern, ``T`` given by the blocks (identity on the
-    kept columns, ``-E_b`` on block ``b``'s dependent rows over its reach): row by row, each
-    segment of ``H``'s entries on one block's dependent columns is summed densely over the
-    block's reach (contiguous rows of ``E_b``), then scattered once (segments from
-    :meth:`~mbplan.solvers.reduction_symbolic.ReductionSymbolic._segments`; ``work``: zeros of
-    length ``n_r``, left zero)."""
-    acc = np.zeros(np.max(shape[:, 2]) if shape.shape[0] else 0)
-    for i in range(row_seg.shape[0] - 1):
-        for s in range(row_seg[i], row_seg[i + 1]):
-            b = seg_block[s]
-            if b < 0:
-                for t in range(seg_ptr[s], seg_ptr[s + 1]):
-                    work[seg_arg[t]] += hx[seg_e[t]]
-                continue
-            m = shape[b, 2]
-            for q in range(m):
-                acc[q] = 0.0
-            for t in range(seg_ptr[s], seg_ptr[s + 1]):
-                a, off = hx[seg_e[t]], eoff[b] + seg_arg[t] * m
-                for q in range(m):
-                    acc[q] -= a * ebuf[off + q]
-            rc = reach_ptr[b]
-            for q in range(m):
-                work[reach_red[rc + q]] += acc[q]
-        for kc in range(wp[i], wp[i + 1]):
-            wx[kc] = work[wi[kc]]
-            work[wi[kc]] = 0.0
-
-
-@nb.njit(cache=True)
-def lower_ends(ap, ai, bp, bi) -> np.ndarray:
-    """Per entry ``(i, k)`` of ``A``: the end of row ``k`` of ``B`` (sorted column indices)
-    within the lower triangle of row ``i`` of ``A B`` (symbolic, for :func:`spgemm_lower`)."""
-    ends = np.empty(ai.shape[0], np.int64)
-    for i in range(ap.shape[0] - 1):
-        for ka in range(ap[i], ap[i + 1]):
-            k = ai[ka]
-            kb = bp[k]
-            while kb < bp[k + 1] and bi[kb] <= i:
-                kb += 1
-            ends[ka] = kb
-    return ends
-
-
-@nb.njit(cache=True)
-def spgemm_lower(ap, ai, ax, bp, bi, bx, ends, cp, ci, cx, work) -> None:
-    """``C += tril(A B)`` into ``C``'s fixed lower CSR pattern (``ends`` from
-    :func:`lower_ends`; :func:`spgemm`'s other conventions)."""
-    for i in range(ap.shape[0] - 1):
-        for ka in range(ap[i], ap[i + 1]):
-            k, a = ai[ka], ax[ka]
-            for kb in range(bp[k], ends[ka]):
-                work[bi[kb]] += a * bx[kb]
-        for kc in range(cp[i], cp[i + 1]):
-            cx[kc] += work[ci[kc]]
-            work[ci[kc]] = 0.0
-
-
-@nb.njit(cache=True)
-def fold_values(hf, slot, e, f, row, ai, sigma) -> None:
-    """``H_f += A_Iᵀ diag(σ) A_I`` term by term: ``hf[slot] += σ[row] ai[e] ai[f]``."""
-    for t in range(slot.shape[0]):
-        hf[slot[t]] += sigma[row[t]] * ai[e[t]] * ai[f[t]]
-
-
-@nb.njit(cache=True)
-def csr_matvec(indptr, indices, data, x) -> np.ndarray:
-    """``A x`` for CSR arrays (one pass, no scipy call overhead)."""
-    y = np.zeros(indptr.shape[0] - 1)
-    for i in range(y.shape[0]):
-        t = 0.0
-        for e in range(indptr[i], indptr[i + 1]):
-            t += data[e] * x[indices[e]]
-        y[i] = t
-    return y
-
-
-@nb.njit(cache=True)
-def rows_matvec(indptr, indices, data, rows, x) -> np.ndarray:
-    """``(A x)[rows]`` for CSR arrays."""
-    y = np.zeros(rows.shape[0])
-    for k in range(rows.shape[0]):
-        t = 0.0
-        for e in range(indptr[rows[k]], indptr[rows[k] + 1]):
-            t += data[e] * x[indices[e]]
-        y[k] = t
-    return y
-
-
-@nb.njit(cache=True)
-def rows_t_matvec(indptr, indices, data, rows, v, n) -> np.ndarray:
-    """``A[rows]ᵀ v`` (length ``n``) for CSR arrays: for a symmetric ``A``, ``A[:, rows] v``."""
-    y = np.zeros(n)
-    for k in range(rows.shape[0]):
-        vk = v[k]
-        if vk != 0.0:
-            for e in range(indptr[rows[k]], indptr[rows[k] + 1]):
-                y[indices[e]] += data[e] * vk
-    return y
-
-
-@nb.njit(cache=True)
-def kkt_matvec(hp, hi, hx, ep, ei, ex, ip, ii, ix, diag, x) -> np.ndarray:
-    """``K x`` from its blocks: ``H`` (full symmetric CSR), ``A_E``, ``A_I`` (CSR) and the
-    diagonal ``diag`` (module :mod:`mbplan.solvers.linear_solver`'s ``K``)."""
-    n, me = hp.shape[0] - 1, ep.shape[0] - 1
-    y = diag * x
-    for i in range(n):
-        t = 0.0
-        for e in range(hp[i], hp[i + 1]):
-            t += hx[e] * x[hi[e]]
-        y[i] += t
-    for off, p, idx, v in ((n, ep, ei, ex), (n + me, ip, ii, ix)):
-        for r in range(p.shape[0] - 1):
-            t, xr = 0.0, x[off + r]
-            for e in range(p[r], p[r + 1]):
-                t += v[e] * x[idx[e]]
-                y[idx[e]] += v[e] * xr
-            y[off + r] += t
-    return y
-
-
-@nb.njit(cache=True)
-def b_solve(rhs, lbuf, shape, loff, cptr, cblk, ccol, lu, lu_off, piv, uoff) -> np.ndarray:
-    """``B⁻¹ rhs``, ``B`` lower block triangular: per block ``L_b[:, dep]`` on the diagonal and
-    ``L_b[:, dep_i]`` below (``rhs``, result: blocks' local rows / dependent columns at
-    ``uoff``)."""
-    x = rhs.copy()
-    for b in range(shape.shape[0]):
-        r, w = shape[b, 0], shape[b, 1]
-        L = lbuf[loff[b] : loff[b] + r * w].reshape(r, w)
-        xb = x[uoff[b] : uoff[b] + r].reshape(r, 1)
-        for k in range(cptr[b], cptr[b + 1]):
-            i, co = cblk[k], ccol[k]
-            ri = shape[i, 0]
-            xi = x[uoff[i] : uoff[i] + ri]
-            for a in range(r):
-                t = 0.0
-                for q in range(ri):
-                    t += L[a, co + q] * xi[q]
-                xb[a, 0] -= t
-        A = lu[lu_off[b] : lu_off[b] + r * r].reshape(r, r)
-        _lu_solve(A, piv[uoff[b] : uoff[b] + r], xb)
-    return x
-
-
-@nb.njit(cache=True)
-def bt_solve(rhs, lbuf, shape, loff, cptr, cblk, ccol, lu, lu_off, piv, uoff) -> np.ndarray:
-    """``B⁻ᵀ rhs`` (:func:`b_solve`'s ``B``), blocks in reverse order."""
-    x = rhs.copy()
-    for b in range(shape.shape[0] - 1, -1, -1):
-        r, w = shape[b, 0], shape[b, 1]
-        xb = x[uoff[b] : uoff[b] + r]
-        A = lu[lu_off[b] : lu_off[b] + r * r].reshape(r, r)
-        _lu_solve_t(A, piv[uoff[b] : uoff[b] + r], xb)
-        L = lbuf[loff[b] : loff[b] + r * w].reshape(r, w)
-        for k in range(cptr[b], cptr[b + 1]):
-            i, co = cblk[k], ccol[k]
-            ri = shape[i, 0]
-            for q in range(ri):
-                t = 0.0
-                for a in range(r):
-                    t += L[a, co + q] * xb[a]
-                x[uoff[i] + q] -= t
-    return x
-
-
-@nb.njit(cache=True)
-def s_apply(b, tgt, src, sub, M, transpose: bool) -> np.ndarray:
-    """``S b`` (row ``tgt[j, i]`` becomes ``Σ_g M[j, i, g] b[src[j, g]] - b[sub[j, i]]``) or
-    ``Sᵀ b``."""
-    out = b.copy()
-    J, r, g = M.shape
-    if not transpose:
-        for j in range(J):
+        Mj, nr, hs, go = M[j], new_rows[j], h_sel[j], g_outer[j]
+        for a in range(g):  # Mⱼᵀ = G⁻ᵀ A_hᵀ
+            xa = X[a]
             for i in range(r):
-                t = -b[sub[j, i]]
-                for q in range(g):
-                    if src[j, q] >= 0:
-                        t += M[j, i, q] * b[src[j, q]]
-                out[tgt[j, i]] = t
-        return out
-    for j in range(J):
+                s = hs[i, a]
+                xa[i] = ae[U64(s)] if s >= 0 else 0.0
+        _lu_solve_t_rows(A, piv, X, g_begin[j])
         for i in range(r):
-            out[tgt[j, i]] -= b[tgt[j, i]]
-    for j in range(J):
+            for a in range(g):
+                Mj[i, a] = X[a, i]
+        _gather(ae, h_outer[j], nr)
         for i in range(r):
-            v = b[tgt[j, i]]
-            out[sub[j, i]] -= v
-            for q in range(g):
-                if src[j, q] >= 0:
-                    out[src[j, q]] += M[j, i, q] * v
-    return out
+            ni = nr[i]
+            for q in range(o):
+                ni[q] = -ni[q]
+        for a in range(g):
+            xa = X[a]
+            for q in range(o):
+                s = go[a, q]
+                if s >= 0:
+                    v = ae[U64(s)]
+                    for i in range(r):
+                        nr[i, q] += xa[i] * v
+    return True
 
 
-REDUCED_KERNELS = (
-    group_values,
-    block_values,
-    spgemm,
-    spgemm_lower,
-    times_t,
-    lower_ends,
-    fold_values,
-    csr_matvec,
-    rows_matvec,
-    rows_t_matvec,
-    kkt_matvec,
-    b_solve,
-    bt_solve,
-    s_apply,
-)
+@nb.njit(**_FAST)
+def block_values(
+    ae, new_rows, la_src, ln_src, lval, shape, eoff, lu_off, uoff, lu_begin, lu_end, a_ptr, a_src, a_dst, fe_ptr,
+    fe_src, fe_dst, cptr, cblk, nz_ptr, nz_a, nz_p, nz_src, rmap_off, rmap, lu, piv, dinv, ebuf,
+    tmp,
+) -> bool:  # fmt: skip
+    """The local rows' entries ``lval`` (from ``ae`` and the groups' new rows), then per block in
+    plan order ``E_b = L_b[:, dep]⁻¹ (L_b[:, free] - Σ_i L_b[:, dep_i] E_i)`` over its sorted
+    reach (the free columns, own and coupled, at their reach positions), the coupled blocks
+    ``i = cblk[k]`` by their entries ``nz_*[nz_ptr[k]:nz_ptr[k+1]]`` (row, dependent column,
+    value), summed densely over ``i``'s reach and scattered by ``rmap`` (index arrays:
+    :meth:`~mbplan.solvers.reduction_symbolic.ReductionSymbolic._block_entries`). LU factors of
+    ``L_b[:, dep]`` (its local rows and dependent columns in block triangular order, the
+    diagonal blocks' ends in ``lu_end``) in ``lu`` / ``piv`` (at ``lu_off`` / ``uoff``) and the reciprocals of ``U``'s
+    diagonal in ``dinv`` for the solves; ``tmp``: scratch of the largest reach. False on a
+    breakdown."""
+    ae, new_rows, la_src, ln_src = borrowed(ae), borrowed(new_rows), borrowed(la_src), borrowed(ln_src)  # fmt: skip
+    lval, shape, eoff, lu_off = borrowed(lval), borrowed(shape), borrowed(eoff), borrowed(lu_off)
+    uoff, a_ptr, a_src, a_dst = borrowed(uoff), borrowed(a_ptr), borrowed(a_src), borrowed(a_dst)
+    lu_begin, lu_end = borrowed(lu_begin), borrowed(lu_end)
+    fe_ptr, fe_src, fe_dst, cptr = borrowed(fe_ptr), borrowed(fe_src), borrowed(fe_dst), borrowed(cptr)  # fmt: skip
+    cblk, nz_ptr, nz_a, nz_p = borrowed(cblk), borrowed(nz_ptr), borrowed(nz_a), borrowed(nz_p)
+    nz_src, rmap_off, rmap = borrowed(nz_src), borrowed(rmap_off), borrowed(rmap)
+    lu, piv, dinv = borrowed(lu), borrowed(piv), borrowed(dinv)
+    ebuf, tmp = borrowed(ebuf), borrowed(tmp)
+    na = la_src.shape[0]
+    for t in range(na):
+        lval[t] = ae[U64(la_src[t])]
+    flat_new = new_rows.reshape(-1)
+    for t in range(ln_src.shape[0]):
+        lval[U64(na + t)] = flat_new[U64(ln_src[t])]
+    for b in range(shape.shape[0]):
+        r, m = shape[b, 0], shape[b, 1]
+        eo = eoff[b]
+        for q in range(r * m):
+            ebuf[U64(eo + q)] = 0.0
+        for t in range(fe_ptr[b], fe_ptr[b + 1]):
+            ebuf[U64(fe_dst[t])] += lval[U64(fe_src[t])]
+        for k in range(cptr[b], cptr[b + 1]):
+            i = cblk[k]
+            mi, ei = shape[i, 1], eoff[i]
+            rm = rmap[U64(rmap_off[k]) :]
+            t, t1 = nz_ptr[k], nz_ptr[k + 1]
+            while t < t1:
+                a = nz_a[t]
+                for q in range(mi):
+                    tmp[q] = 0.0
+                while t < t1 and nz_a[t] == a:
+                    v, ep = lval[U64(nz_src[t])], ebuf[U64(ei + nz_p[t] * mi) :]
+                    for q in range(mi):
+                        tmp[q] += v * ep[q]
+                    t += 1
+                ra = ebuf[U64(eo + a * m) :]
+                for q in range(mi):
+                    ra[U64(rm[q])] -= tmp[q]
+        lo = lu_off[b]
+        for q in range(r * r):
+            lu[U64(lo + q)] = 0.0
+        for t in range(a_ptr[b], a_ptr[b + 1]):
+            lu[U64(a_dst[t])] = lval[U64(a_src[t])]
+        A = lu[lo : lo + r * r].reshape(r, r)
+        pb = piv[uoff[b] : uoff[b] + r]
+        if not _lu(A, pb, lu_end[uoff[b] : uoff[b] + r]):
+            return False
+        _lu_solve(A, pb, ebuf[eo : eo + r * m].reshape(r, m), lu_begin[uoff[b] : uoff[b] + r])
+        for a in range(r):
+            dinv[U64(uoff[b] + a)] = 1.0 / A[a, a]
+    return True
+
+
+@nb.njit(**_FAST)
+def b_solve(x, lval, shape, uoff, bc_ptr, bc_row, bc_col, bc_val, lu, lu_off, piv, dinv,
+            lu_begin) -> None:  # fmt: skip
+    """``x ← B⁻¹ x``, ``B`` lower block triangular (``x``: blocks' local rows / dependent
+    columns at ``uoff``): per block its entries below the diagonal by row (``bc_*`` at
+    ``bc_ptr[b]``: row, column and value in ``lval``), then ``L_b[:, dep]⁻¹`` (its LU factors,
+    ``dinv``: the reciprocals of ``U``'s diagonal, ``L`` inside the diagonal blocks from
+    ``lu_begin``)."""
+    x, lval, shape, uoff, bc_ptr = borrowed(x), borrowed(lval), borrowed(shape), borrowed(uoff), borrowed(bc_ptr)  # fmt: skip
+    bc_row, bc_col, bc_val, lu = borrowed(bc_row), borrowed(bc_col), borrowed(bc_val), borrowed(lu)
+    lu_off, piv, dinv, lu_begin = borrowed(lu_off), borrowed(piv), borrowed(dinv), borrowed(lu_begin)  # fmt: skip
+    for b in range(shape.shape[0]):
+        r, ub = shape[b, 0], uoff[b]
+        t, t1 = bc_ptr[b], bc_ptr[b + 1]
+        while t < t1:
+            row = U64(bc_row[t])
+            acc = x[row]
+            while t < t1 and bc_row[t] == row:
+                acc -= lval[U64(bc_val[t])] * x[U64(bc_col[t])]
+                t += 1
+            x[row] = acc
+        A, xb, pb = lu[U64(lu_off[b]) :], x[U64(ub) :], piv[U64(ub) :]
+        for k in range(r):
+            p = pb[k]
+            if p != k:
+                xb[k], xb[p] = xb[p], xb[k]
+        lb = lu_begin[U64(ub) :]
+        for a in range(1, r):
+            la, t = A[U64(a * r) :], xb[a]
+            for c in range(lb[a], a):
+                t -= la[c] * xb[c]
+            xb[a] = t
+        for a in range(r - 1, -1, -1):
+            ua, t = A[U64(a * r) :], xb[a]
+            for c in range(a + 1, r):
+                t -= ua[c] * xb[c]
+            xb[a] = t * dinv[U64(ub + a)]
+
+
+@nb.njit(**_FAST)
+def bt_solve(x, lval, shape, uoff, bc_ptr, bt_row, bt_col, bt_val, lu, lu_off, piv, dinv,
+             lu_end) -> None:  # fmt: skip
+    """``x ← B⁻ᵀ x`` (:func:`b_solve`'s ``B``, its entries by column), blocks in reverse
+    order."""
+    x, lval, shape, uoff, bc_ptr = borrowed(x), borrowed(lval), borrowed(shape), borrowed(uoff), borrowed(bc_ptr)  # fmt: skip
+    bt_row, bt_col, bt_val, lu = borrowed(bt_row), borrowed(bt_col), borrowed(bt_val), borrowed(lu)
+    lu_off, piv, dinv, lu_end = borrowed(lu_off), borrowed(piv), borrowed(dinv), borrowed(lu_end)
+    for b in range(shape.shape[0] - 1, -1, -1):
+        r, ub = shape[b, 0], uoff[b]
+        A, xb, pb = lu[U64(lu_off[b]) :], x[U64(ub) :], piv[U64(ub) :]
+        for a in range(r):  # Uᵀ
+            t = xb[a]
+            for c in range(a):
+                t -= A[U64(c * r + a)] * xb[c]
+            xb[a] = t * dinv[U64(ub + a)]
+        le = lu_end[U64(ub) :]
+        for a in range(r - 2, -1, -1):  # Lᵀ (unit), inside the diagonal block
+            t = xb[a]
+            for c in range(a + 1, le[a]):
+                t -= A[U64(c * r + a)] * xb[c]
+            xb[a] = t
+        for k in range(r - 1, -1, -1):
+            p = pb[k]
+            if p != k:
+                xb[k], xb[p] = xb[p], xb[k]
+        t, t1 = bc_ptr[b], bc_ptr[b + 1]
+        while t < t1:
+            col = U64(bt_col[t])
+            acc = x[col]
+            while t < t1 and bt_col[t] == col:
+                acc -= lval[U64(bt_val[t])] * x[U64(bt_row[t])]
+                t += 1
+            x[col] = acc
+
+
+@nb.njit(**_FAST)
+def copy_values(hess, hl, hl_src, hd, hd_src, ae, ak, ak_src, ebuf) -> bool:
+    """``hl = hess[hl_src]`` (``H``'s strictly lower part), ``hd = hess[hd_src]`` (its
+    diagonal, ``-1``: zero), ``ak = ae[ak_src]`` (``A_E``'s kept rows); whether ``E``
+    (``ebuf``) is finite."""
+    hess, hl, hl_src, hd = borrowed(hess), borrowed(hl), borrowed(hl_src), borrowed(hd)
+    hd_src, ae, ak, ak_src, ebuf = borrowed(hd_src), borrowed(ae), borrowed(ak), borrowed(ak_src), borrowed(ebuf)  # fmt: skip
+    for t in range(hl_src.shape[0]):
+        hl[t] = hess[U64(hl_src[t])]
+    for i in range(hd_src.shape[0]):
+        s = hd_src[i]
+        hd[i] = hess[U64(s)] if s >= 0 else 0.0
+    for t in range(ak_src.shape[0]):
+        ak[t] = ae[U64(ak_src[t])]
+    z = 0.0
+    for e in range(ebuf.shape[0]):
+        z += ebuf[e] * 0.0
+    return z == 0.0
+
+
+@nb.njit(cache=True)
+def sigma_of(diagonal, n, me, y_rows, sigma, sigma_used) -> int:
+    """``Σ = -D_I⁻¹`` into ``sigma`` from ``K``'s ``diagonal``: ``-1`` if a local row's diagonal
+    is nonzero or ``D_I`` is not negative (the reduction does not apply), else ``1`` if ``Σ``
+    differs from ``sigma_used``, ``0`` if not."""
+    for k in range(y_rows.shape[0]):
+        if diagonal[n + y_rows[k]] != 0.0:
+            return -1
+    changed = 0
+    for r in range(sigma.shape[0]):
+        d = diagonal[n + me + r]
+        if not d < 0.0:
+            return -1
+        sigma[r] = -1.0 / d
+        if sigma[r] != sigma_used[r]:
+            changed = 1
+    return changed
+
+
+VALUE_KERNELS = (group_values, block_values, copy_values, sigma_of)

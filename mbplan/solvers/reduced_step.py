@@ -14,8 +14,9 @@ inequality rows folded in (``D_I < 0``, ``Σ = -D_I⁻¹``: inertia ``(0, m_I, 0
 residual ratio, then against the full ``K`` (IPOPT's ratio).
 
 The symbolic phase (once per pattern) picks the replaced rows and dependent columns by QR
-with column pivoting on the first matrix's values and builds every index array; the numeric
-phase is compiled (:mod:`mbplan.solvers.reduction`, :mod:`mbplan.solvers.reduced_kernels`).
+with column pivoting on the values of the pattern's first matrix (again on those of a matrix
+they break down on: :func:`~mbplan.solvers.reduction.repick`) and builds every index array;
+the numeric phase is compiled (:mod:`mbplan.solvers.reduction`).
 The full factorization is the fallback: a nonzero diagonal on an eliminated row (``δ_c > 0``,
 restoration), a pivot breakdown in the reduction or in ``K_r``, or a refined solve that does
 not converge.
@@ -30,17 +31,15 @@ import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.solvers.elimination import EliminationPlan
-from mbplan.solvers.linear_solver import Inertia, KKTSystem, _csr
-from mbplan.solvers.reduction import Reduction, reduction
-
-
-def _ratio(res: np.ndarray, x: np.ndarray, b: np.ndarray) -> float:
-    """IPOPT's residual ratio ``‖r‖∞ / (min(‖x‖∞, 1e6‖b‖∞) + ‖b‖∞)``."""
-    nb = float(np.max(np.abs(b), initial=0.0))
-    den = min(float(np.max(np.abs(x), initial=0.0)), 1e6 * nb) + nb
-    nr = float(np.max(np.abs(res), initial=0.0))
-    return nr / den if den > 0 else (0.0 if nr == 0 else np.inf)
-
+from mbplan.solvers.linear_solver import (
+    Inertia,
+    KKTSystem,
+    _BlockPattern,
+    _csr,
+    _kkt_pattern,
+    _same_pattern,
+)
+from mbplan.solvers.reduction import Reduction, reduction, repick
 
 AUTO_MAX_FLOPS = 4e9
 """``kkt_method="auto"`` reduces only KKT matrices whose full factorization needs at most this
@@ -77,9 +76,10 @@ class ReducedKKTSystem:
         self.ordering, self.pivot_threshold = ordering, pivot_threshold
         self.plan_of, self.strict = plan_of, strict
         self._red: Reduction | None = None
-        self._seen = -1  # full.n_analyses the reduction was built for
-        self._active = self._values = False
-        self._diag = np.zeros(0)
+        self._plan: EliminationPlan | None = None
+        self._patterns: tuple[_BlockPattern, ...] = ()
+        self._active = self._values = self._pending = self._repicked = False
+        self._diag = self._hess = np.zeros(0)
         self._reg = 0.0
         self.n_reduced = 0
         self.n_fallbacks = 0
@@ -94,34 +94,75 @@ class ReducedKKTSystem:
         return self._red
 
     def set_matrices(self, hessian, jac_eq, jac_ineq) -> None:
-        """As :meth:`KKTSystem.set_matrices` (``hessian=None``: the full factorization)."""
-        self.full.set_matrices(hessian, jac_eq, jac_ineq)
-        self._active = False
+        """As :meth:`KKTSystem.set_matrices` (``hessian=None``: the full factorization). While
+        the reduction applies, the full system gets the matrices only when it is needed (a
+        fallback)."""
+        self._active = self._pending = False
         if hessian is None:
+            self.full.set_matrices(hessian, jac_eq, jac_ineq)
             self._values = False
             return
-        hess = _csr(hessian, (self.n, self.n))
-        ae = _csr(jac_eq, (self.n_eq, self.n))
-        ai = _csr(jac_ineq, (self.n_ineq, self.n))
-        if self._seen != self.full.n_analyses:
-            self._seen = self.full.n_analyses
-            self._red = None
-            if not self.strict and self.full._pattern.analysis.flops > AUTO_MAX_FLOPS:
-                self._values = False
+        blocks = (
+            _csr(hessian, (self.n, self.n)),
+            _csr(jac_eq, (self.n_eq, self.n)),
+            _csr(jac_ineq, (self.n_ineq, self.n)),
+        )
+        if not (self._patterns and all(map(_same_pattern, blocks, self._patterns))):
+            self._new_pattern(*blocks)
+        self._values = self._red is not None and self._set_values(*blocks)
+        if self._values:
+            self._pending, self._hess = True, blocks[0].data.copy()
+        else:
+            self.full.set_matrices(*blocks)
+
+    def _new_pattern(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> None:
+        """The reduction of a new pattern (``None``: no plan, an unusable one, or under
+        ``"auto"`` a full factorization cheap enough: :data:`AUTO_MAX_FLOPS`)."""
+        self._red, self._plan, self._repicked = None, None, False
+        self._patterns = tuple(
+            _BlockPattern(a.shape, a.indptr.copy(), a.indices.copy()) for a in (hess, ae, ai)
+        )
+        if not self.strict:
+            pattern = _kkt_pattern(self.n, self.n_eq, self.n_ineq, hess, ae, ai, self.ordering)
+            if pattern.analysis.flops > AUTO_MAX_FLOPS:
                 return
-            try:
-                plan = self.plan_of(ae)
-                if plan is not None:
-                    self._red = reduction(plan, hess, ae, ai, self.ordering, self.pivot_threshold)
-            except InputError:
-                if self.strict:
-                    raise
-            except (ValueError, IndexError, KeyError) as err:  # a plan that does not fit
-                if self.strict:
-                    raise InputError(
-                        f"kkt_method='reduced': unusable elimination plan: {err}"
-                    ) from err
-        self._values = self._red is not None and self._red.set_values(hess, ae, ai)
+        try:
+            self._plan = self.plan_of(ae)
+            if self._plan is not None:
+                self._red = reduction(self._plan, hess, ae, ai, self.ordering, self.pivot_threshold)
+        except InputError:
+            if self.strict:
+                raise
+        except (ValueError, IndexError, KeyError) as err:  # a plan that does not fit
+            if self.strict:
+                raise InputError(f"kkt_method='reduced': unusable elimination plan: {err}") from err
+
+    def _set_values(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> bool:
+        """The reduction's values; on a breakdown, once per pattern, another choice of its
+        replaced rows and dependent columns (:func:`repick`: they were picked on the values of
+        another matrix, maybe of another problem)."""
+        if self._red.set_values(hess, ae, ai):
+            return True
+        if self._repicked:
+            return False
+        self._repicked = True
+        red = repick(self._plan, hess, ae, ai, self.ordering, self.pivot_threshold, self._red)
+        if red is None:
+            return False
+        self._red = red
+        return True
+
+    def _full(self) -> KKTSystem:
+        """The full system, with the current matrices."""
+        if self._pending:
+            red, (ph, pe, pi) = self._red, self._patterns
+            self.full.set_matrices(
+                sp.csr_matrix((self._hess, ph.indices, ph.indptr), shape=ph.shape),
+                sp.csr_matrix((red.ae_data, pe.indices, pe.indptr), shape=pe.shape),
+                sp.csr_matrix((red.ai_data, pi.indices, pi.indptr), shape=pi.shape),
+            )
+            self._pending = False
+        return self.full
 
     def factorize(self, diagonal: np.ndarray, static_reg: float = 0.0) -> Inertia | None:
         """As :meth:`KKTSystem.factorize`: the inertia of the full ``K``."""
@@ -132,7 +173,7 @@ class ReducedKKTSystem:
         inertia = self._red.factorize(diagonal, static_reg) if self._values else None
         self._active = inertia is not None
         if not self._active:
-            return self.full.factorize(diagonal, static_reg)
+            return self._full().factorize(diagonal, static_reg)
         self.n_reduced += 1
         return inertia
 
@@ -140,7 +181,7 @@ class ReducedKKTSystem:
         """``K v`` with the last factorized matrix."""
         if self._active:
             return self._red.matvec(np.asarray(v, dtype=np.float64), self._diag)
-        return self.full.matvec(v)
+        return self._full().matvec(v)
 
     def solve(
         self, rhs: np.ndarray, max_refinement: int = 10, ratio_max: float = 1e-10
@@ -148,21 +189,19 @@ class ReducedKKTSystem:
         """As :meth:`KKTSystem.solve`: refinement against ``K`` (a solve through the reduction
         that misses ``ratio_max`` is redone with the full factorization)."""
         if not self._active:
-            return self.full.solve(rhs, max_refinement, ratio_max)
+            return self._full().solve(rhs, max_refinement, ratio_max)
         rhs = np.asarray(rhs, dtype=np.float64)
         if rhs.shape != (self.dim,):
             raise InputError(f"KKTSystem.solve: rhs has shape {rhs.shape}, expected ({self.dim},)")
         red, diag = self._red, self._diag
         inner = INNER_RATIO * ratio_max
         x = red.solve_once(rhs, diag, inner)
-        res = rhs - red.matvec(x, diag)
-        ratio = _ratio(res, x, rhs)
+        res, ratio = red.residual(rhs, x, diag)
         for _ in range(max_refinement):
             if ratio <= ratio_max:
                 break
             x_new = x + red.solve_once(res, diag, inner)
-            res_new = rhs - red.matvec(x_new, diag)
-            ratio_new = _ratio(res_new, x_new, rhs)
+            res_new, ratio_new = red.residual(rhs, x_new, diag)
             if not ratio_new < ratio:
                 break
             x, res, ratio = x_new, res_new, ratio_new
@@ -170,7 +209,7 @@ class ReducedKKTSystem:
             return x, ratio
         self.n_fallbacks += 1
         self._active = False
-        if self.full.factorize(self._diag, self._reg) is None:  # a breakdown: no usable step
+        if self._full().factorize(self._diag, self._reg) is None:  # a breakdown: no usable step
             return np.full(self.dim, np.nan), np.inf
         return self.full.solve(rhs, max_refinement, ratio_max)
 

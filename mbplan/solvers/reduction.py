@@ -1,38 +1,36 @@
 """The two congruences of an :class:`~mbplan.solvers.elimination.EliminationPlan` for
 :class:`~mbplan.solvers.reduced_step.ReducedKKTSystem`: the symbolic phase
-(:mod:`mbplan.solvers.reduction_symbolic`, memoized per process), the numeric phase (compiled
-kernels of :mod:`mbplan.solvers.reduced_kernels`), the factorization of the reduced matrix
-``K_r`` and one solve through the reduction."""
+(:mod:`mbplan.solvers.reduction_symbolic`, :mod:`mbplan.solvers.reduction_layout`, memoized
+per process with the choices of replaced rows and dependent columns made so far), the numeric
+phase (compiled kernels of :mod:`mbplan.solvers.reduced_kernels`,
+:mod:`mbplan.solvers.reduced_products`, :mod:`mbplan.solvers.reduced_solves`), the
+factorization of the reduced matrix ``K_r`` and one solve through the reduction."""
 
 from __future__ import annotations
 
 import copy
 import dataclasses
 import threading
+import weakref
 from collections import OrderedDict
 
 import numpy as np
 import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba
+from mbplan.errors import InputError
 from mbplan.solvers.elimination import EliminationPlan
 from mbplan.solvers.linear_solver import Inertia, KKTSystem
 from mbplan.solvers.reduced_kernels import (
-    REDUCED_KERNELS,
-    b_solve,
+    VALUE_KERNELS,
     block_values,
-    bt_solve,
-    csr_matvec,
-    fold_values,
+    copy_values,
     group_values,
-    kkt_matvec,
-    rows_matvec,
-    rows_t_matvec,
-    s_apply,
-    spgemm,
-    spgemm_lower,
-    times_t,
+    sigma_of,
 )
+from mbplan.solvers.reduced_products import PRODUCT_KERNELS, hr_values, tdt_values, times_t
+from mbplan.solvers.reduced_solves import SOLVE_KERNELS, expand_solution, reduce_rhs, residual
+from mbplan.solvers.reduction_layout import ReductionLayout
 from mbplan.solvers.reduction_symbolic import ReductionSymbolic, Slots
 
 REDUCED_STATIC_REG = 1e-8
@@ -40,9 +38,28 @@ REDUCED_STATIC_REG = 1e-8
 the unpivoted LDLᵀ down with ``1e-9`` (docs/ripm-speed.md, session 5)."""
 
 
-_REDUCTIONS: OrderedDict[tuple, Reduction] = OrderedDict()
+_REDUCTIONS: OrderedDict[tuple, list[Reduction]] = OrderedDict()
 _REDUCTIONS_KEPT = 8
+_CHOICES_KEPT = 4
 _REDUCTIONS_LOCK = threading.Lock()
+
+
+def _key(plan, hess, ae, ai, ordering, pivot_threshold) -> tuple:
+    return (
+        ordering,
+        pivot_threshold,
+        *(getattr(plan, f.name).tobytes() for f in dataclasses.fields(plan)),
+        *(a.tobytes() for m in (hess, ae, ai) for a in (m.indptr, m.indices)),
+    )
+
+
+def _remember(key: tuple, red: Reduction) -> None:
+    """``red`` first among its pattern's choices (the next systems start with it)."""
+    with _REDUCTIONS_LOCK:
+        choices = [c for c in _REDUCTIONS.pop(key, []) if c is not red]
+        _REDUCTIONS[key] = [red, *choices][:_CHOICES_KEPT]
+        while len(_REDUCTIONS) > _REDUCTIONS_KEPT:
+            _REDUCTIONS.popitem(last=False)
 
 
 def reduction(
@@ -54,29 +71,56 @@ def reduction(
     pivot_threshold: float = 0.0,
 ) -> Reduction:
     """A :class:`Reduction` of its own for ``plan`` and the blocks' patterns; the symbolic
-    phase is memoized per process for the last few (the solves of one task family share it,
-    with the replaced rows and dependent columns picked on the first one's values)."""
-    key = (
-        ordering,
-        pivot_threshold,
-        *(getattr(plan, f.name).tobytes() for f in dataclasses.fields(plan)),
-        *(a.tobytes() for m in (hess, ae, ai) for a in (m.indptr, m.indices)),
-    )
+    phase is memoized per process for the last few patterns (the solves of one task family
+    share it), with the replaced rows and dependent columns picked on the values of the first
+    matrix of the pattern, or of the last one :func:`repick` chose them for."""
+    key = _key(plan, hess, ae, ai, ordering, pivot_threshold)
     with _REDUCTIONS_LOCK:
         hit = _REDUCTIONS.get(key)
         if hit is not None:
             _REDUCTIONS.move_to_end(key)
-            return hit.fresh()
-    announce_uncached_numba(*REDUCED_KERNELS)  # first run only
+            return hit[0].fresh()
+    announce_uncached_numba(*VALUE_KERNELS, *PRODUCT_KERNELS, *SOLVE_KERNELS)  # first run only
     hit = Reduction(plan, hess, ae, ai, ordering, pivot_threshold)
-    with _REDUCTIONS_LOCK:
-        _REDUCTIONS[key] = hit
-        while len(_REDUCTIONS) > _REDUCTIONS_KEPT:
-            _REDUCTIONS.popitem(last=False)
+    _remember(key, hit)
     return hit.fresh()
 
 
-class Reduction(ReductionSymbolic):
+def repick(
+    plan: EliminationPlan,
+    hess: sp.csr_matrix,
+    ae: sp.csr_matrix,
+    ai: sp.csr_matrix,
+    ordering: str,
+    pivot_threshold: float,
+    failed: Reduction,
+) -> Reduction | None:
+    """After ``failed`` broke down on these values (a pivot below the threshold: its replaced
+    rows or dependent columns were picked on another matrix): a memoized choice of the same
+    pattern that takes them, else the rows and columns picked on these values (memoized
+    first); its values set. ``None`` if these values admit no reduction (rank deficient
+    rows, or a breakdown on the very values the choice was picked on)."""
+    key = _key(plan, hess, ae, ai, ordering, pivot_threshold)
+    with _REDUCTIONS_LOCK:
+        choices = list(_REDUCTIONS.get(key, []))
+    for choice in choices:
+        if choice.dep_key != failed.dep_key:
+            red = choice.fresh()
+            if red.set_values(hess, ae, ai):
+                _remember(key, choice)
+                return red
+    try:
+        choice = Reduction(plan, hess, ae, ai, ordering, pivot_threshold)
+    except (InputError, ValueError, np.linalg.LinAlgError):
+        return None
+    red = choice.fresh()
+    if not red.set_values(hess, ae, ai):
+        return None
+    _remember(key, choice)
+    return red
+
+
+class Reduction(ReductionSymbolic, ReductionLayout):
     """Symbolic phase of one plan and one pattern of ``(H, A_E, A_I)``, and the work arrays of
     the numeric phase."""
 
@@ -99,109 +143,126 @@ class Reduction(ReductionSymbolic):
         self.factor_options = {"ordering": ordering, "pivot_threshold": pivot_threshold}
         self.kkt = KKTSystem(self.nr, len(self.kept), 0, **self.factor_options)
         self.ok = False
+        self._pool: list[dict] = []  # work arrays of copies no longer alive (:meth:`fresh`)
+        for name in ("T", "hs", "union", "reach", "outer", "_kept_rows", "ostart"):
+            delattr(self, name)  # the symbolic phase's own
+        self._compact()
+        self.dep_key = (self.g_sel.tobytes(), self.tgt.tobytes(), self.dep.tobytes())  # the choice
+        self._tuples()
 
-    _WORK = ("M", "new_rows", "lbuf", "ebuf", "lu", "piv", "work", "hr_base", "dt_data", "ttt",
-             "sigma", "sigma_used", "ae_data", "ai_data")  # fmt: skip
-    _MATRICES = ("T", "Tt", "hs", "hf", "W", "Hr", "ak", "Ar")
+    def _compact(self) -> None:
+        """Every index array as ``int32`` (half the memory the kernels stream per iteration)."""
+
+        def small(a):
+            if isinstance(a, tuple):
+                return tuple(small(x) for x in a)
+            if isinstance(a, np.ndarray) and a.dtype == np.int64 and a.size:
+                if -(2**31) <= a.min() and a.max() < 2**31:
+                    return a.astype(np.int32)
+            return a
+
+        for name, value in list(vars(self).items()):
+            setattr(self, name, small(value))
+
+    _WORK = ("M", "new_rows", "g_a", "g_x", "g_piv", "lval", "ebuf", "lu", "dinv", "piv", "hf_data", "pbuf", "kbuf", "hr_base", "ttt",
+             "sigma", "sigma_used", "ae_data", "ai_data", "acc", "tmp", "xu", "rz", "yv",
+             "vx", "kv", "se", "rhs_r", "hw", "hd")  # fmt: skip
+    _MATRICES = ("hl", "ak", "Ar", "Hr")
 
     def fresh(self) -> Reduction:
-        """A copy sharing the symbolic arrays, with its own work arrays and ``K_r`` system."""
+        """A copy sharing the symbolic arrays, with its own work arrays, matrices' values and
+        ``K_r`` system: those of a copy no longer alive if there is one (they return to the
+        pool when their copy is collected), else new ones (every one is written before it is
+        read)."""
         new = copy.copy(self)
-        for name in self._WORK:
-            setattr(new, name, getattr(self, name).copy())
-        for name in self._MATRICES:
-            m = getattr(self, name)
-            setattr(new, name, sp.csr_matrix((m.data.copy(), m.indices, m.indptr), shape=m.shape))
-        new.kkt = KKTSystem(self.nr, len(self.kept), 0, **self.factor_options)
-        new.ok = new.hr_ok = False
+        try:
+            own = self._pool.pop()
+        except IndexError:
+            own = {name: np.empty_like(getattr(self, name)) for name in self._WORK}
+            for name in self._MATRICES:
+                m = getattr(self, name)
+                own[name] = sp.csr_matrix((np.empty_like(m.data), m.indices, m.indptr), m.shape)
+            own["kkt"] = KKTSystem(self.nr, len(self.kept), 0, **self.factor_options)
+        for name, value in own.items():
+            setattr(new, name, value)
+        weakref.finalize(new, self._pool.append, own)
+        new.ok = new.hr_ok = new.ttt_ok = False
+        new._tuples()
         return new
+
+    def _tuples(self) -> None:
+        """The solve kernels' argument tuples (:mod:`mbplan.solvers.reduced_solves`)."""
+        hl, ak = self.hl, self.ak
+        self._h = (hl.indptr, hl.indices, hl.data, self.hd)
+        self._ai = (self.ai_p, self.ai_i, self.ai_data)
+        self._ak = (ak.indptr, ak.indices, ak.data)
+        self._grp = (self.tgt, self.src, self.sub, self.M)
+        blocks = (self.lu, self.lu_off, self.piv, self.dinv)
+        self._bf = (self.lval, self.shape, self.uoff, self.bc_ptr, self.bc_row, self.bc_col,
+                    self.bc_val, *blocks, self.lu_begin)  # fmt: skip
+        self._bb = (self.lval, self.shape, self.uoff, self.bc_ptr, self.bt_row, self.bt_col,
+                    self.bt_val, *blocks, self.lu_end)  # fmt: skip
+        self._tr = (self.red_cols, self.dep, self.ebuf, self.eoff, self.shape, self.reach_red,
+                    self.reach_ptr, self.uoff, self.tmp)  # fmt: skip
 
     # ------------------------------------------------------------------ numeric
     def set_values(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> bool:
-        """``M_j``, ``E``, ``T``, ``A_E,kept T`` for new values (``H``, ``A_E`` and ``A_I`` with
-        this reduction's patterns; ``Tᵀ H_f T`` follows in :meth:`factorize`, with ``Σ``);
-        False on a breakdown."""
-        self.ok = False
+        """``M_j``, ``E``, ``H`` in ``H_f``'s pattern, ``A_E,kept T`` for new values (``H``,
+        ``A_E`` and ``A_I`` with this reduction's patterns; ``Tᵀ H_f T`` follows in
+        :meth:`factorize`, with ``Σ``); False on a breakdown."""
+        self.ok = self.hr_ok = self.ttt_ok = False
         self.ae_data[:] = ae.data
         self.ai_data[:] = ai.data
         if len(self.M) and not group_values(
-            ae.data, self.g_sel, self.h_sel, self.pad, self.g_outer, self.h_outer, self.M,
-            self.new_rows,
+            ae.data, self.g_sel, self.h_sel, self.pad, self.g_begin, self.g_end, self.g_outer, self.h_outer,
+            self.M, self.new_rows, self.g_a, self.g_x, self.g_piv,
         ):  # fmt: skip
             return False
         if not block_values(
-            ae.data, self.new_rows, self.l_dst_a, self.l_src_a, self.l_dst_n, self.l_src_n,
-            self.lbuf, self.shape, self.loff, self.eoff, self.cptr, self.cblk, self.ccol,
-            self.fmap_off, self.fmap, self.rmap_off, self.rmap, self.lu, self.lu_off, self.piv,
-            self.uoff, self.ebuf,
+            ae.data, self.new_rows, self.la_src, self.ln_src, self.lval, self.shape, self.eoff,
+            self.lu_off, self.uoff, self.lu_begin, self.lu_end, self.a_ptr, self.a_src, self.a_dst, self.fe_ptr, self.fe_src,
+            self.fe_dst, self.cptr, self.cblk, self.nz_ptr, self.nz_a, self.nz_p, self.nz_src,
+            self.rmap_off, self.rmap, self.lu, self.piv, self.dinv, self.ebuf, self.tmp,
         ):  # fmt: skip
             return False
-        T, Tt = self.T, self.Tt
-        T.data[self.t_e] = -self.ebuf[self.t_e_src]
-        Tt.data[:] = T.data[self.tt_src]
-        self.hs.data[:] = 0.0
-        self.hs.data[self.hs_slot] = hess.data[self.hs_src]
-        self.hr_ok = False
-        self.ttt_ok = False
-        self.ak.data[:] = ae.data[self.ak_src]
-        self._product(self.ak, T, self.Ar)
-        self.ok = bool(np.isfinite(T.data).all())
-        return self.ok
-
-    def _product(self, a: sp.csr_matrix, b: sp.csr_matrix, c: sp.csr_matrix) -> None:
-        """``c = a @ b`` in ``c``'s pattern."""
-        c.data[:] = 0.0
-        spgemm(a.indptr, a.indices, a.data, b.indptr, b.indices, b.data, c.indptr, c.indices,
-               c.data, self.work)  # fmt: skip
-
-    def _add_lower(
-        self, a: sp.csr_matrix, b: sp.csr_matrix, b_data: np.ndarray, ends: np.ndarray
-    ) -> None:
-        """``H_r += tril(a @ b)`` with ``b``'s values ``b_data`` (``ends``: :func:`lower_ends`)."""
-        hr = self.Hr
-        spgemm_lower(a.indptr, a.indices, a.data, b.indptr, b.indices, b_data, ends, hr.indptr,
-                     hr.indices, hr.data, self.work)  # fmt: skip
+        if not copy_values(hess.data, self.hl.data, self.hl_src, self.hd, self.hd_src, ae.data,
+                           self.ak.data, self.ak_src, self.ebuf):  # fmt: skip
+            return False
+        times_t(self.ak.data, *self.ak_seg, self.ebuf, self.eoff, self.shape, self.Ar.data,
+                self.acc)  # fmt: skip
+        self.ok = True
+        return True
 
     def factorize(self, diagonal: np.ndarray, static_reg: float) -> Inertia | None:
         """Factorize ``K_r`` for ``K``'s diagonal (``Tᵀ D_x T`` added to ``Tᵀ H T``; the
         inequality rows folded in, ``Σ = -D_I⁻¹``); the inertia of ``K`` (``None``: a nonzero
         diagonal on a local row, ``D_I`` not negative, or a breakdown)."""
-        n, me = self.n, self.me
-        d_i = diagonal[n + me :]
-        if not self.ok or np.any(diagonal[n + self.y_rows] != 0.0) or not np.all(d_i < 0.0):
+        n = self.n
+        status = sigma_of(diagonal, n, self.me, self.y_rows, self.sigma, self.sigma_used)
+        if not self.ok or status < 0:
             return None
-        np.divide(-1.0, d_i, out=self.sigma)
-        if not (self.hr_ok and np.array_equal(self.sigma, self.sigma_used)):  # Tᵀ H_f T
-            hf = self.hf
-            hf.data[:] = self.hs.data
-            fold_values(hf.data, self.fold_slot, self.fold_e, self.fold_f, self.fold_row,
-                        self.ai_data, self.sigma)  # fmt: skip
-            W = self.W
-            times_t(hf.data, self.row_seg, self.seg_ptr, self.seg_block, self.seg_e,
-                    self.seg_arg, self.ebuf, self.eoff, self.shape, self.reach_red,
-                    self.reach_ptr, W.indptr, W.indices, W.data, self.work)  # fmt: skip
-            self.Hr.data[:] = 0.0
-            self._add_lower(self.Tt, self.W, self.W.data, self.tw_end)
-            self.hr_base[:] = self.Hr.data
+        if not self.hr_ok or status == 1:  # Tᵀ H_f T for new values or a new Σ
             self.sigma_used[:] = self.sigma
-            self.hr_ok = bool(np.isfinite(self.hr_base).all())
+            self.hr_ok = hr_values(
+                self.hl.data, self.hl_lo, self.hl_up, self.hd, self.hd_slot, self.hf_data,
+                self.fold_slot, self.ai_p, self.ai_data, self.sigma,
+                *self.hs_seg, self.bseg_ptr, self.ebuf, self.eoff, self.shape, self.reach_ptr,
+                self.panel_off, self.pwidth, self.pbuf, self.kbuf, self.kw_pos, self.kw_slot,
+                self.lo_ptr, self.lo_slot, self.hr_base, self.acc,
+            )  # fmt: skip
             if not self.hr_ok:
                 return None
-        dx = diagonal[:n]
+        dx, hr = diagonal[:n], self.Hr.data
         if not dx.any():
-            self.Hr.data[:] = self.hr_base
+            hr[:] = self.hr_base
         elif np.all(dx == dx[0]):  # δ_w (+ζ) I: Tᵀ D T = d TᵀT, TᵀT once per matrix
             if not self.ttt_ok:
-                self.Hr.data[:] = 0.0
-                self._add_lower(self.Tt, self.T, self.T.data, self.tt_end)
-                self.ttt[:] = self.Hr.data
+                self._tdt(self.ttt, np.zeros_like(hr), np.ones(n))
                 self.ttt_ok = True
-            np.multiply(self.ttt, dx[0], out=self.Hr.data)
-            self.Hr.data += self.hr_base
+            np.multiply(self.ttt, dx[0], out=hr)
+            hr += self.hr_base
         else:
-            np.multiply(self.T.data, dx[self.t_rows], out=self.dt_data)
-            self.Hr.data[:] = self.hr_base
-            self._add_lower(self.Tt, self.T, self.dt_data, self.tt_end)
+            self._tdt(hr, self.hr_base, dx)
         self.kkt.set_matrices(self.Hr, self.Ar, None)
         diag_r = np.concatenate([np.zeros(self.nr), diagonal[n + self.kept]])
         inertia = self.kkt.factorize(diag_r, max(static_reg, REDUCED_STATIC_REG))
@@ -210,40 +271,30 @@ class Reduction(ReductionSymbolic):
         m = len(self.dep)
         return Inertia(inertia.positive + m, inertia.negative + m + self.mi, 0)
 
+    def _tdt(self, out: np.ndarray, base: np.ndarray, d: np.ndarray) -> None:
+        """``out = base + tril(Tᵀ diag(d) T)``."""
+        tdt_values(out, base, d, self.dep, self.red_cols, self.ebuf, self.eoff, self.shape,
+                   self.uoff, self.tt_off, self.tt_slot, self.diag_slot, self.acc)  # fmt: skip
+
+    def residual(self, b: np.ndarray, x: np.ndarray, diagonal: np.ndarray) -> tuple[np.ndarray, float]:  # fmt: skip
+        """``b - K x`` for the values of :meth:`set_values` and ``K``'s ``diagonal``, and IPOPT's
+        residual ratio."""
+        res = np.empty(len(b))
+        ratio = residual(*self._h, self.ae_p, self.ae_i, self.ae_data, *self._ai, diagonal, x, b,
+                         res)  # fmt: skip
+        return res, ratio
+
     def matvec(self, x: np.ndarray, diagonal: np.ndarray) -> np.ndarray:
         """``K x`` for the values of :meth:`set_values` and ``K``'s ``diagonal``."""
-        hs = self.hs
-        return kkt_matvec(hs.indptr, hs.indices, hs.data, self.ae_p, self.ae_i, self.ae_data,
-                          self.ai_p, self.ai_i, self.ai_data, diagonal, x)  # fmt: skip
+        return -self.residual(np.zeros(len(x)), x, diagonal)[0]
 
     def solve_once(self, b: np.ndarray, diagonal: np.ndarray, ratio_max: float) -> np.ndarray:
         """``K⁻¹ b`` through the reduction (module docstring; ``diagonal``: ``K``'s), ``K_r``
         solved to the residual ratio ``ratio_max``."""
-        n, me, nr, dep = self.n, self.me, self.nr, self.dep
-        bx, be, bi = b[:n], b[n : n + me], b[n + me :]
-        blk = (self.lbuf, self.shape, self.loff, self.cptr, self.cblk, self.ccol, self.lu,
-               self.lu_off, self.piv, self.uoff)  # fmt: skip
-        xu = b_solve(s_apply(be, self.tgt, self.src, self.sub, self.M, False)[self.y_rows], *blk)
-        hs, ak, T, Tt = self.hs, self.ak, self.T, self.Tt
-        ai = (self.ai_p, self.ai_i, self.ai_data)
-        v = np.zeros(n)
-        v[dep] = xu
-        kv = rows_t_matvec(hs.indptr, hs.indices, hs.data, dep, xu, n)  # (K [x_U; 0])_x
-        kv[dep] += diagonal[dep] * xu
-        rz = bi - csr_matvec(*ai, v)
-        kv -= rows_t_matvec(*ai, self.all_ineq, self.sigma * rz, n)  # the folded rows
-        rx = csr_matvec(Tt.indptr, Tt.indices, Tt.data, bx - kv)
-        re = be[self.kept] - csr_matvec(ak.indptr, ak.indices, ak.data, v)
-        xr = self.kkt.solve(np.concatenate([rx, re]), 10, ratio_max)[0]
-        w = np.zeros(len(b))
-        w[:n] = csr_matvec(T.indptr, T.indices, T.data, xr[:nr])
-        wz = self.sigma * (csr_matvec(*ai, w[:n]) - rz)
-        w[dep] += xu
-        w[n + self.kept] = xr[nr:]
-        w[n + me :] = wz
-        kw = rows_matvec(hs.indptr, hs.indices, hs.data, dep, w[:n]) + diagonal[dep] * w[dep]
-        at_w = rows_t_matvec(ak.indptr, ak.indices, ak.data, self.all_kept, xr[nr:], n)
-        at_w += rows_t_matvec(*ai, self.all_ineq, wz, n)
-        w[n + self.y_rows] = bt_solve(bx[dep] - kw - at_w[dep], *blk)
-        w[n : n + me] = s_apply(w[n : n + me], self.tgt, self.src, self.sub, self.M, True)
+        common = (diagonal, self.sigma, self.n, self.me, self.y_rows, self.kept, self._h,
+                  self._ai, self._ak, self._grp, self._bf, self._bb, self._tr)  # fmt: skip
+        reduce_rhs(b, *common, self.xu, self.rz, self.rhs_r, self.vx, self.kv, self.se)
+        xr = self.kkt.solve(self.rhs_r, 10, ratio_max)[0]
+        w = np.empty(len(b))
+        expand_solution(b, xr, *common, self.xu, self.rz, w, self.kv, self.yv, self.hw)
         return w

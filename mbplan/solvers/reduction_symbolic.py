@@ -1,17 +1,20 @@
 """The symbolic phase of :class:`~mbplan.solvers.reduction.Reduction` (once per plan and
-pattern): the replaced rows and dependent columns by QR with column pivoting on the first
-matrix's values, couplings, reach sets, the patterns of ``T``, ``Tᵀ``, ``H_f``, ``H_f T``,
-``A_E,kept T`` and ``H_r``, and every index array of the numeric phase."""
+pattern, :mod:`mbplan.solvers.reduction_layout` for the products): the replaced rows and
+dependent columns by QR with column pivoting on given values, couplings, reach sets and the
+index arrays of the groups' and blocks' values."""
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components, maximum_bipartite_matching
 
 from mbplan.errors import InputError
 from mbplan.solvers.elimination import EliminationPlan
-from mbplan.solvers.reduced_kernels import group_values, lower_ends
+from mbplan.solvers.reduced_kernels import group_values
 
 
 class Slots:
@@ -30,33 +33,55 @@ class Slots:
         hit = ok & (self.keys[pos] == want) if len(self.keys) else ok & False
         return np.where(hit, pos, -1)
 
+    def pairs(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """Slots of the entries ``(rows[t], cols[t])`` (``-1``: not stored)."""
+        want = np.asarray(rows, np.int64) * self.n + np.asarray(cols, np.int64)
+        pos = np.minimum(np.searchsorted(self.keys, want), max(len(self.keys) - 1, 0))
+        hit = self.keys[pos] == want if len(self.keys) else want < 0
+        return np.where(hit, pos, -1)
+
 
 def _pivots(m: np.ndarray) -> np.ndarray:
     """Column order of a QR with column pivoting (the first ``rank`` are well conditioned)."""
     return sla.qr(m, pivoting=True, mode="r")[1]
 
 
-def _product_pattern(*pairs: tuple[sp.csr_matrix, sp.csr_matrix]) -> sp.csr_matrix:
-    """The structural pattern of ``Σ a @ b`` over the pairs (values of ones: no cancellation),
-    zero values."""
-
-    def one(m: sp.csr_matrix) -> sp.csr_matrix:
-        return sp.csr_matrix((np.ones(m.nnz), m.indices, m.indptr), shape=m.shape)
-
-    p = sp.csr_matrix(sum(one(a) @ one(b) for a, b in pairs))
-    p.sort_indices()
-    p.data[:] = 0.0
-    return p
+def _btf(pattern: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Row and column orders making the square boolean ``pattern`` block upper triangular with
+    irreducible diagonal blocks (a matching on the diagonal, then the strong components in
+    topological order), and per position the beginning and the end of its diagonal block."""
+    return _btf_of(pattern.shape[0], np.packbits(pattern).tobytes())
 
 
-def _transpose(m: sp.csr_matrix) -> tuple[sp.csr_matrix, np.ndarray]:
-    """``mᵀ``'s pattern (zero values, sorted) and where each of its entries is in ``m.data``."""
-    pos = sp.csr_matrix((np.arange(m.nnz, dtype=float) + 1, m.indices, m.indptr), shape=m.shape)
-    pos_t = pos.T.tocsr()
-    pos_t.sort_indices()
-    shape = (m.shape[1], m.shape[0])
-    t = sp.csr_matrix((np.zeros(pos_t.nnz), pos_t.indices, pos_t.indptr), shape=shape)
-    return t, pos_t.data.astype(np.int64) - 1
+@functools.lru_cache(maxsize=4096)
+def _btf_of(g: int, packed: bytes) -> tuple[np.ndarray, ...]:
+    pattern = np.unpackbits(np.frombuffer(packed, np.uint8), count=g * g).reshape(g, g) > 0
+    match = maximum_bipartite_matching(sp.csr_matrix(pattern.astype(float)), perm_type="column")
+    if np.any(match < 0):
+        raise InputError("EliminationPlan: a group's or block's matrix is structurally singular")
+    diag = pattern[:, match]  # row i -> column i: an edge i -> k for every entry (i, k)
+    n_comp, label = connected_components(sp.csr_matrix(diag), directed=True, connection="strong")
+    succ = [set() for _ in range(n_comp)]
+    for i, k in zip(*np.nonzero(diag), strict=True):
+        if label[i] != label[k]:
+            succ[label[i]].add(label[k])
+    indegree = np.zeros(n_comp, np.int64)
+    for c in range(n_comp):
+        for k in succ[c]:
+            indegree[k] += 1
+    order, ready = [], [c for c in range(n_comp) if indegree[c] == 0]
+    while ready:
+        c = ready.pop()
+        order.append(c)
+        for k in sorted(succ[c]):
+            indegree[k] -= 1
+            if indegree[k] == 0:
+                ready.append(k)
+    rows = np.concatenate([np.flatnonzero(label == c) for c in order] + [np.zeros(0, np.int64)])
+    sizes = np.bincount(label, minlength=n_comp)[order]
+    end = np.repeat(np.cumsum(sizes), sizes).astype(np.int64)
+    begin = np.repeat(np.cumsum(sizes) - sizes, sizes).astype(np.int64)
+    return rows.astype(np.int64), match[rows].astype(np.int64), begin, end
 
 
 def _rows_of(a: sp.csr_matrix, row: int) -> np.ndarray:
@@ -97,15 +122,22 @@ class ReductionSymbolic:
             if np.any(chosen < 0):
                 raise InputError("EliminationPlan: a group's source rows are rank deficient")
             sel[j, valid] = chosen
+        src, self.g_begin, self.g_end = src.copy(), np.zeros(src.shape, np.int64), np.zeros(src.shape, np.int64)  # fmt: skip
+        pattern = (slots(src, sel) >= 0) | np.eye(src.shape[1], dtype=bool)[None] * (src < 0)[..., None]  # fmt: skip
+        for j in range(J):  # sources and selected columns in block triangular order
+            rows, cols, self.g_begin[j], self.g_end[j] = _btf(pattern[j])
+            src[j], sel[j] = src[j][rows], sel[j][cols]
         self.g_sel, self.h_sel, self.pad = slots(src, sel), slots(sub, sel), src < 0
         self.g_outer = slots(src, self.outer)
         self.h_outer = slots(sub, self.outer)
         self.src, self.sub = src, sub
-        self.M = np.zeros((J, r, src.shape[1]))
+        g = src.shape[1]
+        self.M = np.zeros((J, r, g))
         self.new_rows = np.zeros((J, r, o))
+        self.g_a, self.g_x, self.g_piv = np.zeros((g, g)), np.zeros((g, r)), np.zeros(g, np.int64)
         if J and not group_values(
-            ae.data, self.g_sel, self.h_sel, self.pad, self.g_outer, self.h_outer, self.M,
-            self.new_rows,
+            ae.data, self.g_sel, self.h_sel, self.pad, self.g_begin, self.g_end, self.g_outer, self.h_outer,
+            self.M, self.new_rows, self.g_a, self.g_x, self.g_piv,
         ):  # fmt: skip
             raise InputError("EliminationPlan: a group's source rows are rank deficient")
         self.tgt = np.zeros((J, r), np.int64)
@@ -115,218 +147,147 @@ class ReductionSymbolic:
             self.tgt[j] = np.sort(t[_pivots(self.M[j][:, where])[:r]])
 
     def _blocks(self, plan: EliminationPlan, ae: sp.csr_matrix, slots: Slots) -> None:
-        """Local rows, dependent columns (QR pivoting of the first values), couplings, reach
-        sets and the scatter of ``L_b``."""
-        n, B, r = self.n, plan.n_blocks, self.M.shape[1]
-        col_block = -np.ones(n, np.int64)
+        """Local rows, dependent columns (QR pivoting of the first values, then the block
+        triangular order of the square part), couplings, reach sets and where each local row
+        entry goes (:meth:`_block_entries`)."""
+        n, B = self.n, plan.n_blocks
+        col_block, col_local = -np.ones(n, np.int64), np.zeros(n, np.int64)
         for b in range(B):
             own = plan.block_cols[b][plan.block_cols[b] >= 0]
             if np.any(col_block[own] >= 0):
                 raise InputError("EliminationPlan: a column in two blocks")
-            col_block[own] = b
-        rows_of_block, entries = [], []  # per block: local row ids (eq rows), {(a, col): src}
-        for b in range(B):
-            j = plan.block_groups[b]
-            rows, ent = [], {}
-            if j >= 0:
-                for i in range(r):
-                    rows.append(self.tgt[j, i])
-                    for q, c in enumerate(self.outer[j]):
-                        if c >= 0:
-                            ent[(len(rows) - 1, int(c))] = (
-                                "n",
-                                (j * r + i) * self.outer.shape[1] + q,
-                            )
-            for row in plan.block_rows[b][plan.block_rows[b] >= 0]:
-                rows.append(int(row))
-                for e in range(ae.indptr[row], ae.indptr[row + 1]):
-                    ent[(len(rows) - 1, int(ae.indices[e]))] = ("a", e)
-            rows_of_block.append(np.array(rows, np.int64))
-            entries.append(ent)
-        dep, free, couple = [], [], []
+            col_block[own], col_local[own] = b, np.arange(len(own))
+        rows_of_block, (eb, ea, ec, ek, es) = self._local_entries(plan, ae)
+        cb = col_block[ec]
+        if np.any((cb < 0) | (cb > eb)):
+            raise InputError(
+                f"EliminationPlan: block {eb[np.flatnonzero((cb < 0) | (cb > eb))[0]]}'s local "
+                "rows touch a column outside it and the blocks before it"
+            )
+        val = np.zeros(len(es))
+        val[ek], val[~ek] = self.new_rows.reshape(-1)[es[ek]], ae.data[es[~ek]]
+        ptr = np.searchsorted(eb, np.arange(B + 1))
+        dep, free, couple, lu_begin, lu_end = [], [], [], [], []
         for b in range(B):
             own = plan.block_cols[b][plan.block_cols[b] >= 0]
-            touched = {c for _, c in entries[b]}
-            others = sorted({int(col_block[c]) for c in touched} - {b})
-            if any(c not in set(own) and col_block[c] < 0 for c in touched) or any(
-                i > b for i in others
-            ):
-                raise InputError(
-                    f"EliminationPlan: block {b}'s local rows touch a column outside it and "
-                    "the blocks before it"
-                )
+            t = np.arange(ptr[b], ptr[b + 1])
+            mine = t[cb[t] == b]
             nr = len(rows_of_block[b])
-            dense = np.zeros((nr, len(own)))
-            pos = {int(c): q for q, c in enumerate(own)}
-            for (a, c), (kind, s) in entries[b].items():
-                if c in pos:
-                    dense[a, pos[c]] = ae.data[s] if kind == "a" else self.new_rows.reshape(-1)[s]
+            dense, stored = np.zeros((nr, len(own))), np.zeros((nr, len(own)), bool)
+            dense[ea[mine], col_local[ec[mine]]] = val[mine]
+            stored[ea[mine], col_local[ec[mine]]] = True
             piv = _pivots(dense)
-            dep.append(own[np.sort(piv[:nr])])
+            d = np.sort(piv[:nr])
+            rows, cols, begin, end = _btf(stored[:, d])  # rows, dependent columns: triangular
+            new_row = np.empty(nr, np.int64)
+            new_row[rows] = np.arange(nr)
+            ea[t] = new_row[ea[t]]
+            rows_of_block[b] = rows_of_block[b][rows]
+            dep.append(own[d[cols]])
             free.append(own[np.sort(piv[nr:])])
-            couple.append(others)
-        reach = []
-        cptr, cblk, ccol, fmap, rmap = [0], [], [], [], []
-        fmap_off, rmap_off = [], []
-        shape = np.zeros((B, 4), np.int64)
-        l_dst_a, l_src_a, l_dst_n, l_src_n = [], [], [], []
-        loff = [0]
-        for b in range(B):
-            R = list(free[b])
-            for i in couple[b]:
-                R += [c for c in reach[i] if c not in set(R)]
-            reach.append(np.array(R, np.int64))
-            rpos = {int(c): q for q, c in enumerate(R)}
-            lc = list(dep[b]) + list(free[b])
-            for i in couple[b]:
-                cblk.append(i)
-                ccol.append(len(lc))
-                lc += list(dep[i]) + list(free[i])
-                fmap_off.append(len(fmap))
-                fmap += [rpos[int(c)] for c in free[i]]
-                rmap_off.append(len(rmap))
-                rmap += [rpos[int(c)] for c in reach[i]]
-            cptr.append(len(cblk))
-            nr, w = len(rows_of_block[b]), len(lc)
-            shape[b] = (nr, w, len(R), len(free[b]))
-            lpos = {int(c): q for q, c in enumerate(lc)}
-            for (a, c), (kind, s) in entries[b].items():
-                dst = loff[-1] + a * w + lpos[c]
-                (l_dst_a if kind == "a" else l_dst_n).append(dst)
-                (l_src_a if kind == "a" else l_src_n).append(s)
-            loff.append(loff[-1] + nr * w)
-        i64 = lambda x: np.asarray(x, np.int64)  # noqa: E731
-        self.shape, self.loff = shape, i64(loff)
-        self.l_dst_a, self.l_src_a = i64(l_dst_a), i64(l_src_a)
-        self.l_dst_n, self.l_src_n = i64(l_dst_n), i64(l_src_n)
-        self.cptr, self.cblk, self.ccol = i64(cptr), i64(cblk), i64(ccol)
-        self.fmap_off, self.fmap = i64(fmap_off), i64(fmap)
-        self.rmap_off, self.rmap = i64(rmap_off), i64(rmap)
-        self.eoff = i64(np.concatenate([[0], np.cumsum(shape[:, 0] * shape[:, 2])]))
-        self.lu_off = i64(np.concatenate([[0], np.cumsum(shape[:, 0] ** 2)]))
-        self.uoff = i64(np.concatenate([[0], np.cumsum(shape[:, 0])]))
-        self.lbuf = np.zeros(self.loff[-1])
-        self.ebuf = np.zeros(self.eoff[-1])
-        self.lu = np.zeros(self.lu_off[-1])
-        self.piv = np.zeros(self.uoff[-1], np.int64)
+            couple.append(np.unique(cb[t][cb[t] != b]))
+            lu_begin.append(begin)
+            lu_end.append(end)
+        self.lu_begin = np.concatenate([*lu_begin, np.zeros(0, np.int64)])
+        self.lu_end = np.concatenate([*lu_end, np.zeros(0, np.int64)])
         self.dep = np.concatenate(dep) if B else np.zeros(0, np.int64)
         self.y_rows = np.concatenate(rows_of_block) if B else np.zeros(0, np.int64)
-        self.reach = reach
         if len(np.unique(self.y_rows)) != len(self.y_rows):
             raise InputError("EliminationPlan: a local row in two blocks")
+        self._block_entries((eb, ea, ec, ek, es), dep, free, couple, [len(x) for x in rows_of_block])  # fmt: skip
 
-    def _transform(self) -> None:
-        """The pattern of ``T`` (``n × n_r``: identity on the kept columns, ``-E`` on the
-        dependent rows) and of ``Tᵀ``, and where ``E``'s entries land."""
-        n = self.n
-        is_dep = np.zeros(n, bool)
-        is_dep[self.dep] = True
-        self.red_cols = np.flatnonzero(~is_dep)
-        self.nr = len(self.red_cols)
-        red_of = -np.ones(n, np.int64)
-        red_of[self.red_cols] = np.arange(self.nr)
-        rows = [self.red_cols]
-        cols = [np.arange(self.nr)]
-        e_id = [-np.ones(self.nr, np.int64)]
-        u = 0
-        for b in range(len(self.shape)):
-            r, nrb = self.shape[b, 0], self.shape[b, 2]
-            deps = self.dep[u : u + r]
-            rows.append(np.repeat(deps, nrb))
-            cols.append(np.tile(red_of[self.reach[b]], r))
-            e_id.append(self.eoff[b] + np.arange(r * nrb))
-            u += r
-        rows, cols, e_id = (np.concatenate(x) for x in (rows, cols, e_id))
-        order = np.lexsort((cols, rows))
-        rows, cols, e_id = rows[order], cols[order], e_id[order]
-        self.T = sp.csr_matrix(
-            (np.ones(len(rows)), cols, np.searchsorted(rows, np.arange(n + 1))), shape=(n, self.nr)
-        )
-        self.t_e = np.flatnonzero(e_id >= 0)
-        self.t_e_src = e_id[self.t_e]
-        self.Tt, self.tt_src = _transpose(self.T)
-        self.t_rows = np.repeat(np.arange(n), np.diff(self.T.indptr))
-        self.red_of = red_of
-        self.reach_red = np.concatenate([red_of[c] for c in self.reach] + [cols[:0]])
-        self.reach_ptr = np.concatenate([[0], np.cumsum([len(c) for c in self.reach])]).astype(int)
+    def _local_entries(self, plan: EliminationPlan, ae: sp.csr_matrix) -> tuple[list, tuple]:
+        """Per block its local rows (the group's new rows, then its plan rows) and the entries
+        of these rows as arrays sorted by block, local row and column: block, local row, column,
+        from the groups' new rows (else ``A_E``), source (in ``new_rows.flat`` or ``ae.data``)."""
+        B, r, o = plan.n_blocks, self.M.shape[1], self.outer.shape[1]
+        j = plan.block_groups
+        g = np.flatnonzero(j >= 0)  # the new rows: r per grouped block, dense over its outer cols
+        gb, gi, gq = (x.reshape(-1) for x in np.meshgrid(g, np.arange(r), np.arange(o), indexing="ij"))  # fmt: skip
+        gc = self.outer[j[gb], gq]
+        keep = gc >= 0
+        gb, gi, gq, gc = gb[keep], gi[keep], gq[keep], gc[keep]
+        gs = (j[gb] * r + gi) * o + gq
+        valid = plan.block_rows >= 0  # the plan rows after them
+        rb, rk = np.nonzero(valid)
+        ra = np.where(j[rb] >= 0, r, 0) + np.cumsum(valid, axis=1)[rb, rk] - 1
+        row = plan.block_rows[rb, rk]
+        nnz = np.diff(ae.indptr)[row]
+        at = np.repeat(ae.indptr[row] - np.cumsum(nnz) + nnz, nnz) + np.arange(nnz.sum())
+        eb = np.concatenate([gb, np.repeat(rb, nnz)]).astype(np.int64)
+        ea = np.concatenate([gi, np.repeat(ra, nnz)]).astype(np.int64)
+        ec = np.concatenate([gc, ae.indices[at]]).astype(np.int64)
+        ek = np.concatenate([np.ones(len(gb), bool), np.zeros(len(at), bool)])
+        es = np.concatenate([gs, at]).astype(np.int64)
+        order = np.lexsort((ec, ea, eb))
+        rows = [np.concatenate([self.tgt[j[b]] if j[b] >= 0 else np.zeros(0, np.int64), row[rb == b]]).astype(np.int64) for b in range(B)]  # fmt: skip
+        return rows, (eb[order], ea[order], ec[order], ek[order], es[order])
 
-    def _products(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> None:
-        """Patterns of ``H_sym`` (with room for ``A_Iᵀ Σ A_I``: ``H_f``, the inequality rows
-        folded in), ``H_f T``, ``A_E,kept T`` and ``H_r = tril(Tᵀ H_f T)``; the slots of the
-        fold's terms."""
-        n, me = self.n, self.me
-        h_rows = np.repeat(np.arange(n), np.diff(hess.indptr))
-        low = np.flatnonzero(h_rows >= hess.indices)
-        r, c = h_rows[low], hess.indices[low]
-        off = r != c
-        fold = _product_pattern((_transpose(ai)[0], ai)).tocoo()
-        rr = np.concatenate([r, c[off], np.arange(n), fold.row])
-        cc = np.concatenate([c, r[off], np.arange(n), fold.col])
-        src = np.concatenate([low, low[off], -np.ones(n + fold.nnz, np.int64)])
-        keys, inv = np.unique(rr * n + cc, return_inverse=True)
-        self.hs = sp.csr_matrix(
-            (np.zeros(len(keys)), keys % n, np.searchsorted(keys // n, np.arange(n + 1))),
-            shape=(n, n),
-        )
-        self.hs_slot, self.hs_src = inv[src >= 0], src[src >= 0]
-        self.hf = sp.csr_matrix((np.zeros(len(keys)), self.hs.indices, self.hs.indptr), (n, n))
-        # per pair of entries (e, f) of an inequality row: its slot in H_f
-        lens = np.diff(ai.indptr).astype(np.int64)
-        sq = lens * lens
-        self.fold_row = np.repeat(np.arange(self.mi), sq)
-        t = np.arange(len(self.fold_row)) - np.repeat(np.cumsum(sq) - sq, sq)
-        width, start = np.repeat(lens, sq), np.repeat(ai.indptr[:-1].astype(np.int64), sq)
-        self.fold_e, self.fold_f = start + t // width, start + t % width
-        cols = (ai.indices[self.fold_e][:, None], ai.indices[self.fold_f][:, None])
-        self.fold_slot = Slots(self.hs)(*cols).reshape(-1)
-        self.W = _product_pattern((self.hs, self.T))
-        self._segments()
-        is_y = np.zeros(me, bool)
-        is_y[self.y_rows] = True
-        self.kept = np.flatnonzero(~is_y)
-        self.ae_p, self.ae_i, self.ae_data = ae.indptr, ae.indices, np.zeros(ae.nnz)
-        self.ai_p, self.ai_i, self.ai_data = ai.indptr, ai.indices, np.zeros(ai.nnz)
-        sub = ae[self.kept]
-        sub.sort_indices()
-        ae_pos = sp.csr_matrix(
-            (np.arange(ae.nnz, dtype=float) + 1, ae.indices, ae.indptr), shape=ae.shape
-        )[self.kept]
-        ae_pos.sort_indices()
-        self.ak = sp.csr_matrix((np.zeros(sub.nnz), ae_pos.indices, ae_pos.indptr), shape=sub.shape)
-        self.ak_src = ae_pos.data.astype(np.int64) - 1
-        self.Ar = _product_pattern((self.ak, self.T))
-        self.Hr = sp.csr_matrix(sp.tril(_product_pattern((self.Tt, self.W)), format="csr"))
-        self.Hr.sort_indices()
-        ends = lambda a, b: lower_ends(a.indptr, a.indices, b.indptr, b.indices)  # noqa: E731
-        self.tw_end, self.tt_end = ends(self.Tt, self.W), ends(self.Tt, self.T)
-        self.sigma = np.zeros(self.mi)
-        self.sigma_used = np.zeros(self.mi)  # the Σ of hr_base
-        self.hr_ok = False  # hr_base holds Tᵀ H_f T for these values and sigma_used
-        self.all_kept, self.all_ineq = np.arange(len(self.kept)), np.arange(self.mi)
-        self.work = np.zeros(max(self.nr, 1))
-        self.hr_base = np.zeros(self.Hr.nnz)
-        self.dt_data = np.zeros(self.T.nnz)
-        self.ttt = np.zeros(self.Hr.nnz)  # TᵀT in Hr's pattern
-        self.ttt_ok = False
-
-    def _segments(self) -> None:
-        """``H_f``'s entries row by row in segments of one block's dependent columns (``-1``:
-        the kept columns), for :func:`~mbplan.solvers.reduced_kernels.times_t`: per segment its
-        block and entries, per entry its ``H_f`` slot and the dependent column's row in the
-        block's ``E`` (the kept column's reduced index)."""
-        n, hf = self.n, self.hs
-        block_of, local = -np.ones(n, np.int64), np.zeros(n, np.int64)
-        for b in range(len(self.shape)):
-            dep = self.dep[self.uoff[b] : self.uoff[b + 1]]
-            block_of[dep], local[dep] = b, np.arange(len(dep))
-        rows = np.repeat(np.arange(n), np.diff(hf.indptr))
-        blk = block_of[hf.indices]
-        self.seg_e = np.lexsort((blk, rows))
-        r_s, b_s, c_s = rows[self.seg_e], blk[self.seg_e], hf.indices[self.seg_e]
-        new = np.ones(len(r_s), bool)
-        new[1:] = (r_s[1:] != r_s[:-1]) | (b_s[1:] != b_s[:-1])
-        starts = np.flatnonzero(new)
-        self.seg_block = b_s[starts]
-        self.seg_ptr = np.append(starts, len(r_s))
-        self.row_seg = np.searchsorted(r_s[starts], np.arange(n + 1))
-        self.seg_arg = np.where(b_s >= 0, local[c_s], self.red_of[c_s])
+    def _block_entries(self, entries: tuple, dep: list, free: list, couple: list,
+                       n_rows: list[int]) -> None:  # fmt: skip
+        """Per block its sorted reach ``R_b`` (own free columns and the coupled blocks' reach),
+        ``shape[b] = (r_b, |R_b|)``, and where each entry of its local rows (``entries``:
+        :meth:`_local_entries`, local rows in their final order) goes: the values ``lval``
+        (``A_E``'s entries first, ``lval[t] = ae[la_src[t]]``, then the groups' new rows',
+        ``new_rows.flat[ln_src]``), from there to ``L_b[:, dep]`` (``a_src`` → ``a_dst`` in
+        ``lu``), to the right-hand side of ``E_b`` (a free column: ``fe_src`` → ``fe_dst`` in
+        ``ebuf``; both lists per block at ``a_ptr``, ``fe_ptr``) or to coupling ``k`` (a coupled
+        block's dependent column ``p``: ``nz_a``, ``nz_p``, ``nz_src``, sorted by row, at
+        ``nz_ptr[k]``; ``rmap``: the coupled block's reach in ``R_b``)."""
+        n, B = self.n, len(dep)
+        eb, ea, ec, ek, es = entries
+        self.reach, cptr, cblk, rmap = [], [0], [], []
+        for b in range(B):
+            R = np.unique(np.concatenate([free[b], *(self.reach[i] for i in couple[b])]))
+            self.reach.append(R.astype(np.int64))
+            for i in couple[b]:
+                cblk.append(int(i))
+                rmap.append(np.searchsorted(R, self.reach[i]))
+            cptr.append(len(cblk))
+        i64 = lambda x: np.asarray(x, np.int64)  # noqa: E731
+        r, m = i64(n_rows), i64([len(x) for x in self.reach])
+        self.shape = np.stack([r, m], axis=1) if B else np.zeros((0, 2), np.int64)
+        self.eoff = i64(np.concatenate([[0], np.cumsum(r * m)]))
+        self.lu_off = i64(np.concatenate([[0], np.cumsum(r * r)]))
+        self.uoff = i64(np.concatenate([[0], np.cumsum(r)]))
+        self.cptr, self.cblk = i64(cptr), i64(cblk)
+        self.rmap_off = i64(np.concatenate([[0], np.cumsum([len(x) for x in rmap])]))
+        self.rmap = i64(np.concatenate([*rmap, np.zeros(0, np.int64)]))
+        order = np.argsort(ek, kind="stable")  # A_E's entries first
+        self.la_src, self.ln_src = es[order][~ek[order]], es[order][ek[order]]
+        lval_of = np.empty(len(order), np.int64)
+        lval_of[order] = np.arange(len(order))
+        dep_block, dep_pos = -np.ones(n, np.int64), np.zeros(n, np.int64)
+        for b in range(B):
+            dep_block[dep[b]], dep_pos[dep[b]] = b, np.arange(len(dep[b]))
+        db = dep_block[ec]
+        own, coupled, fr = db == eb, (db >= 0) & (db != eb), db < 0
+        self.a_src = lval_of[own]
+        self.a_dst = self.lu_off[eb[own]] + ea[own] * r[eb[own]] + dep_pos[ec[own]]
+        self.a_ptr = i64(np.searchsorted(eb[own], np.arange(B + 1)))
+        reach_key = np.concatenate([b * n + self.reach[b] for b in range(B)] + [np.zeros(0, np.int64)])  # fmt: skip
+        rstart = np.concatenate([[0], np.cumsum(m)])[:-1] if B else np.zeros(0, np.int64)
+        rpos = np.searchsorted(reach_key, eb[fr] * n + ec[fr]) - rstart[eb[fr]]
+        self.fe_src = lval_of[fr]
+        self.fe_dst = self.eoff[eb[fr]] + ea[fr] * m[eb[fr]] + rpos
+        self.fe_ptr = i64(np.searchsorted(eb[fr], np.arange(B + 1)))
+        k_block = np.repeat(np.arange(B), np.diff(self.cptr))
+        k = np.searchsorted(k_block * B + self.cblk, eb[coupled] * B + db[coupled])
+        nz_a, nz_p, nz_src = ea[coupled], dep_pos[ec[coupled]], lval_of[coupled]
+        by = np.lexsort((nz_p, nz_a, k))
+        self.nz_a, self.nz_p, self.nz_src, k = nz_a[by], nz_p[by], nz_src[by], k[by]
+        self.nz_ptr = i64(np.searchsorted(k, np.arange(len(cblk) + 1)))
+        # the same entries per block as rows and columns of B (its local rows / dependent
+        # columns at uoff), by row for B⁻¹ and by column for B⁻ᵀ
+        k_of = np.repeat(np.arange(len(cblk)), np.diff(self.nz_ptr))
+        b_of = np.searchsorted(self.cptr, k_of, side="right") - 1
+        row = self.uoff[b_of] + self.nz_a
+        col = self.uoff[self.cblk[k_of]] + self.nz_p
+        by_row, by_col = np.lexsort((col, row, b_of)), np.lexsort((row, col, b_of))
+        self.bc_ptr = i64(np.searchsorted(b_of[by_row], np.arange(B + 1)))
+        self.bc_row, self.bc_col, self.bc_val = row[by_row], col[by_row], self.nz_src[by_row]
+        self.bt_row, self.bt_col, self.bt_val = row[by_col], col[by_col], self.nz_src[by_col]
+        self.lval = np.zeros(len(order))
+        self.ebuf = np.zeros(self.eoff[-1])
+        self.lu, self.dinv = np.zeros(self.lu_off[-1]), np.zeros(self.uoff[-1])
+        self.piv = np.zeros(self.uoff[-1], np.int64)
