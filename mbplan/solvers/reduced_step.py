@@ -42,13 +42,6 @@ def _ratio(res: np.ndarray, x: np.ndarray, b: np.ndarray) -> float:
     return nr / den if den > 0 else (0.0 if nr == 0 else np.inf)
 
 
-AUTO_MAX_FLOPS = 4e9
-"""``kkt_method="auto"`` reduces only KKT matrices whose full factorization needs at most this
-many multiply-adds: above it the reduction's per-knot dense blocks (dense over each body's
-ancestors) and the reduced matrix's small supernodes cost more than the full supernodal
-factorization saves (chain64: 9.2e9, reduced 1.4× slower; chain16 0.59×; docs/ripm-speed.md)."""
-
-
 INNER_RATIO = 0.1
 """Each solve through the reduction refines ``K_r``'s solve to this times the requested residual
 ratio: one pass then usually meets the ratio against ``K`` (docs/ripm-speed.md, session 7)."""
@@ -106,9 +99,6 @@ class ReducedKKTSystem:
         if self._seen != self.full.n_analyses:
             self._seen = self.full.n_analyses
             self._red = None
-            if not self.strict and self.full._pattern.analysis.flops > AUTO_MAX_FLOPS:
-                self._values = False
-                return
             try:
                 plan = self.plan_of(ae)
                 if plan is not None:
@@ -183,8 +173,7 @@ def kkt_system(
 ) -> KKTSystem | ReducedKKTSystem:
     """The RIPM's KKT system for ``problem``: ``"full"``, ``"reduced"`` (through the problem's
     ``elimination_plan(A_E)``, an :class:`InputError` if it has none or it is invalid) or
-    ``"auto"`` (reduced when the problem has a valid plan and the full factorization needs at
-    most :data:`AUTO_MAX_FLOPS` multiply-adds)."""
+    ``"auto"`` (reduced when the problem has a valid plan, the full factorization otherwise)."""
     if method not in KKT_METHODS:
         raise InputError(f"kkt_method: expected one of {KKT_METHODS}, got {method!r}")
     n, me, mi = int(problem.n), int(problem.n_eq), int(problem.n_ineq)
