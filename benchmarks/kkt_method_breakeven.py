@@ -1,7 +1,7 @@
 """Time per iteration of whole RIPM solves with ``kkt_method="full"`` and ``"reduced"`` (the
 formulation's default elimination plan), the minimum over ``--repeats`` solves after a warm-up
-one, for the break-even of ``reduced_step.AUTO_MAX_FLOPS``; one JSON line per task. Run it from
-the root of each tree to compare.
+one, for the choice of ``kkt_method="auto"`` (reduced whenever a plan exists); one JSON line
+per task. Run it from the root of each tree to compare.
 
     python benchmarks/kkt_method_breakeven.py --tasks chain16 chain32 chain64 --repeats 1
 """

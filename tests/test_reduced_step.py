@@ -34,16 +34,29 @@ def _kkt(problem, x0, seed):
     return full, red, -rng.uniform(0.5, 2.0, problem.n_ineq) / z, rng
 
 
-@pytest.fixture(scope="module", params=["chain4", "chain8", "iiwa", "chain4+wrench", "iiwa+wrench"])
+@pytest.fixture(
+    scope="module",
+    params=[
+        "chain4",
+        "chain8",
+        "iiwa",
+        "chain4+wrench",
+        "iiwa+wrench",
+        "chain8+3",
+        "chain8+wrench+3",
+    ],
+)
 def systems(request):
-    task, _, wrench = request.param.partition("+")
+    task, *rest = request.param.split("+")
+    wrench = "wrench" in rest
+    segment = int(rest[-1]) if rest and rest[-1].isdigit() else None  # bodies per segment
     if task == "iiwa":
         ocp = iiwa_obstacle(iiwa_obstacle_starts(3, 0, "com")[1], N=6, constraint="com")
         problem, x0 = maximal_ripm_problem(ocp)
     else:
         problem, x0 = maximal_ripm_problem(chain_task(int(task[5:]), N=5), "linear")
-    # the joints alone, or the joint wrenches eliminated too (inverse dynamics)
-    problem.elimination_plan = JointEliminationPlans(problem, forces=bool(wrench))
+    # the joints alone, or the joint wrenches eliminated too (inverse dynamics); in segments
+    problem.elimination_plan = JointEliminationPlans(problem, forces=wrench, segment=segment)
     return problem, x0, *_kkt(problem, x0, 1)
 
 
@@ -131,12 +144,12 @@ def test_nonnegative_inequality_diagonal_goes_to_the_full_factorization(systems)
     assert np.abs(red.solve(b)[0] - full.solve(b)[0]).max() == 0.0
 
 
-@pytest.mark.parametrize("wrench", [False, True])
-def test_ripm_reduced_solve_equals_full(wrench):
+@pytest.mark.parametrize(("wrench", "segment"), [(False, None), (True, None), (False, 2)])
+def test_ripm_reduced_solve_equals_full(wrench, segment):
     problem, x0 = maximal_ripm_problem(chain_task(4, N=8), "linear")
     opts = RIPMOptions(tol=1e-6, max_iter=100)
     full = solve_ripm(problem, x0, opts)
-    problem.elimination_plan = JointEliminationPlans(problem, forces=wrench)
+    problem.elimination_plan = JointEliminationPlans(problem, forces=wrench, segment=segment)
     red = solve_ripm(problem, x0, opts.replace(kkt_method="reduced"))
     assert full.status.name == red.status.name == "CONVERGED"
     assert abs(full.iterations - red.iterations) <= 1
@@ -151,6 +164,40 @@ def test_default_plan_eliminates_the_wrenches_of_shallow_trees(monkeypatch):
     assert joint_elimination_plan(problem, jac).n_blocks == 2 * blocks  # and a wrench block
     monkeypatch.setattr(maximal_layout, "WRENCH_MAX_DEPTH", 3)
     assert joint_elimination_plan(problem, jac).n_blocks == blocks
+
+
+def test_default_plan_of_deep_trees_is_joints_only_in_segments():
+    """Deeper than ``WRENCH_MAX_DEPTH``: no wrench blocks; every ``SEGMENT_DEPTH``-th body of a
+    path keeps its maximal coordinates (a state block without local rows, no row group)."""
+    problem, x0 = maximal_ripm_problem(chain_task(9, N=4), "linear")
+    jac = problem.evaluate(x0, 1.0).eq_jacobian
+    plan = joint_elimination_plan(problem, jac)
+    assert maximal_layout.WRENCH_MAX_DEPTH == maximal_layout.SEGMENT_DEPTH == 8
+    assert plan.n_blocks == 9 * 4  # state blocks only
+    local = (plan.block_rows >= 0).sum(axis=1).reshape(4, 9)
+    assert np.all(local[:, 8] == 0) and np.all(local[:, :8] > 0)  # body 8 at depth 9 is cut
+    assert plan.n_groups == 8 * 3  # steps 1…N-1, uncut bodies
+    one = joint_elimination_plan(problem, jac, segment=9)
+    assert one.n_blocks == 9 * 4 and np.all((one.block_rows >= 0).sum(axis=1) > 0)
+    with pytest.raises(InputError, match="segment"):
+        joint_elimination_plan(problem, jac, segment=0)
+
+
+def test_segments_keep_the_cut_bodies_coordinates_in_the_reduced_matrix():
+    """A cut body's twelve state coordinates stay in ``K_r`` at every knot; its joint
+    constraints and kinematics rows stay among ``K_r``'s rows."""
+    problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
+    jac = problem.evaluate(x0, 1.0).eq_jacobian
+    lay = maximal_layout.maximal_layout(problem, jac)
+    problem.elimination_plan = JointEliminationPlans(problem, forces=False, segment=2)
+    red = _kkt(problem, x0, 0)[1].reduction
+    cut = 2  # depth 3
+    assert np.isin(lay.s_cols[1:, cut], red.red_cols).all()
+    assert np.isin(lay.con_rows[1:, cut], red.kept).all()
+    assert np.isin(lay.kin_rows[:, cut], red.kept).all()
+    # the others: 11 dependent coordinates at knot 1 (six kinematics rows, five constraints),
+    # 10 at knots 2…N (five replaced kinematics rows, five constraints)
+    assert np.isin(lay.s_cols[1:, [0, 1, 3]], red.dep).sum() == 3 * (11 + 10 * 4)
 
 
 def test_wrench_blocks_leave_the_generalized_coordinates():

@@ -38,19 +38,30 @@ class MaximalLayout:
         return self.kin_rows.shape[1]
 
     @property
-    def depth(self) -> int:
-        """Bodies on the longest path from the world."""
+    def depths(self) -> np.ndarray:
+        """Each body's depth: bodies on its path from the world, itself included."""
         d = np.zeros(self.nb, np.int64)
         for c, p in enumerate(self.parent):
             d[c] = 1 + (d[p] if p >= 0 else 0)
-        return int(d.max(initial=0))
+        return d
+
+    @property
+    def depth(self) -> int:
+        """Bodies on the longest path from the world."""
+        return int(self.depths.max(initial=0))
 
 
-WRENCH_MAX_DEPTH = 16
+WRENCH_MAX_DEPTH = 8
 """The default plan eliminates the joint wrenches too (:func:`joint_elimination_plan`) for body
-trees at most this deep: their blocks are dense over the free coordinates of a body's whole
-path, so their cost grows with the depth (iiwa, chain4…16: 0.9–1.0× the joints-only step's
-time per iteration; chain32: ~1.3×; docs/ripm-speed.md, session 7)."""
+trees at most this deep: a wrench block is dense over the free coordinates of the body's
+subtree and their paths, so its cost grows with the depth (iiwa: 0.88× the joints-only step's
+time per iteration, chain8 equal, chain16 1.1–1.3×; docs/ripm-speed.md, session 7)."""
+
+SEGMENT_DEPTH = 8
+"""The default plan's segment (:func:`joint_elimination_plan`): every 8th body along a path
+keeps its maximal coordinates, so that the reduction's blocks stay dense over at most 8 bodies
+(chain64: the joints-only step per iteration 0.46× the full factorization's, one segment
+0.8×; docs/ripm-speed.md, session 7, branch ``chain``)."""
 
 
 def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
@@ -106,7 +117,7 @@ def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
 
 
 def joint_elimination_plan(
-    problem, eq_jacobian: sp.spmatrix, forces: bool | None = None
+    problem, eq_jacobian: sp.spmatrix, forces: bool | None = None, segment: int | None = None
 ) -> EliminationPlan:
     """The joints eliminated knot by knot (:mod:`mbplan.benchmarks.reduced_kkt`, stage 1): for
     steps ``k = 1…N-1`` five of each body's kinematics rows become ``M g - h`` (``h`` its joint
@@ -118,20 +129,34 @@ def joint_elimination_plan(
     states, which are blocks before, and the wrenches of its children; the reduced matrix shrinks
     ~5×, the reduction's products grow: docs/ripm-speed.md, session 7). ``None``: the wrench
     blocks when every joint has a torque and the tree is at most :data:`WRENCH_MAX_DEPTH`
-    deep."""
+    deep. ``segment`` (``None``: :data:`SEGMENT_DEPTH`): the bodies at depths ``segment + 1,
+    2 segment + 1, …`` keep their maximal coordinates (state and wrench blocks without local
+    rows: their columns stay in the reduced matrix, with their joint constraints, kinematics
+    and dynamics rows), so that an eliminated state depends on the free coordinates of at most
+    ``segment`` bodies of its path (and on the state of the cut body above them), an
+    eliminated wrench on those of its subtree down to the next cut bodies; a tree at most
+    ``segment`` deep is one segment."""
     lay = maximal_layout(problem, eq_jacobian)
     actuated = bool(np.all(lay.tau_cols[1:] >= 0))
     if forces is None:
         forces = actuated and lay.depth <= WRENCH_MAX_DEPTH
     elif forces and not actuated:
         raise InputError("joint_elimination_plan: the wrench blocks need a torque on every joint")
+    segment = SEGMENT_DEPTH if segment is None else segment
+    if segment < 1:
+        raise InputError(f"joint_elimination_plan: segment must be at least 1, got {segment}")
     N, nb, parent = lay.N, lay.nb, lay.parent
+    depths = lay.depths
+    cut = (depths > 1) & ((depths - 1) % segment == 0)
     pad6 = -np.ones(6, np.int64)
+    pad11 = -np.ones(11, np.int64)
     pad12 = -np.ones(12, np.int64)
     targets, sources, subtract, cancel = [], [], [], []
+    group = -np.ones((N, nb), np.int64)
     for k in range(1, N):
-        for c in range(nb):
+        for c in np.flatnonzero(~cut):
             p = parent[c]
+            group[k, c] = len(targets)
             targets.append(lay.kin_rows[k, c])
             sources.append(
                 np.concatenate([lay.kin_rows[k, c], lay.kin_rows[k, p] if p >= 0 else pad6])
@@ -141,16 +166,20 @@ def joint_elimination_plan(
     groups, rows, cols = [], [], []
     for k in range(1, N + 1):
         for c in range(nb):
-            groups.append(-1 if k == 1 else (k - 2) * nb + c)
-            rows.append(
-                np.concatenate([lay.kin_rows[0, c] if k == 1 else pad6, lay.con_rows[k, c]])
-            )
+            groups.append(group[k - 1, c])
+            if cut[c]:
+                rows.append(pad11)
+            else:
+                rows.append(
+                    np.concatenate([lay.kin_rows[0, c] if k == 1 else pad6, lay.con_rows[k, c]])
+                )
             cols.append(lay.s_cols[k, c])
     if forces:
         for k in range(1, N + 1):
             for c in range(nb - 1, -1, -1):
                 groups.append(-1)
-                rows.append(np.concatenate([lay.dyn_rows[k - 1, c], -np.ones(5, np.int64)]))
+                dyn = pad6 if cut[c] else lay.dyn_rows[k - 1, c]
+                rows.append(np.concatenate([dyn, -np.ones(5, np.int64)]))
                 cols.append(np.concatenate([lay.lam_cols[k, c], lay.tau_cols[k, c], pad6]))
 
     def stack(a: list, width: int) -> np.ndarray:
@@ -165,11 +194,11 @@ def joint_elimination_plan(
 class JointEliminationPlans:
     """``problem.elimination_plan`` of a maximal-coordinate problem: the
     :func:`joint_elimination_plan` of the equality Jacobian's pattern, kept for the last
-    pattern (every solve of the problem asks for it); ``forces``: with the joint-wrench blocks
-    (``None``: :func:`joint_elimination_plan`'s rule)."""
+    pattern (every solve of the problem asks for it); ``forces``: with the joint-wrench blocks,
+    ``segment``: bodies per segment (``None``: :func:`joint_elimination_plan`'s rules)."""
 
-    def __init__(self, problem, forces: bool | None = None) -> None:
-        self.problem, self.forces = problem, forces
+    def __init__(self, problem, forces: bool | None = None, segment: int | None = None) -> None:
+        self.problem, self.forces, self.segment = problem, forces, segment
         self._key: tuple[bytes, bytes] | None = None
         self._plan: EliminationPlan | None = None
 
@@ -177,5 +206,8 @@ class JointEliminationPlans:
         jac = sp.csr_matrix(eq_jacobian)
         key = (jac.indptr.tobytes(), jac.indices.tobytes())
         if key != self._key or self._plan is None:
-            self._plan, self._key = joint_elimination_plan(self.problem, jac, self.forces), key
+            self._plan, self._key = (
+                joint_elimination_plan(self.problem, jac, self.forces, self.segment),
+                key,
+            )
         return self._plan

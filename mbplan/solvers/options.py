@@ -136,8 +136,7 @@ class RIPMOptions:
     """``"full"``: factorize the whole KKT matrix; ``"reduced"``: eliminate the pairs of the
     problem's ``elimination_plan`` first (:mod:`mbplan.solvers.reduced_step`; the full
     factorization where it does not apply, e.g. ``δ_c > 0``); ``"auto"``: reduced when the
-    problem has a plan and the full factorization needs at most
-    :data:`~mbplan.solvers.reduced_step.AUTO_MAX_FLOPS` multiply-adds."""
+    problem has a valid plan, else the full factorization (no error)."""
 
     # --- feasibility restoration (WB §3.3) ---
     restoration: bool = True

@@ -36,17 +36,9 @@ from mbplan.solvers.linear_solver import (
     KKTSystem,
     _BlockPattern,
     _csr,
-    _kkt_pattern,
     _same_pattern,
 )
 from mbplan.solvers.reduction import Reduction, reduction, repick
-
-AUTO_MAX_FLOPS = 4e9
-"""``kkt_method="auto"`` reduces only KKT matrices whose full factorization needs at most this
-many multiply-adds: above it the reduction's per-knot dense blocks (dense over each body's
-ancestors) and the reduced matrix's small supernodes cost more than the full supernodal
-factorization saves (chain64: 9.2e9, reduced 1.4× slower; chain16 0.59×; docs/ripm-speed.md)."""
-
 
 INNER_RATIO = 0.1
 """Each solve through the reduction refines ``K_r``'s solve to this times the requested residual
@@ -116,16 +108,11 @@ class ReducedKKTSystem:
             self.full.set_matrices(*blocks)
 
     def _new_pattern(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> None:
-        """The reduction of a new pattern (``None``: no plan, an unusable one, or under
-        ``"auto"`` a full factorization cheap enough: :data:`AUTO_MAX_FLOPS`)."""
+        """The reduction of a new pattern (``None``: no plan or an unusable one)."""
         self._red, self._plan, self._repicked = None, None, False
         self._patterns = tuple(
             _BlockPattern(a.shape, a.indptr.copy(), a.indices.copy()) for a in (hess, ae, ai)
         )
-        if not self.strict:
-            pattern = _kkt_pattern(self.n, self.n_eq, self.n_ineq, hess, ae, ai, self.ordering)
-            if pattern.analysis.flops > AUTO_MAX_FLOPS:
-                return
         try:
             self._plan = self.plan_of(ae)
             if self._plan is not None:
@@ -222,8 +209,7 @@ def kkt_system(
 ) -> KKTSystem | ReducedKKTSystem:
     """The RIPM's KKT system for ``problem``: ``"full"``, ``"reduced"`` (through the problem's
     ``elimination_plan(A_E)``, an :class:`InputError` if it has none or it is invalid) or
-    ``"auto"`` (reduced when the problem has a valid plan and the full factorization needs at
-    most :data:`AUTO_MAX_FLOPS` multiply-adds)."""
+    ``"auto"`` (reduced when the problem has a valid plan, the full factorization otherwise)."""
     if method not in KKT_METHODS:
         raise InputError(f"kkt_method: expected one of {KKT_METHODS}, got {method!r}")
     n, me, mi = int(problem.n), int(problem.n_eq), int(problem.n_ineq)
