@@ -28,16 +28,9 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ripm_options_ab import SESSION6  # the defaults before session 7
 from tqdm import tqdm
 
-SESSION6 = {
-    "mu_strategy": "monotone",
-    "mu_oracle": "loqo",
-    "mu_max_fact": 1e3,
-    "corrector": False,
-    "kkt_method": "full",
-}
-"""The defaults before session 7 (monotone μ, full KKT)."""
 PROBING = {"mu_strategy": "adaptive", "mu_oracle": "probing"}
 VARIANTS: dict[str, dict[str, Any]] = {
     "default": {},

@@ -31,6 +31,7 @@ import scipy.sparse as sp
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from mbplan.benchmarks.kkt_profile import warm_kkt
 from mbplan.benchmarks.speed_tasks import TASKS
 from mbplan.formulations.maximal_layout import JointEliminationPlans
 from mbplan.solvers.linear_solver import KKTSystem
@@ -42,17 +43,6 @@ VARIANTS = ("full-amd", "full-metis", "joints-amd", "joints-metis", "wrench-amd"
 wrench blocks); ``segment``: :func:`joint_elimination_plan`'s (``wrench8-metis``: bodies at
 depths 9, 17, … keep their maximal coordinates); METIS with pivoting (u = :data:`PIVOT`)."""
 CALLS = ("set_matrices", "factorize", "solve")
-
-
-def warm_kkt(task: str, seed: int = 0) -> tuple[Any, tuple, np.ndarray, np.ndarray]:
-    """The task's problem, KKT blocks, diagonal and a right-hand side (module docstring)."""
-    problem, x0, _ = TASKS[task](0)
-    rng = np.random.default_rng(seed)
-    z, s = rng.uniform(0.5, 2.0, (2, problem.n_ineq))
-    ev = problem.evaluate(x0, 1.0, rng.normal(size=problem.n_eq), z)
-    blocks = (ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
-    diag = np.concatenate([np.full(problem.n, 1e-6), np.zeros(problem.n_eq), -s / z])
-    return problem, blocks, diag, rng.normal(size=problem.n + problem.n_eq + problem.n_ineq)
 
 
 def product_flops(a: sp.csr_matrix, b: sp.csr_matrix, lower: bool = False) -> float:
@@ -102,7 +92,8 @@ def sizes(kkt: KKTSystem | ReducedKKTSystem) -> dict[str, Any]:
 
 
 def run(task: str, variants: list[str], reps: int) -> dict[str, Any]:
-    problem, blocks, diag, rhs = warm_kkt(task)
+    problem, x0, _ = TASKS[task](0)
+    blocks, diag, rhs = warm_kkt(problem, x0)
     systems, out = {}, {}
     for v in variants:
         t0 = time.perf_counter()

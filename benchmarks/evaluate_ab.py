@@ -19,11 +19,9 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.common import run_in_tree
+from mbplan.benchmarks.common import median_of_min, run_in_tree
 
 PROFILE = ("evaluate", "values", "retract")
 MICRO = ("evaluate_us", "jacobian_us", "values_us", "retract_us")
@@ -89,12 +87,8 @@ print(json.dumps(out))
 
 def summarize(runs: list[dict], task: str) -> dict:
     """Per component: min over rounds per case, median over cases."""
+    out = median_of_min(runs, task, (*PROFILE, *MICRO))
     cases = range(len(runs[0][task]))
-    out = {
-        k: float(np.median([min(r[task][c][k] for r in runs) for c in cases]))
-        for k in (*PROFILE, *MICRO)
-    }
-    out["iterations"] = [runs[0][task][c]["iterations"] for c in cases]
     out["digests"] = sorted({r[task][c]["digest"] for r in runs for c in cases})
     return out
 

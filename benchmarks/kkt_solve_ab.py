@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -28,6 +26,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from mbplan.benchmarks.common import modules_at  # noqa: E402
 from mbplan.benchmarks.speed_tasks import TASKS  # noqa: E402
 from mbplan.solvers import linear_solver, ripm  # noqa: E402
 
@@ -45,27 +44,7 @@ def baseline_kkt(rev: str) -> type:
     """``KKTSystem`` of commit ``rev`` (those of its modules :data:`BASELINE_MODULES` that exist
     at ``rev``; the rest of the package from the working tree), compiled in a per-commit
     temporary directory."""
-    folder = Path(tempfile.gettempdir()) / f"mbplan-kkt-baseline-{rev}"
-    folder.mkdir(exist_ok=True)
-    sources = {}
-    for name in BASELINE_MODULES:
-        out = subprocess.run(
-            ["git", "show", f"{rev}:mbplan/solvers/{name}.py"],
-            cwd=ROOT,
-            capture_output=True,
-            text=True,
-        )
-        if out.returncode == 0:
-            sources[name] = out.stdout
-    for name, src in sources.items():
-        for other in sources:
-            src = src.replace(
-                f"from mbplan.solvers.{other} import", f"from baseline_{other} import"
-            )
-        path = folder / f"baseline_{name}.py"
-        if not path.exists() or path.read_text() != src:
-            path.write_text(src)
-    sys.path.insert(0, str(folder))
+    modules_at(rev, BASELINE_MODULES, "mbplan.solvers", "baseline_")
     module = importlib.import_module("baseline_linear_solver")
 
     class Baseline(module.KKTSystem):

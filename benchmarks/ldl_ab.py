@@ -20,7 +20,6 @@ import argparse
 import importlib
 import json
 import pickle
-import subprocess
 import sys
 import tempfile
 import time
@@ -32,6 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from mbplan.benchmarks.common import modules_at  # noqa: E402
 from mbplan.benchmarks.speed_tasks import TASKS  # noqa: E402
 from mbplan.solvers import linear_solver  # noqa: E402
 from mbplan.solvers.reduced_step import ReducedKKTSystem  # noqa: E402
@@ -46,25 +46,7 @@ CACHE = Path(tempfile.gettempdir()) / "mbplan-ldl-ab"
 def baseline_kkt(rev: str) -> type:
     """``KKTSystem`` of commit ``rev`` (those of :data:`MODULES` that exist there; the rest of
     the package from the working tree), compiled in a per-commit temporary directory."""
-    folder = Path(tempfile.gettempdir()) / f"mbplan-ldl-baseline-{rev}"
-    folder.mkdir(exist_ok=True)
-    sources = {}
-    for name in MODULES:
-        out = subprocess.run(
-            ["git", "show", f"{rev}:mbplan/solvers/{name}.py"],
-            cwd=ROOT,
-            capture_output=True,
-            text=True,
-        )
-        if out.returncode == 0:
-            sources[name] = out.stdout
-    for name, src in sources.items():
-        for other in sources:
-            src = src.replace(f"from mbplan.solvers.{other} import", f"from ldlbase_{other} import")
-        path = folder / f"ldlbase_{name}.py"
-        if not path.exists() or path.read_text() != src:
-            path.write_text(src)
-    sys.path.insert(0, str(folder))
+    modules_at(rev, MODULES, "mbplan.solvers", "ldlbase_")
     return importlib.import_module("ldlbase_linear_solver").KKTSystem
 
 

@@ -28,6 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from mbplan.benchmarks.kkt_profile import warm_kkt
 from mbplan.benchmarks.speed_tasks import TASKS
 from mbplan.solvers import solve_ripm
 from mbplan.solvers.linear_solver import KKTSystem
@@ -71,12 +72,7 @@ def _kkt_clock(clock: dict[str, float]):
 def kkt_parts(task: str, repeats: int, seed: int = 0) -> dict:
     """Part 1 (module docstring)."""
     problem, x0, _ = TASKS[task](0)
-    rng = np.random.default_rng(seed)
-    z, s = rng.uniform(0.5, 2.0, (2, problem.n_ineq))
-    ev = problem.evaluate(x0, 1.0, rng.normal(size=problem.n_eq), z)
-    blocks = (ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
-    diag = np.concatenate([np.full(problem.n, 1e-6), np.zeros(problem.n_eq), -s / z])
-    b = rng.normal(size=problem.n + problem.n_eq + problem.n_ineq)
+    blocks, diag, b = warm_kkt(problem, x0, seed)
     systems = {
         "full": KKTSystem(problem.n, problem.n_eq, problem.n_ineq),
         "reduced": ReducedKKTSystem(

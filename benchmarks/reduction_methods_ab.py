@@ -16,11 +16,9 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.common import run_in_tree
+from mbplan.benchmarks.common import median_of_min, run_in_tree
 
 _CHILD = r"""
 import json, sys, time
@@ -73,14 +71,9 @@ print(json.dumps(out))
 
 def summarize(runs: list[dict], task: str) -> dict:
     """Per timer: min over rounds per case, median over cases (ms per iteration)."""
-    cases = range(len(runs[0][task]))
     keys = [k for k in runs[0][task][0] if k not in ("iterations", "calls")]
-    out = {
-        k: float(np.median([min(r[task][c].get(k, np.nan) for r in runs) for c in cases]))
-        for k in keys
-    }
+    out = median_of_min(runs, task, keys)
     out["calls"] = runs[0][task][0]["calls"]
-    out["iterations"] = [runs[0][task][c]["iterations"] for c in cases]
     return out
 
 

@@ -17,11 +17,9 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.common import run_in_tree
+from mbplan.benchmarks.common import median_of_min, run_in_tree
 
 KEYS = ("evaluate", "values", "retract", "assembly", "factorize", "solve", "python")
 
@@ -47,12 +45,9 @@ print(json.dumps(out))
 
 def summarize(runs: list[dict], task: str) -> dict:
     """Per component: min over rounds per case, median over cases (ms per iteration)."""
-    cases = range(len(runs[0][task]))
-    out = {
-        k: float(np.median([min(r[task][c][f"{k}_ms"] for r in runs) for c in cases])) for k in KEYS
-    }
+    out = median_of_min(runs, task, [f"{k}_ms" for k in KEYS])
+    out.update({k: out.pop(f"{k}_ms") for k in KEYS})
     out["sum"] = sum(out[k] for k in KEYS)
-    out["iterations"] = [runs[0][task][c]["iterations"] for c in cases]
     return out
 
 

@@ -85,6 +85,18 @@ def _timed_kkt(clock: dict[str, float]):
             setattr(cls, name, fn)
 
 
+def warm_kkt(problem: Any, x0: Any, seed: int = 0) -> tuple[tuple, np.ndarray, np.ndarray]:
+    """A KKT system of ``problem`` at ``x0`` as the RIPM meets it: multipliers ``y ~ N(0, 1)``,
+    ``z, s`` uniform in ``[0.5, 2]``, ``δ_w = 1e-6``; its blocks (Hessian's lower triangle,
+    ``A_E``, ``A_I``), diagonal and a random right-hand side."""
+    rng = np.random.default_rng(seed)
+    z, s = rng.uniform(0.5, 2.0, (2, problem.n_ineq))
+    ev = problem.evaluate(x0, 1.0, rng.normal(size=problem.n_eq), z)
+    blocks = (ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+    diag = np.concatenate([np.full(problem.n, 1e-6), np.zeros(problem.n_eq), -s / z])
+    return blocks, diag, rng.normal(size=problem.n + problem.n_eq + problem.n_ineq)
+
+
 def profile_solve(problem: Any, x0: Any, options: RIPMOptions) -> dict[str, Any]:
     """Solve once (after a warm-up solve for compilation and pattern analysis) and return the
     time per iteration of each part, in ms, with counts per iteration."""
