@@ -226,6 +226,8 @@ def test_kkt_method_choice_and_errors(systems):
         EliminationPlan(
             one[:0], one[:0], one[:0], one[:0], np.array([-1]), np.array([[0, 1, 2]]), one[:, :1]
         )
+    with pytest.raises(InputError, match="1 of 1 groups in no block"):  # rows it replaces
+        EliminationPlan(one, one, one[:, :1], one, np.array([-1]), one[:, :1], one)
 
 
 def test_breakdown_and_invalid_plan_fall_back_to_the_full_factorization(systems):

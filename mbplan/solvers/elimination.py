@@ -25,6 +25,9 @@ import numpy as np
 
 from mbplan.errors import InputError
 
+PLAN_ERRORS = (InputError, ValueError, IndexError, KeyError, np.linalg.LinAlgError)
+"""What building a reduction from a plan that does not fit the matrix raises."""
+
 
 @dataclass(frozen=True)
 class EliminationPlan:
@@ -51,6 +54,11 @@ class EliminationPlan:
         used = self.block_groups[self.block_groups >= 0]
         if len(np.unique(used)) != len(used):
             raise InputError("EliminationPlan.block_groups: a group's rows in two blocks")
+        if len(used) != J:
+            raise InputError(
+                f"EliminationPlan.block_groups: {J - len(used)} of {J} groups in no block "
+                "(a group's new rows must be local to a block)"
+            )
         r = (self.group_subtract >= 0).sum(axis=1)
         if np.any(r > (self.group_targets >= 0).sum(axis=1)):
             raise InputError("EliminationPlan: a group replaces more rows than it targets")

@@ -16,7 +16,8 @@ residual ratio, then against the full ``K`` (IPOPT's ratio).
 The symbolic phase (once per pattern) picks the replaced rows and dependent columns by QR
 with column pivoting on the values of the pattern's first matrix (again on those of a matrix
 they break down on: :func:`~mbplan.solvers.reduction.repick`) and builds every index array;
-the numeric phase is compiled (:mod:`mbplan.solvers.reduction`).
+the numeric phase is compiled (:mod:`mbplan.solvers.reduced_kernels`,
+:mod:`~mbplan.solvers.reduced_products`, :mod:`~mbplan.solvers.reduced_solves`).
 The full factorization is the fallback: a nonzero diagonal on an eliminated row (``δ_c > 0``,
 restoration), a pivot breakdown in the reduction or in ``K_r``, or a refined solve that does
 not converge.
@@ -30,7 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mbplan.errors import InputError
-from mbplan.solvers.elimination import EliminationPlan
+from mbplan.solvers.elimination import PLAN_ERRORS, EliminationPlan
 from mbplan.solvers.linear_solver import (
     Inertia,
     KKTSystem,
@@ -120,7 +121,7 @@ class ReducedKKTSystem:
         except InputError:
             if self.strict:
                 raise
-        except (ValueError, IndexError, KeyError) as err:  # a plan that does not fit
+        except PLAN_ERRORS as err:  # a plan that does not fit
             if self.strict:
                 raise InputError(f"kkt_method='reduced': unusable elimination plan: {err}") from err
 

@@ -18,8 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba
-from mbplan.errors import InputError
-from mbplan.solvers.elimination import EliminationPlan
+from mbplan.solvers.elimination import PLAN_ERRORS, EliminationPlan
 from mbplan.solvers.linear_solver import Inertia, KKTSystem
 from mbplan.solvers.reduced_kernels import (
     VALUE_KERNELS,
@@ -111,7 +110,7 @@ def repick(
                 return red
     try:
         choice = Reduction(plan, hess, ae, ai, ordering, pivot_threshold)
-    except (InputError, ValueError, np.linalg.LinAlgError):
+    except PLAN_ERRORS:
         return None
     red = choice.fresh()
     if not red.set_values(hess, ae, ai):
@@ -207,8 +206,8 @@ class Reduction(ReductionSymbolic, ReductionLayout):
 
     # ------------------------------------------------------------------ numeric
     def set_values(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> bool:
-        """``M_j``, ``E``, ``H`` in ``H_f``'s pattern, ``A_E,kept T`` for new values (``H``,
-        ``A_E`` and ``A_I`` with this reduction's patterns; ``Tᵀ H_f T`` follows in
+        """``M_j``, ``E``, ``H``'s values, ``A_E,kept T`` for new values (``H``, ``A_E`` and
+        ``A_I`` with this reduction's patterns; ``H_f`` and ``Tᵀ H_f T`` follow in
         :meth:`factorize`, with ``Σ``); False on a breakdown."""
         self.ok = self.hr_ok = self.ttt_ok = False
         self.ae_data[:] = ae.data
