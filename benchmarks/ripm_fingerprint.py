@@ -43,34 +43,6 @@ def fingerprint(res) -> str:
     )
 
 
-def _infeasible_eq():
-    from mbplan.solvers import EuclideanNLP
-
-    return EuclideanNLP(
-        2,
-        lambda x: x[0] ** 2 + (x[1] - 1) ** 2,
-        lambda x: np.array([2 * x[0], 2 * (x[1] - 1)]),
-        lambda x, s, y, z: np.diag([2 * s + 2 * y[0], 2 * s]),
-        eq=lambda x: np.array([x[0] ** 2 + 1]),
-        eq_jacobian=lambda x: np.array([[2 * x[0], 0.0]]),
-        n_eq=1,
-    )
-
-
-def _infeasible_ineq():
-    from mbplan.solvers import EuclideanNLP
-
-    return EuclideanNLP(
-        2,
-        lambda x: x[0] + x[1],
-        lambda x: np.ones(2),
-        lambda x, s, y, z: np.diag([2 * z[0], 0.0]),
-        ineq=lambda x: np.array([x[0] ** 2 + 1, -x[1]]),
-        ineq_jacobian=lambda x: np.array([[2 * x[0], 0.0], [0.0, -1.0]]),
-        n_ineq=2,
-    )
-
-
 def _test_cases():
     """The small problems of tests/test_ripm.py with the option sets that exercise the
     restoration phase, the adaptive μ and Mehrotra's probing and corrector."""
@@ -80,13 +52,20 @@ def _test_cases():
     import mbplan
 
     assert Path(mbplan.__file__).resolve().parents[1] == Path.cwd().resolve(), mbplan.__file__
-    from mbplan.solvers.examples import HS071_X0, BandedControlNLP, hs071
+    from mbplan.solvers.examples import (
+        HS071_X0,
+        INFEASIBLE_X0,
+        BandedControlNLP,
+        hs071,
+        infeasible_equality,
+        infeasible_inequalities,
+    )
 
     banded = BandedControlNLP(nx=4, nu=2, horizon=20)
     probing = {"mu_strategy": "adaptive", "mu_oracle": "probing"}
     problems = {
-        "infeasible-eq": (_infeasible_eq, lambda: np.array([1.0, 3.0])),
-        "infeasible-ineq": (_infeasible_ineq, lambda: np.array([1.0, 3.0])),
+        "infeasible-eq": (infeasible_equality, lambda: INFEASIBLE_X0),
+        "infeasible-ineq": (infeasible_inequalities, lambda: INFEASIBLE_X0),
         "hs071": (hs071, lambda: HS071_X0),
         "banded": (lambda: banded, banded.initial_guess),
         "disc": (t._outside_disc, lambda: np.array([0.0, 1e-3])),

@@ -23,7 +23,14 @@ from mbplan.solvers import (
     solve_ripm,
 )
 from mbplan.solvers.barrier import MU_MIN
-from mbplan.solvers.examples import HS071_X0, BandedControlNLP, hs071
+from mbplan.solvers.examples import (
+    HS071_X0,
+    INFEASIBLE_X0,
+    BandedControlNLP,
+    hs071,
+    infeasible_equality,
+    infeasible_inequalities,
+)
 from mbplan.solvers.linear_solver import KKTSystem
 
 
@@ -209,16 +216,7 @@ def _assert_finite(res):
 
 
 def test_infeasible_equality_is_detected():
-    prob = EuclideanNLP(
-        2,
-        lambda x: x[0] ** 2 + (x[1] - 1) ** 2,
-        lambda x: np.array([2 * x[0], 2 * (x[1] - 1)]),
-        lambda x, s, y, z: np.diag([2 * s + 2 * y[0], 2 * s]),
-        eq=lambda x: np.array([x[0] ** 2 + 1]),
-        eq_jacobian=lambda x: np.array([[2 * x[0], 0.0]]),
-        n_eq=1,
-    )
-    res = solve_ripm(prob, np.array([1.0, 3.0]))
+    res = solve_ripm(infeasible_equality(), INFEASIBLE_X0)
     assert res.status is RIPMStatus.LOCALLY_INFEASIBLE
     _assert_finite(res)
     assert abs(res.x[0]) < 1e-6  # the minimizer of the infeasibility x₁² + 1
@@ -226,16 +224,7 @@ def test_infeasible_equality_is_detected():
 
 
 def test_infeasible_inequalities_are_detected():
-    prob = EuclideanNLP(
-        2,
-        lambda x: x[0] + x[1],
-        lambda x: np.ones(2),
-        lambda x, s, y, z: np.diag([2 * z[0], 0.0]),
-        ineq=lambda x: np.array([x[0] ** 2 + 1, -x[1]]),
-        ineq_jacobian=lambda x: np.array([[2 * x[0], 0.0], [0.0, -1.0]]),
-        n_ineq=2,
-    )
-    res = solve_ripm(prob, np.array([1.0, 3.0]))
+    res = solve_ripm(infeasible_inequalities(), INFEASIBLE_X0)
     assert res.status is RIPMStatus.LOCALLY_INFEASIBLE
     _assert_finite(res)
     assert any(res.history.restoration)

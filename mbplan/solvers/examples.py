@@ -1,6 +1,7 @@
-"""Reference problems for the RIPM: HS071 (Hock-Schittkowski no. 71, IPOPT's tutorial problem)
-and a block-banded, vectorised optimal-control NLP whose KKT matrix has the structure of a
-trajectory optimization (used by the tests and ``benchmarks/ripm_linear_solver.py``)."""
+"""Reference problems for the RIPM: HS071 (Hock-Schittkowski no. 71, IPOPT's tutorial problem),
+two infeasible problems (restoration and infeasibility detection) and a block-banded, vectorised
+optimal-control NLP whose KKT matrix has the structure of a trajectory optimization (used by the
+tests and ``benchmarks/ripm_linear_solver.py``)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,35 @@ import scipy.sparse as sp
 from mbplan.solvers.problem import EuclideanNLP, ManifoldNLP
 
 HS071_X0 = np.array([1.0, 5.0, 5.0, 1.0])
+INFEASIBLE_X0 = np.array([1.0, 3.0])
+
+
+def infeasible_equality() -> EuclideanNLP:
+    """``min x₁² + (x₂ - 1)²`` s.t. ``x₁² + 1 = 0``: no feasible point; the infeasibility
+    ``x₁² + 1`` is least at ``x₁ = 0``. Start at :data:`INFEASIBLE_X0`."""
+    return EuclideanNLP(
+        2,
+        lambda x: x[0] ** 2 + (x[1] - 1) ** 2,
+        lambda x: np.array([2 * x[0], 2 * (x[1] - 1)]),
+        lambda x, s, y, z: np.diag([2 * s + 2 * y[0], 2 * s]),
+        eq=lambda x: np.array([x[0] ** 2 + 1]),
+        eq_jacobian=lambda x: np.array([[2 * x[0], 0.0]]),
+        n_eq=1,
+    )
+
+
+def infeasible_inequalities() -> EuclideanNLP:
+    """``min x₁ + x₂`` s.t. ``x₁² + 1 ≤ 0``, ``x₂ ≥ 0``: no feasible point. Start at
+    :data:`INFEASIBLE_X0`."""
+    return EuclideanNLP(
+        2,
+        lambda x: x[0] + x[1],
+        lambda x: np.ones(2),
+        lambda x, s, y, z: np.diag([2 * z[0], 0.0]),
+        ineq=lambda x: np.array([x[0] ** 2 + 1, -x[1]]),
+        ineq_jacobian=lambda x: np.array([[2 * x[0], 0.0], [0.0, -1.0]]),
+        n_ineq=2,
+    )
 
 
 def hs071() -> EuclideanNLP:
