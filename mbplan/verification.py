@@ -56,6 +56,8 @@ Thresholds (all documented values are checked by ``tests/test_verification.py``)
   (:mod:`mbplan.multibody.collision`); the others at the planned knots within
   :data:`CONSTRAINT_TOLERANCE` (or the constraint's own ``tolerance``); torque limits on the applied torques (``tau_knots`` when given)
   within :data:`TORQUE_TOLERANCE` ``· max(1, limit)``.
+* a replay that diverges (a non-finite state in any interval, e.g. an open-loop unstable
+  configuration held over ``Δt``) fails: its NaN metrics would pass every comparison.
 * soft goals (costs with a ``tolerance``): the residual's ∞-norm at the end of the replayed
   last interval (``goal_errors``; ``final_goal_error_rad`` is the largest) ≤ the tolerance (the
   tracking cost is soft, so a plan that converged to a local minimum blocked by the obstacle
@@ -293,6 +295,12 @@ def verify(ocp: OCP | PlanResult, result: PlanResult | None = None) -> Verificat
         np.max(dev_v / (2.0 * np.max(np.abs(v_end - v_euler), axis=1) + DEVIATION_FLOOR))
     )
     reasons = []
+    finite = np.isfinite(path).all(axis=(1, 2)) & np.isfinite(v_end).all(axis=1)
+    if not finite.all():
+        reasons.append(
+            f"the replay diverges (non-finite state) in {int(np.sum(~finite))} of {ocp.N} "
+            f"intervals, the first from knot {int(np.argmin(finite))}"
+        )
     for name, ratio in (("joint", ratio_q), ("velocity", ratio_v)):
         if ratio > 1.0:
             reasons.append(

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 
 from mbplan.benchmarks.kkt_profile import PROFILE_KEYS, profile_solve
-from mbplan.benchmarks.speed_tasks import chain_task
+from mbplan.benchmarks.speed_tasks import chain_start, chain_target, chain_task
 from mbplan.solvers import RIPMOptions
 from mbplan.solvers.examples import BandedControlNLP
 
@@ -35,11 +36,33 @@ def test_profile_splits_the_iteration_into_parts_that_add_up():
 def test_chain_obstacle_task_blocks_the_linear_path_but_not_its_ends():
     from mbplan.planning.initial_guess import initial_path, path_clearance
 
-    for n in (4, 8):
+    for n in (4, 8, 64):
         ocp = chain_task(n, N=10, obstacle=True)
         assert [o.name for o in ocp.scene] == ["cylinder"]
         assert "com_outside_cylinder" in [c.name for c in ocp.constraints]
         path = initial_path(ocp, "linear")
         assert path_clearance(ocp, path) > 0.0  # the straight reach crosses the cylinder
         assert path_clearance(ocp, path[[0, -1]]) < 0.0  # start and goal are clear
+        np.testing.assert_allclose(path[0], chain_start(n, obstacle=True))
         np.testing.assert_allclose(path[-1], ocp["joint_position_terminal"].residual.target)
+
+
+def _growth_rate(model: pin.Model, q: np.ndarray) -> float:
+    """Largest real part (1/s) of the eigenvalues of the dynamics linearised at rest at ``q``
+    under the torques that hold it (``pinocchio.rnea``)."""
+    data, n = model.createData(), model.nv
+    tau = pin.rnea(model, data, q, np.zeros(n), np.zeros(n))
+    pin.computeABADerivatives(model, data, q, np.zeros(n), tau)
+    a = np.block([[np.zeros((n, n)), np.eye(n)], [data.ddq_dq, data.ddq_dv]])
+    return float(np.max(np.linalg.eigvals(a).real))
+
+
+def test_chain_obstacle_start_and_goal_are_stable_at_every_size():
+    # a plan that holds an open-loop unstable goal cannot be replayed (growth e^{λΔt} per interval)
+    for n in (4, 64):
+        model = chain_task(n, N=2, obstacle=True).robot.model
+        for q in (chain_start(n, obstacle=True), chain_target(n, obstacle=True)):
+            assert _growth_rate(model, q) < 1e-6
+        bent = np.zeros(n)
+        bent[0], bent[n // 2 + 1] = 1.0, 1.5  # the old goal's kind: x bend above, y bend below
+        assert _growth_rate(model, bent) > 1.0

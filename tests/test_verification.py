@@ -210,6 +210,16 @@ def test_obstacle_goal_torque_and_nan_failures(free_task: OCP, rollout: PlanResu
     assert np.isnan(check.max_joint_deviation_rad)
 
 
+def test_a_diverging_replay_fails(free_task: OCP, rollout: PlanResult) -> None:
+    tau = rollout.tau.copy()
+    tau[3] = 1e200  # finite, but the replay of interval 3 overflows to NaN
+    check = verify(free_task, dataclasses.replace(rollout, tau=tau))
+    assert not check.passed
+    assert "the replay diverges (non-finite state) in 1 of 40 intervals, the first from knot 3" in (
+        check.reasons
+    )
+
+
 def test_mismatched_result_is_an_input_error(free_task: OCP, rollout: PlanResult) -> None:
     with pytest.raises(InputError, match="does not match the OCP"):
         verify(make_task(N=20), rollout)

@@ -87,29 +87,37 @@ def _chain_path(n: int) -> str:
 
 
 CHAIN_CURL = 1.2  # rad, the reach's total curl (every joint 1.2 / n)
-CHAIN_BEND = (1.0, 3.0)  # rad: the upper half's x joints, the lower half's y joints (obstacle task)
-CHAIN_CYLINDER = ((-0.15, 0.22), 0.05)  # vertical cylinder: centre xy, radius (m)
+CHAIN_BEND = 1.2  # rad: the obstacle task: the x joints share it at the start, the y at the goal
+CHAIN_CYLINDER = ((-0.25, 0.3), 0.05)  # vertical cylinder: centre xy, radius (m)
 CHAIN_MARGIN = 0.08  # m, eq. (62) margin of the link COMs (the replay deviates ~3 cm between knots)
 CHAIN_VELOCITY = 2.0  # rad/s, joint speed limit of the obstacle task (no whipping past it)
 
 
+def _bend(n: int, about_x: bool) -> np.ndarray:
+    """The x (``about_x``) or the y joints share :data:`CHAIN_BEND`, the others stay at 0."""
+    rows = (np.arange(n) % 2 == 0) == about_x
+    return np.where(rows, CHAIN_BEND / max(int(rows.sum()), 1), 0.0)
+
+
+def chain_start(n: int, obstacle: bool = False) -> np.ndarray:
+    """The reach's start at rest: hanging (q = 0), or (``obstacle``) the x joints' bend, the
+    chain curled in the y-z plane towards +y."""
+    return _bend(n, about_x=True) if obstacle else np.zeros(n)
+
+
 def chain_target(n: int, obstacle: bool = False) -> np.ndarray:
-    """The reach's goal: a uniform curl of :data:`CHAIN_CURL`, or (``obstacle``) a bend: the
-    upper half's x joints share ``CHAIN_BEND[0]``, the lower half's y joints ``CHAIN_BEND[1]``,
-    so that the linear interpolation sweeps the link COMs through :data:`CHAIN_CYLINDER`
-    (≥ 7 cm into it with the margin for 4…64 links) while start and goal keep ≥ 2 cm clear of it and its margin."""
-    if not obstacle:
-        return np.full(n, CHAIN_CURL / n)
-    i = np.arange(n)
-    upper, about_x = i < n // 2, i % 2 == 0
-    q = np.zeros(n)
-    for rows, total in zip((upper & about_x, ~upper & ~about_x), CHAIN_BEND, strict=True):
-        q[rows] = total / max(int(rows.sum()), 1)
-    return q
+    """The reach's goal: a uniform curl of :data:`CHAIN_CURL`, or (``obstacle``) the y joints'
+    bend, the chain curled in the x-z plane towards -x. The obstacle task's start and goal are
+    planar curls, stable equilibria under their holding torques at every size (a bend that
+    curls the chain out of one vertical plane is open-loop unstable, with a growth rate of
+    ~n^1.5 / s); the linear interpolation between them sweeps the link COMs through
+    :data:`CHAIN_CYLINDER` (≥ 11 cm into it with the margin for 4…64 links) while start and goal
+    keep ≥ 11 cm clear of it and its margin."""
+    return _bend(n, about_x=False) if obstacle else np.full(n, CHAIN_CURL / n)
 
 
 def chain_task(n: int, N: int = 40, obstacle: bool = False):
-    """Reach with an ``n``-link hanging chain from rest at q = 0 to :func:`chain_target`;
+    """Reach with an ``n``-link chain from rest at :func:`chain_start` to :func:`chain_target`;
     ``obstacle``: around a vertical cylinder, every link COM outside it (eq. 62), joint speeds
     within :data:`CHAIN_VELOCITY`."""
     from mbplan.ocp.scene import Scene
@@ -120,8 +128,8 @@ def chain_task(n: int, N: int = 40, obstacle: bool = False):
         (x, y), r = CHAIN_CYLINDER
         scene = Scene().add_cylinder("cylinder", r, 1.2, (x, y, -0.6))
     vmax = np.full(n, CHAIN_VELOCITY) if obstacle else None
-    target = chain_target(n, obstacle)
-    ocp = tracking_ocp(_chain_path(n), np.zeros(n), target, scene, N=N, velocity_limit=vmax)
+    start, target = chain_start(n, obstacle), chain_target(n, obstacle)
+    ocp = tracking_ocp(_chain_path(n), start, target, scene, N=N, velocity_limit=vmax)
     return add_obstacle_constraint(ocp, "com", CHAIN_MARGIN) if obstacle else ocp
 
 
