@@ -621,3 +621,36 @@ def test_first_trials_evaluated_with_their_multipliers_take_the_same_steps(make,
         fast.n_evaluations + fast.n_trial_evaluations
         <= plain.n_evaluations + plain.n_trial_evaluations
     )
+
+
+def test_soft_restoration_steps_where_the_line_search_fails(monkeypatch):
+    """IPOPT's soft restoration phase: where the filter line search fails (here: always), steps
+    to the boundary are taken while the original filter accepts them (HS071: every one, and the
+    solve ends at the optimum) or they reduce the primal-dual error (Wächter-Biegler from
+    (-0.4, 1, 1): two steps); the first that does neither starts the restoration phase (which
+    fails here: its line search too), as does every failure with ``max_soft_resto_iters=0``."""
+    from mbplan.solvers.iterate import IterateState
+    from mbplan.solvers.line_search import FilterLineSearch, Search
+
+    reference = solve_ripm(hs071(), HS071_X0)
+    monkeypatch.setattr(FilterLineSearch, "_line_search", lambda self, step, cur: Search(None))
+    errors = []
+    pd_error = IterateState._primal_dual_error
+
+    def recorded(self, ev, y, z, s, mu):
+        errors.append(pd_error(self, ev, y, z, s, mu))
+        return errors[-1]
+
+    monkeypatch.setattr(IterateState, "_primal_dual_error", recorded)
+    soft = solve_ripm(hs071(), HS071_X0)
+    assert soft.status is RIPMStatus.CONVERGED and not any(soft.history.restoration)
+    np.testing.assert_allclose(soft.x, reference.x, atol=1e-8)
+    assert not errors  # every step acceptable to the filter
+    wb = solve_ripm(_wachter_biegler(), np.array([-0.4, 1.0, 1.0]))
+    assert wb.status is RIPMStatus.LINE_SEARCH_FAILED and "restoration" in wb.message
+    trials, currents = np.array(errors[::2]), np.array(errors[1::2])
+    assert len(trials) == 3
+    assert np.all(trials[:2] <= 0.9999 * currents[:2]) and trials[2] > 0.9999 * currents[2]
+    none = solve_ripm(hs071(), HS071_X0, max_soft_resto_iters=0)
+    assert none.status is RIPMStatus.LINE_SEARCH_FAILED and "restoration" in none.message
+    assert none.iterations == 0

@@ -44,10 +44,14 @@ from mbplan.errors import InputError
 GJK_TOLERANCE = 1e-13
 EPA_TOLERANCE = 1e-8
 _FAILED = 1e100  # coal reports a failed GJK/EPA as ±DBL_MAX
-# At the tight tolerances GJK occasionally stops at a wrong, finite distance (seen on the iiwa's
-# link cylinders: 0.021 m where 1e-9 rad away it is 0.085 m); coal's default request is the
-# cross-check, and where the two differ by more than this the default result is used.
-_CROSS_CHECK = 1e-5
+# At the tight tolerance GJK occasionally fails or stops at a wrong, finite distance (seen on
+# the iiwa's link cylinders: 0.021 m where 1e-9 rad away it is 0.085 m, and errors of 1e-7 to
+# 1e-5 m near solutions); a request at CHECK_TOLERANCE is the cross-check, and where the two
+# differ by more than _CROSS_CHECK its result is used. (Coal's default request, 1e-6, as the
+# check let value jumps of up to 6.5e-6 through, above the RIPM's tol: docs/ripm-speed.md,
+# session 7, branch distls.)
+CHECK_TOLERANCE = 1e-11
+_CROSS_CHECK = 1e-8
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,36 +116,44 @@ def signed_distances(
     pairs: CollisionPairs, pair: np.ndarray, rotation: np.ndarray, translation: np.ndarray
 ) -> Contacts:
     """Coal distances of pairs ``pair (S,)`` with the robot geometries at world placements
-    ``rotation (S, 3, 3)``, ``translation (S, 3)``. A pair on which coal fails at the tight
-    tolerances is retried with coal's defaults; :class:`InputError` if that fails too."""
-    tight, default = coal.DistanceRequest(), coal.DistanceRequest()
+    ``rotation (S, 3, 3)``, ``translation (S, 3)``: the tight request's, unless the check
+    request's differs by more than ``_CROSS_CHECK`` or the tight one fails; coal's defaults if
+    both fail; :class:`InputError` if that fails too."""
+    tight, check = coal.DistanceRequest(), coal.DistanceRequest()
     tight.gjk_tolerance, tight.epa_tolerance = GJK_TOLERANCE, EPA_TOLERANCE
+    check.gjk_tolerance, check.epa_tolerance = CHECK_TOLERANCE, EPA_TOLERANCE
     S = len(pair)
     distance, normal, point = np.empty(S), np.empty((S, 3)), np.empty((S, 3))
     for s, i in enumerate(pair.tolist()):
         placement = coal.Transform3s(rotation[s], translation[s])
-        results = []
-        for request in (tight, default):
-            result = coal.DistanceResult()
-            d = coal.distance(
-                pairs.robot_shapes[i],
-                placement,
-                pairs.obstacle_shapes[i],
-                pairs.obstacle_transforms[i],
-                request,
-                result,
-            )
-            if abs(d) < _FAILED:
-                results.append((d, result))
-        if not results:
+        found = [r for r in (_distance(pairs, i, placement, q) for q in (tight, check)) if r]
+        if not found:
+            found = [r for r in [_distance(pairs, i, placement, coal.DistanceRequest())] if r]
+        if not found:
             raise InputError(f"coal failed to compute the distance of {pairs.names[i]}")
-        d, result = results[0]
-        if len(results) == 2 and abs(d - results[1][0]) > _CROSS_CHECK:
-            d, result = results[1]  # the tight GJK stopped at a wrong distance
+        d, result = found[0]
+        if len(found) == 2 and abs(d - found[1][0]) > _CROSS_CHECK:
+            d, result = found[1]  # the tight GJK stopped at a wrong distance
         distance[s] = d
         normal[s] = result.normal
         point[s] = result.getNearestPoint1()
     return Contacts(distance, normal, point)
+
+
+def _distance(
+    pairs: CollisionPairs, i: int, placement: coal.Transform3s, request: coal.DistanceRequest
+) -> tuple[float, coal.DistanceResult] | None:
+    """Coal's distance of pair ``i`` with its result, ``None`` where GJK/EPA failed."""
+    result = coal.DistanceResult()
+    d = coal.distance(
+        pairs.robot_shapes[i],
+        placement,
+        pairs.obstacle_shapes[i],
+        pairs.obstacle_transforms[i],
+        request,
+        result,
+    )
+    return (d, result) if abs(d) < _FAILED else None
 
 
 # ---------------------------------------------------------------------------- joint space

@@ -225,6 +225,12 @@ class IterateState:
     ) -> tuple[np.ndarray, np.ndarray, float]:
         """``y + α dy``, ``z`` after its own step ``α_z`` (WB eq. 15) within
         ``[μ/(κ_Σ s), κ_Σ μ/s]`` (WB eq. 16) for the slacks ``s``, and ``α_z``."""
+        alpha_z = self._alpha_z_max(step)
+        z = safeguarded_duals(self.z, step.dz, alpha_z, s, self.mu, self.o.kappa_sigma)
+        return self.y + alpha * step.dy, z, alpha_z
+
+    def _alpha_z_max(self, step: Step) -> float:
+        """The multipliers' fraction-to-boundary step (WB eq. 15)."""
         alpha_z = frac_to_boundary(self.z, step.dz, self.tau)
         if self.resto:
             alpha_z = min(
@@ -232,8 +238,18 @@ class IterateState:
                 frac_to_boundary(self.zp, step.dzp, self.tau),
                 frac_to_boundary(self.zn, step.dzn, self.tau),
             )
-        z = safeguarded_duals(self.z, step.dz, alpha_z, s, self.mu, self.o.kappa_sigma)
-        return self.y + alpha * step.dy, z, alpha_z
+        return alpha_z
+
+    def _primal_dual_error(self, ev: NLPEvaluation, y, z, s, mu: float) -> float:
+        """IPOPT's primal-dual system error of the main phase at ``(ev, y, z, s)``: the mean
+        absolute entry of ``(r_d, r_c, s∘z - μ)`` (its soft restoration's measure)."""
+        r_d, r_c = np.empty(self.n), np.empty(self.m)
+        measures(
+            ev.gradient, self.sigma, *_csr_arrays(ev.eq_jacobian), y,
+            *_csr_arrays(ev.ineq_jacobian), z, ev.eq, ev.ineq, s, r_d, r_c,
+        )  # fmt: skip
+        total = abs_sum(r_d) + abs_sum(r_c) + (abs_sum(s * z - mu) if self.mi else 0.0)
+        return total / (self.n + self.m + self.mi)
 
     def _scalings(self, y_sum: float, z_sum: float) -> tuple[float, float]:
         """``s_d``, ``s_c`` of WB eq. 5 (multipliers averaged per component, as in IPOPT) from

@@ -22,8 +22,8 @@ from mbplan.solvers.ripm_kernels import ratio_sum
 class Search:
     """Outcome of a line search: the accepted trial (``None`` if it failed) and the step taken.
 
-    ``tag`` is ``f`` (Armijo), ``h`` (filter progress) or ``T`` (tiny step, no search), with
-    ``S`` appended for a second-order correction."""
+    ``tag`` is ``f`` (Armijo), ``h`` (filter progress), ``T`` (tiny step, no search) or ``s``
+    (soft restoration step), with ``S`` appended for a second-order correction."""
 
     trial: Trial | None
     step: Step | None = None

@@ -152,6 +152,11 @@ class RIPMOptions:
     resto_ls_multipliers: bool = False
     """After restoration, y from least squares instead of 0 (IPOPT's
     constr_mult_reset_threshold > 0)."""
+    max_soft_resto_iters: int = 10
+    """IPOPT's soft restoration phase: when the line search fails, steps to the boundary are
+    taken while they reduce the primal-dual error, at most this many in a row (0: none)."""
+    soft_resto_pderror_reduction_factor: float = 0.9999
+    """A soft restoration step must reduce the primal-dual error by this factor (IPOPT's)."""
     print_level: int = 0
     """0: silent; 1: an IPOPT-like line per iteration and a summary."""
 
@@ -201,6 +206,8 @@ class RIPMOptions:
             "mu_oracle": self.mu_oracle in ("loqo", "probing"),
             "resto_penalty": self.resto_penalty > 0,
             "resto_proximity_weight": self.resto_proximity_weight >= 0,
+            "max_soft_resto_iters": self.max_soft_resto_iters >= 0,
+            "soft_resto_pderror_reduction_factor": 0 < self.soft_resto_pderror_reduction_factor < 1,
         }
         bad = [name for name, ok in checks.items() if not ok]
         if bad:

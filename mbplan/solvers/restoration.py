@@ -20,8 +20,10 @@ import math
 
 import numpy as np
 
-from mbplan.solvers.iterate import EPS, amax
+from mbplan.solvers.iterate import EPS, Step, amax
+from mbplan.solvers.line_search import Search
 from mbplan.solvers.result import RIPMStatus
+from mbplan.solvers.ripm_kernels import safeguarded_duals
 
 
 class Stop(Exception):
@@ -42,6 +44,39 @@ def elastic_start(c: np.ndarray, mu: float, rho: float) -> tuple[np.ndarray, np.
 class Restoration:
     """Entering, running and leaving the restoration phase (``parent``: the main phase)."""
 
+    def _soft_restoration(self, step: Step) -> Search:
+        """IPOPT's soft restoration phase (``TrySoftRestoStep``), tried where the line search
+        fails and then instead of it: the step to the boundary ``α = min(α_max, α_z,max)`` of
+        primal and dual variables, accepted if the original filter and sufficient-decrease tests
+        accept it (the phase ends) or if it reduces the primal-dual error
+        (:meth:`_primal_dual_error`, at μ = 0 in free mode) by
+        ``soft_resto_pderror_reduction_factor``; at most ``max_soft_resto_iters`` steps in a
+        row. A failed search (``trial=None``) leads to the restoration phase."""
+        o = self.o
+        if self.resto or self.m == 0 or self.soft_steps >= o.max_soft_resto_iters:
+            return Search(None)
+        if self.soft_steps == 0:  # the filter as at the start of a restoration phase
+            self._augment_filter(self.cur.theta, self.cur.phi)
+        self.soft_steps += 1
+        alpha = min(self._alpha_max(step), self._alpha_z_max(step))
+        trial = self._trial_at(step, alpha)
+        if trial is None:
+            return Search(None)
+        y = self.y + alpha * step.dy
+        z = safeguarded_duals(self.z, step.dz, alpha, trial.s, self.mu, o.kappa_sigma)
+        trial.ev, trial.multipliers = self._evaluate(trial.x, y, z), (y, z, alpha)
+        if trial.ev is None:
+            return Search(None)
+        if self._acceptable(self.cur, trial, 0.0, 0.0):
+            self.soft_steps = 0
+            return Search(trial, step, alpha, 1, "s")
+        mu = 0.0 if self.free_mode else self.mu
+        error = self._primal_dual_error(trial.ev, y, z, trial.s, mu)
+        current = self._primal_dual_error(self.ev, self.y, self.z, self.s, mu)
+        if error <= o.soft_resto_pderror_reduction_factor * current:
+            return Search(trial, step, alpha, 1, "s")
+        return Search(None)
+
     def _restoration(self) -> None:
         """Run the ℓ1 restoration phase and continue from its result.
 
@@ -49,7 +84,9 @@ class Restoration:
         estimate with ``resto_ls_multipliers``) and ``z = μ/s``, or all ``z = 1`` if that exceeds
         ``bound_mult_reset_threshold`` (IPOPT's rule)."""
         self._count("restorations")
-        self._augment_filter(self.cur.theta, self.cur.phi)
+        if not self.soft_steps:  # else augmented when the soft restoration phase started
+            self._augment_filter(self.cur.theta, self.cur.phi)
+        self.soft_steps = 0
         phase = type(self)(self.p, self.o, parent=self)
         try:
             phase._start_restoration(self)

@@ -126,6 +126,7 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         self.zeta = 0.0
         self.delta_w_last = 0.0
         self.n_perturbed = 0  # consecutive iterations that needed δ_w > 0
+        self.soft_steps = 0  # steps of the current soft restoration phase (0: not in one)
         self.filter: list[tuple[float, float]] = []
         self.ep = self.en = self.zp = self.zn = self.xi = None
         # describes the step that produced the current iterate (for the log and history)
@@ -276,8 +277,12 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
                 alpha = self._alpha_max(step)
                 trial = self._trial_at(step, alpha, evaluate=not self.resto)
                 search = Search(trial, step, alpha, 1, "T", all_nan=trial is None)
+            elif self.soft_steps:  # in IPOPT's soft restoration phase
+                search = self._soft_restoration(step)
             else:
                 search = self._line_search(step, self.cur)
+                if search.trial is None and not search.all_nan:
+                    search = self._soft_restoration(step)
             if search.trial is None:
                 if search.all_nan:
                     raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite values at every trial point")
