@@ -133,6 +133,28 @@ def test_regularized_jacobian_block_goes_to_the_full_factorization(systems):
     assert np.abs(red.solve(b)[0] - full.solve(b)[0]).max() == 0.0
 
 
+def test_fallback_after_new_values_factorizes_the_current_matrices(systems):
+    """The full system gets the matrices lazily (only on a fallback): after a reduced
+    factorization of one matrix and new values of the same pattern, a ``δ_c > 0`` fallback
+    factorizes the new matrix, bitwise as a full system given it directly."""
+    problem, x0, _, _, sigma, rng = systems
+    full_a, red, _, _ = _kkt(problem, x0, 5)
+    red.factorize(_diag(problem, 1e-4, 0.0, sigma), 1e-9)  # reduced, first values
+    z = rng.uniform(0.5, 2.0, problem.n_ineq)
+    ev = problem.evaluate(x0, 2.0, rng.normal(size=problem.n_eq), z)
+    blocks = (ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
+    full = KKTSystem(problem.n, problem.n_eq, problem.n_ineq)
+    for kkt in (full, red):
+        kkt.set_matrices(*blocks)
+    diag = _diag(problem, 1e-4, -1e-8, sigma)  # δ_c > 0: the full factorization
+    assert red.factorize(diag, 1e-9) == full.factorize(diag, 1e-9)
+    b = rng.normal(size=full.dim)
+    x_red, x_full = red.solve(b)[0], full.solve(b)[0]
+    assert np.abs(x_red - x_full).max() == 0.0
+    full_a.factorize(diag, 1e-9)
+    assert np.abs(full_a.solve(b)[0] - x_full).max() > 0.0  # the first values' step differs
+
+
 def test_nonnegative_inequality_diagonal_goes_to_the_full_factorization(systems):
     """The inequality rows are folded into ``K_r`` only for ``D_I < 0`` (the RIPM's ``-Σ⁻¹``)."""
     problem, _, full, red, sigma, rng = systems
