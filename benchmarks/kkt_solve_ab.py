@@ -36,7 +36,7 @@ METHODS = {"set_matrices": "assembly", "factorize": "factorize", "solve": "solve
 
 BASELINE_MODULES = (
     "numba_borrow", "ldl_layout", "ldl_symbolic", "ldl_pivot", "ldl_dense", "ldl_kernels",
-    "ldl_solve", "supernodal_ldl", "kkt_scatter", "linear_solver",
+    "ldl_solve", "supernodal_ldl", "kkt_scatter", "kkt_pattern", "linear_solver",
 )  # fmt: skip
 
 

@@ -38,7 +38,7 @@ from mbplan.solvers.reduced_step import ReducedKKTSystem  # noqa: E402
 
 MODULES = (
     "ordering", "numba_borrow", "ldl_layout", "ldl_symbolic", "ldl_pivot", "ldl_dense",
-    "ldl_kernels", "ldl_solve", "supernodal_ldl", "kkt_scatter", "linear_solver",
+    "ldl_kernels", "ldl_solve", "supernodal_ldl", "kkt_scatter", "kkt_pattern", "linear_solver",
 )  # fmt: skip
 CACHE = Path(tempfile.gettempdir()) / "mbplan-ldl-ab"
 

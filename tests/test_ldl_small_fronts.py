@@ -14,7 +14,7 @@ import pytest
 import scipy.sparse as sp
 from test_linear_solver import CASES, _dense, _kkt_blocks
 
-from mbplan.solvers import ldl_layout, linear_solver
+from mbplan.solvers import kkt_pattern, ldl_layout
 from mbplan.solvers.linear_solver import KKTSystem
 from mbplan.solvers.numba_borrow import borrowed
 
@@ -59,8 +59,8 @@ def _control_blocks(rng, knots=10, dim=6, nu=3, zero_control=None):
 def _without_small_front_paths(monkeypatch):
     """New analyses without direct leaves or merged siblings (every front through its own
     update matrix)."""
-    monkeypatch.setattr(linear_solver, "_ANALYSES", OrderedDict())
-    monkeypatch.setattr(linear_solver, "_PATTERNS", OrderedDict())
+    monkeypatch.setattr(kkt_pattern, "_ANALYSES", OrderedDict())
+    monkeypatch.setattr(kkt_pattern, "_PATTERNS", OrderedDict())
     monkeypatch.setattr(ldl_layout, "DIRECT_COLUMNS", 0)
 
 

@@ -226,7 +226,7 @@ def test_auto_ordering_keeps_the_analysis_with_fewer_flops(blocks, expected):
     """``"auto"`` is AMD's memoized analysis, or METIS's when AMD's factorization reaches
     ``AUTO_MIN_FLOPS`` and METIS predicts fewer multiply-adds: AMD on a thin time × body grid
     and on a small 3-D grid, METIS on a larger 3-D grid."""
-    from mbplan.solvers.linear_solver import AUTO_MIN_FLOPS
+    from mbplan.solvers.kkt_pattern import AUTO_MIN_FLOPS
 
     hess, *jacs = blocks
     n = hess.shape[0]

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from mbplan.errors import InputError
-from mbplan.solvers.linear_solver import ORDERINGS
+from mbplan.solvers.kkt_pattern import ORDERINGS
 from mbplan.solvers.reduced_step import KKT_METHODS
 
 

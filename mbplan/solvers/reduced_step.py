@@ -32,13 +32,8 @@ import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.solvers.elimination import PLAN_ERRORS, EliminationPlan
-from mbplan.solvers.linear_solver import (
-    Inertia,
-    KKTSystem,
-    _BlockPattern,
-    _csr,
-    _same_pattern,
-)
+from mbplan.solvers.kkt_pattern import _BlockPattern, _same_pattern
+from mbplan.solvers.linear_solver import Inertia, KKTSystem, _csr
 from mbplan.solvers.reduction import Reduction, reduction, repick
 
 INNER_RATIO = 0.1
