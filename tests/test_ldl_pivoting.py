@@ -9,7 +9,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from test_linear_solver import CASES, _dense, _grid_blocks, _kkt_blocks
+from test_linear_solver import (
+    CASES,
+    _dense,
+    _grid_blocks,
+    _kkt_blocks,
+    _kkt_blocks_without_empty_eq_rows,
+)
 
 from mbplan.errors import InputError
 from mbplan.solvers import RIPMOptions
@@ -30,14 +36,8 @@ def test_pivoted_inertia_and_steps_match_dense_linear_algebra(case, ordering, u)
     """Positive, zero and negative primal diagonals (wrong inertia), zero equality diagonals:
     the pivoted factorization's inertia is the dense eigenvalues' and its refined step the
     dense solve's."""
-    n, me, mi, density, band = case
-    rng = np.random.default_rng(n + me + 1)
-    hess, jac_e, jac_i = _kkt_blocks(rng, n, me, mi, density, band)
-    # no empty equality row (with its zero diagonal it would make K singular)
-    jac_e = (
-        jac_e + sp.csr_matrix((np.ones(me), (np.arange(me), rng.integers(0, n, me))), (me, n))
-    ).tocsr()
-    blocks = (hess, jac_e, jac_i)
+    n, me, mi = case[:3]
+    blocks, rng = _kkt_blocks_without_empty_eq_rows(case)
     kkt = KKTSystem(n, me, mi, ordering=ordering, pivot_threshold=u)
     kkt.set_matrices(*blocks)
     checked = 0

@@ -12,7 +12,7 @@ import numba as nb
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from test_linear_solver import CASES, _dense, _kkt_blocks
+from test_linear_solver import CASES, _dense, _kkt_blocks, _kkt_blocks_without_empty_eq_rows
 
 from mbplan.solvers import kkt_pattern, ldl_layout
 from mbplan.solvers.linear_solver import KKTSystem
@@ -145,12 +145,8 @@ def test_pivoted_leaves_and_parents_of_direct_leaves_match_dense(case, u):
     the pivoted path (their update matrix built as before), parents that fail it reassemble
     their pivot columns with their direct children's updates sent again; inertia and steps
     are the dense ones."""
-    n, me, mi, density, band = case
-    rng = np.random.default_rng(n + me + 1)
-    hess, jac_e, jac_i = _kkt_blocks(rng, n, me, mi, density, band)
-    jac_e = (
-        jac_e + sp.csr_matrix((np.ones(me), (np.arange(me), rng.integers(0, n, me))), (me, n))
-    ).tocsr()
+    n, me, mi = case[:3]
+    (hess, jac_e, jac_i), rng = _kkt_blocks_without_empty_eq_rows(case)
     kkt = KKTSystem(n, me, mi, pivot_threshold=u)
     kkt.set_matrices(hess, jac_e, jac_i)
     a, f = kkt.analysis, kkt._solver

@@ -33,6 +33,16 @@ def _kkt_blocks(rng, n, me, mi, density, band=None):
     return hess, jac_e, jac_i
 
 
+def _kkt_blocks_without_empty_eq_rows(case):
+    """:func:`_kkt_blocks` of ``case`` (seeded by its size) with a one added to every equality
+    row (an empty one, with its zero diagonal, would make ``K`` singular); and the generator."""
+    n, me, mi, density, band = case
+    rng = np.random.default_rng(n + me + 1)
+    hess, jac_e, jac_i = _kkt_blocks(rng, n, me, mi, density, band)
+    ones = sp.csr_matrix((np.ones(me), (np.arange(me), rng.integers(0, n, me))), (me, n))
+    return (hess, (jac_e + ones).tocsr(), jac_i), rng
+
+
 def _dense(hess, jac_e, jac_i, diag):
     h = hess.toarray()
     h = h + np.tril(h, -1).T
