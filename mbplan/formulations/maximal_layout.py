@@ -4,7 +4,9 @@ multibody rows in its KKT matrix, and the joint elimination plan built from it
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, fields
 
 import numpy as np
 import scipy.sparse as sp
@@ -36,6 +38,11 @@ class MaximalLayout:
     @property
     def nb(self) -> int:
         return self.kin_rows.shape[1]
+
+    def key(self) -> tuple:
+        """The layout as a hashable value: equal layouts, equal keys."""
+        values = (getattr(self, f.name) for f in fields(self))
+        return tuple((np.shape(v), np.asarray(v).tobytes()) for v in values)
 
     @property
     def depths(self) -> np.ndarray:
@@ -95,17 +102,23 @@ def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
     parent = np.full(nb, -2, np.int64)
     jac = sp.csr_matrix(eq_jacobian)
     for name, term_rows in rows_of.items():
-        if "joint_constraints" not in name:
+        if "joint_constraints" not in name or not term_rows.size:
             continue
-        for rows in term_rows:
-            support = np.concatenate([jac.indices[jac.indptr[r] : jac.indptr[r + 1]] for r in rows])
-            bodies = np.unique(body_of_col[support])
-            k = np.unique(knot_of_col[support])
-            if len(k) != 1 or bodies.min() < 0:
-                raise InputError(f"{name}: a joint constraint row outside one knot's bodies")
-            child = int(bodies.max())
-            con_rows[k[0], child] = rows
-            parent[child] = int(bodies.min()) if len(bodies) > 1 else -1
+        # every row group's support: the bodies and knots of its entries (min and max by group)
+        counts = np.diff(jac.indptr)[term_rows].sum(axis=1)
+        if np.any(counts == 0):
+            raise InputError(f"{name}: a joint constraint row group without entries")
+        starts = jac.indptr[term_rows.ravel()]
+        lengths = np.diff(jac.indptr)[term_rows.ravel()]
+        entry = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum())
+        support = jac.indices[entry]
+        first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        b_min, b_max = (f.reduceat(body_of_col[support], first) for f in (np.minimum, np.maximum))
+        k_min, k_max = (f.reduceat(knot_of_col[support], first) for f in (np.minimum, np.maximum))
+        if np.any(k_min != k_max) or np.any(b_min < 0) or np.any(k_min < 0):
+            raise InputError(f"{name}: a joint constraint row outside one knot's bodies")
+        con_rows[k_min, b_max] = term_rows
+        parent[b_max] = np.where(b_min < b_max, b_min, -1)
     if np.any(parent == -2) or np.any(con_rows[1:] < 0):
         raise InputError("maximal_layout: every body needs a joint constraint at every knot")
     if np.any(parent >= np.arange(nb)):
@@ -135,7 +148,8 @@ def joint_elimination_plan(
     and dynamics rows), so that an eliminated state depends on the free coordinates of at most
     ``segment`` bodies of its path (and on the state of the cut body above them), an
     eliminated wrench on those of its subtree down to the next cut bodies; a tree at most
-    ``segment`` deep is one segment."""
+    ``segment`` deep is one segment. Memoized per process for the last few layouts (every
+    case of a task family has the same)."""
     lay = maximal_layout(problem, eq_jacobian)
     actuated = bool(np.all(lay.tau_cols[1:] >= 0))
     if forces is None:
@@ -145,6 +159,27 @@ def joint_elimination_plan(
     segment = SEGMENT_DEPTH if segment is None else segment
     if segment < 1:
         raise InputError(f"joint_elimination_plan: segment must be at least 1, got {segment}")
+    key = (lay.key(), bool(forces), int(segment))
+    with _PLANS_LOCK:
+        plan = _PLANS.get(key)
+        if plan is not None:
+            _PLANS.move_to_end(key)
+            return plan
+    plan = _plan_of_layout(lay, forces, segment)
+    with _PLANS_LOCK:
+        _PLANS[key] = plan
+        while len(_PLANS) > _PLANS_KEPT:
+            _PLANS.popitem(last=False)
+    return plan
+
+
+_PLANS: OrderedDict[tuple, EliminationPlan] = OrderedDict()
+_PLANS_KEPT = 8
+_PLANS_LOCK = threading.Lock()
+
+
+def _plan_of_layout(lay: MaximalLayout, forces: bool, segment: int) -> EliminationPlan:
+    """:func:`joint_elimination_plan` of a layout, its options resolved (not memoized)."""
     N, nb, parent = lay.N, lay.nb, lay.parent
     depths = lay.depths
     cut = (depths > 1) & ((depths - 1) % segment == 0)

@@ -31,6 +31,7 @@ from operator import is_
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba
 from mbplan.errors import InputError
@@ -192,24 +193,23 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
 
     def _least_squares_y(self, ev: NLPEvaluation) -> np.ndarray | None:
         """``y`` minimizing ``‖grad f + A_Eᵀy + A_Iᵀz‖`` (WB); ``None`` if it is larger than
-        ``constr_mult_init_max`` (or not computable): ``y = 0`` then."""
-        kkt = KKTSystem(
-            self.n,
-            self.me,
-            0,
-            ordering=self.o.kkt_ordering,
-            pivot_threshold=self.o.kkt_pivot_threshold,
+        ``constr_mult_init_max`` (or not computable): ``y = 0`` then. Solved with the Newton
+        step's own system and pattern (its symbolic phase and reduction serve both): ``H`` and
+        ``A_I`` with zero values, ``I`` on the primal diagonal, ``-I`` on the inequality rows."""
+        kkt, n, me = self.kkt, self.n, self.me
+        kkt.set_matrices(
+            _zero_values(ev.hessian_lower), ev.eq_jacobian, _zero_values(ev.ineq_jacobian)
         )
-        kkt.set_matrices(None, ev.eq_jacobian, None)
-        diag = np.zeros(self.n + self.me)
-        diag[: self.n] = 1.0
+        diag = np.zeros(n + self.m)
+        diag[:n] = 1.0
+        diag[n + me :] = -1.0
         inertia = kkt.factorize(diag, self.o.static_regularization)
-        if inertia is None or inertia.zero or inertia.negative != self.me:
+        if inertia is None or inertia.zero or inertia.negative != self.m:
             return None
-        rhs = np.zeros(self.n + self.me)
-        np.negative(ev.gradient + transpose_times(ev.ineq_jacobian, self.z), out=rhs[: self.n])
+        rhs = np.zeros(n + self.m)
+        np.negative(ev.gradient + transpose_times(ev.ineq_jacobian, self.z), out=rhs[:n])
         sol, _ = kkt.solve(rhs, self.o.max_refinement_steps, self.o.residual_ratio_max)
-        y = sol[self.n :]
+        y = sol[n : n + me]
         return y if finite(y) and amax(y) <= self.o.constr_mult_init_max else None
 
     # ------------------------------------------------------------------ loop
@@ -389,3 +389,9 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
                 f"{self.kkt.n_factorizations} factorizations)"
             )
         return result
+
+
+def _zero_values(matrix: sp.spmatrix) -> sp.csr_matrix:
+    """``matrix``'s pattern with zero values."""
+    m = sp.csr_matrix(matrix)
+    return sp.csr_matrix((np.zeros_like(m.data), m.indices, m.indptr), shape=m.shape)
