@@ -18,7 +18,7 @@ import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.finite import finite_vector
-from mbplan.transcription.sparse import SparsePattern
+from mbplan.transcription.sparse import SparsePattern, sparse_pattern
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Point, TrajectoryVariables
 
@@ -142,7 +142,7 @@ class TrajectoryProblem:
     def _jacobian_pattern(self, kind: str, m: int) -> SparsePattern:
         rows = _cat_index([lay.jac_rows.ravel() for lay in self._layouts[kind]])
         cols = _cat_index([lay.jac_cols.ravel() for lay in self._layouts[kind]])
-        return SparsePattern(rows, cols, (m, self.n))  # fixed columns (-1) dropped
+        return sparse_pattern(rows, cols, (m, self.n))  # fixed columns (-1) dropped
 
     def _gradient_columns(self) -> np.ndarray:
         """Gradient column of every cost Jacobian nonzero, ``n`` (a bin cut off) where fixed."""
@@ -152,7 +152,7 @@ class TrajectoryProblem:
     def _hessian_pattern(self) -> SparsePattern:
         rows = _cat_index([lay.hess_rows.ravel() for lay in self._all_layouts])
         cols = _cat_index([lay.hess_cols.ravel() for lay in self._all_layouts])
-        return SparsePattern(rows, cols, (self.n, self.n))
+        return sparse_pattern(rows, cols, (self.n, self.n))
 
     def _output_buffers(self) -> None:
         """One array per kind for the residuals and for the Jacobian nonzeros, one for all

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
+
 import numba as nb
 import numpy as np
 import scipy.sparse as sp
@@ -45,6 +48,29 @@ class SparsePattern:
             raise InputError(f"{len(self._slot)} values expected, got shape {values.shape}")
         out.data = _accumulate(self._slot, values, self.nnz + 1)[: self.nnz]
         return out
+
+
+_PATTERNS: OrderedDict[tuple, SparsePattern] = OrderedDict()
+_PATTERNS_KEPT = 16
+_PATTERNS_LOCK = threading.Lock()
+
+
+def sparse_pattern(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> SparsePattern:
+    """``SparsePattern(rows, cols, shape)``, memoized per process for the last few index arrays:
+    every problem of a task family has the same (its sort costs ~10× the lookup)."""
+    rows, cols = np.asarray(rows), np.asarray(cols)
+    key = (tuple(shape), rows.dtype.str, cols.dtype.str, rows.tobytes(), cols.tobytes())
+    with _PATTERNS_LOCK:
+        hit = _PATTERNS.get(key)
+        if hit is not None:
+            _PATTERNS.move_to_end(key)
+            return hit
+    hit = SparsePattern(rows, cols, shape)
+    with _PATTERNS_LOCK:
+        _PATTERNS[key] = hit
+        while len(_PATTERNS) > _PATTERNS_KEPT:
+            _PATTERNS.popitem(last=False)
+    return hit
 
 
 @nb.njit(cache=True)
