@@ -8,7 +8,7 @@ from mbplan.errors import InputError
 from mbplan.lie import SO3, R
 from mbplan.lie.group import check_orthogonal
 from mbplan.solvers.iterate import transpose_times
-from mbplan.transcription.sparse import SparsePattern
+from mbplan.transcription.sparse import SparsePattern, sparse_pattern
 from mbplan.transcription.variables import Block, TrajectoryVariables
 
 
@@ -40,6 +40,23 @@ def test_sparse_pattern_drops_entries_of_fixed_columns():
     assert a.data.shape == (2,) and a.has_canonical_format
     with pytest.raises(InputError, match="5 values expected"):
         pattern.assemble(np.ones(4))
+
+
+def test_sparse_patterns_are_memoized_by_their_index_arrays():
+    """The same index arrays and shape: the same pattern (its matrices stay independent);
+    other entries, dtype or shape: another."""
+    rows, cols = np.array([0, 1, 1, 0]), np.array([1, 0, 0, 1])
+    first = sparse_pattern(rows, cols, (2, 3))
+    assert sparse_pattern(rows.copy(), cols.copy(), (2, 3)) is first
+    a, b = first.assemble(np.ones(4)), first.assemble(np.zeros(4))
+    assert np.array_equal(a.toarray(), [[0, 2, 0], [2, 0, 0]]) and not b.toarray().any()
+    for other in (
+        sparse_pattern(rows, np.array([1, 0, 2, 1]), (2, 3)),
+        sparse_pattern(rows.astype(np.int32), cols, (2, 3)),
+        sparse_pattern(rows, cols, (2, 4)),
+    ):
+        assert other is not first
+    assert sparse_pattern(rows, cols, (2, 4)).shape == (2, 4)
 
 
 def test_so3_batched_retraction_equals_one_by_one():

@@ -166,6 +166,38 @@ def test_nonnegative_inequality_diagonal_goes_to_the_full_factorization(systems)
     assert np.abs(red.solve(b)[0] - full.solve(b)[0]).max() == 0.0
 
 
+@pytest.mark.parametrize("method", ["full", "reduced"])
+def test_least_squares_y0_through_the_newton_system_is_the_least_squares_solution(method):
+    """The start's ``y₀`` (kept: ``constr_mult_init_max`` large), solved with the Newton step's
+    own system (``H``, ``A_I`` with zero values), minimizes ``‖∇f + A_Iᵀz₀ + A_Eᵀy‖`` as a
+    dense least-squares solve does, with the full and with the reduced factorization: the same
+    minimum, the normal equations met to the refinement's residual ratio (``A_E`` has condition
+    ~4e4 here: ``y`` itself agrees to ~1e-5 relative)."""
+    problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
+    opts = RIPMOptions(max_iter=0, constr_mult_init_max=1e12, kkt_method=method)
+    y0 = solve_ripm(problem, x0, opts).y
+    ev = problem.evaluate(x0, 1.0)
+    rhs = -(ev.gradient + ev.ineq_jacobian.T @ np.full(problem.n_ineq, opts.bound_mult_init_val))
+    a = ev.eq_jacobian.toarray()
+    expected = np.linalg.lstsq(a.T, rhs, rcond=None)[0]
+    r0, r = rhs - a.T @ y0, rhs - a.T @ expected
+    assert np.linalg.norm(r0) <= (1 + 1e-10) * np.linalg.norm(r)
+    assert np.abs(a @ r0).max() <= 1e-8 * np.abs(expected).max()
+    assert np.abs(y0 - expected).max() <= 1e-4 * np.abs(expected).max()
+
+
+def test_elimination_plans_are_memoized_per_layout():
+    """Two problems of one family share the plan (same layout); other options, another plan."""
+    plans = []
+    for _ in range(2):
+        problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
+        jac = problem.evaluate(x0, 1.0).eq_jacobian
+        plans.append(joint_elimination_plan(problem, jac))
+    assert plans[0] is plans[1]
+    other = joint_elimination_plan(problem, jac, segment=2)
+    assert other is not plans[0] and other.n_groups < plans[0].n_groups
+
+
 @pytest.mark.parametrize(("wrench", "segment"), [(False, None), (True, None), (False, 2)])
 def test_ripm_reduced_solve_equals_full(wrench, segment):
     problem, x0 = maximal_ripm_problem(chain_task(4, N=8), "linear")
