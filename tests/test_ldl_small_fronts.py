@@ -6,14 +6,13 @@ inertias."""
 
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import numba as nb
 import numpy as np
 import pytest
 import scipy.sparse as sp
 from test_linear_solver import CASES, _dense, _kkt_blocks, _kkt_blocks_without_empty_eq_rows
 
+from mbplan.memo import RecentMemo
 from mbplan.solvers import kkt_pattern, ldl_layout
 from mbplan.solvers.linear_solver import KKTSystem
 from mbplan.solvers.numba_borrow import borrowed
@@ -59,8 +58,8 @@ def _control_blocks(rng, knots=10, dim=6, nu=3, zero_control=None):
 def _without_small_front_paths(monkeypatch):
     """New analyses without direct leaves or merged siblings (every front through its own
     update matrix)."""
-    monkeypatch.setattr(kkt_pattern, "_ANALYSES", OrderedDict())
-    monkeypatch.setattr(kkt_pattern, "_PATTERNS", OrderedDict())
+    monkeypatch.setattr(kkt_pattern, "_ANALYSES", RecentMemo(8))
+    monkeypatch.setattr(kkt_pattern, "_PATTERNS", RecentMemo(8))
     monkeypatch.setattr(ldl_layout, "DIRECT_COLUMNS", 0)
 
 

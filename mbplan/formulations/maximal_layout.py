@@ -4,14 +4,13 @@ multibody rows in its KKT matrix, and the joint elimination plan built from it
 
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
 from dataclasses import dataclass, fields
 
 import numpy as np
 import scipy.sparse as sp
 
 from mbplan.errors import InputError
+from mbplan.memo import RecentMemo
 from mbplan.solvers.elimination import EliminationPlan
 
 
@@ -160,22 +159,10 @@ def joint_elimination_plan(
     if segment < 1:
         raise InputError(f"joint_elimination_plan: segment must be at least 1, got {segment}")
     key = (lay.key(), bool(forces), int(segment))
-    with _PLANS_LOCK:
-        plan = _PLANS.get(key)
-        if plan is not None:
-            _PLANS.move_to_end(key)
-            return plan
-    plan = _plan_of_layout(lay, forces, segment)
-    with _PLANS_LOCK:
-        _PLANS[key] = plan
-        while len(_PLANS) > _PLANS_KEPT:
-            _PLANS.popitem(last=False)
-    return plan
+    return _PLANS.get_or_build(key, lambda: _plan_of_layout(lay, forces, segment))
 
 
-_PLANS: OrderedDict[tuple, EliminationPlan] = OrderedDict()
-_PLANS_KEPT = 8
-_PLANS_LOCK = threading.Lock()
+_PLANS: RecentMemo[EliminationPlan] = RecentMemo(8)
 
 
 def _plan_of_layout(lay: MaximalLayout, forces: bool, segment: int) -> EliminationPlan:

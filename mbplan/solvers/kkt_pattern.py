@@ -6,8 +6,6 @@ patterns (the KKT systems of one task family share theirs), with pooled work arr
 from __future__ import annotations
 
 import itertools
-import threading
-from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -16,6 +14,7 @@ import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba
 from mbplan.errors import InputError
+from mbplan.memo import RecentMemo
 from mbplan.solvers.kkt_scatter import SCATTER_KERNELS, same_csr_pattern
 from mbplan.solvers.ldl_kernels import NUMERIC_KERNELS
 from mbplan.solvers.ldl_solve import SOLVE_KERNELS
@@ -43,9 +42,8 @@ def _same_pattern(a: sp.csr_matrix | _BlockPattern, b: _BlockPattern | None) -> 
     )
 
 
-_ANALYSES: OrderedDict[tuple[int, bytes, bytes, str], Analysis] = OrderedDict()
-_ANALYSES_KEPT = 8
-_ANALYSES_LOCK = threading.Lock()
+_ANALYSES: RecentMemo[Analysis] = RecentMemo(8)
+_PATTERNS: RecentMemo[_KKTPattern] = RecentMemo(8)
 ORDERINGS = ("amd", "nested", "metis", "auto")
 _ORDERS = {"amd": amd_order, "nested": nested_dissection_order, "metis": metis_order}
 AUTO_MIN_FLOPS = 1e7
@@ -64,26 +62,21 @@ def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> 
     if ordering not in ORDERINGS:
         raise InputError(f"ordering: expected one of {ORDERINGS}, got {ordering!r}")
     key = (len(indptr) - 1, indptr.tobytes(), indices.tobytes(), ordering)
-    with _ANALYSES_LOCK:
-        hit = _ANALYSES.get(key)
-        if hit is not None:
-            _ANALYSES.move_to_end(key)
-            return hit
+    return _ANALYSES.get_or_build(key, lambda: _analysis(indptr, indices, ordering))
+
+
+def _analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str) -> Analysis:
+    """:func:`analysis`, not memoized (``"auto"``: of the memoized candidates)."""
     if ordering == "auto":
-        hit = analysis(indptr, indices, "amd")
-        if hit.flops >= AUTO_MIN_FLOPS:
-            metis = analysis(indptr, indices, "metis")
-            hit = metis if metis.flops < hit.flops else hit
-    else:
-        announce_uncached_numba(*_ENTRY_KERNELS)  # first run only
-        n = key[0]
-        rows = np.repeat(np.arange(n), np.diff(indptr))
-        hit = Analysis(n, rows, indices, _ORDERS[ordering](indptr, indices))
-    with _ANALYSES_LOCK:
-        _ANALYSES[key] = hit
-        while len(_ANALYSES) > _ANALYSES_KEPT:
-            _ANALYSES.popitem(last=False)
-    return hit
+        amd = analysis(indptr, indices, "amd")
+        if amd.flops < AUTO_MIN_FLOPS:
+            return amd
+        metis = analysis(indptr, indices, "metis")
+        return metis if metis.flops < amd.flops else amd
+    announce_uncached_numba(*_ENTRY_KERNELS)  # first run only
+    n = len(indptr) - 1
+    rows = np.repeat(np.arange(n), np.diff(indptr))
+    return Analysis(n, rows, indices, _ORDERS[ordering](indptr, indices))
 
 
 @dataclass(frozen=True)
@@ -139,9 +132,6 @@ class _Workspace:
         self.solver = SupernodalLDL(pat.analysis)
 
 
-_PATTERNS: OrderedDict[tuple, _KKTPattern] = OrderedDict()
-
-
 def _kkt_pattern(
     n: int,
     n_eq: int,
@@ -160,11 +150,15 @@ def _kkt_pattern(
         ordering,
         *tuple(a.tobytes() for m in (hess, jac_eq, jac_in) for a in (m.indptr, m.indices)),
     )
-    with _ANALYSES_LOCK:
-        hit = _PATTERNS.get(key)
-        if hit is not None:
-            _PATTERNS.move_to_end(key)
-            return hit
+    blocks = (hess, jac_eq, jac_in)
+    return _PATTERNS.get_or_build(key, lambda: _new_kkt_pattern(n, n_eq, n_ineq, blocks, ordering))
+
+
+def _new_kkt_pattern(
+    n: int, n_eq: int, n_ineq: int, blocks: tuple[sp.csr_matrix, ...], ordering: str
+) -> _KKTPattern:
+    """:func:`_kkt_pattern` of the blocks ``(H, A_E, A_I)``, not memoized."""
+    hess, jac_eq, jac_in = blocks
     N = n + n_eq + n_ineq
     h_rows = np.repeat(np.arange(n), np.diff(hess.indptr))
     h_mask = h_rows >= hess.indices
@@ -190,7 +184,7 @@ def _kkt_pattern(
     f_cols = np.concatenate([cols, rows[off]])
     order = np.lexsort((f_cols, f_rows))
     hit_analysis = analysis(indptr, indices, ordering)
-    hit = _KKTPattern(
+    return _KKTPattern(
         h_src=np.flatnonzero(h_mask).astype(np.int32),
         h_slot=h_slot,
         e_slot=e_slot,
@@ -212,8 +206,3 @@ def _kkt_pattern(
         ),
         sign=np.where(hit_analysis.perm < n, 1.0, -1.0),
     )
-    with _ANALYSES_LOCK:
-        _PATTERNS[key] = hit
-        while len(_PATTERNS) > _ANALYSES_KEPT:
-            _PATTERNS.popitem(last=False)
-    return hit

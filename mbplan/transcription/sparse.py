@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
-
 import numba as nb
 import numpy as np
 import scipy.sparse as sp
 
 from mbplan.errors import InputError
+from mbplan.memo import RecentMemo
 
 
 class SparsePattern:
@@ -50,9 +48,7 @@ class SparsePattern:
         return out
 
 
-_PATTERNS: OrderedDict[tuple, SparsePattern] = OrderedDict()
-_PATTERNS_KEPT = 16
-_PATTERNS_LOCK = threading.Lock()
+_PATTERNS: RecentMemo[SparsePattern] = RecentMemo(16)
 
 
 def sparse_pattern(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> SparsePattern:
@@ -60,17 +56,7 @@ def sparse_pattern(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -
     every problem of a task family has the same (its sort costs ~10× the lookup)."""
     rows, cols = np.asarray(rows), np.asarray(cols)
     key = (tuple(shape), rows.dtype.str, cols.dtype.str, rows.tobytes(), cols.tobytes())
-    with _PATTERNS_LOCK:
-        hit = _PATTERNS.get(key)
-        if hit is not None:
-            _PATTERNS.move_to_end(key)
-            return hit
-    hit = SparsePattern(rows, cols, shape)
-    with _PATTERNS_LOCK:
-        _PATTERNS[key] = hit
-        while len(_PATTERNS) > _PATTERNS_KEPT:
-            _PATTERNS.popitem(last=False)
-    return hit
+    return _PATTERNS.get_or_build(key, lambda: SparsePattern(rows, cols, shape))
 
 
 @nb.njit(cache=True)
