@@ -30,9 +30,13 @@ class RecentMemo(Generic[V]):
                 self._values.move_to_end(key)
             return hit
 
-    def put(self, key: Hashable, value: V) -> V:
-        """Keep ``value`` for ``key``; returns it."""
+    def put(self, key: Hashable, value: V, replace: bool = True) -> V:
+        """Keep ``value`` for ``key`` and return it; ``replace=False``: a value already kept for
+        ``key`` stays and is returned instead."""
         with self._lock:
+            kept = self._values.get(key)
+            if kept is not None and not replace:
+                value = kept
             self._values[key] = value
             self._values.move_to_end(key)
             while len(self._values) > self.kept:
@@ -40,9 +44,13 @@ class RecentMemo(Generic[V]):
         return value
 
     def get_or_build(self, key: Hashable, build: Callable[[], V]) -> V:
-        """The value of ``key``, built by ``build()`` (outside the lock) if it is not kept."""
+        """The value of ``key``, built by ``build()`` (outside the lock) if it is not kept; of
+        two threads that build the same key at once, both get the value stored first."""
+        hash(key)  # outside the lock: bytes in the key cache their hash
         hit = self.get(key)
-        return hit if hit is not None else self.put(key, build())
+        if hit is not None:
+            return hit
+        return self.put(key, build(), replace=False)
 
     def clear(self) -> None:
         with self._lock:

@@ -30,6 +30,13 @@ def test_sparse_pattern_assembles_independent_matrices():
     assert np.array_equal(a.toarray(), [[0, 5, 0], [5, 0, 0]])
     assert np.array_equal(b.toarray(), [[0, -1, 0], [0, 0, 0]])
     assert a.has_canonical_format and a.shape == (2, 3)
+    # the index arrays are shared by every matrix of the pattern (and, memoized, by every
+    # problem of a task family): an in-place index operation must fail, not corrupt the others
+    with pytest.raises(ValueError, match="read-only"):
+        a.indices[0] = 2
+    with pytest.raises(ValueError, match="read-only"):
+        b.eliminate_zeros()
+    assert np.array_equal(a.toarray(), [[0, 5, 0], [5, 0, 0]]) and a.T.shape == (3, 2)
 
 
 def test_sparse_pattern_drops_entries_of_fixed_columns():

@@ -1,5 +1,7 @@
 """The per-process memo of the last few keys (patterns, analyses, plans)."""
 
+import pytest
+
 from mbplan.memo import RecentMemo
 
 
@@ -20,3 +22,40 @@ def test_recent_memo_builds_once_and_drops_the_least_recently_used():
     assert memo.get_or_build("b", lambda: build("b")) == ["b"] and built == ["a", "b", "c", "b"]
     memo.clear()
     assert len(memo) == 0 and memo.get("a") is None
+
+
+def test_recent_memo_keeps_the_first_value_built_for_a_key_and_nothing_on_a_failed_build():
+    memo: RecentMemo[list] = RecentMemo(4)
+    first = memo.put("k", [1], replace=False)
+    # a second build of the same key (another thread's, finishing later) yields the kept value
+    assert memo.get_or_build("k", lambda: [2]) is first
+    assert memo.put("k", [3], replace=False) is first
+    assert memo.put("k", [4]) == [4] and memo.get("k") == [4]
+
+    def failing() -> list:
+        raise RuntimeError("build failed")
+
+    with pytest.raises(RuntimeError, match="build failed"):
+        memo.get_or_build("bad", failing)
+    assert memo.get("bad") is None and len(memo) == 1
+
+
+def test_recent_memo_gives_threads_building_one_key_the_same_value():
+    import threading
+
+    memo: RecentMemo[list] = RecentMemo(4)
+    barrier = threading.Barrier(4)
+    got: list[list] = []
+
+    def build() -> list:
+        barrier.wait()  # every thread misses, then builds its own value
+        return [threading.get_ident()]
+
+    threads = [
+        threading.Thread(target=lambda: got.append(memo.get_or_build("k", build))) for _ in range(4)
+    ]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(got) == 4 and all(g is got[0] for g in got)

@@ -186,6 +186,38 @@ def test_least_squares_y0_through_the_newton_system_is_the_least_squares_solutio
     assert np.abs(y0 - expected).max() <= 1e-4 * np.abs(expected).max()
 
 
+def test_least_squares_y0_goes_through_the_reduction():
+    """With ``kkt_method="reduced"`` the start's least-squares system is factorized through the
+    reduction, not by the full fallback (which would also pass the test above)."""
+    from mbplan.solvers.ripm import _RIPM
+
+    problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
+    ripm = _RIPM(problem, RIPMOptions(max_iter=0, constr_mult_init_max=1e12, kkt_method="reduced"))
+    ripm.run(x0, None, None, None)
+    kkt = ripm.kkt
+    assert kkt.n_reduced == 1 and kkt.n_fallbacks == 0
+    assert kkt.full is None or kkt.full.n_factorizations == 0
+
+
+def test_joint_layout_rejects_joint_rows_that_are_empty_or_span_knots():
+    """A joint constraint row group without entries, or with an entry on another knot's body,
+    is not a joint of one knot: :func:`maximal_layout` says so instead of writing a wrong
+    layout."""
+    problem, x0 = maximal_ripm_problem(chain_task(2, N=4), "linear")
+    jac = problem.evaluate(x0, 1.0).eq_jacobian.tolil()
+    rows = next(r for name, r in problem.term_rows("eq").items() if "joint_constraints" in name)
+    empty = jac.copy()
+    for row in rows[0]:
+        empty[row, :] = 0.0
+    with pytest.raises(InputError, match="without entries"):
+        maximal_layout.maximal_layout(problem, empty.tocsr())
+    spanning = jac.copy()
+    other_knot = jac.rows[rows[-1][0]][0]  # a column of the last knot's joint rows
+    spanning[rows[0][0], other_knot] = 1.0
+    with pytest.raises(InputError, match="outside one knot"):
+        maximal_layout.maximal_layout(problem, spanning.tocsr())
+
+
 def test_elimination_plans_are_memoized_per_layout():
     """Two problems of one family share the plan (same layout); other options, another plan."""
     plans = []

@@ -293,6 +293,29 @@ def test_rank_deficient_equality_jacobian_keeps_multipliers_bounded():
         assert np.max(np.abs(res.y)) <= 100 and res.iterations <= 10
 
 
+def test_least_squares_multipliers_without_inequalities_and_after_restoration():
+    """The start's ``y₀`` of an equality-only problem is the least-squares solution of
+    ``A_Eᵀy = -∇f``; with ``resto_ls_multipliers`` the Wächter–Biegler example leaves its
+    restoration phase with least-squares ``y`` (the Newton system reused) and converges."""
+    problem = EuclideanNLP(
+        3,
+        lambda x: x[0] ** 2 + 2 * x[1] ** 2 + x[2],
+        lambda x: np.array([2 * x[0], 4 * x[1], 1.0]),
+        lambda x, s, y, z: np.diag([2 * s, 4 * s, 0.0]),
+        eq=lambda x: np.array([x.sum() - 1, x[0] - x[2]]),
+        eq_jacobian=lambda x: np.array([[1.0, 1.0, 1.0], [1.0, 0.0, -1.0]]),
+        n_eq=2,
+    )
+    x0 = np.array([0.3, -0.2, 0.1])
+    y0 = solve_ripm(problem, x0, max_iter=0, constr_mult_init_max=1e3).y
+    a = problem.evaluate(x0).eq_jacobian.toarray()
+    expected = np.linalg.lstsq(a.T, -problem.evaluate(x0).gradient, rcond=None)[0]
+    np.testing.assert_allclose(y0, expected, rtol=1e-10, atol=1e-12)
+    res = solve_ripm(_wachter_biegler(), np.array([-0.4, 1.0, 1.0]), resto_ls_multipliers=True)
+    assert any(res.history.restoration)
+    assert res.success and np.allclose(res.x, [1.0, 0.0, 0.5], atol=1e-8)
+
+
 def _outside_disc() -> EuclideanNLP:
     """min (x₁ - 2)² + x₂² s.t. x₁² + x₂² ≥ 1 (a concave g): x* = (2, 0)."""
     return EuclideanNLP(

@@ -41,7 +41,9 @@ class MaximalLayout:
     def key(self) -> tuple:
         """The layout as a hashable value: equal layouts, equal keys."""
         values = (getattr(self, f.name) for f in fields(self))
-        return tuple((np.shape(v), np.asarray(v).tobytes()) for v in values)
+        return tuple(
+            (np.shape(v), np.asarray(v).dtype.str, np.asarray(v).tobytes()) for v in values
+        )
 
     @property
     def depths(self) -> np.ndarray:
@@ -104,17 +106,17 @@ def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
         if "joint_constraints" not in name or not term_rows.size:
             continue
         # every row group's support: the bodies and knots of its entries (min and max by group)
-        counts = np.diff(jac.indptr)[term_rows].sum(axis=1)
-        if np.any(counts == 0):
-            raise InputError(f"{name}: a joint constraint row group without entries")
         starts = jac.indptr[term_rows.ravel()]
         lengths = np.diff(jac.indptr)[term_rows.ravel()]
+        counts = lengths.reshape(term_rows.shape).sum(axis=1)
+        if np.any(counts == 0):
+            raise InputError(f"{name}: a joint constraint row group without entries")
         entry = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum())
         support = jac.indices[entry]
         first = np.concatenate([[0], np.cumsum(counts)[:-1]])
         b_min, b_max = (f.reduceat(body_of_col[support], first) for f in (np.minimum, np.maximum))
         k_min, k_max = (f.reduceat(knot_of_col[support], first) for f in (np.minimum, np.maximum))
-        if np.any(k_min != k_max) or np.any(b_min < 0) or np.any(k_min < 0):
+        if np.any(k_min != k_max) or np.any(b_min < 0):  # knot_of_col is set where body_of_col is
             raise InputError(f"{name}: a joint constraint row outside one knot's bodies")
         con_rows[k_min, b_max] = term_rows
         parent[b_max] = np.where(b_min < b_max, b_min, -1)

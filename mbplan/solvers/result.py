@@ -98,6 +98,8 @@ class RIPMResult:
     n_trial_evaluations: int
     """Calls of ``problem.values`` (line-search trials)."""
     n_factorizations: int
+    """Numeric KKT factorizations: every inertia-correction trial, and the least-squares
+    multipliers' (at the start, and after restoration with ``resto_ls_multipliers``)."""
 
     @property
     def success(self) -> bool:

@@ -195,7 +195,9 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         """``y`` minimizing ``‖grad f + A_Eᵀy + A_Iᵀz‖`` (WB); ``None`` if it is larger than
         ``constr_mult_init_max`` (or not computable): ``y = 0`` then. Solved with the Newton
         step's own system and pattern (its symbolic phase and reduction serve both): ``H`` and
-        ``A_I`` with zero values, ``I`` on the primal diagonal, ``-I`` on the inequality rows."""
+        ``A_I`` with zero values, ``I`` on the primal diagonal, ``-I`` on the inequality rows
+        (it overwrites the system's matrices and factorization: every Newton step sets its own
+        first; a plan the reduction cannot use raises here, at the start)."""
         kkt, n, me = self.kkt, self.n, self.me
         kkt.set_matrices(
             _zero_values(ev.hessian_lower), ev.eq_jacobian, _zero_values(ev.ineq_jacobian)

@@ -32,6 +32,10 @@ class SparsePattern:
         # int32 indices when they fit: scipy then skips an index-dtype pass per assembly
         itype = np.int32 if max(self.nnz, *shape) < np.iinfo(np.int32).max else np.int64
         self._indptr, self._cols = indptr.astype(itype), self.cols.astype(itype)
+        # every assembled matrix shares these (and the memo shares them across problems):
+        # read-only, so that an in-place scipy operation on one cannot corrupt the others
+        for index in (self._indptr, self._cols):
+            index.setflags(write=False)
         self._template = sp.csr_matrix((np.zeros(self.nnz), self._cols, self._indptr), shape)
         # canonical by construction (sorted unique keys): scipy's flag, copied with the template
         self._template.has_canonical_format = True
