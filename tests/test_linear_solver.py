@@ -88,6 +88,29 @@ def test_inertia_and_solve_match_dense_linear_algebra(n, me, mi, density, band):
         np.testing.assert_allclose(k_dense @ sol, rhs, atol=1e-8 * (1 + np.abs(sol).max()))
 
 
+def test_refinement_steps_between_the_minimum_and_the_ratio():
+    """``min_refinement=0``: no refinement step when the first solve meets ``ratio_max`` (the
+    solution of ``max_refinement=0``); IPOPT's ``1``: one step even then (the static
+    regularization's error removed); a ratio the first solve misses is refined to either way."""
+    rng = np.random.default_rng(7)
+    n, me, mi = 120, 30, 40
+    hess, jac_e, jac_i = _kkt_blocks(rng, n, me, mi, 0.03)
+    kkt = KKTSystem(n, me, mi)
+    kkt.set_matrices(hess, jac_e, jac_i)
+    diag = np.concatenate([np.full(n, 2.0), -rng.uniform(0.1, 1, me), -rng.random(mi)])
+    assert kkt.factorize(diag, static_reg=1e-6) is not None  # a first solve at ratio ~1e-6
+    rhs = rng.normal(size=n + me + mi)
+    first, first_ratio = kkt.solve(rhs, 0)
+    assert 1e-12 < first_ratio < 1e-3
+    loose, loose_ratio = kkt.solve(rhs, 10, 1e-3, min_refinement=0)
+    np.testing.assert_array_equal(loose, first)
+    assert loose_ratio == first_ratio
+    once, once_ratio = kkt.solve(rhs, 10, 1e-3, min_refinement=1)
+    assert once_ratio < 1e-3 * first_ratio
+    tight, tight_ratio = kkt.solve(rhs, 10, 1e-10, min_refinement=0)
+    assert tight_ratio <= 1e-10 and np.abs(tight - once).max() < 1e-8 * np.abs(once).max()
+
+
 def test_zero_or_nonfinite_pivot_is_a_breakdown():
     kkt = KKTSystem(1, 1, 0)
     kkt.set_matrices(None, sp.csr_matrix([[1.0]]), None)

@@ -241,12 +241,12 @@ def _ratio(nrm_r, nrm_x, nrm_b):
 @nb.njit(cache=True, error_model="numpy")
 def refined_solve(
     b, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv, indptr, indices, data, work,
-    max_refinement, ratio_max,
+    max_refinement, ratio_max, min_refinement,
 ):  # fmt: skip
     """Solve ``K x = b`` with the factorization of the regularized ``K`` and iterative
     refinement against ``K`` (full CSR arrays ``indptr, indices, data``): at least
-    one (IPOPT's default) and at most ``max_refinement`` steps, stopping at a residual ratio
-    ``<= ratio_max`` or when a step does not reduce it. ``work``: ``6 n`` plus the largest
+    ``min_refinement`` (IPOPT: 1) and at most ``max_refinement`` steps, stopping at a residual
+    ratio ``<= ratio_max`` or when a step does not reduce it. ``work``: ``6 n`` plus the largest
     front. Returns ``x`` (a new array) and the ratio."""
     n = b.shape[0]
     b, perm, sfirst, fptr, rows = (
@@ -277,7 +277,7 @@ def refined_solve(
     nrm_r, nrm_x = _residual_into(indptr, indices, data, b, sol, resid)
     ratio = _ratio(nrm_r, nrm_x, nrm_b)
     for step in range(max_refinement):
-        if step >= 1 and ratio <= ratio_max:
+        if step >= min_refinement and ratio <= ratio_max:
             break
         _solve_into(resid, dx, y, w, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv)
         for i in range(n):

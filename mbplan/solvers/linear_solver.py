@@ -257,12 +257,16 @@ class KKTSystem:
         return self._full() @ v
 
     def solve(
-        self, rhs: np.ndarray, max_refinement: int = 10, ratio_max: float = 1e-10
+        self,
+        rhs: np.ndarray,
+        max_refinement: int = 10,
+        ratio_max: float = 1e-10,
+        min_refinement: int = 1,
     ) -> tuple[np.ndarray, float]:
-        """Solve ``K x = rhs`` with iterative refinement against ``K``: at least one step
-        (IPOPT's default) and at most ``max_refinement``, stopping at a residual ratio
-        ``<= ratio_max`` or when a step does not reduce it (one compiled kernel: triangular
-        solves, residuals with the full symmetric pattern, the loop).
+        """Solve ``K x = rhs`` with iterative refinement against ``K``: at least
+        ``min_refinement`` steps (IPOPT's default: 1) and at most ``max_refinement``, stopping
+        at a residual ratio ``<= ratio_max`` or when a step does not reduce it (one compiled
+        kernel: triangular solves, residuals with the full symmetric pattern, the loop).
 
         Returns ``x`` and IPOPT's residual ratio ``‖r‖∞ / (min(‖x‖∞, 1e6‖b‖∞) + ‖b‖∞)``."""
         if self._solver is None:
@@ -272,7 +276,7 @@ class KKTSystem:
             raise InputError(f"KKTSystem.solve: rhs has shape {rhs.shape}, expected ({self.dim},)")
         return self._solver.refined_solve(
             rhs, self._pattern.full_indptr, self._pattern.full_indices, self._full_data,
-            max_refinement, ratio_max,
+            max_refinement, ratio_max, min_refinement,
         )  # fmt: skip
 
 

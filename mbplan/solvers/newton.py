@@ -28,6 +28,11 @@ from mbplan.solvers.ripm_kernels import corrector_shift, newton_diagonal, newton
 
 _NO_SHIFT = np.zeros(0)
 
+AFFINE_RATIO_MAX = 1e-8
+"""Residual ratio the predictor step is solved to: it only sets μ (probing) and the corrector's
+shift ``Δs_aff Δz_aff``, whose fraction-to-boundary steps and products do not change with the
+last digits refinement adds (one triangular solve and residual fewer per iteration)."""
+
 
 class NewtonStep:
     """Right-hand side, diagonal, factorization with inertia correction and step recovery."""
@@ -56,10 +61,14 @@ class NewtonStep:
 
     def _affine_step(self) -> Step:
         """The affine-scaling (predictor) step: the Newton step for μ = 0 with the current
-        factorization."""
+        factorization, solved to :data:`AFFINE_RATIO_MAX` (no refinement step unless the first
+        solve misses it)."""
         saved, self.mu, self.compl_shift = self.mu, 0.0, None
         try:
-            return self._split(self._solve(self._rhs(self.r_c)))
+            rhs = self._rhs(self.r_c)
+            o = self.o
+            sol = self.kkt.solve(rhs, o.max_refinement_steps, AFFINE_RATIO_MAX, min_refinement=0)
+            return self._split(sol[0])
         finally:
             self.mu = saved
 

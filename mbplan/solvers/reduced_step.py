@@ -167,23 +167,28 @@ class ReducedKKTSystem:
         return self._full().matvec(v)
 
     def solve(
-        self, rhs: np.ndarray, max_refinement: int = 10, ratio_max: float = 1e-10
+        self,
+        rhs: np.ndarray,
+        max_refinement: int = 10,
+        ratio_max: float = 1e-10,
+        min_refinement: int = 1,
     ) -> tuple[np.ndarray, float]:
         """As :meth:`KKTSystem.solve`: refinement against ``K`` (a solve through the reduction
-        that misses ``ratio_max`` is redone with the full factorization)."""
+        that misses ``ratio_max`` is redone with the full factorization; ``min_refinement``
+        applies to the solves of the reduced system)."""
         if not self._active:
-            return self._full().solve(rhs, max_refinement, ratio_max)
+            return self._full().solve(rhs, max_refinement, ratio_max, min_refinement)
         rhs = np.asarray(rhs, dtype=np.float64)
         if rhs.shape != (self.dim,):
             raise InputError(f"KKTSystem.solve: rhs has shape {rhs.shape}, expected ({self.dim},)")
         red, diag = self._red, self._diag
         inner = INNER_RATIO * ratio_max
-        x = red.solve_once(rhs, diag, inner)
+        x = red.solve_once(rhs, diag, inner, min_refinement)
         res, ratio = red.residual(rhs, x, diag)
         for _ in range(max_refinement):
             if ratio <= ratio_max:
                 break
-            x_new = x + red.solve_once(res, diag, inner)
+            x_new = x + red.solve_once(res, diag, inner, min_refinement)
             res_new, ratio_new = red.residual(rhs, x_new, diag)
             if not ratio_new < ratio:
                 break
@@ -194,7 +199,7 @@ class ReducedKKTSystem:
         self._active = False
         if self._full().factorize(self._diag, self._reg) is None:  # a breakdown: no usable step
             return np.full(self.dim, np.nan), np.inf
-        return self.full.solve(rhs, max_refinement, ratio_max)
+        return self.full.solve(rhs, max_refinement, ratio_max, min_refinement)
 
 
 KKT_METHODS = ("full", "reduced", "auto")

@@ -287,13 +287,15 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         """``K x`` for the values of :meth:`set_values` and ``K``'s ``diagonal``."""
         return -self.residual(np.zeros(len(x)), x, diagonal)[0]
 
-    def solve_once(self, b: np.ndarray, diagonal: np.ndarray, ratio_max: float) -> np.ndarray:
+    def solve_once(
+        self, b: np.ndarray, diagonal: np.ndarray, ratio_max: float, min_refinement: int = 1
+    ) -> np.ndarray:
         """``K⁻¹ b`` through the reduction (module docstring; ``diagonal``: ``K``'s), ``K_r``
-        solved to the residual ratio ``ratio_max``."""
+        solved to the residual ratio ``ratio_max`` (at least ``min_refinement`` steps)."""
         common = (diagonal, self.sigma, self.n, self.me, self.y_rows, self.kept, self._h,
                   self._ai, self._ak, self._grp, self._bf, self._bb, self._tr)  # fmt: skip
         reduce_rhs(b, *common, self.xu, self.rz, self.rhs_r, self.vx, self.kv, self.se)
-        xr = self.kkt.solve(self.rhs_r, 10, ratio_max)[0]
+        xr = self.kkt.solve(self.rhs_r, 10, ratio_max, min_refinement)[0]
         w = np.empty(len(b))
         expand_solution(b, xr, *common, self.xu, self.rz, w, self.kv, self.yv, self.hw)
         return w

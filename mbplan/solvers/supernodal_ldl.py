@@ -107,11 +107,11 @@ class SupernodalLDL:
 
     def refined_solve(
         self, b: np.ndarray, indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
-        max_refinement: int, ratio_max: float,
+        max_refinement: int, ratio_max: float, min_refinement: int = 1,
     ) -> tuple[np.ndarray, float]:  # fmt: skip
         a = self.a
         return refined_solve(
             np.ascontiguousarray(b, dtype=np.float64), a.perm, a.sfirst, a.fptr, a.rows,
             a.loff, self.lbuf, self.d, self.piv, self.e, self.spiv, indptr, indices, data,
-            self._work, max_refinement, ratio_max,
+            self._work, max_refinement, ratio_max, min_refinement,
         )  # fmt: skip
