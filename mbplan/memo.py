@@ -1,5 +1,6 @@
 """A per-process memo of the values built for the last few keys (thread-safe): what every
-problem of a task family builds alike (patterns, analyses, plans) is built once."""
+problem of a task family builds alike (patterns, analyses, plans, reduction choices) is built
+once."""
 
 from __future__ import annotations
 
@@ -33,10 +34,14 @@ class RecentMemo(Generic[V]):
     def put(self, key: Hashable, value: V, replace: bool = True) -> V:
         """Keep ``value`` for ``key`` and return it; ``replace=False``: a value already kept for
         ``key`` stays and is returned instead."""
+        return self.update(key, lambda kept: value if replace or kept is None else kept)
+
+    def update(self, key: Hashable, change: Callable[[V | None], V]) -> V:
+        """Keep ``change(value of key or None)`` for ``key`` (read and write under the lock:
+        ``change`` must be quick); returns it."""
+        hash(key)
         with self._lock:
-            kept = self._values.get(key)
-            if kept is not None and not replace:
-                value = kept
+            value = change(self._values.get(key))
             self._values[key] = value
             self._values.move_to_end(key)
             while len(self._values) > self.kept:

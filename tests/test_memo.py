@@ -59,3 +59,14 @@ def test_recent_memo_gives_threads_building_one_key_the_same_value():
     for t in threads:
         t.join()
     assert len(got) == 4 and all(g is got[0] for g in got)
+
+
+def test_recent_memo_update_changes_the_kept_value_atomically():
+    """``update``: the new value from the kept one (``None`` at first), the key most recent."""
+    memo: RecentMemo[list] = RecentMemo(2)
+    assert memo.update("a", lambda old: [1, *(old or [])]) == [1]
+    assert memo.update("a", lambda old: [2, *(old or [])]) == [2, 1]
+    memo.put("b", [0])
+    memo.update("a", lambda old: old[:1])  # "a" now the most recent: "b" goes first
+    memo.put("c", [3])
+    assert memo.get("a") == [2] and memo.get("b") is None

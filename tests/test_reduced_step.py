@@ -2,8 +2,6 @@
 the full LDLᵀ and the dense eigenvalues: same inertia (also wrong and singular), same steps,
 the cases it leaves to the full factorization, and a RIPM solve with kkt_method="reduced"."""
 
-from collections import OrderedDict
-
 import numpy as np
 import pytest
 
@@ -11,6 +9,7 @@ from mbplan.benchmarks.speed_tasks import chain_task, maximal_ripm_problem
 from mbplan.errors import InputError
 from mbplan.formulations import maximal_layout
 from mbplan.formulations.maximal_layout import JointEliminationPlans, joint_elimination_plan
+from mbplan.memo import RecentMemo
 from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
 from mbplan.solvers import RIPMOptions, solve_ripm
 from mbplan.solvers import reduction as reduction_module
@@ -362,7 +361,7 @@ def test_rows_and_columns_picked_on_another_problem_are_picked_again(monkeypatch
         jac.data[jac.indices == col] *= s
         return jac
 
-    monkeypatch.setattr(reduction_module, "_REDUCTIONS", OrderedDict())
+    monkeypatch.setattr(reduction_module, "_REDUCTIONS", RecentMemo(8))
     diag = _diag(problem, 1e-4, 0.0, -rng.uniform(0.5, 2.0, problem.n_ineq) / z)
     b = rng.normal(size=probe.dim)
     choices = []

@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import threading
 import weakref
-from collections import OrderedDict
 
 import numpy as np
 import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba
+from mbplan.memo import RecentMemo
 from mbplan.solvers.elimination import PLAN_ERRORS, EliminationPlan
 from mbplan.solvers.linear_solver import Inertia, KKTSystem
 from mbplan.solvers.reduced_kernels import (
@@ -37,10 +36,10 @@ REDUCED_STATIC_REG = 1e-8
 the unpivoted LDLᵀ down with ``1e-9`` (docs/ripm-speed.md, session 5)."""
 
 
-_REDUCTIONS: OrderedDict[tuple, list[Reduction]] = OrderedDict()
-_REDUCTIONS_KEPT = 8
+_REDUCTIONS: RecentMemo[list[Reduction]] = RecentMemo(8)
+"""The last patterns' reductions, each a list of choices (replaced rows and dependent columns)
+picked on different values, the last one used first."""
 _CHOICES_KEPT = 4
-_REDUCTIONS_LOCK = threading.Lock()
 
 
 def _key(plan, hess, ae, ai, ordering, pivot_threshold) -> tuple:
@@ -54,11 +53,9 @@ def _key(plan, hess, ae, ai, ordering, pivot_threshold) -> tuple:
 
 def _remember(key: tuple, red: Reduction) -> None:
     """``red`` first among its pattern's choices (the next systems start with it)."""
-    with _REDUCTIONS_LOCK:
-        choices = [c for c in _REDUCTIONS.pop(key, []) if c is not red]
-        _REDUCTIONS[key] = [red, *choices][:_CHOICES_KEPT]
-        while len(_REDUCTIONS) > _REDUCTIONS_KEPT:
-            _REDUCTIONS.popitem(last=False)
+    _REDUCTIONS.update(
+        key, lambda choices: [red, *(c for c in choices or [] if c is not red)][:_CHOICES_KEPT]
+    )
 
 
 def reduction(
@@ -74,11 +71,9 @@ def reduction(
     share it), with the replaced rows and dependent columns picked on the values of the first
     matrix of the pattern, or of the last one :func:`repick` chose them for."""
     key = _key(plan, hess, ae, ai, ordering, pivot_threshold)
-    with _REDUCTIONS_LOCK:
-        hit = _REDUCTIONS.get(key)
-        if hit is not None:
-            _REDUCTIONS.move_to_end(key)
-            return hit[0].fresh()
+    hit = _REDUCTIONS.get(key)
+    if hit is not None:
+        return hit[0].fresh()
     announce_uncached_numba(*VALUE_KERNELS, *PRODUCT_KERNELS, *SOLVE_KERNELS)  # first run only
     hit = Reduction(plan, hess, ae, ai, ordering, pivot_threshold)
     _remember(key, hit)
@@ -100,8 +95,7 @@ def repick(
     first); its values set. ``None`` if these values admit no reduction (rank deficient
     rows, or a breakdown on the very values the choice was picked on)."""
     key = _key(plan, hess, ae, ai, ordering, pivot_threshold)
-    with _REDUCTIONS_LOCK:
-        choices = list(_REDUCTIONS.get(key, []))
+    choices = list(_REDUCTIONS.get(key) or [])
     for choice in choices:
         if choice.dep_key != failed.dep_key:
             red = choice.fresh()
