@@ -5,6 +5,7 @@ once."""
 from __future__ import annotations
 
 import threading
+import weakref
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from typing import Generic, TypeVar
@@ -19,6 +20,7 @@ class RecentMemo(Generic[V]):
         self.kept = kept
         self._values: OrderedDict[Hashable, V] = OrderedDict()
         self._lock = threading.Lock()
+        _MEMOS.add(self)
 
     def __len__(self) -> int:
         return len(self._values)
@@ -60,3 +62,14 @@ class RecentMemo(Generic[V]):
     def clear(self) -> None:
         with self._lock:
             self._values.clear()
+
+
+_MEMOS: weakref.WeakSet[RecentMemo] = weakref.WeakSet()
+
+
+def clear_all() -> None:
+    """Empty every :class:`RecentMemo` of the process: the next solve builds (and picks, e.g. the
+    joint reduction's pivots on its own first matrix) as in a fresh process, so that it does not
+    depend on the problems solved before it (at the cost of the symbolic phases again)."""
+    for memo in list(_MEMOS):
+        memo.clear()
