@@ -20,7 +20,8 @@ class RecentMemo(Generic[V]):
         self.kept = kept
         self._values: OrderedDict[Hashable, V] = OrderedDict()
         self._lock = threading.Lock()
-        _MEMOS.add(self)
+        with _MEMOS_LOCK:
+            _MEMOS.add(self)
 
     def __len__(self) -> int:
         return len(self._values)
@@ -39,8 +40,8 @@ class RecentMemo(Generic[V]):
         return self.update(key, lambda kept: value if replace or kept is None else kept)
 
     def update(self, key: Hashable, change: Callable[[V | None], V]) -> V:
-        """Keep ``change(value of key or None)`` for ``key`` (read and write under the lock:
-        ``change`` must be quick); returns it."""
+        """Keep ``change(value of key or None)`` for ``key`` (read and write under the memo's
+        lock: ``change`` must be quick and must not use this memo); returns it."""
         hash(key)
         with self._lock:
             value = change(self._values.get(key))
@@ -65,11 +66,15 @@ class RecentMemo(Generic[V]):
 
 
 _MEMOS: weakref.WeakSet[RecentMemo] = weakref.WeakSet()
+_MEMOS_LOCK = threading.Lock()
 
 
 def clear_all() -> None:
     """Empty every :class:`RecentMemo` of the process: the next solve builds (and picks, e.g. the
     joint reduction's pivots on its own first matrix) as in a fresh process, so that it does not
-    depend on the problems solved before it (at the cost of the symbolic phases again)."""
-    for memo in list(_MEMOS):
+    depend on the problems solved before it (at the cost of the symbolic phases again; while no
+    other thread is solving)."""
+    with _MEMOS_LOCK:
+        memos = list(_MEMOS)
+    for memo in memos:
         memo.clear()

@@ -49,7 +49,7 @@ def test_recent_memo_gives_threads_building_one_key_the_same_value():
     import threading
 
     memo: RecentMemo[list] = RecentMemo(4)
-    barrier = threading.Barrier(4)
+    barrier = threading.Barrier(4, timeout=30)
     got: list[list] = []
 
     def build() -> list:
@@ -62,7 +62,7 @@ def test_recent_memo_gives_threads_building_one_key_the_same_value():
     for t in threads:
         t.start()
     for t in threads:
-        t.join()
+        t.join(timeout=60)
     assert len(got) == 4 and all(g is got[0] for g in got)
 
 
@@ -75,6 +75,24 @@ def test_recent_memo_update_changes_the_kept_value_atomically():
     memo.update("a", lambda old: old[:1])  # "a" now the most recent: "b" goes first
     memo.put("c", [3])
     assert memo.get("a") == [2] and memo.get("b") is None
+
+
+def test_recent_memo_updates_from_threads_are_not_lost():
+    """Each ``update`` reads and writes under the lock: 8 threads × 200 appends, none lost."""
+    import threading
+
+    memo: RecentMemo[list] = RecentMemo(2)
+
+    def append(i: int) -> None:
+        for _ in range(200):
+            memo.update("k", lambda old: [*(old or []), i])
+
+    threads = [threading.Thread(target=append, args=(i,)) for i in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert sorted(memo.get("k")) == sorted(i for i in range(8) for _ in range(200))
 
 
 def test_clear_all_makes_a_solve_independent_of_the_solves_before_it():

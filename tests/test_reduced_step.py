@@ -195,7 +195,33 @@ def test_least_squares_y0_goes_through_the_reduction():
     ripm.run(x0, None, None, None)
     kkt = ripm.kkt
     assert kkt.n_reduced == 1 and kkt.n_fallbacks == 0
-    assert kkt.full is None or kkt.full.n_factorizations == 0
+    assert kkt.full.n_factorizations == 0
+
+
+def test_min_refinement_reaches_the_reduced_and_the_full_solves(monkeypatch):
+    """``ReducedKKTSystem.solve(min_refinement=)`` is what the reduced system's solves and the
+    full factorization (reduction inactive) are called with."""
+    problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
+    _, red, sigma, rng = _kkt(problem, x0, 3)
+    seen = []
+    solve = KKTSystem.solve
+
+    def spy(self, rhs, max_refinement=10, ratio_max=1e-10, min_refinement=1):
+        seen.append((self is red.full, min_refinement))
+        return solve(self, rhs, max_refinement, ratio_max, min_refinement)
+
+    monkeypatch.setattr(KKTSystem, "solve", spy)
+    assert red.factorize(_diag(problem, 1e-4, 0.0, sigma), 1e-9) is not None
+    b = rng.normal(size=red.dim)
+    for minimum in (0, 1):
+        seen.clear()
+        red.solve(b, 10, 1e-8, min_refinement=minimum)
+        assert seen and all(not full and m == minimum for full, m in seen)
+    red._active = False  # as after a breakdown of the reduction: the full factorization
+    red._full().factorize(_diag(problem, 1e-4, 0.0, sigma), 1e-9)
+    seen.clear()
+    red.solve(b, 10, 1e-8, min_refinement=0)
+    assert seen == [(True, 0)]
 
 
 def test_joint_layout_rejects_joint_rows_that_are_empty_or_span_knots():

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from mbplan.solvers.iterate import EPS, Step
+from mbplan.solvers.iterate import EPS, Step, finite
 from mbplan.solvers.ripm_kernels import affine_complementarity, mean_product
 
 MU_MIN = 1e-14
@@ -63,10 +63,13 @@ class BarrierStrategy:
         """Mehrotra's predictor (IPOPT's probing oracle): the affine-scaling step (μ = 0) with
         the current factorization, ``μ_aff`` the average complementarity after its
         fraction-to-boundary steps, ``μ = σ μ_avg`` with ``σ = (μ_aff / μ_avg)³``; returns the
-        affine step."""
+        affine step. LOQO's μ if the affine step is not finite (a broken-down solve)."""
         self.probe_pending = False
         mu_avg = self._avg_compl()
         aff = self._affine_step()
+        if not finite(aff.ds, aff.dz):
+            self._set_mu(self._loqo_mu())
+            return aff
         mu_aff = affine_complementarity(self.s, aff.ds, self.z, aff.dz, self.tau)
         sigma = min((mu_aff / mu_avg) ** 3, 1.0) if mu_avg > 0 else 0.0
         self._set_mu(min(max(sigma * mu_avg, self._mu_floor()), self.mu_max))

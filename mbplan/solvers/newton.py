@@ -29,9 +29,10 @@ from mbplan.solvers.ripm_kernels import corrector_shift, newton_diagonal, newton
 _NO_SHIFT = np.zeros(0)
 
 AFFINE_RATIO_MAX = 1e-8
-"""Residual ratio the predictor step is solved to: it only sets μ (probing) and the corrector's
-shift ``Δs_aff Δz_aff``, whose fraction-to-boundary steps and products do not change with the
-last digits refinement adds (one triangular solve and residual fewer per iteration)."""
+"""Residual ratio the predictor step is solved to (or ``residual_ratio_max`` if looser): it only
+sets μ (probing) and the corrector's shift ``Δs_aff Δz_aff``, which it moves by ~1e-5 relative
+against a solve to 1e-14 (one triangular solve and residual fewer per iteration; the iterates
+change in their last digits, and a rounding-sensitive path with them)."""
 
 
 class NewtonStep:
@@ -65,10 +66,8 @@ class NewtonStep:
         solve misses it)."""
         saved, self.mu, self.compl_shift = self.mu, 0.0, None
         try:
-            rhs = self._rhs(self.r_c)
-            o = self.o
-            sol = self.kkt.solve(rhs, o.max_refinement_steps, AFFINE_RATIO_MAX, min_refinement=0)
-            return self._split(sol[0])
+            ratio_max = max(AFFINE_RATIO_MAX, self.o.residual_ratio_max)
+            return self._split(self._solve(self._rhs(self.r_c), ratio_max, min_refinement=0))
         finally:
             self.mu = saved
 
@@ -92,9 +91,14 @@ class NewtonStep:
             frac_to_boundary(self.s, step.ds, self.tau), frac_to_boundary(self.z, step.dz, self.tau)
         )
 
-    def _solve(self, rhs: np.ndarray) -> np.ndarray:
-        """Solve with the current factorization (iterative refinement as configured)."""
-        return self.kkt.solve(rhs, self.o.max_refinement_steps, self.o.residual_ratio_max)[0]
+    def _solve(
+        self, rhs: np.ndarray, ratio_max: float | None = None, min_refinement: int = 1
+    ) -> np.ndarray:
+        """Solve with the current factorization (iterative refinement to ``ratio_max``, default
+        ``residual_ratio_max``)."""
+        o = self.o
+        ratio = o.residual_ratio_max if ratio_max is None else ratio_max
+        return self.kkt.solve(rhs, o.max_refinement_steps, ratio, min_refinement)[0]
 
     def _split(self, sol: np.ndarray) -> Step:
         n, me = self.n, self.me
@@ -158,9 +162,10 @@ class NewtonStep:
                     aff = self._probe_mu()
                 if o.corrector and self.mi and not self.resto:
                     aff = aff or self._affine_step()
-                    self.compl_shift, aff_reach = corrector_shift(
-                        self.s, aff.ds, self.z, aff.dz, self.tau
-                    )
+                    if finite(aff.ds, aff.dz):  # else no corrector (a broken-down solve)
+                        self.compl_shift, aff_reach = corrector_shift(
+                            self.s, aff.ds, self.z, aff.dz, self.tau
+                        )
                 rhs = self._rhs(self.r_c)
                 sol, ratio = self.kkt.solve(rhs, o.max_refinement_steps, o.residual_ratio_max)
                 if dc == 0.0 and m > 0 and ratio > o.residual_ratio_max and finite(sol):
@@ -180,6 +185,7 @@ class NewtonStep:
                         return self._safeguarded_corrector(sol, aff_reach), dw
                     return self._split(sol), dw
                 pretend_singular = singular = True  # IPOPT: refinement failed
+                self.probe_pending = probing  # μ from the next factorization
             if singular and dc == 0.0 and m > 0:
                 dc = self._delta_c()  # IC-2
                 continue

@@ -75,9 +75,9 @@ def reduction(
     if hit is not None:
         return hit[0].fresh()
     announce_uncached_numba(*VALUE_KERNELS, *PRODUCT_KERNELS, *SOLVE_KERNELS)  # first run only
-    hit = Reduction(plan, hess, ae, ai, ordering, pivot_threshold)
-    _remember(key, hit)
-    return hit.fresh()
+    built = Reduction(plan, hess, ae, ai, ordering, pivot_threshold)
+    # of two threads that built the pattern's first choice at once, both keep the one stored first
+    return _REDUCTIONS.update(key, lambda choices: choices or [built])[0].fresh()
 
 
 def repick(

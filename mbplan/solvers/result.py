@@ -99,7 +99,8 @@ class RIPMResult:
     """Calls of ``problem.values`` (line-search trials)."""
     n_factorizations: int
     """Numeric KKT factorizations: every inertia-correction trial, and the least-squares
-    multipliers' (at the start, and after restoration with ``resto_ls_multipliers``)."""
+    multipliers' (at the start, and after restoration with ``resto_ls_multipliers``); a trial
+    whose joint reduction falls back to the full factorization counts twice."""
 
     @property
     def success(self) -> bool:

@@ -197,7 +197,8 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
         step's own system and pattern (its symbolic phase and reduction serve both): ``H`` and
         ``A_I`` with zero values, ``I`` on the primal diagonal, ``-I`` on the inequality rows
         (it overwrites the system's matrices and factorization: every Newton step sets its own
-        first; a plan the reduction cannot use raises here, at the start)."""
+        first; with ``kkt_method="reduced"`` a plan the reduction cannot use raises here, at the
+        start)."""
         kkt, n, me = self.kkt, self.n, self.me
         kkt.set_matrices(
             _zero_values(ev.hessian_lower), ev.eq_jacobian, _zero_values(ev.ineq_jacobian)

@@ -25,7 +25,9 @@ from mbplan.transcription.variables import Point, TrajectoryVariables
 
 @dataclass(frozen=True)
 class Evaluation:
-    """Everything a Newton step needs at one point (Hessian is the lower triangle)."""
+    """Everything a Newton step needs at one point (Hessian is the lower triangle). The sparse
+    matrices share read-only index arrays with every evaluation of their pattern: copy one
+    (``.copy()``) before an in-place index operation such as ``eliminate_zeros``."""
 
     objective: float
     gradient: np.ndarray
