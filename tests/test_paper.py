@@ -9,6 +9,7 @@ import pytest
 
 import mbplan as mb
 from mbplan.formulations.joint_space import evaluate
+from mbplan.ocp.continuous import joint_ranges
 from mbplan.paper import (
     IIWA_CYLINDER,
     IIWA_START,
@@ -19,7 +20,7 @@ from mbplan.paper import (
     iiwa_obstacle_cases,
     tracking_ocp,
 )
-from mbplan.planning.initial_guess import initial_path, path_clearance
+from mbplan.planning.initial_guess import VIA_CANDIDATES, initial_path, path_clearance
 
 MODEL = mb.load_robot("iiwa").model
 
@@ -121,6 +122,21 @@ def test_via_warm_start_is_collision_free_where_linear_is_not() -> None:
     np.testing.assert_array_equal(via, initial_path(ocp, "via"))  # deterministic
     with pytest.raises(mb.InputError, match="warm_start"):
         initial_path(ocp, "rrt")
+    # the shortest clear one of the VIA_CANDIDATES seeded via points: every shorter one collides
+    mid = 0.5 * (ocp.q0 + IIWA_TARGET)
+    lo, hi = joint_ranges(ocp.robot, mid)
+    rng = np.random.default_rng(0)
+    vias = np.clip(mid + 0.5 * rng.uniform(-1, 1, (VIA_CANDIDATES, 7)) * (hi - lo), lo, hi)
+    length = np.linalg.norm(vias - ocp.q0, axis=1) + np.linalg.norm(IIWA_TARGET - vias, axis=1)
+    s = np.concatenate([[0.0], np.linspace(0.0, 1.0, ocp.N)])
+    k = int(np.flatnonzero(s <= 0.5)[-1])  # on the first leg: q_k = q0 + 2 s_k (via - q0)
+    point = ocp.q0 + (via[k] - ocp.q0) / (2 * s[k])
+    chosen = int(np.argmin(np.abs(vias - point).sum(axis=1)))
+    np.testing.assert_allclose(vias[chosen], point, atol=1e-10)
+    for v in vias[length < length[chosen]]:
+        path = ocp.q0 + np.minimum(2 * s, 1)[:, None] * (v - ocp.q0)
+        path += np.maximum(2 * s - 1, 0)[:, None] * (IIWA_TARGET - v)
+        assert path_clearance(ocp, path) > 0
 
 
 def test_frame_goal_warm_start_uses_inverse_kinematics() -> None:

@@ -131,20 +131,18 @@ def initial_path(ocp: OCP, kind: str = "linear") -> np.ndarray:
     rng = np.random.default_rng(0)
     mid = 0.5 * (q0 + q_goal)
     lo, hi = joint_ranges(ocp.robot, mid)
-    best, best_length = linear, np.inf
+    vias = np.clip(
+        mid + 0.5 * rng.uniform(-1.0, 1.0, (VIA_CANDIDATES, *mid.shape)) * (hi - lo), lo, hi
+    )
+    lengths = np.linalg.norm(vias - q0, axis=1) + np.linalg.norm(q_goal - vias, axis=1)
     first = np.minimum(2 * s, 1.0)[:, None]
     second = np.maximum(2 * s - 1.0, 0.0)[:, None]
-    for _ in range(VIA_CANDIDATES):
-        via = np.clip(mid + 0.5 * rng.uniform(-1.0, 1.0, mid.shape) * (hi - lo), lo, hi)
-        length = float(np.linalg.norm(via - q0) + np.linalg.norm(q_goal - via))
-        if length >= best_length:
-            continue
+    for via in vias[np.argsort(lengths, kind="stable")]:  # the shortest clear one
         path = q0 + first * (via - q0) + second * (q_goal - via)
         if path_clearance(ocp, path) <= 0.0:
-            best, best_length = path, length
-    if best is linear:
-        warnings.warn(WarmStartWarning(VIA_FALLBACK), stacklevel=2)
-    return best
+            return path
+    warnings.warn(WarmStartWarning(VIA_FALLBACK), stacklevel=2)
+    return linear
 
 
 VIA_FALLBACK = (
