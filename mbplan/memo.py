@@ -28,6 +28,7 @@ class RecentMemo(Generic[V]):
 
     def get(self, key: Hashable) -> V | None:
         """The value of ``key`` (now the most recent), or ``None``."""
+        hash(key)  # outside the lock: bytes in the key cache their hash
         with self._lock:
             hit = self._values.get(key)
             if hit is not None:
@@ -42,7 +43,7 @@ class RecentMemo(Generic[V]):
     def update(self, key: Hashable, change: Callable[[V | None], V]) -> V:
         """Keep ``change(value of key or None)`` for ``key`` (read and write under the memo's
         lock: ``change`` must be quick and must not use this memo); returns it."""
-        hash(key)
+        hash(key)  # outside the lock, as in get
         with self._lock:
             value = change(self._values.get(key))
             self._values[key] = value
@@ -54,7 +55,6 @@ class RecentMemo(Generic[V]):
     def get_or_build(self, key: Hashable, build: Callable[[], V]) -> V:
         """The value of ``key``, built by ``build()`` (outside the lock) if it is not kept; of
         two threads that build the same key at once, both get the value stored first."""
-        hash(key)  # outside the lock: bytes in the key cache their hash
         hit = self.get(key)
         if hit is not None:
             return hit

@@ -40,10 +40,8 @@ class MaximalLayout:
 
     def key(self) -> tuple:
         """The layout as a hashable value: equal layouts, equal keys."""
-        values = (getattr(self, f.name) for f in fields(self))
-        return tuple(
-            (np.shape(v), np.asarray(v).dtype.str, np.asarray(v).tobytes()) for v in values
-        )
+        values = (np.asarray(getattr(self, f.name)) for f in fields(self))
+        return tuple((v.shape, v.dtype.str, v.tobytes()) for v in values)
 
     @property
     def depths(self) -> np.ndarray:

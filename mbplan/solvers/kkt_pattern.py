@@ -103,8 +103,8 @@ class _KKTPattern:
     spare_max_entries: ClassVar[int] = 1 << 20
     """Released workspaces kept (:meth:`release`): at most ``spares``, each with at most
     ``spare_max_entries`` factor entries (8 MB): a new system of a small pattern (each case of a
-    task family) then allocates nothing, while
-    a large one's allocation costs little beside its factorization. (Class attributes: a
+    task family) then allocates nothing, while a large one's allocation costs little beside its
+    factorization. (Class attributes: a
     system's ``__del__`` may run at interpreter exit, after the module's globals are gone.)"""
 
     def workspace(self) -> _Workspace:

@@ -71,13 +71,12 @@ def reduction(
     share it), with the replaced rows and dependent columns picked on the values of the first
     matrix of the pattern, or of the last one :func:`repick` chose them for."""
     key = _key(plan, hess, ae, ai, ordering, pivot_threshold)
-    hit = _REDUCTIONS.get(key)
-    if hit is not None:
-        return hit[0].fresh()
-    announce_uncached_numba(*VALUE_KERNELS, *PRODUCT_KERNELS, *SOLVE_KERNELS)  # first run only
-    built = Reduction(plan, hess, ae, ai, ordering, pivot_threshold)
-    # of two threads that built the pattern's first choice at once, both keep the one stored first
-    return _REDUCTIONS.update(key, lambda choices: choices or [built])[0].fresh()
+
+    def first_choice() -> list[Reduction]:
+        announce_uncached_numba(*VALUE_KERNELS, *PRODUCT_KERNELS, *SOLVE_KERNELS)  # first run only
+        return [Reduction(plan, hess, ae, ai, ordering, pivot_threshold)]
+
+    return _REDUCTIONS.get_or_build(key, first_choice)[0].fresh()
 
 
 def repick(
