@@ -45,6 +45,33 @@ def test_callbacks_agree_with_the_numpy_functions() -> None:
     )
 
 
+def test_residuals_of_new_ocps_reuse_the_robots_symbolic_kinematics(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The joint placements' SX graph is built once per robot: a new OCP (new residuals, another
+    scene) only adds its own rows. Its COM clearances are those of Pinocchio's link COMs."""
+    import pinocchio as pin
+
+    import mbplan.formulations.joint_space as js
+
+    built = []
+    original = js.symbolic_placements
+    monkeypatch.setattr(js, "symbolic_placements", lambda *a: built.append(1) or original(*a))
+    js._state_symbols.cache_clear()
+    for ocp in small_cases(3):
+        item = ocp.constraints[-1]
+        q = ocp.q0 + 0.3
+        value = evaluate(ocp.robot, ocp.scene, item.residual, q[None], ocp.v0[None], None)[0]
+        model = ocp.robot.model
+        data = model.createData()
+        pin.forwardKinematics(model, data, q)
+        cx, cy, r = item.residual.circle(ocp.scene)  # r: radius + margin
+        com = [data.oMi[j].act(model.inertias[j].lever) for j in range(1, model.njoints)]
+        clearance = [r**2 - (c[0] - cx) ** 2 - (c[1] - cy) ** 2 for c in com]  # eq. 62
+        np.testing.assert_allclose(value, clearance, atol=1e-12)
+    assert len(built) == 1
+
+
 def test_initial_guess_satisfies_eq61() -> None:
     ocp = small_cases(1)[0]
     nlp = GeneralizedNLP(ocp)

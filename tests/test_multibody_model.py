@@ -199,6 +199,18 @@ def test_kinova_angles_beyond_pi_are_recovered_from_the_limit_window() -> None:
     np.testing.assert_allclose(joint_positions(mm, body_poses(mm, q)[0]), q, atol=1e-12)
 
 
+@pytest.mark.parametrize("name", ROBOTS)
+def test_body_poses_of_a_batch_are_those_of_each_configuration(name: str) -> None:
+    mm = _mm(name)
+    q = np.array([qk for qk, _ in _samples(mm, seed=5)])
+    R, p = body_poses(mm, q)
+    assert R.shape == (len(q), mm.nb, 3, 3) and p.shape == (len(q), mm.nb, 3)
+    for k, qk in enumerate(q):
+        Rk, pk = body_poses(mm, qk)
+        np.testing.assert_array_equal(R[k], Rk)
+        np.testing.assert_allclose(p[k], pk, rtol=0, atol=1e-15)
+
+
 def test_q_ref_selects_the_2pi_branch() -> None:
     mm = _mm("ur5")  # joint limits +-2 pi
     q = np.array([5.5, -4.0, 1.0, -6.0, 3.5, 0.2])
@@ -224,6 +236,8 @@ def test_state_maps_validate_inputs() -> None:
     mm = _mm("iiwa")
     with pytest.raises(InputError, match=r"q must have shape \(7,\)"):
         body_poses(mm, np.zeros(6))
+    with pytest.raises(InputError, match=r"q must have shape \(3, 7\)"):
+        body_poses(mm, np.zeros((3, 6)))
     with pytest.raises(InputError, match="non-finite"):
         body_velocities(mm, np.zeros(7), np.full(7, np.nan))
     with pytest.raises(InputError, match=r"R must have shape \(7, 3, 3\)"):

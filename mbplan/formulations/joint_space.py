@@ -82,7 +82,17 @@ def frame_error(R, p, p_goal, R_goal=None):
     return cs.vertcat(p - p_goal, SO3.log(cs.mtimes(R_goal.T, R)))
 
 
+@lru_cache(maxsize=16)
+def _state_symbols(robot: Robot) -> tuple[cs.SX, list[tuple[cs.SX, cs.SX]]]:
+    """A knot state ``x = (q, v)`` and the joints' :func:`symbolic_placements` at its ``q``, built
+    once per robot (the slow part of a state residual's graph; every state residual's function
+    takes this ``x``)."""
+    x = cs.SX.sym("x", 2 * robot.nv)
+    return x, symbolic_placements(robot.model, x[: robot.nv])
+
+
 def _symbolic(robot: Robot, scene: Scene, residual: Residual, x: cs.SX) -> cs.SX:
+    """``r(x)`` as an SX expression; ``x`` of a state residual is ``_state_symbols(robot)[0]``."""
     model, nv = robot.model, robot.nv
     q, v = x[:nv], x[nv:] if residual.space == "state" else None
     if isinstance(residual, (JointPosition, JointVelocity, JointTorque)):
@@ -102,7 +112,7 @@ def _symbolic(robot: Robot, scene: Scene, residual: Residual, x: cs.SX) -> cs.SX
         var = cs.vertcat(*[var[i] for i in keep])
         lo, hi = (cs.DM(np.asarray(b)[keep]) for b in (residual.lower, residual.upper))
         return cs.vertcat(lo - var, var - hi)
-    placements = symbolic_placements(model, q)
+    placements = _state_symbols(robot)[1]
     if isinstance(residual, (FrameTranslation, FramePlacement)):
         frame = model.frames[robot.frame_id(residual.frame)]
         Rj, pj = placements[frame.parentJoint]
@@ -123,8 +133,7 @@ def _symbolic(robot: Robot, scene: Scene, residual: Residual, x: cs.SX) -> cs.SX
 @lru_cache(maxsize=256)
 def knot_function(robot: Robot, scene: Scene, residual: Residual) -> cs.Function:
     """``r(x)`` at one knot (``x = (q, v)`` or ``τ``), an SX function (cached per residual)."""
-    nx = 2 * robot.nv if residual.space == "state" else robot.nv
-    x = cs.SX.sym("x", nx)
+    x = _state_symbols(robot)[0] if residual.space == "state" else cs.SX.sym("x", robot.nv)
     return cs.Function(type(residual).__name__, [x], [_symbolic(robot, scene, residual, x)])
 
 

@@ -16,13 +16,19 @@ from mbplan.multibody.model import MaximalModel
 
 
 def body_poses(mm: MaximalModel, q: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-    """World poses of the bodies at configuration ``q``: ``R`` (nb, 3, 3) and ``p`` (nb, 3)."""
-    q = _array(q, (mm.nq,), "q")
-    data = mm.model.createData()
-    pin.forwardKinematics(mm.model, data, q)
-    R = np.array([data.oMi[j].rotation for j in mm.pin_joint.tolist()])
-    t = np.array([data.oMi[j].translation for j in mm.pin_joint.tolist()])
-    return R, t + np.einsum("bij,bj->bi", R, mm.com_in_joint)
+    """World poses of the bodies at configuration ``q``: ``R`` (nb, 3, 3) and ``p`` (nb, 3); at
+    configurations ``q (K, nq)``: ``R`` (K, nb, 3, 3) and ``p`` (K, nb, 3)."""
+    q = np.asarray(q, dtype=float)
+    q = _array(q, (len(q), mm.nq) if q.ndim == 2 else (mm.nq,), "q")
+    flat = q.reshape(-1, mm.nq)
+    R, t = np.empty((len(flat), mm.nb, 3, 3)), np.empty((len(flat), mm.nb, 3))
+    data, joints = mm.model.createData(), mm.pin_joint.tolist()
+    for k, qk in enumerate(flat):
+        pin.forwardKinematics(mm.model, data, qk)
+        for b, j in enumerate(joints):
+            R[k, b], t[k, b] = data.oMi[j].rotation, data.oMi[j].translation
+    p = t + np.einsum("kbij,bj->kbi", R, mm.com_in_joint)
+    return (R, p) if q.ndim == 2 else (R[0], p[0])
 
 
 def body_velocities(

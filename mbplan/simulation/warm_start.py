@@ -13,14 +13,15 @@ damping, evaluated on the given motion) vanish up to round-off.
 
 from __future__ import annotations
 
-import warnings
+import threading
 
 import numpy as np
 import numpy.typing as npt
-import scipy.sparse.linalg as spla
+import scipy.sparse as sp
 
 from mbplan.engine.jit import jit_available
 from mbplan.errors import InputError, MbplanError
+from mbplan.memo import RecentMemo
 from mbplan.multibody import MaximalModel, body_poses
 from mbplan.transcription.multibody import LAMBDA_DIM, multibody_layout
 from mbplan.transcription.problem import TrajectoryProblem
@@ -40,7 +41,7 @@ def maximal_warm_start(
     ``q_traj`` holds the configurations of knots ``0 … N`` (``N`` defaults to ``len(q_traj) - 1``)
     and optionally one more, at ``t = (N+1)Δt``, that defines ``F_N`` and ``v_N``; without it
     the motion stops after knot ``N`` (``F_N = I``, ``v_N = 0``). ``λ_k`` and ``τ_k``
-    (``k = 1 … N``) solve the dynamics rows of step ``k-1`` (one sparse solve for all knots);
+    (``k = 1 … N``) solve the dynamics rows of step ``k-1`` (one dense block per knot);
     knot 0, which no equation uses, repeats knot 1. Raises :class:`MbplanError` if the joint
     forces cannot balance the dynamics (singular system).
     """
@@ -54,18 +55,15 @@ def maximal_warm_start(
     if not np.all(np.isfinite(q)) or not dt > 0:
         raise InputError("q_traj must be finite and dt > 0")
     jit = jit_available() if jit is None else jit
-    poses = [body_poses(mm, qk) for qk in q]
-    R = np.array([r for r, _ in poses])
-    p = np.array([t for _, t in poses])
+    R, p = body_poses(mm, q)
     if len(q) == N + 1:
         R = np.concatenate([R, R[-1:]])
         p = np.concatenate([p, p[-1:]])
     F = np.swapaxes(R[:-1], -1, -2) @ R[1:]
     v = (p[1:] - p[:-1]) / dt
     nb = mm.nb
-    layout = multibody_layout(mm, N, dt, jit=jit)
-    variables = TrajectoryVariables(layout.blocks)
-    problem = TrajectoryProblem(variables, layout.terms)
+    dynamics = _dynamics_rows(mm, N, float(dt), bool(jit))
+    blocks = dynamics.variables.blocks
     point = {
         "R": R[: N + 1],
         "p": p[: N + 1],
@@ -74,23 +72,75 @@ def maximal_warm_start(
         "lam": np.zeros((N + 1, nb, LAMBDA_DIM)),
         "tau": np.zeros((N + 1, nb, 1)),
     }
-    point = {k: a.reshape(variables.blocks[k].shape) for k, a in point.items()}
-    ev = problem.evaluate(point, hessian=False)
-    lam_idx = variables.tangent_index("lam").reshape(N + 1, nb * LAMBDA_DIM)[1:]
-    tau_idx = variables.tangent_index("tau").reshape(N + 1, nb)[1:]
-    rows = np.arange(layout.n_dynamics_rows - 6 * N * nb, layout.n_dynamics_rows)
-    cols = np.concatenate([lam_idx, tau_idx], axis=1).ravel()  # knot-major, like the rows
-    A = ev.eq_jacobian[rows][:, cols].tocsc()  # block diagonal: step k-1 <-> knot k
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", spla.MatrixRankWarning)
-        try:
-            x = spla.spsolve(A, -ev.eq[rows]).reshape(N, nb * (LAMBDA_DIM + 1))
-        except spla.MatrixRankWarning as err:
-            raise MbplanError(
-                f"{mm.name}: the joint forces cannot balance the body dynamics rows ({err})"
-            ) from err
+    point = {k: a.reshape(blocks[k].shape) for k, a in point.items()}
+    try:
+        x = dynamics.solve(point).reshape(N, nb * (LAMBDA_DIM + 1))
+    except np.linalg.LinAlgError as err:
+        raise MbplanError(
+            f"{mm.name}: the joint forces cannot balance the body dynamics rows ({err})"
+        ) from err
     lam = np.concatenate([x[:1, : nb * LAMBDA_DIM], x[:, : nb * LAMBDA_DIM]])
     tau = np.concatenate([x[:1, nb * LAMBDA_DIM :], x[:, nb * LAMBDA_DIM :]])
-    point["lam"] = lam.reshape(variables.blocks["lam"].shape)
-    point["tau"] = tau.reshape(variables.blocks["tau"].shape)
+    point["lam"] = lam.reshape(blocks["lam"].shape)
+    point["tau"] = tau.reshape(blocks["tau"].shape)
     return point
+
+
+class _DynamicsRows:
+    """The dynamics rows of ``multibody_layout(mm, N, dt)`` as the warm start solves them for
+    ``λ_k, τ_k`` (knots 1 … N): one ``6nb × 6nb`` dense block per knot, gathered from the
+    Jacobian's fixed pattern. Shared by every warm start of its key (evaluated under a lock)."""
+
+    def __init__(self, mm: MaximalModel, N: int, dt: float, jit: bool) -> None:
+        layout = multibody_layout(mm, N, dt, jit=jit)
+        self.variables = TrajectoryVariables(layout.blocks)
+        self.problem = TrajectoryProblem(self.variables, layout.terms)
+        self.lock = threading.Lock()
+        nb = mm.nb
+        self.rows = np.arange(layout.n_dynamics_rows - 6 * N * nb, layout.n_dynamics_rows)
+        lam_idx = self.variables.tangent_index("lam").reshape(N + 1, nb * LAMBDA_DIM)[1:]
+        tau_idx = self.variables.tangent_index("tau").reshape(N + 1, nb)[1:]
+        # knot-major, like the rows: step k-1's rows and knot k's columns form block k-1
+        self.cols = np.concatenate([lam_idx, tau_idx], axis=1).ravel()
+        self.shape = (N, 6 * nb, 6 * nb)
+        self._gather: tuple[np.ndarray, np.ndarray] | None = None
+
+    def solve(self, point: Point) -> np.ndarray:
+        """``(λ_k, τ_k)`` of knots 1 … N, knot-major, that zero the dynamics rows at ``point``
+        (whose ``lam`` and ``tau`` are 0); ``LinAlgError`` if a block is singular."""
+        with self.lock:
+            ev = self.problem.evaluate(point, hessian=False)
+            if self._gather is None:
+                self._gather = self._block_entries(ev.eq_jacobian)
+        src, dst = self._gather
+        A = np.zeros(self.shape)
+        A.ravel()[dst] = ev.eq_jacobian.data[src]
+        b = -ev.eq[self.rows].reshape(*self.shape[:2], 1)
+        return np.linalg.solve(A, b).ravel()
+
+    def _block_entries(self, jac: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
+        """Which nonzeros of the equality Jacobian (fixed pattern) are the blocks' entries and
+        where each lands in the ``(N, d, d)`` array."""
+        d = self.shape[1]
+        starts, counts = jac.indptr[self.rows], np.diff(jac.indptr)[self.rows]
+        row = np.repeat(np.arange(len(self.rows)), counts)  # each row's nonzeros, in order
+        src = (
+            np.repeat(starts, counts)
+            + np.arange(len(row))
+            - np.repeat(np.cumsum(counts) - counts, counts)
+        )
+        where = np.full(jac.shape[1], -1)
+        where[self.cols] = np.arange(len(self.cols))
+        col = where[jac.indices[src]]
+        keep = col >= 0
+        row, col, src = row[keep], col[keep], src[keep]
+        if np.any(row // d != col // d):  # the layout ties step k-1 to knot k only
+            raise MbplanError("the warm start's dynamics rows are not block diagonal")
+        return src, (row // d) * d * d + (row % d) * d + col % d
+
+
+_DYNAMICS: RecentMemo[_DynamicsRows] = RecentMemo(4)
+
+
+def _dynamics_rows(mm: MaximalModel, N: int, dt: float, jit: bool) -> _DynamicsRows:
+    return _DYNAMICS.get_or_build((mm, N, dt, jit), lambda: _DynamicsRows(mm, N, dt, jit))
