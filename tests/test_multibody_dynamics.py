@@ -15,7 +15,7 @@ from mbplan.benchmarks import chain_scaling, validate_dynamics
 from mbplan.benchmarks.dynamics_scenario import joint_errors, joint_trajectory, smooth_scenario
 from mbplan.benchmarks.validate_dynamics import damping_variants, validate_case
 from mbplan.engine import check_derivatives
-from mbplan.errors import InputError
+from mbplan.errors import InputError, MbplanError
 from mbplan.lie import SO3
 from mbplan.multibody import (
     MaximalModel,
@@ -360,6 +360,40 @@ def test_warm_starts_share_one_dynamics_problem_across_threads() -> None:
             np.testing.assert_array_equal(a[block], b[block])
     problem = _problem(mm, N, dt)
     assert all(np.abs(problem.values(x)[1]).max() <= 1e-8 for x in sequential)
+
+
+@pytest.mark.parametrize("dense_max", [0, 10**6])
+def test_warm_start_block_solves_agree_and_report_singular_blocks(
+    dense_max: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The knot blocks solved by SuperLU (dense_max = 0) or by one batched dense solve give the
+    same λ, τ; a singular block is an MbplanError naming the model."""
+    import dataclasses
+
+    import mbplan.simulation.warm_start as ws
+
+    mm, dt, N = _mm("iiwa"), 0.01, 10
+    q = _reference("iiwa", dt, N)[0]
+    reference = maximal_warm_start(mm, q, dt, N=N)
+    monkeypatch.setattr(ws, "DENSE_BLOCK_MAX", dense_max)
+    ws._DYNAMICS.clear()
+    point = maximal_warm_start(mm, q, dt, N=N)
+    for block in ("lam", "tau"):
+        np.testing.assert_allclose(point[block], reference[block], rtol=1e-9, atol=1e-9)
+    dynamics = ws._dynamics_rows(mm, N, dt, True)
+    evaluate = dynamics.problem.evaluate
+
+    def without_torques(*args, **kwargs):  # the τ columns of every block zero: singular
+        ev = evaluate(*args, **kwargs)
+        jac = ev.eq_jacobian.copy()
+        tau = dynamics.variables.tangent_index("tau").ravel()
+        jac.data[np.isin(jac.indices, tau)] = 0.0
+        return dataclasses.replace(ev, eq_jacobian=jac)
+
+    monkeypatch.setattr(dynamics.problem, "evaluate", without_torques)
+    with pytest.raises(MbplanError, match=r"iiwa.*cannot balance"):
+        maximal_warm_start(mm, q, dt, N=N)
+    ws._DYNAMICS.clear()
 
 
 def test_warm_start_without_extra_configuration_stops_at_the_last_knot() -> None:
