@@ -66,6 +66,28 @@ def test_sparse_patterns_are_memoized_by_their_index_arrays():
     assert sparse_pattern(rows, cols, (2, 4)).shape == (2, 4)
 
 
+def test_sparse_pattern_memo_checks_every_entry_not_only_its_key_sample():
+    """The memo key samples the index arrays; arrays equal on the sample but not elsewhere get
+    their own pattern (and the first one's is kept correct)."""
+    rng = np.random.default_rng(0)
+    rows, cols = rng.integers(0, 50, 5000), rng.integers(0, 50, 5000)
+    first = sparse_pattern(rows, cols, (50, 50))
+    other_cols = cols.copy()
+    other_cols[1] = (cols[1] + 1) % 50  # index 1 is not in the sample (every 4th entry)
+    other = sparse_pattern(rows, other_cols, (50, 50))
+    assert other is not first
+    values = rng.standard_normal(5000)
+    for pattern, c in (
+        (first, cols),
+        (other, other_cols),
+        (sparse_pattern(rows, cols, (50, 50)), cols),
+    ):
+        expected = np.zeros((50, 50))
+        np.add.at(expected, (rows, c), values)
+        np.testing.assert_allclose(pattern.assemble(values).toarray(), expected, atol=1e-12)
+    assert not first.entries[1].flags.writeable
+
+
 def test_so3_batched_retraction_equals_one_by_one():
     """One call on a batch mixing tiny (Taylor branch) and large angles gives each element's
     own result exactly (the line search retracts all knots of all SO(3) blocks at once)."""

@@ -20,6 +20,10 @@ class SparsePattern:
 
     def __init__(self, rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> None:
         self.shape = shape
+        # the index arrays it was built from (read-only copies): what a memo hit is checked against
+        self.entries = tuple(np.array(a) for a in (rows, cols))
+        for a in self.entries:
+            a.setflags(write=False)
         kept = cols >= 0
         keys = rows[kept].astype(np.int64) * shape[1] + cols[kept].astype(np.int64)
         unique, slot = np.unique(keys, return_inverse=True)
@@ -55,12 +59,20 @@ class SparsePattern:
 _PATTERNS: RecentMemo[SparsePattern] = RecentMemo(16)
 
 
+_SAMPLES = 1024  # entries of each index array in a memo key
+
+
 def sparse_pattern(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> SparsePattern:
     """``SparsePattern(rows, cols, shape)``, memoized per process for the last few index arrays:
-    every problem of a task family has the same (its sort costs ~10× the lookup)."""
+    every problem of a task family has the same (its sort costs ~10× the lookup). The memo key
+    holds an evenly spaced sample of each array; a hit is used only if its arrays are equal."""
     rows, cols = np.asarray(rows), np.asarray(cols)
-    key = (tuple(shape), rows.dtype.str, cols.dtype.str, rows.tobytes(), cols.tobytes())
-    return _PATTERNS.get_or_build(key, lambda: SparsePattern(rows, cols, shape))
+    key = (tuple(shape), rows.dtype.str, cols.dtype.str, rows.shape, cols.shape)
+    key += tuple(a[:: max(1, a.size // _SAMPLES)].tobytes() for a in (rows, cols))
+    hit = _PATTERNS.get(key)
+    if hit is not None and all(map(np.array_equal, hit.entries, (rows, cols))):
+        return hit
+    return _PATTERNS.put(key, SparsePattern(rows, cols, shape))
 
 
 @nb.njit(cache=True)
