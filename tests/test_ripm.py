@@ -694,6 +694,23 @@ def test_soft_restoration_steps_where_the_line_search_fails(monkeypatch):
     assert none.iterations == 0
 
 
+def test_no_restoration_phase_at_an_almost_feasible_point(monkeypatch):
+    """IPOPT's rule: where the line search fails at ‖c‖∞ ≤ min(tol/100, constr_viol_tol/10) the
+    restoration phase cannot help; the solve stops there (LINE_SEARCH_FAILED, no restoration
+    iteration). From an infeasible start the same failure starts the restoration phase."""
+    from mbplan.solvers.line_search import FilterLineSearch, Search
+
+    opt = solve_ripm(hs071(), HS071_X0)
+    monkeypatch.setattr(FilterLineSearch, "_line_search", lambda self, step, cur: Search(None))
+    near = solve_ripm(hs071(), opt.x, tol=1e-6, max_soft_resto_iters=0, s0=opt.s, z0=opt.z + 1)
+    assert near.status is RIPMStatus.LINE_SEARCH_FAILED and "almost feasible" in near.message
+    assert near.iterations == 0 and not any(near.history.restoration)
+    assert near.inf_pr <= 1e-8
+    far = solve_ripm(hs071(), HS071_X0, tol=1e-6, max_soft_resto_iters=0)
+    assert far.status is RIPMStatus.LINE_SEARCH_FAILED and "restoration" in far.message
+    assert "almost feasible" not in far.message
+
+
 def test_a_non_finite_predictor_step_leaves_mu_finite(monkeypatch):
     """A predictor solve that breaks down (NaN, e.g. a failed fallback factorization) gives
     LOQO's μ and no corrector instead of μ = NaN: HS071 still converges to its optimum."""

@@ -294,6 +294,8 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
             self._accept(search, dw)
 
     def _fail_or_restore(self, why: str) -> None:
+        """After a failed step: stop, or start the restoration phase (main phase, with
+        inequality or equality rows, not at an almost feasible point: IPOPT's rules)."""
         if self.resto:
             if self.kkt_error <= self.o.acceptable_tol:  # solved to the acceptable level
                 self._resto_converged()
@@ -303,6 +305,12 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
                 RIPMStatus.NUMERICAL_ERROR if "inertia" in why else RIPMStatus.LINE_SEARCH_FAILED
             )
             raise Stop(status, why)
+        if self.inf_pr <= min(1e-2 * self.o.tol, 0.1 * self.o.constr_viol_tol):
+            # IPOPT's rule: the restoration phase cannot reduce an infeasibility this small
+            raise Stop(
+                RIPMStatus.LINE_SEARCH_FAILED,
+                f"{why} at an almost feasible point (‖c‖∞ = {self.inf_pr:.1e}): no restoration",
+            )
         self._restoration()
 
     def _accept(self, search: Search, dw: float) -> None:
