@@ -11,6 +11,7 @@ hand-derived derivatives, e.g. distances computed by coal).
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -33,7 +34,7 @@ class Slot:
 
     @property
     def size(self) -> int:
-        return int(np.prod(self.shape))
+        return int(math.prod(self.shape))
 
 
 def _layout(items: Sequence[tuple[str, Any]], is_variable: bool) -> tuple[list[Slot], int, int]:
@@ -47,7 +48,7 @@ def _layout(items: Sequence[tuple[str, Any]], is_variable: bool) -> tuple[list[S
         else:
             shape = (spec,) if isinstance(spec, int) else tuple(spec)
             slots.append(Slot(name, shape, offset))
-        offset += int(np.prod(shape))
+        offset += int(math.prod(shape))
     return slots, offset, tangent
 
 
