@@ -91,8 +91,14 @@ def _state_symbols(robot: Robot) -> tuple[cs.SX, list[tuple[cs.SX, cs.SX]]]:
     return x, symbolic_placements(robot.model, x[: robot.nv])
 
 
-def _symbolic(robot: Robot, scene: Scene, residual: Residual, x: cs.SX) -> cs.SX:
-    """``r(x)`` as an SX expression; ``x`` of a state residual is ``_state_symbols(robot)[0]``."""
+def _symbolic(robot: Robot, scene: Scene, residual: Residual) -> tuple[cs.SX, cs.SX]:
+    """The knot's symbol ``x`` and ``r(x)``: a state residual's ``x`` is the robot's
+    :func:`_state_symbols`, the one its placements are built on."""
+    x = _state_symbols(robot)[0] if residual.space == "state" else cs.SX.sym("x", robot.nv)
+    return x, _rows(robot, scene, residual, x)
+
+
+def _rows(robot: Robot, scene: Scene, residual: Residual, x: cs.SX) -> cs.SX:
     model, nv = robot.model, robot.nv
     q, v = x[:nv], x[nv:] if residual.space == "state" else None
     if isinstance(residual, (JointPosition, JointVelocity, JointTorque)):
@@ -133,8 +139,8 @@ def _symbolic(robot: Robot, scene: Scene, residual: Residual, x: cs.SX) -> cs.SX
 @lru_cache(maxsize=256)
 def knot_function(robot: Robot, scene: Scene, residual: Residual) -> cs.Function:
     """``r(x)`` at one knot (``x = (q, v)`` or ``τ``), an SX function (cached per residual)."""
-    x = _state_symbols(robot)[0] if residual.space == "state" else cs.SX.sym("x", robot.nv)
-    return cs.Function(type(residual).__name__, [x], [_symbolic(robot, scene, residual, x)])
+    x, rows = _symbolic(robot, scene, residual)
+    return cs.Function(type(residual).__name__, [x], [rows])
 
 
 @lru_cache(maxsize=64)

@@ -132,18 +132,14 @@ class _DynamicsRows:
     def _block_entries(self, jac: sp.csr_matrix) -> tuple[np.ndarray, ...]:
         """Which nonzeros of the equality Jacobian (fixed pattern) are the blocks' entries, with
         their row and column in the block-diagonal matrix and their place in ``(N, d, d)``."""
-        starts, counts = jac.indptr[self.rows], np.diff(jac.indptr)[self.rows]
-        row = np.repeat(np.arange(len(self.rows)), counts)  # each row's nonzeros, in order
-        src = (
-            np.repeat(starts, counts)
-            + np.arange(len(row))
-            - np.repeat(np.cumsum(counts) - counts, counts)
-        )
-        where = np.full(jac.shape[1], -1)
-        where[self.cols] = np.arange(len(self.cols))
-        col = where[jac.indices[src]]
-        keep = col >= 0
-        row, col, src = row[keep], col[keep], src[keep]
+        row_of = np.full(jac.shape[0], -1)
+        row_of[self.rows] = np.arange(len(self.rows))
+        col_of = np.full(jac.shape[1], -1)
+        col_of[self.cols] = np.arange(len(self.cols))
+        row = row_of[np.repeat(np.arange(jac.shape[0]), np.diff(jac.indptr))]  # per nonzero
+        col = col_of[jac.indices]
+        src = np.flatnonzero((row >= 0) & (col >= 0))
+        row, col = row[src], col[src]
         if np.any(row // self.d != col // self.d):  # the layout ties step k-1 to knot k only
             raise MbplanError("the warm start's dynamics rows are not block diagonal")
         d = self.d
