@@ -358,6 +358,42 @@ def test_elastic_restoration_escapes_jamming():
     assert off.status is RIPMStatus.LINE_SEARCH_FAILED and not any(off.history.restoration)
 
 
+def test_multipliers_of_a_blocked_step_follow_the_primal_step(monkeypatch):
+    """From near the disc's centre the slack's fraction-to-the-boundary step is ``α_s ≈ 5e-6``:
+    with ``dual_step_cap`` (default 1e-2) ``z`` steps ``α_z = α_s`` there, with 0 its own full
+    ``α_z`` (WB eq. 15); steps with ``α_s`` at or above the cap keep their own ``α_z``. Both
+    solve the test problems; a cap outside [0, 1] is rejected by name."""
+    from mbplan.solvers.iterate import IterateState, frac_to_boundary
+
+    multipliers_at = IterateState._multipliers_at
+    steps = []
+
+    def recorded(self, step, alpha, s):
+        y, z, alpha_z = multipliers_at(self, step, alpha, s)
+        if not self.resto:
+            alpha_s = frac_to_boundary(self.s, step.ds, self.tau)
+            steps.append((alpha_s, alpha_z, self._alpha_z_max(step)))
+        return y, z, alpha_z
+
+    monkeypatch.setattr(IterateState, "_multipliers_at", recorded)
+    for cap in (RIPMOptions().dual_step_cap, 0.0):
+        steps.clear()
+        res = solve_ripm(_outside_disc(), np.array([0.0, 1e-3]), dual_step_cap=cap)
+        assert res.status is RIPMStatus.CONVERGED and np.allclose(res.x, [2.0, 0.0], atol=1e-8)
+        blocked = [(a_s, a_z, own) for a_s, a_z, own in steps if a_s < 1e-2]
+        assert blocked and all(own > 0.5 for _, _, own in blocked)
+        if cap:
+            assert all(a_z == min(own, a_s) for a_s, a_z, own in blocked)
+        else:
+            assert all(a_z == own for _, a_z, own in steps)
+        assert all(a_z == own for a_s, a_z, own in steps if a_s >= 1e-2)
+    _assert_solves_the_test_problems({"dual_step_cap": 0.0})
+    _assert_solves_the_test_problems({"dual_step_cap": 1.0})
+    for bad in (-1e-3, 2.0):
+        with pytest.raises(InputError, match="dual_step_cap"):
+            RIPMOptions(dual_step_cap=bad)
+
+
 def _assert_solves_the_test_problems(options: dict) -> None:
     """HS071, the banded control problem and the jamming disc solved to their reference
     points with ``options``."""

@@ -224,8 +224,16 @@ class IterateState:
         self, step: Step, alpha: float, s: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, float]:
         """``y + α dy``, ``z`` after its own step ``α_z`` (WB eq. 15) within
-        ``[μ/(κ_Σ s), κ_Σ μ/s]`` (WB eq. 16) for the slacks ``s``, and ``α_z``."""
+        ``[μ/(κ_Σ s), κ_Σ μ/s]`` (WB eq. 16) for the slacks ``s``, and ``α_z``.
+
+        In the main phase, when the slacks' fraction-to-the-boundary step ``α_s`` is below
+        ``dual_step_cap``, ``α_z ≤ α_s``: ``dz`` is the complementarity row's answer to the whole
+        ``ds``, of which the primal point takes only ``α_s``."""
         alpha_z = self._alpha_z_max(step)
+        if not self.resto and self.o.dual_step_cap > 0:
+            alpha_s = frac_to_boundary(self.s, step.ds, self.tau)
+            if alpha_s < self.o.dual_step_cap:
+                alpha_z = min(alpha_z, alpha_s)
         z = safeguarded_duals(self.z, step.dz, alpha_z, s, self.mu, self.o.kappa_sigma)
         return self.y + alpha * step.dy, z, alpha_z
 

@@ -88,6 +88,11 @@ class RIPMOptions:
     kappa_soc: float = 0.99
     kappa_sigma: float = 1e10
     """Safeguard κ_Σ of the multipliers z against μ/s (WB eq. 16)."""
+    dual_step_cap: float = 1e-2
+    """When the fraction-to-the-boundary rule cuts the slacks' step to ``α_s`` below this, the
+    multipliers ``z`` step at most ``α_s`` too instead of their own ``α_z`` (WB eq. 15): a
+    primal step blocked at ``α_s ≪ 1`` must not take the full ``dz ≈ -z ds/s`` that the whole
+    ``ds`` implies (docs/ripm-speed.md, session 11); 0: always ``α_z`` (IPOPT)."""
     tiny_step_tol: float = 10 * float(np.finfo(float).eps)
 
     # --- initialization (WB) ---
@@ -189,6 +194,7 @@ class RIPMOptions:
             "gamma_phi": 0 < self.gamma_phi < 1,
             "eta_phi": 0 < self.eta_phi < 0.5,
             "kappa_soc": 0 < self.kappa_soc < 1,
+            "dual_step_cap": 0 <= self.dual_step_cap <= 1,
             "kappa_resto": 0 < self.kappa_resto < 1,
             "bound_push": self.bound_push > 0,
             "constr_mult_init_max": self.constr_mult_init_max >= 0,
