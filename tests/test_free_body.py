@@ -298,3 +298,26 @@ def test_mehrotra_barrier_options_plan_the_docking_with_input_limits() -> None:
     assert mehrotra.iterations != default.iterations or not np.allclose(
         mehrotra.kkt_history, default.kkt_history
     )
+
+
+def test_lgvi_plans_start_from_zero_equality_multipliers(monkeypatch: pytest.MonkeyPatch) -> None:
+    """``plan`` on the LGVI skips the least-squares ``y₀`` (``LGVI_RIPM_OPTIONS``): on a docking
+    case that ``y₀`` exceeds ``constr_mult_init_max = 1`` and is discarded, so the plan with it
+    takes the same iterates; a user's option brings it back."""
+    from mbplan.solvers import ripm
+
+    kept = []
+    original = ripm._RIPM._least_squares_y
+    monkeypatch.setattr(
+        ripm._RIPM,
+        "_least_squares_y",
+        lambda self, ev: kept.append(original(self, ev)) or kept[-1],
+    )
+    ocp = paper.drone_docking(sample_docking_cases(1, 0)[0])
+    fast = mb.plan(ocp, "ripm")
+    assert kept == []
+    least_squares = mb.plan(ocp, "ripm", options={"constr_mult_init_max": 1.0})
+    assert len(kept) == 1 and kept[0] is None  # computed, larger than 1, discarded
+    assert fast.success and fast.iterations == least_squares.iterations
+    np.testing.assert_array_equal(fast.kkt_history, least_squares.kkt_history)
+    np.testing.assert_array_equal(fast.tau, least_squares.tau)

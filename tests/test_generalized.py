@@ -10,6 +10,7 @@ import mbplan.planning.methods as methods
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.joint_space import distance_values, evaluate
 from mbplan.multibody.collision import chain_kinematics, joint_space_contacts, point_jacobians
+from mbplan.ocp.residuals import JointPosition
 from mbplan.paper import IIWA_TARGET, add_obstacle_constraint, tracking_ocp
 from mbplan.planning.initial_guess import initial_path
 
@@ -48,8 +49,9 @@ def test_callbacks_agree_with_the_numpy_functions() -> None:
 def test_residuals_of_new_ocps_reuse_the_robots_symbolic_kinematics(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """The joint placements' SX graph is built once per robot: a new OCP (new residuals, another
-    scene) only adds its own rows. Its COM clearances are those of Pinocchio's link COMs."""
+    """The joint placements' SX graph is built once per robot and a residual's rows once per
+    robot and structure: a new OCP (new residuals, another scene) passes its numbers as
+    parameters. Its COM clearances are those of Pinocchio's link COMs."""
     import pinocchio as pin
 
     import mbplan.formulations.joint_space as js
@@ -58,6 +60,10 @@ def test_residuals_of_new_ocps_reuse_the_robots_symbolic_kinematics(
     original = js.symbolic_placements
     monkeypatch.setattr(js, "symbolic_placements", lambda *a: built.append(1) or original(*a))
     js._state_symbols.cache_clear()
+    rows = []
+    original_rows = js._rows
+    monkeypatch.setattr(js, "_rows", lambda *a: rows.append(a[1]) or original_rows(*a))
+    js._parametric.cache_clear()
     for ocp in small_cases(3):
         item = ocp.constraints[-1]
         q = ocp.q0 + 0.3
@@ -70,6 +76,12 @@ def test_residuals_of_new_ocps_reuse_the_robots_symbolic_kinematics(
         clearance = [r**2 - (c[0] - cx) ** 2 - (c[1] - cy) ** 2 for c in com]  # eq. 62
         np.testing.assert_allclose(value, clearance, atol=1e-12)
     assert len(built) == 1
+    ocp = small_cases(1)[0]
+    q = ocp.q0 + 0.2
+    goals = [JointPosition(target=t).resolve(ocp.robot, ocp.scene) for t in (q - 0.1, q + 0.3)]
+    values = [evaluate(ocp.robot, ocp.scene, g, q[None], ocp.v0[None], None)[0] for g in goals]
+    np.testing.assert_allclose(values, [np.full(7, 0.1), np.full(7, -0.3)], atol=1e-15)
+    assert rows == [(type(item.residual),), (JointPosition, tuple(range(7)))]
 
 
 def test_initial_guess_satisfies_eq61() -> None:

@@ -12,7 +12,7 @@ import pinocchio as pin
 import pytest
 
 from mbplan.benchmarks import chain_scaling, validate_dynamics
-from mbplan.benchmarks.dynamics_scenario import joint_errors, joint_trajectory, smooth_scenario
+from mbplan.benchmarks.dynamics_scenario import joint_errors, smooth_scenario
 from mbplan.benchmarks.validate_dynamics import damping_variants, validate_case
 from mbplan.engine import check_derivatives
 from mbplan.errors import InputError, MbplanError
@@ -20,6 +20,7 @@ from mbplan.lie import SO3
 from mbplan.multibody import (
     MaximalModel,
     joint_constraint_residuals,
+    joint_positions,
     maximal_model,
     nonstandard_inertia,
 )
@@ -73,7 +74,7 @@ def test_simulation_keeps_every_joint_constraint(name: str) -> None:
     traj = simulate_maximal(mm, q[0], q[1], tau, dt, N)
     assert joint_constraint_residuals(mm, traj.R, traj.p).max() <= 1e-10
     assert np.abs(np.swapaxes(traj.R, -1, -2) @ traj.R - np.eye(3)).max() <= 1e-12
-    q_lgvi = joint_trajectory(mm, traj.R, traj.p, q[0])
+    q_lgvi = joint_positions(mm, traj.R, traj.p, q_ref=q[0])
     assert np.abs(joint_errors(mm, q_lgvi, q[: N + 1])).max() < 1e-3
 
 
@@ -96,7 +97,7 @@ def test_damping_changes_the_motion_by_far_more_than_the_error() -> None:
     for damped in (True, False):
         mm = _mm(name, damped)
         traj = simulate_maximal(mm, q[0], q[1], tau, dt, N)
-        q_lgvi = joint_trajectory(mm, traj.R, traj.p, q[0])
+        q_lgvi = joint_positions(mm, traj.R, traj.p, q_ref=q[0])
         errors[damped] = np.abs(joint_errors(mm, q_lgvi, q[: N + 1])).max()
     assert errors[False] > 30 * errors[True], errors
 
@@ -294,7 +295,7 @@ def _simulated(name: str, dt: float, N: int):
     traj = simulate_maximal(mm, q_ref[0], q_ref[1], tau, dt, N)
     R = np.concatenate([traj.R, (traj.R[-1] @ traj.F[-1])[None]])
     p = np.concatenate([traj.p, (traj.p[-1] + dt * traj.v[-1])[None]])
-    return traj, joint_trajectory(mm, R, p, q_ref[0]), tau
+    return traj, joint_positions(mm, R, p, q_ref=q_ref[0]), tau
 
 
 @pytest.mark.parametrize("name", ROBOTS)

@@ -211,6 +211,31 @@ def test_body_poses_of_a_batch_are_those_of_each_configuration(name: str) -> Non
         np.testing.assert_allclose(p[k], pk, rtol=0, atol=1e-15)
 
 
+@pytest.mark.parametrize("name", ROBOTS)
+def test_joint_positions_of_a_path_follow_each_knot_from_the_last(name: str) -> None:
+    """A path of poses gives each knot's ``joint_positions`` with ``q_ref`` the knot before
+    (the first's ``q_ref`` given): a joint path winding twice around recovered unwrapped."""
+    mm = _mm(name)
+    q0 = _samples(mm, seed=6)[0][0]
+    angle = mm.revolute & ~mm.continuous
+    winding = np.zeros(mm.nq)
+    winding[mm.idx_q[angle]] = 4 * np.pi
+    if not mm.revolute.all():  # prismatic displacements move a little
+        winding[mm.idx_q[~mm.revolute]] = 0.01
+    q = q0 + np.linspace(0.0, 1.0, 33)[:, None] * winding
+    if mm.continuous.any():  # (cos, sin) pairs of the sampled angles, unchanged
+        q[:, mm.idx_q[mm.continuous]] = q0[mm.idx_q[mm.continuous]]
+        q[:, mm.idx_q[mm.continuous] + 1] = q0[mm.idx_q[mm.continuous] + 1]
+    R, p = body_poses(mm, q)
+    path = joint_positions(mm, R, p, q_ref=q[0])
+    assert path.shape == q.shape
+    np.testing.assert_allclose(path, q, rtol=0, atol=1e-9)
+    q_ref = q[0]
+    for k in range(len(q)):
+        q_ref = joint_positions(mm, R[k], p[k], q_ref=q_ref)
+        np.testing.assert_array_equal(path[k], q_ref)
+
+
 def test_q_ref_selects_the_2pi_branch() -> None:
     mm = _mm("ur5")  # joint limits +-2 pi
     q = np.array([5.5, -4.0, 1.0, -6.0, 3.5, 0.2])

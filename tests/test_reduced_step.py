@@ -4,6 +4,7 @@ the cases it leaves to the full factorization, and a RIPM solve with kkt_method=
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from mbplan.benchmarks.speed_tasks import chain_task, maximal_ripm_problem
 from mbplan.errors import InputError
@@ -244,13 +245,24 @@ def test_joint_layout_rejects_joint_rows_that_are_empty_or_span_knots():
 
 
 def test_elimination_plans_are_memoized_per_layout():
-    """Two problems of one family share the plan (same layout); other options, another plan."""
-    plans = []
+    """Two problems of one family share the layout and the plan; other options, another plan;
+    another pattern, another layout."""
+    plans, layouts = [], []
     for _ in range(2):
         problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
         jac = problem.evaluate(x0, 1.0).eq_jacobian
         plans.append(joint_elimination_plan(problem, jac))
-    assert plans[0] is plans[1]
+        layouts.append(maximal_layout.maximal_layout(problem, jac))
+    assert plans[0] is plans[1] and layouts[0] is layouts[1]
+    fresh = maximal_layout._layout(problem, jac)
+    assert fresh.key() == layouts[0].key()
+    coo = jac.tocoo()
+    col = np.setdiff1d(np.arange(jac.shape[1]), jac.indices[jac.indptr[0] : jac.indptr[1]])[-1]
+    extra = sp.csr_matrix(
+        (np.r_[coo.data, 1.0], (np.r_[coo.row, 0], np.r_[coo.col, col])), shape=jac.shape
+    )
+    assert extra.nnz == jac.nnz + 1  # another pattern: built anew
+    assert maximal_layout.maximal_layout(problem, extra) is not layouts[0]
     other = joint_elimination_plan(problem, jac, segment=2)
     assert other is not plans[0] and other.n_groups < plans[0].n_groups
 

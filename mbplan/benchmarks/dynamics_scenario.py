@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from mbplan.multibody import MaximalModel, joint_positions
+from mbplan.multibody import MaximalModel
 from mbplan.simulation import integrate_aba
 
 
@@ -110,18 +110,6 @@ def smooth_scenario(mm: MaximalModel, seed: int) -> SmoothScenario:
     M = np.triu(M) + np.triu(M, 1).T
     push = 0.2 * M @ rng.uniform(-1.0, 1.0, model.nv)
     return SmoothScenario(model, q0, amplitude, omega, push, rng.uniform(5.0, 15.0, model.nv))
-
-
-def joint_trajectory(
-    mm: MaximalModel, R: np.ndarray, p: np.ndarray, q_start: np.ndarray
-) -> np.ndarray:
-    """Joint configurations ``(K, nq)`` of body poses ``R (K, nb, 3, 3)``, ``p (K, nb, 3)``, each
-    angle taken in the 2π-window of the previous knot's (continuity from ``q_start``)."""
-    out = np.empty((len(R), mm.nq))
-    q = q_start
-    for k, (Rk, pk) in enumerate(zip(R, p, strict=True)):
-        q = out[k] = joint_positions(mm, Rk, pk, q_ref=q)
-    return out
 
 
 def joint_errors(mm: MaximalModel, q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from mbplan.benchmarks.common import plan_row
+from mbplan.planning.methods import LGVI_RIPM_OPTIONS
 from mbplan.solvers import RIPMOptions
 
 
@@ -136,14 +137,14 @@ def chain_task(n: int, N: int = 40, obstacle: bool = False):
 def _iiwa(i: int, constraint: str = "com"):
     return (
         *maximal_ripm_problem(iiwa_task(i, constraint=constraint)),
-        RIPMOptions(tol=1e-6, max_iter=500),
+        RIPMOptions(tol=1e-6, max_iter=500, **LGVI_RIPM_OPTIONS),
     )
 
 
 def _drone(i: int, limits: bool = False):
     return (
         *maximal_ripm_problem(drone_task(i, limits=limits)),
-        RIPMOptions(tol=1e-6, max_iter=100),
+        RIPMOptions(tol=1e-6, max_iter=100, **LGVI_RIPM_OPTIONS),
     )
 
 
@@ -151,7 +152,7 @@ def chain_problem(n: int, obstacle: bool = False):
     """The RIPM problem, warm start and options of the ``n``-link chain reach."""
     return (
         *maximal_ripm_problem(chain_task(n, obstacle=obstacle), "linear"),
-        RIPMOptions(tol=1e-6, max_iter=500),
+        RIPMOptions(tol=1e-6, max_iter=500, **LGVI_RIPM_OPTIONS),
     )
 
 

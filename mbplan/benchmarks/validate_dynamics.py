@@ -21,9 +21,9 @@ import pinocchio as pin
 from tqdm import tqdm
 
 from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, write_json
-from mbplan.benchmarks.dynamics_scenario import joint_errors, joint_trajectory, smooth_scenario
+from mbplan.benchmarks.dynamics_scenario import joint_errors, smooth_scenario
 from mbplan.errors import InputError, MbplanError
-from mbplan.multibody import joint_constraint_residuals, maximal_model
+from mbplan.multibody import joint_constraint_residuals, joint_positions, maximal_model
 from mbplan.robots import available_robots, load
 from mbplan.simulation import simulate_maximal
 
@@ -82,7 +82,7 @@ def validate_case(
         finally:
             if bar is not None:
                 bar.update(N)
-        q = joint_trajectory(mm, traj.R, traj.p, scenario.q0)
+        q = joint_positions(mm, traj.R, traj.p, q_ref=scenario.q0)
         err = np.abs(joint_errors(mm, q, q_ref[::stride]))
         euler = np.abs(joint_errors(mm, scenario.euler(dt, N), q_ref[::stride]))
         runs.append(

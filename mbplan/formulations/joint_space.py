@@ -91,56 +91,96 @@ def _state_symbols(robot: Robot) -> tuple[cs.SX, list[tuple[cs.SX, cs.SX]]]:
     return x, symbolic_placements(robot.model, x[: robot.nv])
 
 
-def _symbolic(robot: Robot, scene: Scene, residual: Residual) -> tuple[cs.SX, cs.SX]:
-    """The knot's symbol ``x`` and ``r(x)``: a state residual's ``x`` is the robot's
-    :func:`_state_symbols`, the one its placements are built on."""
-    x = _state_symbols(robot)[0] if residual.space == "state" else cs.SX.sym("x", robot.nv)
-    return x, _rows(robot, scene, residual, x)
-
-
-def _rows(robot: Robot, scene: Scene, residual: Residual, x: cs.SX) -> cs.SX:
-    model, nv = robot.model, robot.nv
-    q, v = x[:nv], x[nv:] if residual.space == "state" else None
+def _structure(robot: Robot, residual: Residual) -> tuple:
+    """What a residual's rows depend on besides its :func:`_parameters`: equal structures of
+    one robot share one :func:`_parametric` function."""
     if isinstance(residual, (JointPosition, JointVelocity, JointTorque)):
-        idx = robot.joint_indices(residual.joints).tolist()
-        source = {JointPosition: q, JointVelocity: v, JointTorque: x}[type(residual)]
-        error = cs.vertcat(*[source[i] for i in idx]) - cs.DM(residual.target)
-        if isinstance(residual, JointPosition) and robot.continuous:
+        return type(residual), tuple(robot.joint_indices(residual.joints).tolist())
+    if isinstance(residual, _Limits):
+        return type(residual), tuple(residual.indices(robot).tolist())
+    if isinstance(residual, (FrameTranslation, FramePlacement)):
+        return type(residual), residual.frame
+    if isinstance(residual, ComOutsideCylinder):
+        return (type(residual),)
+    raise InputError(f"{type(residual).__name__} has no joint-space CasADi form")
+
+
+def _parameters(robot: Robot, scene: Scene, residual: Residual) -> np.ndarray:
+    """The residual's numbers, the second input of its :func:`_parametric` function: a joint
+    residual's target, the limits ``(lower, upper)`` of the limited joints, a frame goal's
+    translation (after its rotation, column-major), a cylinder's ``(x_c, y_c, r + margin)``."""
+    if isinstance(residual, (JointPosition, JointVelocity, JointTorque)):
+        return np.asarray(residual.target, dtype=float)
+    if isinstance(residual, _Limits):
+        keep = residual.indices(robot)
+        return np.concatenate([np.asarray(b, dtype=float)[keep] for b in (residual.lower, residual.upper)])  # fmt: skip
+    if isinstance(residual, FramePlacement):
+        return np.concatenate([residual.rotation.ravel(order="F"), residual.translation])
+    if isinstance(residual, FrameTranslation):
+        return np.asarray(residual.translation, dtype=float)
+    return residual.circle(scene)
+
+
+@lru_cache(maxsize=256)
+def _parametric(robot: Robot, structure: tuple, n_parameters: int) -> cs.Function:
+    """``r(x, θ)`` at one knot for residuals of ``structure`` (:func:`_structure`), ``θ`` their
+    :func:`_parameters`: built once per robot and structure, whatever the targets."""
+    kind = structure[0]
+    x = _state_symbols(robot)[0] if kind.space == "state" else cs.SX.sym("x", robot.nv)
+    theta = cs.SX.sym("theta", n_parameters)
+    return cs.Function(kind.__name__, [x, theta], [_rows(robot, structure, x, theta)])
+
+
+def _rows(robot: Robot, structure: tuple, x: cs.SX, theta: cs.SX) -> cs.SX:
+    model, nv = robot.model, robot.nv
+    kind = structure[0]
+    q, v = x[:nv], x[nv:] if kind.space == "state" else None
+    if kind in (JointPosition, JointVelocity, JointTorque):
+        idx = list(structure[1])
+        source = {JointPosition: q, JointVelocity: v, JointTorque: x}[kind]
+        error = cs.vertcat(*[source[i] for i in idx]) - theta
+        if kind is JointPosition and robot.continuous:
             wrapped = set(robot.joint_indices(robot.continuous).tolist())
             rows = [
                 2 * cs.sin(error[r] / 2) if i in wrapped else error[r] for r, i in enumerate(idx)
             ]
             error = cs.vertcat(*rows)  # continuous: 2 sin(Δθ/2), zero at Δθ ≡ 0 (mod 2π)
         return error
-    if isinstance(residual, _Limits):
-        var = {"JointPositionLimits": q, "JointVelocityLimits": v}.get(type(residual).__name__, x)
-        keep = residual.indices(robot).tolist()
+    if issubclass(kind, _Limits):
+        var = {"JointPositionLimits": q, "JointVelocityLimits": v}.get(kind.__name__, x)
+        keep = list(structure[1])
         var = cs.vertcat(*[var[i] for i in keep])
-        lo, hi = (cs.DM(np.asarray(b)[keep]) for b in (residual.lower, residual.upper))
-        return cs.vertcat(lo - var, var - hi)
+        return cs.vertcat(theta[: len(keep)] - var, var - theta[len(keep) :])
     placements = _state_symbols(robot)[1]
-    if isinstance(residual, (FrameTranslation, FramePlacement)):
-        frame = model.frames[robot.frame_id(residual.frame)]
+    if kind in (FrameTranslation, FramePlacement):
+        frame = model.frames[robot.frame_id(structure[1])]
         Rj, pj = placements[frame.parentJoint]
         R = cs.mtimes(Rj, cs.DM(frame.placement.rotation))
         p = pj + cs.mtimes(Rj, cs.DM(frame.placement.translation))
-        R_goal = cs.DM(residual.rotation) if isinstance(residual, FramePlacement) else None
-        return frame_error(R, p, cs.DM(residual.translation), R_goal)
-    if isinstance(residual, ComOutsideCylinder):
-        c = cs.DM(residual.circle(scene))
-        rows = []
-        for j in range(1, model.njoints):
-            Rj, pj = placements[j]
-            rows.append(cylinder_clearance(pj + cs.mtimes(Rj, cs.DM(model.inertias[j].lever)), c))
-        return cs.vertcat(*rows)
-    raise InputError(f"{type(residual).__name__} has no joint-space CasADi form")
+        if kind is FrameTranslation:
+            return frame_error(R, p, theta)
+        return frame_error(R, p, theta[9:], cs.reshape(theta[:9], 3, 3))
+    rows = []  # ComOutsideCylinder
+    for j in range(1, model.njoints):
+        Rj, pj = placements[j]
+        rows.append(cylinder_clearance(pj + cs.mtimes(Rj, cs.DM(model.inertias[j].lever)), theta))
+    return cs.vertcat(*rows)
+
+
+def _parametric_of(
+    robot: Robot, scene: Scene, residual: Residual
+) -> tuple[cs.Function, np.ndarray]:
+    """The residual's :func:`_parametric` function and its parameter values."""
+    theta = _parameters(robot, scene, residual)
+    return _parametric(robot, _structure(robot, residual), theta.size), theta
 
 
 @lru_cache(maxsize=256)
 def knot_function(robot: Robot, scene: Scene, residual: Residual) -> cs.Function:
     """``r(x)`` at one knot (``x = (q, v)`` or ``τ``), an SX function (cached per residual)."""
-    x, rows = _symbolic(robot, scene, residual)
-    return cs.Function(type(residual).__name__, [x], [rows])
+    fn, theta = _parametric_of(robot, scene, residual)
+    x = cs.SX.sym("x", fn.size1_in(0))
+    return cs.Function(type(residual).__name__, [x], [fn(x, cs.DM(theta))])
 
 
 @lru_cache(maxsize=64)
@@ -181,8 +221,14 @@ def evaluate(
     if isinstance(residual, Distance):
         return distance_values(robot, scene, residual, np.asarray(q))[0]
     x = np.hstack([q, v]) if residual.space == "state" else np.asarray(tau)
-    fn = knot_function(robot, scene, residual)
-    return np.array(fn.map(len(x))(x.T)).T.reshape(len(x), -1)
+    fn, theta = _parametric_of(robot, scene, residual)
+    return np.array(_mapped(fn, len(x))(x.T, theta)).T.reshape(len(x), -1)
+
+
+@lru_cache(maxsize=256)
+def _mapped(fn: cs.Function, knots: int) -> cs.Function:
+    """``fn`` over ``knots`` knots (its parameters shared)."""
+    return fn.map(knots)
 
 
 def row_label(robot: Robot, scene: Scene, residual: Residual, row: int) -> str:

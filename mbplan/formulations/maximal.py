@@ -246,10 +246,7 @@ class MaximalNLP:
         mm, N, dt = self.mm, self.ocp.N, self.ocp.dt
         Rk = np.concatenate([x["R"], (x["R"][-1] @ x["F"][-1])[None]])
         pk = np.concatenate([x["p"], (x["p"][-1] + x["v"][-1] * dt)[None]])
-        q = np.empty((N + 2, mm.nq))
-        q[0] = joint_positions(mm, Rk[0], pk[0], q_ref=self.ocp.q0)
-        for k in range(1, N + 2):
-            q[k] = joint_positions(mm, Rk[k], pk[k], q_ref=q[k - 1])
+        q = joint_positions(mm, Rk, pk, q_ref=self.ocp.q0)
         v = np.zeros((N + 1, mm.nv))
         v[0] = self.ocp.v0
         v[1:] = (q[2:] - q[:-2]) / (2 * dt)

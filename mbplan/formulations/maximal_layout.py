@@ -70,10 +70,30 @@ keeps its maximal coordinates, so that the reduction's blocks stay dense over at
 0.8×; docs/ripm-speed.md, session 7, branch ``chain``)."""
 
 
+_LAYOUTS: RecentMemo[MaximalLayout] = RecentMemo(8)
+
+
 def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
     """The :class:`MaximalLayout` of the RIPM problem of :mod:`mbplan.formulations.maximal`
     (revolute and prismatic joints with a constraint row group on every body) from the
-    pattern of its equality Jacobian."""
+    pattern of its equality Jacobian; memoized per process by everything it reads (the blocks'
+    tangent coordinates, the equality terms' rows, the pattern): every case of a task family
+    has the same."""
+    jac = sp.csr_matrix(eq_jacobian)
+    v = problem.variables
+    key = (
+        problem.n,
+        tuple((name, v.tangent_index(name).tobytes()) for name in v.blocks),
+        tuple((name, rows.shape, rows.tobytes()) for name, rows in problem.term_rows("eq").items()),
+        jac.shape,
+        jac.indptr.tobytes(),
+        jac.indices.tobytes(),
+    )
+    return _LAYOUTS.get_or_build(key, lambda: _layout(problem, jac))
+
+
+def _layout(problem, jac: sp.csr_matrix) -> MaximalLayout:
+    """:func:`maximal_layout`, not memoized."""
     v = problem.variables
     nb = v.blocks["R"].count
     knots = v.blocks["R"].knots
@@ -99,7 +119,6 @@ def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
     dyn_rows = rows_of["body_dynamics"].reshape(N, nb, 6)
     con_rows = -np.ones((knots, nb, 5), np.int64)
     parent = np.full(nb, -2, np.int64)
-    jac = sp.csr_matrix(eq_jacobian)
     for name, term_rows in rows_of.items():
         if "joint_constraints" not in name or not term_rows.size:
             continue

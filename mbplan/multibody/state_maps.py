@@ -54,20 +54,24 @@ def joint_positions(
     q_ref: npt.ArrayLike | None = None,
 ) -> np.ndarray:
     """Pinocchio configuration ``q`` (nq,) of body poses ``(R, p)``; ``p`` needed for prismatic joints.
+    For a path of poses ``R (K, nb, 3, 3)``, ``p (K, nb, 3)``: ``q (K, nq)``, knot ``k``'s angles
+    in the window centred on knot ``k - 1``'s (knot 0's as for one pose).
 
     A revolute angle is read from ``R_rel0^T R_p^T R_c = exp(theta [axis_child]^)``; it is taken
     in the 2*pi-window centred on ``q_ref`` (default: the middle of the joint's limits, or 0).
     A continuous joint gives ``(cos theta, sin theta)``.  A prismatic displacement is the distance
     between the two pivot points along the joint axis.
     """
-    R = _array(R, (mm.nb, 3, 3), "R")
-    Rp = _from_parent(mm, R, np.eye(3))
-    M = np.einsum("bji,bjk->bik", mm.R_rel0, np.einsum("bji,bjk->bik", Rp, R))
-    skew = M - M.transpose(0, 2, 1)
-    sin = 0.5 * np.einsum(
-        "bi,bi->b", mm.axis_child, np.stack([skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0]], 1)
-    )
-    cos = 0.5 * (np.trace(M, axis1=1, axis2=2) - 1.0)
+    single = np.ndim(R) == 3
+    R = np.asarray(R, dtype=float)
+    R = _array(R, (mm.nb, 3, 3) if single else (len(R), mm.nb, 3, 3), "R")
+    Rb = R[None] if single else R
+    Rp = _from_parent(mm, Rb, np.eye(3), axis=1)
+    M = np.einsum("bji,...bjk->...bik", mm.R_rel0, np.einsum("...bji,...bjk->...bik", Rp, Rb))
+    skew = M - np.swapaxes(M, -1, -2)
+    axial = np.stack([skew[..., 2, 1], skew[..., 0, 2], skew[..., 1, 0]], -1)
+    sin = 0.5 * np.einsum("bi,...bi->...b", mm.axis_child, axial)
+    cos = 0.5 * (np.trace(M, axis1=-2, axis2=-1) - 1.0)
     theta = np.arctan2(sin, cos)
 
     if q_ref is None:
@@ -77,21 +81,23 @@ def joint_positions(
         center = 0.5 * (lo + hi)
     else:
         center = _array(q_ref, (mm.nq,), "q_ref")[mm.idx_q]
-    theta += 2.0 * np.pi * np.round((center - theta) / (2.0 * np.pi))
+    for k in range(len(theta)):
+        theta[k] += 2.0 * np.pi * np.round((center - theta[k]) / (2.0 * np.pi))
+        center = theta[k]
 
-    q = np.zeros(mm.nq)
+    q = np.zeros((len(theta), mm.nq))
     revolute = mm.revolute
     angle = revolute & ~mm.continuous
-    q[mm.idx_q[angle]] = theta[angle]
-    q[mm.idx_q[mm.continuous]] = np.cos(theta[mm.continuous])
-    q[mm.idx_q[mm.continuous] + 1] = np.sin(theta[mm.continuous])
+    q[:, mm.idx_q[angle]] = theta[:, angle]
+    q[:, mm.idx_q[mm.continuous]] = np.cos(theta[:, mm.continuous])
+    q[:, mm.idx_q[mm.continuous] + 1] = np.sin(theta[:, mm.continuous])
     if not revolute.all():
         prismatic = ~revolute
-        p = _require(p, (mm.nb, 3), "p")
-        delta = _pivot_separation(mm, R, p, Rp)
-        axis_world = np.einsum("bij,bj->bi", Rp, mm.axis_parent)
-        q[mm.idx_q[prismatic]] = np.einsum("bi,bi->b", axis_world, delta)[prismatic]
-    return q
+        p = _require(p, (mm.nb, 3) if single else (len(R), mm.nb, 3), "p")
+        delta = _pivot_separation(mm, Rb, p[None] if single else p, Rp)
+        axis_world = np.einsum("...bij,bj->...bi", Rp, mm.axis_parent)
+        q[:, mm.idx_q[prismatic]] = np.einsum("...bi,...bi->...b", axis_world, delta)[:, prismatic]
+    return q[0] if single else q
 
 
 def joint_velocities(
@@ -160,16 +166,18 @@ def joint_constraint_residuals(mm: MaximalModel, R: npt.ArrayLike, p: npt.ArrayL
 
 
 def _pivot_separation(mm: MaximalModel, R: np.ndarray, p: np.ndarray, Rp: np.ndarray) -> np.ndarray:
-    """(nb, 3) world vector from the parent's pivot point to the child's (pivot constraint)."""
-    pp = _from_parent(mm, p, np.zeros(3))
-    child = np.einsum("bij,bj->bi", R, mm.r_child) + p
-    return child - np.einsum("bij,bj->bi", Rp, mm.r_parent) - pp
+    """(..., nb, 3) world vector from the parent's pivot point to the child's (pivot constraint);
+    ``R``, ``p``, ``Rp`` with the bodies on the second-to-last axis of ``p``."""
+    pp = _from_parent(mm, p, np.zeros(3), axis=p.ndim - 2)
+    child = np.einsum("...bij,bj->...bi", R, mm.r_child) + p
+    return child - np.einsum("...bij,bj->...bi", Rp, mm.r_parent) - pp
 
 
-def _from_parent(mm: MaximalModel, x: np.ndarray, world: np.ndarray) -> np.ndarray:
-    """Per body, the parent's entry of ``x`` (``world`` for the fixed world)."""
-    has_parent = (mm.parent >= 0).reshape((-1,) + (1,) * (x.ndim - 1))
-    return np.where(has_parent, x[np.maximum(mm.parent, 0)], world)
+def _from_parent(mm: MaximalModel, x: np.ndarray, world: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Per body (on ``axis`` of ``x``), the parent's entry of ``x`` (``world`` for the fixed
+    world)."""
+    has_parent = (mm.parent >= 0).reshape((-1,) + (1,) * (x.ndim - 1 - axis))
+    return np.where(has_parent, np.take(x, np.maximum(mm.parent, 0), axis=axis), world)
 
 
 def _require(x: npt.ArrayLike | None, shape: tuple[int, ...], name: str) -> np.ndarray:

@@ -29,6 +29,14 @@ from mbplan.results import PlanResult
 from mbplan.solvers import RIPMStatus
 from mbplan.solvers.dispatch import options_for, solve_with
 
+LGVI_RIPM_OPTIONS: dict[str, Any] = {"constr_mult_init_max": 0.0}
+"""The RIPM's defaults on the LGVI (maximal and free-body formulations), under
+``Settings.options``: ``y₀ = 0``, no least-squares multipliers. The LGVI rows' least-squares
+multipliers are forces and momenta, above ``RIPMOptions.constr_mult_init_max`` = 1 (and so
+discarded) on every benchmark task, at the cost of one KKT factorization and solve per solve;
+where kept (IPOPT's 10³) they cost the drone iterations (docs/ripm-speed.md, sessions 5 and
+12)."""
+
 _ITERATION_LINE = re.compile(r"^\s*\d+(r?)\s+[-+]?\d\.\d+e[-+]\d+\s")
 
 
@@ -63,7 +71,8 @@ def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Setting
     t0 = time.perf_counter()
     x0 = nlp.initial_point(q_guess)
     build += time.perf_counter() - t0
-    options = options_for(solver, tol=settings.tol, max_iter=settings.max_iter)
+    defaults = LGVI_RIPM_OPTIONS if solver == "ripm" else {}
+    options = options_for(solver, tol=settings.tol, max_iter=settings.max_iter, **defaults)
     result = solve_with(solver, nlp.problem, x0, options.replace(**settings.options))
     traj = nlp.trajectory(result.x)
     h = result.history.arrays()
