@@ -766,3 +766,19 @@ def test_bad_construction_raises():
         RiemannianFunction("not a name", [("R", SO3)], lambda R: R)
     with pytest.raises(InputError, match="duplicate"):
         RiemannianFunction("dup", [("R", SO3)], lambda R: R, [("R", 3)])
+
+
+def test_numba_cache_index_is_looked_up_until_seen(tmp_path) -> None:
+    """``numba_cached``: False without an index file; once seen, True without a lookup."""
+    from types import SimpleNamespace
+
+    from mbplan.engine.jit import numba_cached
+
+    index = tmp_path / "kernel.nbi"
+    fake = SimpleNamespace(_cache=SimpleNamespace(_cache_file=SimpleNamespace(_index_path=index)))
+    assert not numba_cached(fake)
+    index.write_bytes(b"")
+    assert numba_cached(fake)
+    index.unlink()
+    assert numba_cached(fake)
+    assert numba_cached(object())  # not a cached dispatcher

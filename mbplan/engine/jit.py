@@ -215,11 +215,20 @@ def announce_uncached_numba(*dispatchers: object) -> None:
         _announce_compilation()
 
 
+_INDEXES_SEEN: set[str] = set()
+
+
 def numba_cached(dispatcher: object) -> bool:
-    """False if ``dispatcher`` (numba, ``cache=True``) has no on-disk cache index yet."""
+    """False if ``dispatcher`` (numba, ``cache=True``) has no on-disk cache index yet (an index
+    once seen is not looked up again: every plan asks)."""
     cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
     index = getattr(cache_file, "_index_path", None)
-    return index is None or Path(index).exists()
+    if index is None or str(index) in _INDEXES_SEEN:
+        return True
+    if Path(index).exists():
+        _INDEXES_SEEN.add(str(index))
+        return True
+    return False
 
 
 def jit_available() -> bool:
