@@ -267,6 +267,14 @@ def test_state_maps_validate_inputs() -> None:
         body_velocities(mm, np.zeros(7), np.full(7, np.nan))
     with pytest.raises(InputError, match=r"R must have shape \(7, 3, 3\)"):
         joint_positions(mm, np.zeros((6, 3, 3)))
+    with pytest.raises(InputError, match=r"R must have shape \(4, 7, 3, 3\)"):
+        joint_positions(mm, np.zeros((4, 6, 3, 3)))
+    with pytest.raises(InputError, match="R has non-finite entries"):
+        joint_positions(mm, np.full((4, 7, 3, 3), np.nan))
+    panda = _mm("panda")
+    R, _ = body_poses(panda, np.tile(panda.model.referenceConfigurations["default"], (3, 1)))
+    with pytest.raises(InputError, match=r"p is required"):
+        joint_positions(panda, R)
 
 
 # ---------------------------------------------------------------------------- unsupported

@@ -113,7 +113,8 @@ def _parameters(robot: Robot, scene: Scene, residual: Residual) -> np.ndarray:
         return np.asarray(residual.target, dtype=float)
     if isinstance(residual, _Limits):
         keep = residual.indices(robot)
-        return np.concatenate([np.asarray(b, dtype=float)[keep] for b in (residual.lower, residual.upper)])  # fmt: skip
+        lower, upper = (np.asarray(b, dtype=float)[keep] for b in (residual.lower, residual.upper))
+        return np.concatenate([lower, upper])
     if isinstance(residual, FramePlacement):
         return np.concatenate([residual.rotation.ravel(order="F"), residual.translation])
     if isinstance(residual, FrameTranslation):

@@ -63,7 +63,6 @@ def joint_positions(
     between the two pivot points along the joint axis.
     """
     single = np.ndim(R) == 3
-    R = np.asarray(R, dtype=float)
     R = _array(R, (mm.nb, 3, 3) if single else (len(R), mm.nb, 3, 3), "R")
     Rb = R[None] if single else R
     Rp = _from_parent(mm, Rb, np.eye(3), axis=1)
