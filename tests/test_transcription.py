@@ -148,3 +148,31 @@ def test_packed_point_feeds_each_term_as_its_own_evaluation_would():
         prob.values({**x, "p": np.full((4, 3), np.nan)})
     with pytest.raises(InputError, match="block 'R' must have shape"):
         prob.evaluate({"p": x["p"]})
+
+
+def test_problems_of_one_structure_share_patterns_not_parameters_or_buffers():
+    """Two problems whose terms differ only in parameters share the memoized index maps and
+    sparsity patterns, yet each evaluates with its own parameters (as a fresh build would) and
+    its own buffers; another binding gives another structure."""
+    f = _input_cost()
+    variables = TrajectoryVariables([Block("u", R(4), 3, fixed=(0,))])
+
+    def problem(u_ref: float, sites=(1, 2)) -> TrajectoryProblem:
+        term = Term(
+            "c", "cost", f, {"u": ("u", list(sites))}, {"u_ref": np.full(4, u_ref), "w": 2.0}
+        )
+        return TrajectoryProblem(TrajectoryVariables(list(variables.blocks.values())), [term])
+
+    a, b = problem(0.0), problem(1.0)
+    assert a._hess_pattern is b._hess_pattern and a._layouts["cost"][0].index is (
+        b._layouts["cost"][0].index
+    )
+    u = {"u": np.arange(12.0).reshape(3, 4)}
+    ev_a, ev_b = a.evaluate(u), b.evaluate(u)
+    assert ev_a.objective == pytest.approx(np.sum(u["u"][1:] ** 2))
+    assert ev_b.objective == pytest.approx(np.sum((u["u"][1:] - 1.0) ** 2))
+    np.testing.assert_allclose(ev_a.gradient, 2 * u["u"][1:].ravel())
+    assert a.evaluate(u).objective == ev_a.objective  # b's evaluation did not touch a's buffers
+    other = problem(0.0, sites=(2, 1))
+    assert other._layouts["cost"][0].index is not a._layouts["cost"][0].index
+    np.testing.assert_allclose(other.evaluate(u).gradient, ev_a.gradient)

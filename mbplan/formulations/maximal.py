@@ -45,7 +45,7 @@ from mbplan.transcription.distance import distance_constraint_function, pair_bod
 from mbplan.transcription.multibody import multibody_layout
 from mbplan.transcription.problem import TrajectoryProblem
 from mbplan.transcription.terms import Term
-from mbplan.transcription.variables import Point, TrajectoryVariables
+from mbplan.transcription.variables import Point, trajectory_variables
 
 _TORQUE = {
     "cost": (lambda tau, t, w: 0.5 * w * (tau - t) ** 2, [("t", 1), ("w", 1)]),
@@ -95,7 +95,7 @@ class MaximalNLP:
                 terms += self._terms(item)
             except InputError as err:
                 raise InputError(f"maximal formulation, {item.role} {item.name!r}: {err}") from None
-        self.problem = TrajectoryProblem(TrajectoryVariables(layout.blocks), terms)
+        self.problem = TrajectoryProblem(trajectory_variables(layout.blocks), terms)
         # the RIPM's kkt_method="reduced" eliminates the joints through this plan
         self.problem.elimination_plan = JointEliminationPlans(self.problem)
 

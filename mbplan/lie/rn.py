@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from functools import cache
+
 import casadi as cs
 import numpy as np
 
@@ -102,5 +104,6 @@ class RnGroup:
         return scale * rng.standard_normal(self.n)
 
 
+@cache
 def R(n: int) -> RnGroup:
     return RnGroup(n)

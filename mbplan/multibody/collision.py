@@ -176,18 +176,15 @@ class ChainKinematics:
 def chain_kinematics(model: pin.Model, data: pin.Data, q: np.ndarray) -> ChainKinematics:
     """:class:`ChainKinematics` at ``q (K, nq)`` (one ``computeJointJacobians`` per knot)."""
     K = len(q)
-    rotation = np.empty((K, model.njoints, 3, 3))
-    translation = np.empty((K, model.njoints, 3))
+    H = np.empty((K, model.njoints, 4, 4))
     twists = np.empty((K, 6, model.nv))
     for k, qk in enumerate(q):
         pin.computeJointJacobians(model, data, qk)
         twists[k] = data.J
-        for j in range(model.njoints):
-            rotation[k, j] = data.oMi[j].rotation
-            translation[k, j] = data.oMi[j].translation
+        H[k] = [M.homogeneous for M in data.oMi]  # one copy per joint
     return ChainKinematics(
-        rotation,
-        translation,
+        np.ascontiguousarray(H[:, :, :3, :3]),
+        np.ascontiguousarray(H[:, :, :3, 3]),
         np.swapaxes(twists[:, :3], 1, 2),
         np.swapaxes(twists[:, 3:], 1, 2),
         joint_support(model),

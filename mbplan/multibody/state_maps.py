@@ -21,13 +21,13 @@ def body_poses(mm: MaximalModel, q: npt.ArrayLike) -> tuple[np.ndarray, np.ndarr
     q = np.asarray(q, dtype=float)
     q = _array(q, (len(q), mm.nq) if q.ndim == 2 else (mm.nq,), "q")
     flat = q.reshape(-1, mm.nq)
-    R, t = np.empty((len(flat), mm.nb, 3, 3)), np.empty((len(flat), mm.nb, 3))
+    H = np.empty((len(flat), mm.nb, 4, 4))
     data, joints = mm.model.createData(), mm.pin_joint.tolist()
     for k, qk in enumerate(flat):
         pin.forwardKinematics(mm.model, data, qk)
-        for b, j in enumerate(joints):
-            R[k, b], t[k, b] = data.oMi[j].rotation, data.oMi[j].translation
-    p = t + np.einsum("kbij,bj->kbi", R, mm.com_in_joint)
+        H[k] = [data.oMi[j].homogeneous for j in joints]  # one copy per joint
+    R = np.ascontiguousarray(H[:, :, :3, :3])
+    p = H[:, :, :3, 3] + np.einsum("kbij,bj->kbi", R, mm.com_in_joint)
     return (R, p) if q.ndim == 2 else (R[0], p[0])
 
 

@@ -45,11 +45,18 @@ IK_TOLERANCE = 1e-8  # ‖error‖ (m, rad) at which the IK stops
 def path_clearance(ocp: OCP, path: np.ndarray) -> float:
     """Largest obstacle-constraint residual (``≤ 0``: clear, with the margins) over the knots
     ``path (K, nq)``; ``-inf`` if the OCP has no obstacle constraint."""
-    worst = -np.inf
+    return float(path_clearances(ocp, path[None])[0])
+
+
+def path_clearances(ocp: OCP, paths: np.ndarray) -> np.ndarray:
+    """:func:`path_clearance` of every path of ``paths (P, K, nq)``, in one evaluation."""
+    P, K = paths.shape[:2]
+    knots = paths.reshape(P * K, -1)
+    worst = np.full(P, -np.inf)
     for item in ocp.constraints:
         if isinstance(item.residual, (Distance, ComOutsideCylinder)):
-            r = evaluate(ocp.robot, ocp.scene, item.residual, path, np.zeros_like(path), None)
-            worst = max(worst, float(np.max(r)))
+            r = evaluate(ocp.robot, ocp.scene, item.residual, knots, np.zeros_like(knots), None)
+            worst = np.maximum(worst, r.reshape(P, -1).max(axis=1))
     return worst
 
 
@@ -137,10 +144,15 @@ def initial_path(ocp: OCP, kind: str = "linear") -> np.ndarray:
     lengths = np.linalg.norm(vias - q0, axis=1) + np.linalg.norm(q_goal - vias, axis=1)
     first = np.minimum(2 * s, 1.0)[:, None]
     second = np.maximum(2 * s - 1.0, 0.0)[:, None]
-    for via in vias[np.argsort(lengths, kind="stable")]:  # the shortest clear one
-        path = q0 + first * (via - q0) + second * (q_goal - via)
-        if path_clearance(ocp, path) <= 0.0:
-            return path
+    vias = vias[np.argsort(lengths, kind="stable")]
+    start, size = 0, 1
+    while start < len(vias):  # the shortest clear one, in batches of 1, 2, 4, ... candidates
+        via = vias[start : start + size, None]
+        paths = q0 + first * (via - q0) + second * (q_goal - via)
+        clear = np.flatnonzero(path_clearances(ocp, paths) <= 0.0)
+        if clear.size:
+            return paths[clear[0]]
+        start, size = start + size, 2 * size
     warnings.warn(WarmStartWarning(VIA_FALLBACK), stacklevel=2)
     return linear
 

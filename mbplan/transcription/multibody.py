@@ -40,6 +40,7 @@ from mbplan.dynamics.joints import (
 )
 from mbplan.engine import RiemannianFunction
 from mbplan.lie import SO3, R
+from mbplan.memo import RecentMemo
 from mbplan.multibody import MaximalModel
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Block
@@ -205,6 +206,9 @@ class MultibodyLayout:
     n_dynamics_rows: int
 
 
+_LAYOUTS: RecentMemo[MultibodyLayout] = RecentMemo(8)
+
+
 def multibody_layout(
     mm: MaximalModel,
     N: int,
@@ -214,11 +218,25 @@ def multibody_layout(
     kinematics: bool = True,
     fixed_tau_knots: tuple[int, ...] = (0,),
 ) -> MultibodyLayout:
-    """Blocks and equality terms for ``N`` steps of the multi-body LGVI.
+    """Blocks and equality terms for ``N`` steps of the multi-body LGVI (memoized per process:
+    the terms are shared, never modified).
 
     ``kinematics=False`` leaves out the kinematics rows (for a one-step simulator whose ``R, p``
     at both knots are data). ``fixed_tau_knots`` are the knots whose torques are data.
     """
+    key = (mm, int(N), float(dt), bool(jit), bool(kinematics), tuple(fixed_tau_knots))
+    return _LAYOUTS.get_or_build(key, lambda: _multibody_layout(mm, *key[1:]))
+
+
+def _multibody_layout(
+    mm: MaximalModel,
+    N: int,
+    dt: float,
+    jit: bool,
+    kinematics: bool,
+    fixed_tau_knots: tuple[int, ...],
+) -> MultibodyLayout:
+    """:func:`multibody_layout`, not memoized."""
     nb = mm.nb
     blocks = [
         Block("R", SO3, N + 1, (0,) if kinematics else (0, 1), nb),

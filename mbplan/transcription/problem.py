@@ -18,7 +18,8 @@ import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.finite import finite_vector
-from mbplan.transcription.sparse import SparsePattern, sparse_pattern
+from mbplan.memo import RecentMemo
+from mbplan.transcription.sparse import sparse_pattern
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Point, TrajectoryVariables
 
@@ -38,20 +39,141 @@ class Evaluation:
     hessian_lower: sp.csr_matrix | None
 
 
-class _TermLayout:
-    """Where one term's residual rows and tangent columns land in the global NLP."""
+@dataclass(frozen=True)
+class _TermIndex:
+    """Where one term's residual rows, tangent columns and packed inputs land in the NLP."""
 
-    def __init__(self, term: Term, rows: np.ndarray, index: dict[str, np.ndarray]) -> None:
+    rows: np.ndarray  # (K, m) global rows within the term's kind
+    jac_rows: np.ndarray
+    jac_cols: np.ndarray
+    hess_rows: np.ndarray
+    hess_cols: np.ndarray
+    z_index: np.ndarray  # (K, nz) gather map of the term's CasADi input in the packed point
+
+    @classmethod
+    def of(cls, term: Term, rows: np.ndarray, index: dict, flat_index: dict) -> _TermIndex:
         f = term.function
-        self.term = term
-        self.rows = rows  # (K, m) global rows within the term's kind
-        self.parameters = f.pack_parameters(term.parameters, term.sites)
         cols = term.tangent_columns(index)  # (K, n_f)
-        self.z_index = np.zeros((term.sites, f.nz), np.int64)  # set by TrajectoryProblem
-        self.jac_rows = rows[:, f.jac_rows]
-        self.jac_cols = cols[:, f.jac_cols]
         hr, hc = cols[:, f.hess_rows], cols[:, f.hess_cols]
-        self.hess_rows, self.hess_cols = np.maximum(hr, hc), np.minimum(hr, hc)
+        # the packed point (all blocks' arrays raveled and concatenated) gathered into the
+        # term's input as SiteFunction.pack orders it, in one fancy index
+        z_index = np.zeros((term.sites, f.nz), np.int64)
+        args = term.gather(flat_index)
+        for sl in f.variables:
+            a = args[sl.name].reshape(term.sites, *sl.shape)
+            z_index[:, sl.offset : sl.offset + sl.size] = np.swapaxes(a, 1, -1).reshape(
+                term.sites, -1
+            )
+        return cls(
+            rows,
+            rows[:, f.jac_rows],
+            cols[:, f.jac_cols],
+            np.maximum(hr, hc),
+            np.minimum(hr, hc),
+            z_index,
+        )
+
+
+class _Structure:
+    """The index maps and sparsity patterns of a :class:`TrajectoryProblem`: a function of the
+    variables' blocks and of the terms' names, kinds, functions, bindings and rows only, so
+    every problem of a task family shares one (their parameters differ)."""
+
+    def __init__(self, variables: TrajectoryVariables, terms: Sequence[Term]) -> None:
+        names = [t.name for t in terms]
+        if len(set(names)) != len(names):
+            raise InputError(f"duplicate term names: {names}")
+        index = {name: variables.tangent_index(name) for name in variables.blocks}
+        for t in terms:
+            for arg, (block, ix) in t.bind.items():
+                if block not in variables.blocks:
+                    raise InputError(
+                        f"term {t.name!r}: argument {arg!r} bound to unknown block {block!r}"
+                    )
+                b = variables.blocks[block]
+                if ix.size and (ix.min() < 0 or ix.max() >= b.knots * b.count):
+                    raise InputError(
+                        f"term {t.name!r}: indices of {arg!r} fall outside block {block!r}"
+                    )
+        self.n = variables.n
+        flat_index, offset = {}, 0
+        for name, b in variables.blocks.items():
+            size = math.prod(b.shape)
+            flat_index[name] = b.flat(np.arange(offset, offset + size))
+            offset += size
+        self.terms: list[_TermIndex] = []
+        sizes = {"cost": 0, "eq": 0, "ineq": 0}
+        for t in terms:
+            m = t.function.m
+            if t.rows is None:
+                rows = sizes[t.kind] + np.arange(t.sites * m, dtype=np.int64).reshape(t.sites, m)
+                sizes[t.kind] += t.sites * m
+            else:
+                rows = t.rows
+                sizes[t.kind] = max(sizes[t.kind], int(rows.max(initial=-1)) + 1)
+            self.terms.append(_TermIndex.of(t, rows, index, flat_index))
+        self.n_eq, self.n_ineq = sizes["eq"], sizes["ineq"]
+        by_kind = {
+            kind: [ix for t, ix in zip(terms, self.terms, strict=True) if t.kind == kind]
+            for kind in ("cost", "eq", "ineq")
+        }
+        self.rows = {
+            kind: _cat_index([ix.rows.ravel() for ix in ixs]) for kind, ixs in by_kind.items()
+        }
+        # kinds whose terms fill the rows in order, once each: the scatter is a concatenation
+        self.rows_in_order = {
+            kind: np.array_equal(rows, np.arange(len(rows))) for kind, rows in self.rows.items()
+        }
+        self.jac_patterns = {
+            kind: sparse_pattern(
+                _cat_index([ix.jac_rows.ravel() for ix in by_kind[kind]]),
+                _cat_index([ix.jac_cols.ravel() for ix in by_kind[kind]]),
+                (sizes[kind], self.n),
+            )  # fixed columns (-1) dropped
+            for kind in ("eq", "ineq")
+        }
+        # gradient column of every cost Jacobian nonzero, n (a bin cut off) where fixed
+        cols = _cat_index([ix.jac_cols.ravel() for ix in by_kind["cost"]])
+        self.grad_cols = np.where(cols >= 0, cols, self.n)
+        ordered = [ix for kind in ("cost", "eq", "ineq") for ix in by_kind[kind]]
+        self.hess_pattern = sparse_pattern(
+            _cat_index([ix.hess_rows.ravel() for ix in ordered]),
+            _cat_index([ix.hess_cols.ravel() for ix in ordered]),
+            (self.n, self.n),
+        )
+
+
+_STRUCTURES: RecentMemo[_Structure] = RecentMemo(8)
+
+
+def _structure(variables: TrajectoryVariables, terms: Sequence[Term]) -> _Structure:
+    """The :class:`_Structure` of ``variables`` and ``terms``, memoized per process by
+    everything it reads."""
+    key = (
+        tuple(variables.blocks.values()),
+        tuple(
+            (
+                t.name,
+                t.kind,
+                t.function,
+                tuple((arg, block, ix.tobytes()) for arg, (block, ix) in t.bind.items()),
+                None if t.rows is None else (t.rows.shape, t.rows.tobytes()),
+            )
+            for t in terms
+        ),
+    )
+    hit = _STRUCTURES.get(key)
+    return hit if hit is not None else _STRUCTURES.put(key, _Structure(variables, terms))
+
+
+class _TermLayout:
+    """One term of a problem: its index maps, packed parameters and evaluation buffers."""
+
+    def __init__(self, term: Term, index: _TermIndex) -> None:
+        f = term.function
+        self.term, self.index = term, index
+        self.rows = index.rows
+        self.parameters = f.pack_parameters(term.parameters, term.sites)
         # evaluation buffers: inputs refilled in place, outputs views of the problem's
         # per-kind arrays (set by TrajectoryProblem), compiled calls bound to them on first use
         self.z = np.empty((term.sites, f.nz))
@@ -75,87 +197,22 @@ class TrajectoryProblem:
     def __init__(self, variables: TrajectoryVariables, terms: Sequence[Term]) -> None:
         self.variables = variables
         self.terms = list(terms)
-        names = [t.name for t in self.terms]
-        if len(set(names)) != len(names):
-            raise InputError(f"duplicate term names: {names}")
-        index = {name: variables.tangent_index(name) for name in variables.blocks}
-        for t in self.terms:
-            for arg, (block, ix) in t.bind.items():
-                if block not in variables.blocks:
-                    raise InputError(
-                        f"term {t.name!r}: argument {arg!r} bound to unknown block {block!r}"
-                    )
-                b = variables.blocks[block]
-                if ix.size and (ix.min() < 0 or ix.max() >= b.knots * b.count):
-                    raise InputError(
-                        f"term {t.name!r}: indices of {arg!r} fall outside block {block!r}"
-                    )
-        self.n = variables.n
+        s = _structure(variables, self.terms)
+        self.n, self.n_eq, self.n_ineq = s.n, s.n_eq, s.n_ineq
         self._layouts: dict[str, list[_TermLayout]] = {"cost": [], "eq": [], "ineq": []}
-        sizes = {"cost": 0, "eq": 0, "ineq": 0}
-        for t in self.terms:
-            m = t.function.m
-            if t.rows is None:
-                rows = sizes[t.kind] + np.arange(t.sites * m, dtype=np.int64).reshape(t.sites, m)
-                sizes[t.kind] += t.sites * m
-            else:
-                rows = t.rows
-                sizes[t.kind] = max(sizes[t.kind], int(rows.max(initial=-1)) + 1)
-            self._layouts[t.kind].append(_TermLayout(t, rows, index))
-        self.n_eq, self.n_ineq = sizes["eq"], sizes["ineq"]
-        self._rows = {
-            kind: np.concatenate([lay.rows.ravel() for lay in lays] or [np.zeros(0, np.int64)])
-            for kind, lays in self._layouts.items()
-        }
-        # kinds whose terms fill the rows in order, once each: the scatter is a concatenation
-        self._rows_in_order = {
-            kind: np.array_equal(rows, np.arange(len(rows))) for kind, rows in self._rows.items()
-        }
-        self._jac_patterns = {
-            kind: self._jacobian_pattern(kind, sizes[kind]) for kind in ("eq", "ineq")
-        }
-        self._packed_layout()
+        for t, ix in zip(self.terms, s.terms, strict=True):
+            self._layouts[t.kind].append(_TermLayout(t, ix))
+        self._rows, self._rows_in_order = s.rows, s.rows_in_order
+        self._jac_patterns, self._grad_cols, self._hess_pattern = (
+            s.jac_patterns,
+            s.grad_cols,
+            s.hess_pattern,
+        )
         self._all_layouts = [lay for kind in ("cost", "eq", "ineq") for lay in self._layouts[kind]]
-        self._grad_cols = self._gradient_columns()
-        self._hess_pattern = self._hessian_pattern()
         self._output_buffers()
         self._bound: dict[str, list[Callable[[], None]]] = {}
 
-    # ------------------------------------------------------------------ patterns
-    def _packed_layout(self) -> None:
-        """Where every term input lives in the packed point (all blocks' arrays raveled and
-        concatenated): ``lay.z_index`` is the ``(K, nz)`` gather map that builds the term's
-        CasADi input, packed as :meth:`SiteFunction.pack` does, in one fancy index."""
-        offset = 0
-        flat_index = {}
-        for name, b in self.variables.blocks.items():
-            size = int(np.prod(b.shape))
-            flat_index[name] = b.flat(np.arange(offset, offset + size))
-            offset += size
-        self._packed_size = offset
-        for lays in self._layouts.values():
-            for lay in lays:
-                f, args = lay.term.function, lay.term.gather(flat_index)
-                for sl in f.variables:
-                    a = args[sl.name].reshape(lay.term.sites, *sl.shape)
-                    part = np.swapaxes(a, 1, -1).reshape(lay.term.sites, -1)
-                    lay.z_index[:, sl.offset : sl.offset + sl.size] = part
-
-    def _jacobian_pattern(self, kind: str, m: int) -> SparsePattern:
-        rows = _cat_index([lay.jac_rows.ravel() for lay in self._layouts[kind]])
-        cols = _cat_index([lay.jac_cols.ravel() for lay in self._layouts[kind]])
-        return sparse_pattern(rows, cols, (m, self.n))  # fixed columns (-1) dropped
-
-    def _gradient_columns(self) -> np.ndarray:
-        """Gradient column of every cost Jacobian nonzero, ``n`` (a bin cut off) where fixed."""
-        cols = _cat_index([lay.jac_cols.ravel() for lay in self._layouts["cost"]])
-        return np.where(cols >= 0, cols, self.n)
-
-    def _hessian_pattern(self) -> SparsePattern:
-        rows = _cat_index([lay.hess_rows.ravel() for lay in self._all_layouts])
-        cols = _cat_index([lay.hess_cols.ravel() for lay in self._all_layouts])
-        return sparse_pattern(rows, cols, (self.n, self.n))
-
+    # ------------------------------------------------------------------ buffers
     def _output_buffers(self) -> None:
         """One array per kind for the residuals and for the Jacobian nonzeros, one for all
         Hessian nonzeros, in term order: each term's outputs are ``(K, ·)`` views into them, so
@@ -210,7 +267,7 @@ class TrajectoryProblem:
         """Every term's packed variables from the point, into the term's input buffer."""
         vec = self.variables.packed(point)
         for lay in self._all_layouts:
-            vec.take(lay.z_index, out=lay.z, mode="clip")  # indices in range by construction
+            vec.take(lay.index.z_index, out=lay.z, mode="clip")  # indices in range by construction
 
     def _calls(self, kind: str) -> list[Callable[[], None]]:
         """Every term's bound ``value``, ``jacobian`` or ``hessian`` call, in term order."""

@@ -16,6 +16,7 @@ import numpy as np
 
 from mbplan.errors import InputError
 from mbplan.finite import finite_vector
+from mbplan.memo import RecentMemo
 from mbplan.transcription.packed import PackedLayout, PackedPoint
 
 Point = dict[str, np.ndarray]
@@ -166,6 +167,16 @@ class TrajectoryVariables:
                     b.flat(point[b.name])[free], b.flat(other[b.name])[free]
                 )
         return dx
+
+
+_VARIABLES: RecentMemo[TrajectoryVariables] = RecentMemo(8)
+
+
+def trajectory_variables(blocks: Iterable[Block]) -> TrajectoryVariables:
+    """``TrajectoryVariables(blocks)``, memoized per process by the blocks: a layout without
+    values, shared by every problem of a task family."""
+    blocks = tuple(blocks)
+    return _VARIABLES.get_or_build(blocks, lambda: TrajectoryVariables(blocks))
 
 
 def _as_slice(index: np.ndarray) -> slice | np.ndarray:
