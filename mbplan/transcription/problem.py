@@ -50,6 +50,11 @@ class _TermIndex:
     hess_cols: np.ndarray
     z_index: np.ndarray  # (K, nz) gather map of the term's CasADi input in the packed point
 
+    def __post_init__(self) -> None:
+        for a in (self.rows, self.jac_rows, self.jac_cols, self.hess_rows, self.hess_cols):
+            a.setflags(write=False)  # shared by every problem of the structure
+        self.z_index.setflags(write=False)
+
     @classmethod
     def of(cls, term: Term, rows: np.ndarray, index: dict, flat_index: dict) -> _TermIndex:
         f = term.function
@@ -109,7 +114,7 @@ class _Structure:
                 rows = sizes[t.kind] + np.arange(t.sites * m, dtype=np.int64).reshape(t.sites, m)
                 sizes[t.kind] += t.sites * m
             else:
-                rows = t.rows
+                rows = t.rows.copy()
                 sizes[t.kind] = max(sizes[t.kind], int(rows.max(initial=-1)) + 1)
             self.terms.append(_TermIndex.of(t, rows, index, flat_index))
         self.n_eq, self.n_ineq = sizes["eq"], sizes["ineq"]
