@@ -139,6 +139,26 @@ def test_via_warm_start_is_collision_free_where_linear_is_not() -> None:
         assert path_clearance(ocp, path) > 0
 
 
+@pytest.mark.parametrize("constraint", ["com", "distance"])
+def test_path_clearances_of_a_batch_are_each_paths_own(constraint: str) -> None:
+    """The via search's batched check (all paths' knots in one evaluation per obstacle
+    constraint) gives every path exactly its own :func:`path_clearance`, clear or not."""
+    from mbplan.benchmarks.speed_tasks import iiwa_task
+    from mbplan.planning.initial_guess import path_clearances
+
+    ocp = iiwa_task(2, constraint=constraint)
+    linear = initial_path(ocp, "linear")
+    rng = np.random.default_rng(1)
+    paths = (
+        linear
+        + 0.3 * rng.standard_normal((5, 1, ocp.robot.nq)) * np.linspace(0, 1, ocp.N + 1)[:, None]
+    )
+    paths = np.concatenate([paths, initial_path(ocp, "via")[None]])
+    each = [path_clearance(ocp, p) for p in paths]
+    np.testing.assert_array_equal(path_clearances(ocp, paths), each)
+    assert each[-1] <= 0.0 < max(each[:-1])  # the batch mixes clear and colliding paths
+
+
 def test_frame_goal_warm_start_uses_inverse_kinematics() -> None:
     """A terminal frame goal: the warm start ends at a configuration that reaches it."""
     goal = pin.SE3(pin.rpy.rpyToMatrix(np.pi, 0.0, 0.0), np.array([0.5, 0.2, 0.4]))

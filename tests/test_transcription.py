@@ -176,3 +176,14 @@ def test_problems_of_one_structure_share_patterns_not_parameters_or_buffers():
     other = problem(0.0, sites=(2, 1))
     assert other._layouts["cost"][0].index is not a._layouts["cost"][0].index
     np.testing.assert_allclose(other.evaluate(u).gradient, ev_a.gradient)
+    with pytest.raises(ValueError, match="read-only"):  # shared: nobody may write into them
+        a.term_rows("cost")["c"][0, 0] = 1
+    # another function object of the same layout (e.g. one closing over another scene's
+    # geometry), knots fixed by a list: the same structure
+    f2 = _input_cost()
+    listed = TrajectoryVariables([Block("u", R(4), 3, fixed=[0])])
+    assert listed.blocks["u"] == variables.blocks["u"]
+    term = Term("c", "cost", f2, {"u": ("u", [1, 2])}, {"u_ref": np.zeros(4), "w": 2.0})
+    same = TrajectoryProblem(listed, [term])
+    assert same._layouts["cost"][0].index is a._layouts["cost"][0].index
+    assert same.evaluate(u).objective == ev_a.objective

@@ -15,6 +15,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -81,6 +82,16 @@ class SiteFunction(ABC):
         names = [s.name for s in (*self.variables, *self.parameters)]
         if len(set(names)) != len(names):
             raise InputError(f"{name}: duplicate argument names in {names}")
+
+    @cached_property
+    def layout_key(self) -> tuple:
+        """All a transcription reads of the function besides evaluating it: the variables'
+        slots, the sizes and the derivatives' sparsity patterns (equal keys: equal index maps)."""
+        slots = tuple(
+            (s.name, s.shape, s.offset, s.tangent.start, s.tangent.stop) for s in self.variables
+        )
+        patterns = (self.jac_rows, self.jac_cols, self.hess_rows, self.hess_cols)
+        return (slots, self.nz, self.n, self.m, tuple((a.dtype.str, a.tobytes()) for a in patterns))
 
     @property
     def jac_nnz(self) -> int:

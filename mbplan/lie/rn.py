@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import operator
 from functools import cache
 
 import casadi as cs
@@ -104,6 +105,15 @@ class RnGroup:
         return scale * rng.standard_normal(self.n)
 
 
-@cache
 def R(n: int) -> RnGroup:
+    """R^n, one group object per dimension (equal blocks of R^n are equal memo keys)."""
+    try:
+        n = operator.index(n)
+    except TypeError:
+        raise InputError(f"R^n needs an integer n, got {n!r}") from None
+    return _rn(n)
+
+
+@cache
+def _rn(n: int) -> RnGroup:
     return RnGroup(n)

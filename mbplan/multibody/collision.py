@@ -181,7 +181,7 @@ def chain_kinematics(model: pin.Model, data: pin.Data, q: np.ndarray) -> ChainKi
     for k, qk in enumerate(q):
         pin.computeJointJacobians(model, data, qk)
         twists[k] = data.J
-        H[k] = [M.homogeneous for M in data.oMi]  # one copy per joint
+        H[k] = [M.homogeneous for M in data.oMi]  # one 4 × 4 matrix per joint
     return ChainKinematics(
         np.ascontiguousarray(H[:, :, :3, :3]),
         np.ascontiguousarray(H[:, :, :3, 3]),

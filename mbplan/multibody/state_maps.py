@@ -25,7 +25,7 @@ def body_poses(mm: MaximalModel, q: npt.ArrayLike) -> tuple[np.ndarray, np.ndarr
     data, joints = mm.model.createData(), mm.pin_joint.tolist()
     for k, qk in enumerate(flat):
         pin.forwardKinematics(mm.model, data, qk)
-        H[k] = [data.oMi[j].homogeneous for j in joints]  # one copy per joint
+        H[k] = [data.oMi[j].homogeneous for j in joints]  # one 4 × 4 matrix per joint
     R = np.ascontiguousarray(H[:, :, :3, :3])
     p = H[:, :, :3, 3] + np.einsum("kbij,bj->kbi", R, mm.com_in_joint)
     return (R, p) if q.ndim == 2 else (R[0], p[0])

@@ -44,12 +44,13 @@ IK_TOLERANCE = 1e-8  # ‖error‖ (m, rad) at which the IK stops
 
 def path_clearance(ocp: OCP, path: np.ndarray) -> float:
     """Largest obstacle-constraint residual (``≤ 0``: clear, with the margins) over the knots
-    ``path (K, nq)``; ``-inf`` if the OCP has no obstacle constraint."""
-    return float(path_clearances(ocp, path[None])[0])
+    ``path (K, nq)``; ``-inf`` if the OCP has no obstacle constraint, NaN if a residual is."""
+    return float(path_clearances(ocp, np.asarray(path, dtype=float)[None])[0])
 
 
 def path_clearances(ocp: OCP, paths: np.ndarray) -> np.ndarray:
-    """:func:`path_clearance` of every path of ``paths (P, K, nq)``, in one evaluation."""
+    """:func:`path_clearance` of every path of ``paths (P, K, nq)``: each obstacle constraint
+    evaluated once at all ``P K`` knots."""
     P, K = paths.shape[:2]
     knots = paths.reshape(P * K, -1)
     worst = np.full(P, -np.inf)
@@ -151,7 +152,7 @@ def initial_path(ocp: OCP, kind: str = "linear") -> np.ndarray:
         paths = q0 + first * (via - q0) + second * (q_goal - via)
         clear = np.flatnonzero(path_clearances(ocp, paths) <= 0.0)
         if clear.size:
-            return paths[clear[0]]
+            return paths[clear[0]].copy()
         start, size = start + size, 2 * size
     warnings.warn(WarmStartWarning(VIA_FALLBACK), stacklevel=2)
     return linear

@@ -201,8 +201,8 @@ def _damping_function(jit: bool, world_parent: bool, kind: str = "revolute") -> 
 class MultibodyLayout:
     """Blocks and equality terms of the multi-body dynamics over ``N`` steps."""
 
-    blocks: list[Block]
-    terms: list[Term]
+    blocks: tuple[Block, ...]
+    terms: tuple[Term, ...]
     n_dynamics_rows: int
 
 
@@ -305,7 +305,7 @@ def _multibody_layout(
                 terms.append(
                     _damping_term(mm, kind, world, jit, now, nxt, j, damped, params, rows, dt)
                 )
-    return MultibodyLayout(blocks, terms, dyn_offset + 6 * N * nb)
+    return MultibodyLayout(tuple(blocks), tuple(terms), dyn_offset + 6 * N * nb)
 
 
 def _damping_term(mm, kind, world, jit, now, nxt, j, damped, params, rows, dt) -> Term:

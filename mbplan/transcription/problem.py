@@ -39,7 +39,7 @@ class Evaluation:
     hessian_lower: sp.csr_matrix | None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class _TermIndex:
     """Where one term's residual rows, tangent columns and packed inputs land in the NLP."""
 
@@ -51,9 +51,15 @@ class _TermIndex:
     z_index: np.ndarray  # (K, nz) gather map of the term's CasADi input in the packed point
 
     def __post_init__(self) -> None:
-        for a in (self.rows, self.jac_rows, self.jac_cols, self.hess_rows, self.hess_cols):
+        for a in (
+            self.rows,
+            self.jac_rows,
+            self.jac_cols,
+            self.hess_rows,
+            self.hess_cols,
+            self.z_index,
+        ):
             a.setflags(write=False)  # shared by every problem of the structure
-        self.z_index.setflags(write=False)
 
     @classmethod
     def of(cls, term: Term, rows: np.ndarray, index: dict, flat_index: dict) -> _TermIndex:
@@ -106,7 +112,7 @@ class _Structure:
             size = math.prod(b.shape)
             flat_index[name] = b.flat(np.arange(offset, offset + size))
             offset += size
-        self.terms: list[_TermIndex] = []
+        self.indices: list[_TermIndex] = []
         sizes = {"cost": 0, "eq": 0, "ineq": 0}
         for t in terms:
             m = t.function.m
@@ -116,10 +122,10 @@ class _Structure:
             else:
                 rows = t.rows.copy()
                 sizes[t.kind] = max(sizes[t.kind], int(rows.max(initial=-1)) + 1)
-            self.terms.append(_TermIndex.of(t, rows, index, flat_index))
+            self.indices.append(_TermIndex.of(t, rows, index, flat_index))
         self.n_eq, self.n_ineq = sizes["eq"], sizes["ineq"]
         by_kind = {
-            kind: [ix for t, ix in zip(terms, self.terms, strict=True) if t.kind == kind]
+            kind: [ix for t, ix in zip(terms, self.indices, strict=True) if t.kind == kind]
             for kind in ("cost", "eq", "ineq")
         }
         self.rows = {
@@ -146,6 +152,8 @@ class _Structure:
             _cat_index([ix.hess_cols.ravel() for ix in ordered]),
             (self.n, self.n),
         )
+        for a in (*self.rows.values(), self.grad_cols):
+            a.setflags(write=False)
 
 
 _STRUCTURES: RecentMemo[_Structure] = RecentMemo(8)
@@ -153,22 +161,21 @@ _STRUCTURES: RecentMemo[_Structure] = RecentMemo(8)
 
 def _structure(variables: TrajectoryVariables, terms: Sequence[Term]) -> _Structure:
     """The :class:`_Structure` of ``variables`` and ``terms``, memoized per process by
-    everything it reads."""
+    everything it reads (of a function: :attr:`~mbplan.engine.SiteFunction.layout_key`)."""
     key = (
         tuple(variables.blocks.values()),
         tuple(
             (
                 t.name,
                 t.kind,
-                t.function,
+                t.function.layout_key,
                 tuple((arg, block, ix.tobytes()) for arg, (block, ix) in t.bind.items()),
                 None if t.rows is None else (t.rows.shape, t.rows.tobytes()),
             )
             for t in terms
         ),
     )
-    hit = _STRUCTURES.get(key)
-    return hit if hit is not None else _STRUCTURES.put(key, _Structure(variables, terms))
+    return _STRUCTURES.get_or_build(key, lambda: _Structure(variables, terms))
 
 
 class _TermLayout:
@@ -177,7 +184,6 @@ class _TermLayout:
     def __init__(self, term: Term, index: _TermIndex) -> None:
         f = term.function
         self.term, self.index = term, index
-        self.rows = index.rows
         self.parameters = f.pack_parameters(term.parameters, term.sites)
         # evaluation buffers: inputs refilled in place, outputs views of the problem's
         # per-kind arrays (set by TrajectoryProblem), compiled calls bound to them on first use
@@ -205,7 +211,7 @@ class TrajectoryProblem:
         s = _structure(variables, self.terms)
         self.n, self.n_eq, self.n_ineq = s.n, s.n_eq, s.n_ineq
         self._layouts: dict[str, list[_TermLayout]] = {"cost": [], "eq": [], "ineq": []}
-        for t, ix in zip(self.terms, s.terms, strict=True):
+        for t, ix in zip(self.terms, s.indices, strict=True):
             self._layouts[t.kind].append(_TermLayout(t, ix))
         self._rows, self._rows_in_order = s.rows, s.rows_in_order
         self._jac_patterns, self._grad_cols, self._hess_pattern = (
@@ -251,7 +257,7 @@ class TrajectoryProblem:
     def term_rows(self, kind: str) -> dict[str, np.ndarray]:
         """Rows ``(sites, m)`` of every term of ``kind`` (``"cost"``, ``"eq"``, ``"ineq"``) in
         its residual vector, by term name."""
-        return {lay.term.name: lay.rows for lay in self._layouts[kind]}
+        return {lay.term.name: lay.index.rows for lay in self._layouts[kind]}
 
     def check_point(self, point: Point, what: str = "initial guess") -> Point:
         return self.variables.check_point(point, what)
@@ -309,9 +315,9 @@ class TrajectoryProblem:
             for lay in self._layouts["cost"]:
                 lay.lam.fill(float(obj_factor))
             for lay in self._layouts["eq"]:
-                y.take(lay.rows, out=lay.lam, mode="clip")
+                y.take(lay.index.rows, out=lay.lam, mode="clip")
             for lay in self._layouts["ineq"]:
-                z.take(lay.rows, out=lay.lam, mode="clip")
+                z.take(lay.index.rows, out=lay.lam, mode="clip")
         for call in self._calls("hessian" if hessian else "jacobian"):
             call()
         grad = np.bincount(self._grad_cols, weights=self._jacobians["cost"], minlength=self.n + 1)

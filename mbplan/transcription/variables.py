@@ -32,6 +32,10 @@ class Block:
     fixed: tuple[int, ...] = field(default=())
     count: int = 1
 
+    def __post_init__(self) -> None:
+        # any sequence of knots (a list, an array) as a tuple of ints: blocks are memo keys
+        object.__setattr__(self, "fixed", tuple(int(k) for k in self.fixed))
+
     @property
     def shape(self) -> tuple[int, ...]:
         """Shape of the block's array in a point."""
@@ -63,6 +67,7 @@ class TrajectoryVariables:
             nfree = int(free.sum())
             idx[free] = offset + np.arange(nfree * b.group.dim).reshape(nfree, b.group.dim)
             offset += nfree * b.group.dim
+            idx.setflags(write=False)  # shared by every problem of these variables
             self._index[b.name] = idx
             if nfree:
                 self._free.append((b, _as_slice(free), _as_slice(idx[free])))
