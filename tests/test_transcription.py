@@ -164,7 +164,7 @@ def test_problems_of_one_structure_share_patterns_not_parameters_or_buffers():
         return TrajectoryProblem(TrajectoryVariables(list(variables.blocks.values())), [term])
 
     a, b = problem(0.0), problem(1.0)
-    assert a._hess_pattern is b._hess_pattern and a._layouts["cost"][0].index is (
+    assert a._structure is b._structure and a._layouts["cost"][0].index is (
         b._layouts["cost"][0].index
     )
     u = {"u": np.arange(12.0).reshape(3, 4)}

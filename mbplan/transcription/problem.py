@@ -87,8 +87,8 @@ class _TermIndex:
 
 class _Structure:
     """The index maps and sparsity patterns of a :class:`TrajectoryProblem`: a function of the
-    variables' blocks and of the terms' names, kinds, functions, bindings and rows only, so
-    every problem of a task family shares one (their parameters differ)."""
+    variables' blocks and of the terms' names, kinds, bindings, rows and functions' layouts
+    only, so every problem of a task family shares one (their parameters differ)."""
 
     def __init__(self, variables: TrajectoryVariables, terms: Sequence[Term]) -> None:
         names = [t.name for t in terms]
@@ -208,17 +208,11 @@ class TrajectoryProblem:
     def __init__(self, variables: TrajectoryVariables, terms: Sequence[Term]) -> None:
         self.variables = variables
         self.terms = list(terms)
-        s = _structure(variables, self.terms)
+        self._structure = s = _structure(variables, self.terms)
         self.n, self.n_eq, self.n_ineq = s.n, s.n_eq, s.n_ineq
         self._layouts: dict[str, list[_TermLayout]] = {"cost": [], "eq": [], "ineq": []}
         for t, ix in zip(self.terms, s.indices, strict=True):
             self._layouts[t.kind].append(_TermLayout(t, ix))
-        self._rows, self._rows_in_order = s.rows, s.rows_in_order
-        self._jac_patterns, self._grad_cols, self._hess_pattern = (
-            s.jac_patterns,
-            s.grad_cols,
-            s.hess_pattern,
-        )
         self._all_layouts = [lay for kind in ("cost", "eq", "ineq") for lay in self._layouts[kind]]
         self._output_buffers()
         self._bound: dict[str, list[Callable[[], None]]] = {}
@@ -269,10 +263,10 @@ class TrajectoryProblem:
     def _scatter(self, kind: str) -> np.ndarray:
         """The residual vector of ``kind`` from the terms' residuals (a fresh array)."""
         parts = self._residuals[kind]
-        if self._rows_in_order[kind]:
+        if self._structure.rows_in_order[kind]:
             return parts + 0.0  # what bincount gives: 0 + v (-0.0 becomes 0.0)
         size = self.n_eq if kind == "eq" else self.n_ineq
-        return np.bincount(self._rows[kind], weights=parts, minlength=size)
+        return np.bincount(self._structure.rows[kind], weights=parts, minlength=size)
 
     def _gather(self, point: Point) -> None:
         """Every term's packed variables from the point, into the term's input buffer."""
@@ -320,15 +314,16 @@ class TrajectoryProblem:
                 z.take(lay.index.rows, out=lay.lam, mode="clip")
         for call in self._calls("hessian" if hessian else "jacobian"):
             call()
-        grad = np.bincount(self._grad_cols, weights=self._jacobians["cost"], minlength=self.n + 1)
+        s = self._structure
+        grad = np.bincount(s.grad_cols, weights=self._jacobians["cost"], minlength=self.n + 1)
         return Evaluation(
             objective=float(self._residuals["cost"].sum()),
             gradient=grad[: self.n],
             eq=self._scatter("eq"),
-            eq_jacobian=self._jac_patterns["eq"].assemble(self._jacobians["eq"]),
+            eq_jacobian=s.jac_patterns["eq"].assemble(self._jacobians["eq"]),
             ineq=self._scatter("ineq"),
-            ineq_jacobian=self._jac_patterns["ineq"].assemble(self._jacobians["ineq"]),
-            hessian_lower=self._hess_pattern.assemble(self._hessians) if hessian else None,
+            ineq_jacobian=s.jac_patterns["ineq"].assemble(self._jacobians["ineq"]),
+            hessian_lower=s.hess_pattern.assemble(self._hessians) if hessian else None,
         )
 
 
