@@ -565,3 +565,14 @@ def test_membership_tolerance_accepts_rounding_noise():
     rng = np.random.default_rng(3)
     Rm = SO3.exp(rng.standard_normal(3)) + 1e-9 * rng.standard_normal((3, 3))
     assert np.all(np.isfinite(SO3.log(Rm)))
+
+
+def test_rn_is_one_group_per_dimension_and_refuses_a_non_integer_dimension():
+    from mbplan.errors import InputError
+    from mbplan.lie import R
+
+    assert R(3) is R(np.int64(3)) and R(3).n == 3 and type(R(np.int64(3)).n) is int
+    with pytest.raises(InputError, match=r"integer n, got 3\.0"):
+        R(3.0)
+    with pytest.raises(InputError, match="n >= 1"):
+        R(0)
