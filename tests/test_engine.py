@@ -9,6 +9,7 @@ validation.
 
 from __future__ import annotations
 
+import ctypes
 import os
 import shutil
 from collections.abc import Callable
@@ -29,6 +30,7 @@ from mbplan.dynamics import (
     translational_kinematics,
 )
 from mbplan.engine import DerivativeCheck, RiemannianFunction, check_derivatives
+from mbplan.engine.site_table import run_site_loops, site_table
 from mbplan.errors import InputError
 from mbplan.lie import SE3, SL, SO, SO3, R
 from mbplan.lie.so3 import SO3Group
@@ -665,6 +667,42 @@ def test_bound_calls_equal_the_mapped_evaluation(tmp_path, monkeypatch):
         loop.bind([z[:, :-1], p], outs["value"])
     with pytest.raises(InputError, match="C-ordered"):
         loop.bind([np.asfortranarray(z), p], outs["value"])
+
+
+@pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None, reason="no C compiler")
+def test_site_table_runs_the_bound_loops_and_reports_a_failure(tmp_path, monkeypatch):
+    """One compiled pass over a table of bound site loops writes what their own calls write;
+    the first loop that fails is reported by its index and named by its error; a call that is
+    not a compiled site loop gives no table."""
+    monkeypatch.setenv("MBPLAN_CACHE_DIR", str(tmp_path))
+    case = CASE["rotational_dynamics_torque"]
+    fn = case.build(jit=True, name="table_probe")
+    rng = np.random.default_rng(5)
+    z, p, lam = (rng.standard_normal((4, width)) for width in (fn.nz, fn.np, fn.m))
+    widths = {"value": (fn.m,), "jacobian": (fn.m, fn.jac_nnz)}
+    widths["hessian"] = (fn.m, fn.jac_nnz, fn.hess_nnz)
+    outs = {kind: [np.zeros((4, w)) for w in ws] for kind, ws in widths.items()}
+    calls = [fn.bind(k, [z, p, lam][: 2 + (k == "hessian")], outs[k]) for k in widths]
+    for call in calls:
+        call()
+    expected = [a.copy() for arrays in outs.values() for a in arrays]
+    for arrays in outs.values():
+        for a in arrays:
+            a[...] = np.nan
+    table = site_table(calls)
+    assert table is not None and table.shape == (3, 4) and not table.flags.writeable
+    assert run_site_loops(table) == -1
+    got = [a for arrays in outs.values() for a in arrays]
+    for a, b in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(a, b)
+    loop_type = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p)
+    failing = loop_type(lambda sites, args, res: 1)
+    rows = table.copy()
+    rows[1, 0] = ctypes.cast(failing, ctypes.c_void_p).value
+    assert run_site_loops(rows) == 1
+    assert "table_probe_jacobian: compiled evaluation failed" in str(calls[1].failure())
+    interpreted = case.build(name="table_probe")
+    assert site_table([calls[0], interpreted.bind("value", [z, p], outs["value"])]) is None
 
 
 # ---------------------------------------------------------------------------------------------

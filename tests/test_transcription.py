@@ -7,9 +7,10 @@ import pytest
 
 from mbplan import paper
 from mbplan.engine import RiemannianFunction
+from mbplan.engine.jit import jit_available
 from mbplan.errors import InputError
 from mbplan.formulations.free_body import FreeBodyNLP
-from mbplan.lie import R
+from mbplan.lie import SO3, R
 from mbplan.planning.initial_guess import initial_path
 from mbplan.tasks.drone import cluttered_task
 from mbplan.transcription import Block, Term, TrajectoryProblem, TrajectoryVariables
@@ -187,3 +188,63 @@ def test_problems_of_one_structure_share_patterns_not_parameters_or_buffers():
     same = TrajectoryProblem(listed, [term])
     assert same._layouts["cost"][0].index is a._layouts["cost"][0].index
     assert same.evaluate(u).objective == ev_a.objective
+
+
+@pytest.mark.skipif(not jit_available(), reason="no C compiler")
+def test_compiled_term_pass_equals_the_term_by_term_calls(monkeypatch):
+    """A problem of compiled terms runs their site loops in one compiled pass; its values,
+    derivatives and Hessian equal, bit for bit, those of the term-by-term calls."""
+    import mbplan.transcription.problem as problem_module
+
+    A = np.arange(9.0).reshape(3, 3) + np.eye(3)
+    step = RiemannianFunction(
+        "pass_probe_step",
+        [("Ra", SO3), ("Rb", SO3), ("p", R(3))],
+        lambda Ra, Rb, p, w: cs.vertcat(cs.vec(cs.mtimes([Ra, A, Rb.T])), w * p * cs.sumsqr(p)),
+        [("w", 1)],
+        jit=True,
+    )
+    cost = RiemannianFunction(
+        "pass_probe_cost",
+        [("p", R(3))],
+        lambda p: cs.sumsqr(p) ** 2,
+        jit=True,
+    )
+    variables = TrajectoryVariables([Block("R", SO3, 4, fixed=(0,)), Block("p", R(3), 4)])
+
+    bind = {"Ra": ("R", [0, 1, 2]), "Rb": ("R", [1, 2, 3]), "p": ("p", [1, 2, 3])}
+
+    def build() -> TrajectoryProblem:
+        terms = [
+            Term("c", "cost", cost, {"p": ("p", [1, 2, 3])}),
+            Term("s", "eq", step, bind, {"w": 2.0}),
+            Term("g", "ineq", cost, {"p": ("p", [0, 3])}),
+        ]
+        return TrajectoryProblem(variables, terms)
+
+    rng = np.random.default_rng(3)
+    x = {"R": SO3.exp(rng.standard_normal((4, 3))), "p": rng.standard_normal((4, 3))}
+    compiled = build()
+    y, z = rng.standard_normal(compiled.n_eq), rng.standard_normal(compiled.n_ineq)
+
+    def evaluations(prob: TrajectoryProblem) -> tuple:
+        return prob.evaluate(x, 0.5, y, z), prob.evaluate(x, hessian=False), prob.values(x)
+
+    results = [evaluations(compiled)]
+    assert all(compiled._bound[k][1] is not None for k in ("value", "jacobian", "hessian"))
+    monkeypatch.setattr(problem_module, "site_table", lambda calls: None)
+    by_term = build()
+    results.append(evaluations(by_term))
+    assert by_term._bound["hessian"][1] is None
+    (ev_a, plain_a, val_a), (ev_b, plain_b, val_b) = results
+    for a, b in ((ev_a, ev_b), (plain_a, plain_b)):
+        assert a.objective == b.objective
+        for name in ("gradient", "eq", "ineq"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        for name in ("eq_jacobian", "ineq_jacobian"):
+            np.testing.assert_array_equal(getattr(a, name).toarray(), getattr(b, name).toarray())
+    np.testing.assert_array_equal(ev_a.hessian_lower.toarray(), ev_b.hessian_lower.toarray())
+    assert plain_a.hessian_lower is None
+    assert val_a[0] == val_b[0]
+    for a, b in zip(val_a[1:], val_b[1:], strict=True):
+        np.testing.assert_array_equal(a, b)

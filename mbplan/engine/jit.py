@@ -123,7 +123,22 @@ class _BoundLoop:
 
     def __call__(self) -> None:
         if self._loop(self._sites, self._args, self._res):
-            raise MbplanError(f"{self._name}: compiled evaluation failed")
+            raise self.failure()
+
+    def failure(self) -> MbplanError:
+        """The error of a call whose loop reported a failure."""
+        return MbplanError(f"{self._name}: compiled evaluation failed")
+
+    def table_row(self) -> tuple[int, int, int, int]:
+        """``(entry point, sites, argument pointers, result pointers)`` as addresses: how a
+        compiled caller makes this call (:mod:`mbplan.engine.site_table`); valid while this
+        object lives."""
+        return (
+            ctypes.cast(self._loop, ctypes.c_void_p).value,
+            self._sites.value,
+            ctypes.addressof(self._args),
+            ctypes.addressof(self._res),
+        )
 
 
 def compile_function(fn: cs.Function, flags: tuple[str, ...] = DEFAULT_FLAGS) -> cs.Function:

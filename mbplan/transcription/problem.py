@@ -16,9 +16,15 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from mbplan.engine.site_table import run_site_loops, site_table
 from mbplan.errors import InputError
 from mbplan.finite import finite_vector
 from mbplan.memo import RecentMemo
+from mbplan.transcription.evaluation_kernels import (
+    collect_derivatives,
+    collect_values,
+    gather_inputs,
+)
 from mbplan.transcription.sparse import sparse_pattern
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Point, TrajectoryVariables
@@ -131,10 +137,6 @@ class _Structure:
         self.rows = {
             kind: _cat_index([ix.rows.ravel() for ix in ixs]) for kind, ixs in by_kind.items()
         }
-        # kinds whose terms fill the rows in order, once each: the scatter is a concatenation
-        self.rows_in_order = {
-            kind: np.array_equal(rows, np.arange(len(rows))) for kind, rows in self.rows.items()
-        }
         self.jac_patterns = {
             kind: sparse_pattern(
                 _cat_index([ix.jac_rows.ravel() for ix in by_kind[kind]]),
@@ -147,12 +149,23 @@ class _Structure:
         cols = _cat_index([ix.jac_cols.ravel() for ix in by_kind["cost"]])
         self.grad_cols = np.where(cols >= 0, cols, self.n)
         ordered = [ix for kind in ("cost", "eq", "ineq") for ix in by_kind[kind]]
+        # every term's inputs in one array, kind by kind (the problem's input buffers): where
+        # each entry comes from in the packed point, and its multiplier in (y, z) (-1: σ)
+        self.z_gather = _cat_index([ix.z_index.ravel() for ix in ordered])
+        lam_offset = {"cost": None, "eq": 0, "ineq": self.n_eq}
+        self.lam_source = _cat_index(
+            [
+                np.full(ix.rows.size, -1, np.int64) if kind == "cost" else ix.rows.ravel() + off
+                for kind, off in lam_offset.items()
+                for ix in by_kind[kind]
+            ]
+        )
         self.hess_pattern = sparse_pattern(
             _cat_index([ix.hess_rows.ravel() for ix in ordered]),
             _cat_index([ix.hess_cols.ravel() for ix in ordered]),
             (self.n, self.n),
         )
-        for a in (*self.rows.values(), self.grad_cols):
+        for a in (*self.rows.values(), self.grad_cols, self.z_gather, self.lam_source):
             a.setflags(write=False)
 
 
@@ -181,14 +194,13 @@ def _structure(variables: TrajectoryVariables, terms: Sequence[Term]) -> _Struct
 class _TermLayout:
     """One term of a problem: its index maps, packed parameters and evaluation buffers."""
 
-    def __init__(self, term: Term, index: _TermIndex) -> None:
-        f = term.function
+    def __init__(self, term: Term, index: _TermIndex, z: np.ndarray, lam: np.ndarray) -> None:
         self.term, self.index = term, index
-        self.parameters = f.pack_parameters(term.parameters, term.sites)
-        # evaluation buffers: inputs refilled in place, outputs views of the problem's
-        # per-kind arrays (set by TrajectoryProblem), compiled calls bound to them on first use
-        self.z = np.empty((term.sites, f.nz))
-        self.lam = np.empty((term.sites, f.m))
+        self.parameters = term.function.pack_parameters(term.parameters, term.sites)
+        # evaluation buffers, views of the problem's arrays: inputs ``(K, nz)`` and multipliers
+        # ``(K, m)`` refilled in place, outputs (set by TrajectoryProblem); the compiled calls
+        # are bound to them on first use
+        self.z, self.lam = z, lam
         self.outputs: dict[str, list[np.ndarray]] = {}
         self._calls: dict[str, Callable[[], None]] = {}
 
@@ -210,12 +222,24 @@ class TrajectoryProblem:
         self.terms = list(terms)
         self._structure = s = _structure(variables, self.terms)
         self.n, self.n_eq, self.n_ineq = s.n, s.n_eq, s.n_ineq
-        self._layouts: dict[str, list[_TermLayout]] = {"cost": [], "eq": [], "ineq": []}
+        by_kind: dict[str, list[tuple[Term, _TermIndex]]] = {"cost": [], "eq": [], "ineq": []}
         for t, ix in zip(self.terms, s.indices, strict=True):
-            self._layouts[t.kind].append(_TermLayout(t, ix))
-        self._all_layouts = [lay for kind in ("cost", "eq", "ineq") for lay in self._layouts[kind]]
+            by_kind[t.kind].append((t, ix))
+        ordered = [pair for kind in ("cost", "eq", "ineq") for pair in by_kind[kind]]
+        # every term's inputs and multipliers as views of one array each, in the structure's
+        # order (z_gather, lam_source): one compiled pass fills them
+        self._z, z_views = _views([ix.z_index.shape for _, ix in ordered])
+        self._lam, lam_views = _views([ix.rows.shape for _, ix in ordered])
+        self._all_layouts = [
+            _TermLayout(t, ix, z, lam)
+            for (t, ix), z, lam in zip(ordered, z_views, lam_views, strict=True)
+        ]
+        self._layouts: dict[str, list[_TermLayout]] = {
+            kind: [lay for lay in self._all_layouts if lay.term.kind == kind]
+            for kind in ("cost", "eq", "ineq")
+        }
         self._output_buffers()
-        self._bound: dict[str, list[Callable[[], None]]] = {}
+        self._bound: dict[str, tuple[list[Callable[[], None]], np.ndarray | None]] = {}
 
     # ------------------------------------------------------------------ buffers
     def _output_buffers(self) -> None:
@@ -224,9 +248,7 @@ class TrajectoryProblem:
         the evaluated nonzeros are assembled without concatenating per-term arrays."""
 
         def views(sizes: list[int]) -> tuple[np.ndarray, list[np.ndarray]]:
-            flat = np.empty(sum(sizes))
-            starts = np.cumsum([0, *sizes])
-            return flat, [flat[a:b] for a, b in itertools.pairwise(starts)]
+            return _views([(size,) for size in sizes])
 
         self._residuals, self._jacobians, self._cost_residuals = {}, {}, []
         for kind, lays in self._layouts.items():
@@ -260,34 +282,43 @@ class TrajectoryProblem:
         return self.variables.retract(point, dx)
 
     # ------------------------------------------------------------------ evaluation
-    def _scatter(self, kind: str) -> np.ndarray:
-        """The residual vector of ``kind`` from the terms' residuals (a fresh array)."""
-        parts = self._residuals[kind]
-        if self._structure.rows_in_order[kind]:
-            return parts + 0.0  # what bincount gives: 0 + v (-0.0 becomes 0.0)
-        size = self.n_eq if kind == "eq" else self.n_ineq
-        return np.bincount(self._structure.rows[kind], weights=parts, minlength=size)
+    def _gather(self, point: Point, lam: tuple[float, np.ndarray, np.ndarray] | None) -> None:
+        """Every term's packed variables from the point into its input buffer and, given
+        ``(σ, y, z)``, its multipliers into its ``lam`` buffer."""
+        s = self._structure
+        packed = self.variables.packed(point)
+        if lam is None:
+            gather_inputs(packed, s.z_gather, self._z, 0.0, _NONE, _NONE, _NO_INDEX, _NONE)
+        else:
+            gather_inputs(packed, s.z_gather, self._z, *lam, s.lam_source, self._lam)
 
-    def _gather(self, point: Point) -> None:
-        """Every term's packed variables from the point, into the term's input buffer."""
-        vec = self.variables.packed(point)
-        for lay in self._all_layouts:
-            vec.take(lay.index.z_index, out=lay.z, mode="clip")  # indices in range by construction
-
-    def _calls(self, kind: str) -> list[Callable[[], None]]:
-        """Every term's bound ``value``, ``jacobian`` or ``hessian`` call, in term order."""
-        calls = self._bound.get(kind)
-        if calls is None:
-            calls = self._bound[kind] = [lay.call(kind) for lay in self._all_layouts]
-        return calls
+    def _run(self, kind: str) -> None:
+        """Every term's bound ``value``, ``jacobian`` or ``hessian`` call, in term order: one
+        compiled pass over their C entry points when every term is compiled."""
+        bound = self._bound.get(kind)
+        if bound is None:
+            calls = [lay.call(kind) for lay in self._all_layouts]
+            bound = self._bound[kind] = (calls, site_table(calls))
+        calls, table = bound
+        if table is None:
+            for call in calls:
+                call()
+            return
+        failed = run_site_loops(table)
+        if failed >= 0:
+            raise calls[failed].failure()
 
     def values(self, point: Point) -> tuple[float, np.ndarray, np.ndarray]:
         """Objective, equality and inequality residuals (for line-search trials)."""
-        self._gather(point)
-        for call in self._calls("value"):
-            call()
+        self._gather(point, None)
+        self._run("value")
         f = float(sum(r.sum() for r in self._cost_residuals))
-        return f, self._scatter("eq"), self._scatter("ineq")
+        s = self._structure
+        eq, ineq = collect_values(
+            self._residuals["eq"], s.rows["eq"], self.n_eq,
+            self._residuals["ineq"], s.rows["ineq"], self.n_ineq,
+        )  # fmt: skip
+        return f, eq, ineq
 
     def evaluate(
         self,
@@ -298,33 +329,51 @@ class TrajectoryProblem:
         hessian: bool = True,
     ) -> Evaluation:
         """Values, Riemannian gradient and Jacobians and (optionally) the Lagrangian Hessian."""
-        y = np.zeros(self.n_eq) if y is None else np.asarray(y, dtype=float)
-        z = np.zeros(self.n_ineq) if z is None else np.asarray(z, dtype=float)
+        y = np.zeros(self.n_eq) if y is None else np.ascontiguousarray(y, dtype=float)
+        z = np.zeros(self.n_ineq) if z is None else np.ascontiguousarray(z, dtype=float)
         if y.shape != (self.n_eq,) or z.shape != (self.n_ineq,):
             raise InputError(f"multipliers must have shapes ({self.n_eq},), ({self.n_ineq},)")
         if not (math.isfinite(obj_factor) and finite_vector(y) and finite_vector(z)):
             raise InputError("objective factor or multipliers contain NaN or inf")
-        self._gather(point)
-        if hessian:
-            for lay in self._layouts["cost"]:
-                lay.lam.fill(float(obj_factor))
-            for lay in self._layouts["eq"]:
-                y.take(lay.index.rows, out=lay.lam, mode="clip")
-            for lay in self._layouts["ineq"]:
-                z.take(lay.index.rows, out=lay.lam, mode="clip")
-        for call in self._calls("hessian" if hessian else "jacobian"):
-            call()
+        self._gather(point, (float(obj_factor), y, z) if hessian else None)
+        self._run("hessian" if hessian else "jacobian")
         s = self._structure
-        grad = np.bincount(s.grad_cols, weights=self._jacobians["cost"], minlength=self.n + 1)
+        eq_pattern, ineq_pattern = s.jac_patterns["eq"], s.jac_patterns["ineq"]
+        hess_pattern = s.hess_pattern
+        grad, eq, ineq, eq_data, ineq_data, hess_data = collect_derivatives(
+            self._jacobians["cost"], s.grad_cols, self.n,
+            self._residuals["eq"], s.rows["eq"], self.n_eq,
+            self._residuals["ineq"], s.rows["ineq"], self.n_ineq,
+            self._jacobians["eq"], eq_pattern.slot, eq_pattern.nnz,
+            self._jacobians["ineq"], ineq_pattern.slot, ineq_pattern.nnz,
+            self._hessians, hess_pattern.slot if hessian else _NO_INDEX, hess_pattern.nnz,
+        )  # fmt: skip
         return Evaluation(
             objective=float(self._residuals["cost"].sum()),
-            gradient=grad[: self.n],
-            eq=self._scatter("eq"),
-            eq_jacobian=s.jac_patterns["eq"].assemble(self._jacobians["eq"]),
-            ineq=self._scatter("ineq"),
-            ineq_jacobian=s.jac_patterns["ineq"].assemble(self._jacobians["ineq"]),
-            hessian_lower=s.hess_pattern.assemble(self._hessians) if hessian else None,
+            gradient=grad,
+            eq=eq,
+            eq_jacobian=eq_pattern.wrap(eq_data),
+            ineq=ineq,
+            ineq_jacobian=ineq_pattern.wrap(ineq_data),
+            hessian_lower=hess_pattern.wrap(hess_data) if hessian else None,
         )
+
+
+_NONE = np.zeros(0)  # never written (an empty lam buffer skips the multipliers)
+_NO_INDEX = np.zeros(0, np.int64)
+_NO_INDEX.setflags(write=False)  # typed as the structure's read-only index arrays
+
+
+def _views(shapes: list[tuple[int, ...]]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """One flat array and its consecutive views of the given shapes."""
+    sizes = [math.prod(shape) for shape in shapes]
+    flat = np.empty(sum(sizes))
+    starts = np.cumsum([0, *sizes])
+    views = [
+        flat[a:b].reshape(shape)
+        for (a, b), shape in zip(itertools.pairwise(starts), shapes, strict=True)
+    ]
+    return flat, views
 
 
 def _cat_index(parts: list[np.ndarray]) -> np.ndarray:

@@ -30,29 +30,34 @@ class SparsePattern:
         self.rows, self.cols = unique // shape[1], unique % shape[1]
         self.nnz = len(unique)
         # dropped entries go to one extra bin past the matrix's, cut off after the sum
-        self._slot = np.full(len(cols), self.nnz, np.int64)
-        self._slot[kept] = slot.ravel()
+        self.slot = np.full(len(cols), self.nnz, np.int64)
+        self.slot[kept] = slot.ravel()
         indptr = np.concatenate([[0], np.cumsum(np.bincount(self.rows, minlength=shape[0]))])
         # int32 indices when they fit: scipy then skips an index-dtype pass per assembly
         itype = np.int32 if max(self.nnz, *shape) < np.iinfo(np.int32).max else np.int64
         self._indptr, self._cols = indptr.astype(itype), self.cols.astype(itype)
         # every assembled matrix shares these (and the memo shares them across problems):
         # read-only, so that an in-place scipy operation on one cannot corrupt the others
-        for index in (self._indptr, self._cols):
+        for index in (self._indptr, self._cols, self.slot):
             index.setflags(write=False)
         self._template = sp.csr_matrix((np.zeros(self.nnz), self._cols, self._indptr), shape)
         # canonical by construction (sorted unique keys): scipy's flag, copied with the template
         self._template.has_canonical_format = True
 
     def assemble(self, values: np.ndarray) -> sp.csr_matrix:
-        # a shallow copy of the validated template with new data (what copy.copy does, without
-        # its reduce protocol): scipy's constructor checks the fixed index arrays on every call
+        """The matrix of the values at the pattern's entries (repeated entries summed)."""
+        values = np.asarray(values, dtype=float)
+        if values.shape != self.slot.shape:
+            raise InputError(f"{len(self.slot)} values expected, got shape {values.shape}")
+        return self.wrap(accumulate(self.slot, values, self.nnz + 1)[: self.nnz])
+
+    def wrap(self, data: np.ndarray) -> sp.csr_matrix:
+        """The matrix with the nonzeros ``data`` (length :attr:`nnz`, kept as given): a shallow
+        copy of the validated template (what copy.copy does, without its reduce protocol),
+        since scipy's constructor checks the fixed index arrays on every call."""
         out = sp.csr_matrix.__new__(sp.csr_matrix)
         out.__dict__.update(self._template.__dict__)
-        values = np.asarray(values, dtype=float)
-        if values.shape != self._slot.shape:
-            raise InputError(f"{len(self._slot)} values expected, got shape {values.shape}")
-        out.data = _accumulate(self._slot, values, self.nnz + 1)[: self.nnz]
+        out.data = data
         return out
 
 
@@ -76,7 +81,7 @@ def sparse_pattern(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -
 
 
 @nb.njit(cache=True)
-def _accumulate(slot: np.ndarray, values: np.ndarray, bins: int) -> np.ndarray:
+def accumulate(slot: np.ndarray, values: np.ndarray, bins: int) -> np.ndarray:
     """``np.bincount(slot, weights=values, minlength=bins)`` (the same additions in the same
     order) in one pass, without bincount's pass for the largest index."""
     out = np.zeros(bins)
