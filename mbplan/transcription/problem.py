@@ -16,11 +16,13 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from mbplan.engine.site_table import run_site_loops, site_table
+from mbplan.engine.jit import announce_uncached_numba
+from mbplan.engine.site_table import SITE_TABLE_KERNELS, run_site_loops, site_table
 from mbplan.errors import InputError
 from mbplan.finite import finite_vector
 from mbplan.memo import RecentMemo
 from mbplan.transcription.evaluation_kernels import (
+    EVALUATION_KERNELS,
     collect_derivatives,
     collect_values,
     gather_inputs,
@@ -100,6 +102,7 @@ class _Structure:
         names = [t.name for t in terms]
         if len(set(names)) != len(names):
             raise InputError(f"duplicate term names: {names}")
+        announce_uncached_numba(*EVALUATION_KERNELS, *SITE_TABLE_KERNELS)  # first run only
         index = {name: variables.tangent_index(name) for name in variables.blocks}
         for t in terms:
             for arg, (block, ix) in t.bind.items():
