@@ -30,8 +30,8 @@ from mbplan.dynamics import (
     translational_kinematics,
 )
 from mbplan.engine import DerivativeCheck, RiemannianFunction, check_derivatives
-from mbplan.engine.site_table import run_site_loops, site_table
-from mbplan.errors import InputError
+from mbplan.engine.site_table import SiteTable, run_site_loops, site_table
+from mbplan.errors import InputError, MbplanError
 from mbplan.lie import SE3, SL, SO, SO3, R
 from mbplan.lie.so3 import SO3Group
 from mbplan.transcription.costs import chordal_cost, quadratic_cost
@@ -690,17 +690,24 @@ def test_site_table_runs_the_bound_loops_and_reports_a_failure(tmp_path, monkeyp
         for a in arrays:
             a[...] = np.nan
     table = site_table(calls)
-    assert table is not None and table.shape == (3, 4) and not table.flags.writeable
-    assert run_site_loops(table) == -1
+    assert isinstance(table, SiteTable) and not table.rows.flags.writeable
+    table()
     got = [a for arrays in outs.values() for a in arrays]
     for a, b in zip(got, expected, strict=True):
         np.testing.assert_array_equal(a, b)
+    # a failing second loop: reported by its index, the first loop ran, the third did not
     loop_type = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p)
     failing = loop_type(lambda sites, args, res: 1)
-    rows = table.copy()
+    rows = table.rows.copy()
     rows[1, 0] = ctypes.cast(failing, ctypes.c_void_p).value
+    for a in got:
+        a[...] = np.nan
     assert run_site_loops(rows) == 1
-    assert "table_probe_jacobian: compiled evaluation failed" in str(calls[1].failure())
+    np.testing.assert_array_equal(outs["value"][0], expected[0])
+    assert np.isnan(outs["hessian"][2]).all()
+    table.rows = rows
+    with pytest.raises(MbplanError, match="table_probe_jacobian: compiled evaluation failed"):
+        table()
     interpreted = case.build(name="table_probe")
     assert site_table([calls[0], interpreted.bind("value", [z, p], outs["value"])]) is None
 

@@ -8,6 +8,7 @@ import pytest
 from mbplan import paper
 from mbplan.engine import RiemannianFunction
 from mbplan.engine.jit import jit_available
+from mbplan.engine.site_table import SiteTable
 from mbplan.errors import InputError
 from mbplan.formulations.free_body import FreeBodyNLP
 from mbplan.lie import SO3, R
@@ -231,11 +232,12 @@ def test_compiled_term_pass_equals_the_term_by_term_calls(monkeypatch):
         return prob.evaluate(x, 0.5, y, z), prob.evaluate(x, hessian=False), prob.values(x)
 
     results = [evaluations(compiled)]
-    assert all(compiled._bound[k][1] is not None for k in ("value", "jacobian", "hessian"))
+    kinds = ("value", "jacobian", "hessian")
+    assert all(isinstance(compiled._bound[k], SiteTable) for k in kinds)
     monkeypatch.setattr(problem_module, "site_table", lambda calls: None)
     by_term = build()
     results.append(evaluations(by_term))
-    assert by_term._bound["hessian"][1] is None
+    assert not isinstance(by_term._bound["hessian"], SiteTable)
     (ev_a, plain_a, val_a), (ev_b, plain_b, val_b) = results
     for a, b in ((ev_a, ev_b), (plain_a, plain_b)):
         assert a.objective == b.objective
@@ -248,3 +250,67 @@ def test_compiled_term_pass_equals_the_term_by_term_calls(monkeypatch):
     assert val_a[0] == val_b[0]
     for a, b in zip(val_a[1:], val_b[1:], strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_evaluation_passes_equal_per_term_gathers_and_bincounts():
+    """The one-pass gather of inputs and multipliers and the one-pass sums give, bit for bit,
+    per-term ``take`` and NumPy ``bincount`` over the structure's maps: kinds interleaved in
+    the term list, rows shared and reversed (summed), with and without inequalities, a
+    read-only ``y``, with and without the Hessian."""
+    step = RiemannianFunction(
+        "order_probe_step",
+        [("Ra", SO3), ("p", R(3))],
+        lambda Ra, p, w: cs.vertcat(cs.vec(Ra) * w, p * cs.sumsqr(p)),
+        [("w", 1)],
+    )
+    cost = RiemannianFunction("order_probe_cost", [("p", R(3))], lambda p: cs.sumsqr(p) ** 2)
+    variables = TrajectoryVariables([Block("R", SO3, 4, fixed=(0,)), Block("p", R(3), 4)])
+    shared = np.arange(24)[::-1].reshape(2, 12)  # into the first term's rows, reversed
+
+    def terms(with_ineq: bool) -> list[Term]:
+        listed = [
+            Term("s1", "eq", step, {"Ra": ("R", [0, 1, 2]), "p": ("p", [1, 2, 3])}, {"w": 2.0}),
+            Term("c1", "cost", cost, {"p": ("p", [1, 3])}),
+            Term("s2", "eq", step, {"Ra": ("R", [3, 2]), "p": ("p", [0, 1])}, {"w": -1.0}, shared),
+            Term("c2", "cost", cost, {"p": ("p", [0])}),
+        ]
+        if with_ineq:
+            listed.insert(1, Term("g", "ineq", cost, {"p": ("p", [0, 3])}))
+        return listed
+
+    def bincount(slot: np.ndarray, values: np.ndarray, size: int) -> np.ndarray:
+        return np.bincount(slot, weights=values, minlength=size)
+
+    rng = np.random.default_rng(4)
+    x = {"R": SO3.exp(rng.standard_normal((4, 3))), "p": rng.standard_normal((4, 3))}
+    for with_ineq in (True, False):
+        prob = TrajectoryProblem(variables, terms(with_ineq))
+        s = prob._structure
+        assert (prob.n_eq, prob.n_ineq) == (36, 2 if with_ineq else 0)
+        y, z = rng.standard_normal(prob.n_eq), rng.standard_normal(prob.n_ineq)
+        y.setflags(write=False)
+        for ev in (prob.evaluate(x, 0.7, y, z), prob.evaluate(x, hessian=False)):
+            packed = variables.packed(x)
+            for lay in prob._all_layouts:
+                np.testing.assert_array_equal(lay.z, packed.take(lay.index.z_index))
+                kind = lay.term.kind
+                if ev.hessian_lower is not None:
+                    lam = {"cost": np.full(prob.n_eq + prob.n_ineq, 0.7), "eq": y, "ineq": z}
+                    np.testing.assert_array_equal(lay.lam, lam[kind].take(lay.index.rows))
+            grad = bincount(s.grad_cols, prob._jacobians["cost"], prob.n + 1)[: prob.n]
+            np.testing.assert_array_equal(ev.gradient, grad)
+            for kind, size in (("eq", prob.n_eq), ("ineq", prob.n_ineq)):
+                residual = bincount(s.rows[kind], prob._residuals[kind], size)
+                np.testing.assert_array_equal(getattr(ev, kind), residual)
+                pattern = s.jac_patterns[kind]
+                data = bincount(pattern.slot, prob._jacobians[kind], pattern.nnz + 1)
+                np.testing.assert_array_equal(getattr(ev, kind + "_jacobian").data, data[:-1])
+            if ev.hessian_lower is not None:
+                pattern = s.hess_pattern
+                data = bincount(pattern.slot, prob._hessians, pattern.nnz + 1)
+                np.testing.assert_array_equal(ev.hessian_lower.data, data[:-1])
+        f, eq, ineq = prob.values(x)
+        np.testing.assert_array_equal(eq, bincount(s.rows["eq"], prob._residuals["eq"], 36))
+        assert f == pytest.approx(ev.objective, rel=1e-15) and ineq.shape == (prob.n_ineq,)
+    with pytest.raises(InputError, match="rows must be non-negative"):
+        Term("bad", "eq", step, {"Ra": ("R", [1]), "p": ("p", [1])}, {"w": 1.0}, -np.ones((1, 12)))

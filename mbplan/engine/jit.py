@@ -89,7 +89,7 @@ class SiteLoop:
         self._loop.argtypes = [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p]
         self._loop.restype = ctypes.c_int
 
-    def bind(self, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]) -> _BoundLoop:
+    def bind(self, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]) -> BoundLoop:
         """The evaluation at the sites of these arrays, bound to their memory: every call reads
         the inputs' current values and overwrites the outputs."""
         K = inputs[0].shape[0] if inputs else 0
@@ -105,10 +105,10 @@ class SiteLoop:
                         f"{self.name}: {what} must be a C-ordered float array of shape "
                         f"{(K, width)}, got {a.dtype} {a.shape}"
                     )
-        return _BoundLoop(self, K, inputs, outputs)
+        return BoundLoop(self, K, inputs, outputs)
 
 
-class _BoundLoop:
+class BoundLoop:
     """:meth:`SiteLoop.bind`'s call; holds the arrays whose memory it reads and writes."""
 
     __slots__ = ("_args", "_keep", "_loop", "_name", "_res", "_sites")

@@ -1,4 +1,4 @@
-"""Bound site loops (:class:`~mbplan.engine.jit.SiteLoop`) called from compiled code: a table of
+"""Bound site loops (:class:`~mbplan.engine.jit.BoundLoop`) called from compiled code: a table of
 their C entry points and argument arrays, run by one numba call instead of one ctypes call per
 term (each loop reads and writes the same memory as its Python call)."""
 
@@ -12,7 +12,7 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-from mbplan.engine.jit import _BoundLoop
+from mbplan.engine.jit import BoundLoop, announce_uncached_numba
 
 
 @intrinsic
@@ -31,25 +31,36 @@ def _call_site_loop(typingctx, address, sites, args, res):  # pragma: no cover -
     return sig, codegen
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def run_site_loops(table: np.ndarray) -> int:  # pragma: no cover - compiled
     """Call every row ``(entry point, sites, argument pointers, result pointers)`` of ``table``
-    in order; the index of the first loop that reports a failure, or -1."""
+    in order, up to the first loop that reports a failure; its index, or -1."""
     for i in range(table.shape[0]):
         if _call_site_loop(table[i, 0], table[i, 1], table[i, 2], table[i, 3]):
             return i
     return -1
 
 
-def site_table(calls: Sequence[Callable[[], None]]) -> np.ndarray | None:
-    """The table of ``calls`` for :func:`run_site_loops` (read-only; it points into memory the
-    calls keep alive), or ``None`` if one of them is not a compiled site loop."""
-    if not all(type(c) is _BoundLoop for c in calls):
+class SiteTable:
+    """Bound site loops run in order by one compiled call (:func:`run_site_loops`); it keeps
+    the calls, whose memory the table's addresses point into."""
+
+    def __init__(self, calls: Sequence[BoundLoop]) -> None:
+        announce_uncached_numba(run_site_loops)  # first run only
+        self.calls = tuple(calls)
+        self.rows = np.array([c.table_row() for c in self.calls], np.int64).reshape(-1, 4)
+        self.rows.setflags(write=False)
+
+    def __call__(self) -> None:
+        """Run every loop; a failing one raises its call's error (the later ones do not run)."""
+        failed = run_site_loops(self.rows)
+        if failed >= 0:
+            raise self.calls[failed].failure()
+
+
+def site_table(calls: Sequence[Callable[[], None]]) -> SiteTable | None:
+    """The :class:`SiteTable` of ``calls``, or ``None`` if one of them is not a compiled site
+    loop."""
+    if not all(type(c) is BoundLoop for c in calls):
         return None
-    rows = [c.table_row() for c in calls]
-    table = np.array(rows, dtype=np.int64).reshape(len(rows), 4)
-    table.setflags(write=False)
-    return table
-
-
-SITE_TABLE_KERNELS = (run_site_loops,)  # compiled entry points (for the cache check)
+    return SiteTable(calls)

@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba
-from mbplan.engine.site_table import SITE_TABLE_KERNELS, run_site_loops, site_table
+from mbplan.engine.site_table import SiteTable, site_table
 from mbplan.errors import InputError
 from mbplan.finite import finite_vector
 from mbplan.memo import RecentMemo
@@ -102,7 +102,7 @@ class _Structure:
         names = [t.name for t in terms]
         if len(set(names)) != len(names):
             raise InputError(f"duplicate term names: {names}")
-        announce_uncached_numba(*EVALUATION_KERNELS, *SITE_TABLE_KERNELS)  # first run only
+        announce_uncached_numba(*EVALUATION_KERNELS)  # first run only
         index = {name: variables.tangent_index(name) for name in variables.blocks}
         for t in terms:
             for arg, (block, ix) in t.bind.items():
@@ -155,13 +155,10 @@ class _Structure:
         # every term's inputs in one array, kind by kind (the problem's input buffers): where
         # each entry comes from in the packed point, and its multiplier in (y, z) (-1: σ)
         self.z_gather = _cat_index([ix.z_index.ravel() for ix in ordered])
-        lam_offset = {"cost": None, "eq": 0, "ineq": self.n_eq}
         self.lam_source = _cat_index(
-            [
-                np.full(ix.rows.size, -1, np.int64) if kind == "cost" else ix.rows.ravel() + off
-                for kind, off in lam_offset.items()
-                for ix in by_kind[kind]
-            ]
+            [np.full(ix.rows.size, -1, np.int64) for ix in by_kind["cost"]]
+            + [ix.rows.ravel() for ix in by_kind["eq"]]
+            + [ix.rows.ravel() + self.n_eq for ix in by_kind["ineq"]]
         )
         self.hess_pattern = sparse_pattern(
             _cat_index([ix.hess_rows.ravel() for ix in ordered]),
@@ -242,32 +239,29 @@ class TrajectoryProblem:
             for kind in ("cost", "eq", "ineq")
         }
         self._output_buffers()
-        self._bound: dict[str, tuple[list[Callable[[], None]], np.ndarray | None]] = {}
+        self._bound: dict[str, SiteTable | _CallsInOrder] = {}
 
     # ------------------------------------------------------------------ buffers
     def _output_buffers(self) -> None:
         """One array per kind for the residuals and for the Jacobian nonzeros, one for all
-        Hessian nonzeros, in term order: each term's outputs are ``(K, ·)`` views into them, so
+        Hessian nonzeros (cost, equality, then inequality terms): each term's outputs are ``(K, ·)`` views into them, so
         the evaluated nonzeros are assembled without concatenating per-term arrays."""
-
-        def views(sizes: list[int]) -> tuple[np.ndarray, list[np.ndarray]]:
-            return _views([(size,) for size in sizes])
 
         self._residuals, self._jacobians, self._cost_residuals = {}, {}, []
         for kind, lays in self._layouts.items():
-            self._residuals[kind], res = views(
-                [lay.term.sites * lay.term.function.m for lay in lays]
+            self._residuals[kind], res = _views(
+                [(lay.term.sites * lay.term.function.m,) for lay in lays]
             )
-            jac_sizes = [lay.term.sites * lay.term.function.jac_nnz for lay in lays]
-            self._jacobians[kind], jac = views(jac_sizes)
+            jac_shapes = [(lay.term.sites * lay.term.function.jac_nnz,) for lay in lays]
+            self._jacobians[kind], jac = _views(jac_shapes)
             for lay, r, j in zip(lays, res, jac, strict=True):
                 K = lay.term.sites
                 r2, j2 = r.reshape(K, -1), j.reshape(K, -1)
                 lay.outputs = {"value": [r2], "jacobian": [r2, j2], "hessian": [r2, j2]}
             if kind == "cost":
                 self._cost_residuals = res
-        self._hessians, hess = views(
-            [lay.term.sites * lay.term.function.hess_nnz for lay in self._all_layouts]
+        self._hessians, hess = _views(
+            [(lay.term.sites * lay.term.function.hess_nnz,) for lay in self._all_layouts]
         )
         for lay, h in zip(self._all_layouts, hess, strict=True):
             lay.outputs["hessian"].append(h.reshape(lay.term.sites, -1))
@@ -291,25 +285,22 @@ class TrajectoryProblem:
         s = self._structure
         packed = self.variables.packed(point)
         if lam is None:
-            gather_inputs(packed, s.z_gather, self._z, 0.0, _NONE, _NONE, _NO_INDEX, _NONE)
+            gather_inputs(
+                packed, s.z_gather, self._z, 0.0, _NO_MULTIPLIERS, _NO_MULTIPLIERS, _NO_INDEX,
+                _NO_MULTIPLIERS,
+            )  # fmt: skip
         else:
             gather_inputs(packed, s.z_gather, self._z, *lam, s.lam_source, self._lam)
 
     def _run(self, kind: str) -> None:
-        """Every term's bound ``value``, ``jacobian`` or ``hessian`` call, in term order: one
-        compiled pass over their C entry points when every term is compiled."""
-        bound = self._bound.get(kind)
-        if bound is None:
+        """Every term's bound ``value``, ``jacobian`` or ``hessian`` call (cost, equality, then
+        inequality terms): one compiled pass over their C entry points when every term is
+        compiled (:class:`~mbplan.engine.site_table.SiteTable`)."""
+        run = self._bound.get(kind)
+        if run is None:
             calls = [lay.call(kind) for lay in self._all_layouts]
-            bound = self._bound[kind] = (calls, site_table(calls))
-        calls, table = bound
-        if table is None:
-            for call in calls:
-                call()
-            return
-        failed = run_site_loops(table)
-        if failed >= 0:
-            raise calls[failed].failure()
+            run = self._bound[kind] = site_table(calls) or _CallsInOrder(calls)
+        run()
 
     def values(self, point: Point) -> tuple[float, np.ndarray, np.ndarray]:
         """Objective, equality and inequality residuals (for line-search trials)."""
@@ -332,10 +323,11 @@ class TrajectoryProblem:
         hessian: bool = True,
     ) -> Evaluation:
         """Values, Riemannian gradient and Jacobians and (optionally) the Lagrangian Hessian."""
-        y = np.zeros(self.n_eq) if y is None else np.ascontiguousarray(y, dtype=float)
-        z = np.zeros(self.n_ineq) if z is None else np.ascontiguousarray(z, dtype=float)
+        y = np.zeros(self.n_eq) if y is None else np.asarray(y, dtype=float)
+        z = np.zeros(self.n_ineq) if z is None else np.asarray(z, dtype=float)
         if y.shape != (self.n_eq,) or z.shape != (self.n_ineq,):
             raise InputError(f"multipliers must have shapes ({self.n_eq},), ({self.n_ineq},)")
+        y, z = np.ascontiguousarray(y), np.ascontiguousarray(z)
         if not (math.isfinite(obj_factor) and finite_vector(y) and finite_vector(z)):
             raise InputError("objective factor or multipliers contain NaN or inf")
         self._gather(point, (float(obj_factor), y, z) if hessian else None)
@@ -362,7 +354,18 @@ class TrajectoryProblem:
         )
 
 
-_NONE = np.zeros(0)  # never written (an empty lam buffer skips the multipliers)
+class _CallsInOrder:
+    """Calls run one after the other (terms that are not all compiled site loops)."""
+
+    def __init__(self, calls: Sequence[Callable[[], None]]) -> None:
+        self.calls = tuple(calls)
+
+    def __call__(self) -> None:
+        for call in self.calls:
+            call()
+
+
+_NO_MULTIPLIERS = np.zeros(0)  # no y, z; as the lam buffer: skips the multipliers (unwritten)
 _NO_INDEX = np.zeros(0, np.int64)
 _NO_INDEX.setflags(write=False)  # typed as the structure's read-only index arrays
 

@@ -63,6 +63,8 @@ class Term:
                 raise InputError(
                     f"term {self.name!r}: rows must have shape {(self.sites, self.function.m)}"
                 )
+            if self.rows.size and self.rows.min() < 0:
+                raise InputError(f"term {self.name!r}: rows must be non-negative")
 
     @classmethod
     def at_knots(
