@@ -244,9 +244,9 @@ class TrajectoryProblem:
     # ------------------------------------------------------------------ buffers
     def _output_buffers(self) -> None:
         """One array per kind for the residuals and for the Jacobian nonzeros, one for all
-        Hessian nonzeros (cost, equality, then inequality terms): each term's outputs are ``(K, ·)`` views into them, so
-        the evaluated nonzeros are assembled without concatenating per-term arrays."""
-
+        Hessian nonzeros (cost, equality, then inequality terms): each term's outputs are
+        ``(K, ·)`` views into them, so the evaluated nonzeros are summed without concatenating
+        per-term arrays."""
         self._residuals, self._jacobians, self._cost_residuals = {}, {}, []
         for kind, lays in self._layouts.items():
             self._residuals[kind], res = _views(
