@@ -30,7 +30,7 @@ from mbplan.dynamics import (
     translational_kinematics,
 )
 from mbplan.engine import DerivativeCheck, RiemannianFunction, check_derivatives
-from mbplan.engine.site_table import SiteTable, run_site_loops, site_table
+from mbplan.engine.site_table import CallsInOrder, SiteTable, bound_calls, run_site_loops
 from mbplan.errors import InputError, MbplanError
 from mbplan.lie import SE3, SL, SO, SO3, R
 from mbplan.lie.so3 import SO3Group
@@ -689,7 +689,7 @@ def test_site_table_runs_the_bound_loops_and_reports_a_failure(tmp_path, monkeyp
     for arrays in outs.values():
         for a in arrays:
             a[...] = np.nan
-    table = site_table(calls)
+    table = bound_calls(calls)
     assert isinstance(table, SiteTable) and not table.rows.flags.writeable
     table()
     got = [a for arrays in outs.values() for a in arrays]
@@ -709,7 +709,15 @@ def test_site_table_runs_the_bound_loops_and_reports_a_failure(tmp_path, monkeyp
     with pytest.raises(MbplanError, match="table_probe_jacobian: compiled evaluation failed"):
         table()
     interpreted = case.build(name="table_probe")
-    assert site_table([calls[0], interpreted.bind("value", [z, p], outs["value"])]) is None
+    # with a call that is not a compiled loop: the loops in a table, that call on its own
+    plain_out = np.zeros((4, fn.m))
+    plain = interpreted.bind("value", [z, p], [plain_out])
+    mixed = bound_calls([plain, calls[1], calls[2]])
+    assert isinstance(mixed, CallsInOrder) and mixed.calls[1:] == (plain,)
+    assert isinstance(mixed.calls[0], SiteTable) and mixed.calls[0].rows.shape == (2, 4)
+    mixed()
+    np.testing.assert_allclose(plain_out, expected[0], rtol=1e-14)
+    assert not any(isinstance(c, SiteTable) for c in bound_calls([plain]).calls)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -58,9 +58,23 @@ class SiteTable:
             raise self.calls[failed].failure()
 
 
-def site_table(calls: Sequence[Callable[[], None]]) -> SiteTable | None:
-    """The :class:`SiteTable` of ``calls``, or ``None`` if one of them is not a compiled site
-    loop."""
-    if not all(type(c) is BoundLoop for c in calls):
-        return None
-    return SiteTable(calls)
+class CallsInOrder:
+    """Calls run one after the other."""
+
+    def __init__(self, calls: Sequence[Callable[[], None]]) -> None:
+        self.calls = tuple(calls)
+
+    def __call__(self) -> None:
+        for call in self.calls:
+            call()
+
+
+def bound_calls(calls: Sequence[Callable[[], None]]) -> Callable[[], None]:
+    """One call running every call (each writes only its own outputs, so in any order): the
+    compiled site loops by one :class:`SiteTable`, the others (interpreted CasADi buffers,
+    callbacks) one by one."""
+    loops = [c for c in calls if type(c) is BoundLoop]
+    others = [c for c in calls if type(c) is not BoundLoop]
+    if not loops:
+        return CallsInOrder(others)
+    return SiteTable(loops) if not others else CallsInOrder([SiteTable(loops), *others])

@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba
-from mbplan.engine.site_table import SiteTable, site_table
+from mbplan.engine.site_table import bound_calls
 from mbplan.errors import InputError
 from mbplan.finite import finite_vector
 from mbplan.memo import RecentMemo
@@ -239,7 +239,7 @@ class TrajectoryProblem:
             for kind in ("cost", "eq", "ineq")
         }
         self._output_buffers()
-        self._bound: dict[str, SiteTable | _CallsInOrder] = {}
+        self._bound: dict[str, Callable[[], None]] = {}
 
     # ------------------------------------------------------------------ buffers
     def _output_buffers(self) -> None:
@@ -293,13 +293,11 @@ class TrajectoryProblem:
             gather_inputs(packed, s.z_gather, self._z, *lam, s.lam_source, self._lam)
 
     def _run(self, kind: str) -> None:
-        """Every term's bound ``value``, ``jacobian`` or ``hessian`` call (cost, equality, then
-        inequality terms): one compiled pass over their C entry points when every term is
-        compiled (:class:`~mbplan.engine.site_table.SiteTable`)."""
+        """Every term's bound ``value``, ``jacobian`` or ``hessian`` call: the compiled terms'
+        C loops in one compiled pass (:func:`~mbplan.engine.site_table.bound_calls`)."""
         run = self._bound.get(kind)
         if run is None:
-            calls = [lay.call(kind) for lay in self._all_layouts]
-            run = self._bound[kind] = site_table(calls) or _CallsInOrder(calls)
+            run = self._bound[kind] = bound_calls([lay.call(kind) for lay in self._all_layouts])
         run()
 
     def values(self, point: Point) -> tuple[float, np.ndarray, np.ndarray]:
@@ -352,17 +350,6 @@ class TrajectoryProblem:
             ineq_jacobian=ineq_pattern.wrap(ineq_data),
             hessian_lower=hess_pattern.wrap(hess_data) if hessian else None,
         )
-
-
-class _CallsInOrder:
-    """Calls run one after the other (terms that are not all compiled site loops)."""
-
-    def __init__(self, calls: Sequence[Callable[[], None]]) -> None:
-        self.calls = tuple(calls)
-
-    def __call__(self) -> None:
-        for call in self.calls:
-            call()
 
 
 _NO_MULTIPLIERS = np.zeros(0)  # no y, z; as the lam buffer: skips the multipliers (unwritten)
