@@ -47,6 +47,9 @@ class Evaluation:
     hessian_lower: sp.csr_matrix | None
 
 
+_KINDS = ("cost", "eq", "ineq")  # the order of the terms' kinds in every concatenated map
+
+
 @dataclass(frozen=True, eq=False)
 class _TermIndex:
     """Where one term's residual rows, tangent columns and packed inputs land in the NLP."""
@@ -133,9 +136,11 @@ class _Structure:
                 sizes[t.kind] = max(sizes[t.kind], int(rows.max(initial=-1)) + 1)
             self.indices.append(_TermIndex.of(t, rows, index, flat_index))
         self.n_eq, self.n_ineq = sizes["eq"], sizes["ineq"]
+        # the terms kind by kind (costs, equalities, inequalities), each kind in term order: the
+        # order of every concatenated map below and of the problems' buffers
+        self.order = tuple(i for kind in _KINDS for i, t in enumerate(terms) if t.kind == kind)
         by_kind = {
-            kind: [ix for t, ix in zip(terms, self.indices, strict=True) if t.kind == kind]
-            for kind in ("cost", "eq", "ineq")
+            kind: [self.indices[i] for i in self.order if terms[i].kind == kind] for kind in _KINDS
         }
         self.rows = {
             kind: _cat_index([ix.rows.ravel() for ix in ixs]) for kind, ixs in by_kind.items()
@@ -151,9 +156,9 @@ class _Structure:
         # gradient column of every cost Jacobian nonzero, n (a bin cut off) where fixed
         cols = _cat_index([ix.jac_cols.ravel() for ix in by_kind["cost"]])
         self.grad_cols = np.where(cols >= 0, cols, self.n)
-        ordered = [ix for kind in ("cost", "eq", "ineq") for ix in by_kind[kind]]
-        # every term's inputs in one array, kind by kind (the problem's input buffers): where
-        # each entry comes from in the packed point, and its multiplier in (y, z) (-1: σ)
+        ordered = [self.indices[i] for i in self.order]
+        # every term's inputs in one array (the problems' input buffers): where each entry comes
+        # from in the packed point, and its multiplier in (y, z) (-1: σ)
         self.z_gather = _cat_index([ix.z_index.ravel() for ix in ordered])
         self.lam_source = _cat_index(
             [np.full(ix.rows.size, -1, np.int64) for ix in by_kind["cost"]]
@@ -222,10 +227,7 @@ class TrajectoryProblem:
         self.terms = list(terms)
         self._structure = s = _structure(variables, self.terms)
         self.n, self.n_eq, self.n_ineq = s.n, s.n_eq, s.n_ineq
-        by_kind: dict[str, list[tuple[Term, _TermIndex]]] = {"cost": [], "eq": [], "ineq": []}
-        for t, ix in zip(self.terms, s.indices, strict=True):
-            by_kind[t.kind].append((t, ix))
-        ordered = [pair for kind in ("cost", "eq", "ineq") for pair in by_kind[kind]]
+        ordered = [(self.terms[i], s.indices[i]) for i in s.order]
         # every term's inputs and multipliers as views of one array each, in the structure's
         # order (z_gather, lam_source): one compiled pass fills them
         self._z, z_views = _views([ix.z_index.shape for _, ix in ordered])
@@ -235,8 +237,7 @@ class TrajectoryProblem:
             for (t, ix), z, lam in zip(ordered, z_views, lam_views, strict=True)
         ]
         self._layouts: dict[str, list[_TermLayout]] = {
-            kind: [lay for lay in self._all_layouts if lay.term.kind == kind]
-            for kind in ("cost", "eq", "ineq")
+            kind: [lay for lay in self._all_layouts if lay.term.kind == kind] for kind in _KINDS
         }
         self._output_buffers()
         self._bound: dict[str, Callable[[], None]] = {}
@@ -283,14 +284,11 @@ class TrajectoryProblem:
         """Every term's packed variables from the point into its input buffer and, given
         ``(σ, y, z)``, its multipliers into its ``lam`` buffer."""
         s = self._structure
-        packed = self.variables.packed(point)
-        if lam is None:
-            gather_inputs(
-                packed, s.z_gather, self._z, 0.0, _NO_MULTIPLIERS, _NO_MULTIPLIERS, _NO_INDEX,
-                _NO_MULTIPLIERS,
-            )  # fmt: skip
+        if lam is None:  # an empty source and buffer: no multipliers
+            lam, source, out = (0.0, _NO_MULTIPLIERS, _NO_MULTIPLIERS), _NO_INDEX, _NO_MULTIPLIERS
         else:
-            gather_inputs(packed, s.z_gather, self._z, *lam, s.lam_source, self._lam)
+            source, out = s.lam_source, self._lam
+        gather_inputs(self.variables.packed(point), s.z_gather, self._z, *lam, source, out)
 
     def _run(self, kind: str) -> None:
         """Every term's bound ``value``, ``jacobian`` or ``hessian`` call: the compiled terms'
