@@ -1,5 +1,7 @@
-"""The floor of a compiled RIPM iteration: a drone iteration's compiled work with no Python
-between its kernels, against the RIPM's own time per iteration on the same cases.
+"""The floor of a compiled RIPM iteration on the drone, side by side with the RIPM's own.
+
+A drone iteration's compiled work with no Python between its kernels, against the RIPM's own
+time per iteration on the same cases.
 
 One numba loop per case runs the kernels a main-phase RIPM iteration calls, in its order, with
 no Python between them: the terms' evaluation with the Hessian (gather, site loops, sums),
