@@ -1,15 +1,18 @@
 """The floor of a compiled RIPM iteration on the drone, side by side with the RIPM's own.
 
-A drone iteration's compiled work with no Python between its kernels, against the RIPM's own
-time per iteration on the same cases.
-
 One numba loop per case runs the kernels a main-phase RIPM iteration calls, in its order, with
 no Python between them: the terms' evaluation with the Hessian (gather, site loops, sums),
 the residuals (``measures``), the KKT matrix (scatter, diagonal, values), its LDLᵀ, one refined
-solve (two triangular solves and two residuals, as the RIPM's ``min_refinement=1``) and the
-retraction by the full step. It has no line search, filter, barrier update or inertia
-correction (scalar logic) and evaluates once per iteration (the RIPM: ~1.2 times). Stages can
-be left out (``--stages``) to split the floor in situ. The loop reads private attributes of
+solve (with the RIPM's options: at least one refinement step) and the retraction by the full
+step. Three variants split the floor in situ: every stage, the evaluation (with the residuals
+and the retraction) alone, and the evaluation with the factorization.
+
+Left out, each a few microseconds: the finiteness and pattern checks, the fraction-to-boundary
+and multiplier kernels, the line search's slope, trial evaluations without derivatives (0.3 per
+drone iteration). It evaluates, factorizes and solves once per iteration (the RIPM: 1.0–1.35
+times) and takes full Newton steps without inertia correction: on some cases the iterates run
+away, which changes the values but hardly the kernels' work. A failing site loop or
+factorization stops the run with an error. The loop reads private attributes of
 ``TrajectoryProblem`` and ``KKTSystem``: a measurement, not an API.
 
     python benchmarks/compiled_floor.py [--task drone] [--cases 20] [--iters 8] [--rounds 5]
@@ -37,26 +40,30 @@ from mbplan.solvers.kkt_scatter import matrix_values, scatter_blocks
 from mbplan.solvers.ldl_kernels import ldl_factor
 from mbplan.solvers.ldl_solve import refined_solve
 from mbplan.solvers.linear_solver import KKTSystem
+from mbplan.solvers.options import RIPMOptions
 from mbplan.solvers.ripm import solve_ripm
 from mbplan.solvers.ripm_kernels import constraint_values, measures, newton_diagonal, newton_rhs
 from mbplan.transcription.evaluation_kernels import collect_derivatives, gather_inputs
 from mbplan.transcription.packed import _retract
 
-STAGES = ("evaluate", "factorize", "solve")
-
 
 @nb.njit
-def _iterations(iters, stages, packed0, ev, kkt, ldl, retraction):  # pragma: no cover - numba
+def _iterations(
+    iters, stages, packed0, evaluation, matrix, factor, retraction, settings
+):  # pragma: no cover - numba
     """``iters`` iterations of the enabled ``stages`` (evaluate, factorize, solve); returns a
-    checksum (so that nothing is optimized away)."""
+    checksum (so that nothing is optimized away), NaN if a site loop or the factorization
+    failed. ``settings``: BLAS front rows, static regularization, refinement steps and ratio."""
     (z_gather, z_flat, lam_source, lam_flat, table, cost_jac, grad_cols, n, eq_res, eq_rows,
      n_eq, in_res, in_rows, n_in, eq_jac, eq_slot, eq_nnz, in_jac, in_slot, in_nnz, hess,
-     hess_slot, hess_nnz, eq_indptr, eq_indices, in_indptr, in_indices) = ev  # fmt: skip
+     hess_slot, hess_nnz, eq_indptr, eq_indices, in_indptr, in_indices) = evaluation  # fmt: skip
     (base, h_src, h_slot, e_slot, i_slot, diag_slot, full_src, full_data, values, full_indptr,
-     full_indices, sign) = kkt  # fmt: skip
+     full_indices, sign) = matrix  # fmt: skip
     (amap, sfirst, fptr, loff, uoff, zero_at, rptr, rel, cptr, child, sparent, direct, sent,
-     lbuf, ubuf, d, piv, e, spiv, eptr, eidx, stats, perm, rows, work) = ldl  # fmt: skip
+     lbuf, ubuf, d, piv, e, spiv, eptr, eidx, stats, perm, rows, work) = factor  # fmt: skip
     so3_off, so3_col, rn_dst, rn_src = retraction
+    blas_rows, static_reg, max_refinement, ratio_max = settings
+    no_shift = np.zeros(0)
     packed = packed0.copy()
     out = np.empty_like(packed)
     y, z, s = np.zeros(n_eq), np.ones(n_in), np.ones(n_in)
@@ -83,18 +90,20 @@ def _iterations(iters, stages, packed0, ev, kkt, ldl, retraction):  # pragma: no
         if stages[1]:
             scatter_blocks(base, hess_data, h_src, h_slot, eq_data, e_slot, in_data, i_slot)
             newton_diagonal(n, n_eq, 0.0, 0.0, s, z, diagonal)
-            matrix_values(base, diag_slot, diagonal, n, 1e-9, full_src, full_data, values)
-            npos, _, _, _ = ldl_factor(
+            matrix_values(base, diag_slot, diagonal, n, static_reg, full_src, full_data, values)
+            npos, _, _, ok = ldl_factor(
                 values, amap, sfirst, fptr, loff, uoff, zero_at, rptr, rel, cptr, child,
-                sparent, direct, sent, lbuf, ubuf, d, 256, 0.0, 0.0, sign, piv, e, spiv, eptr,
-                eidx, d, stats,
+                sparent, direct, sent, lbuf, ubuf, d, blas_rows, 0.0, 0.0, sign, piv, e, spiv,
+                eptr, eidx, d, stats,
             )  # fmt: skip
+            if not ok:
+                return np.nan
             checksum += npos
         if stages[2]:
-            newton_rhs(r_d, r_c, n_eq, s, z, 0.1, np.zeros(0), rhs)
+            newton_rhs(r_d, r_c, n_eq, s, z, 0.1, no_shift, rhs)
             sol, ratio = refined_solve(
                 rhs, perm, sfirst, fptr, rows, loff, lbuf, d, piv, e, spiv, full_indptr,
-                full_indices, full_data, work, 10, 1e-10, 1,
+                full_indices, full_data, work, max_refinement, ratio_max, 1,
             )  # fmt: skip
             checksum += ratio
         _retract(packed, sol[:n], so3_off, so3_col, rn_dst, rn_src, out)
@@ -104,7 +113,10 @@ def _iterations(iters, stages, packed0, ev, kkt, ldl, retraction):  # pragma: no
 
 
 def _case_arrays(problem, x0) -> tuple:
-    """The arrays the loop works on, from a problem evaluated once at ``x0``."""
+    """The loop's arguments after ``iters`` and ``stages`` (the point, the evaluation's, the
+    KKT matrix's, the factorization's and the retraction's arrays, the settings), from a problem
+    evaluated once at ``x0``, and the ``KKTSystem`` whose workspace they are (kept alive: a
+    released workspace would be handed to the next system)."""
     ev = problem.evaluate(x0, 1.0, np.zeros(problem.n_eq), np.zeros(problem.n_ineq))
     st = problem._structure
     if not hasattr(problem._bound["hessian"], "rows"):
@@ -134,7 +146,14 @@ def _case_arrays(problem, x0) -> tuple:
     lay = problem.variables.layout
     retraction = (lay._so3_off, lay._so3_col, lay._rn_dst, lay._rn_src)
     packed = problem.variables.packed(x0).copy()
-    return packed, evaluation, matrix, factor, retraction, kkt
+    o = RIPMOptions()
+    settings = (
+        ldl.blas_rows,
+        o.static_regularization,
+        o.max_refinement_steps,
+        o.residual_ratio_max,
+    )
+    return (packed, evaluation, matrix, factor, retraction, settings), kkt
 
 
 def main() -> None:
@@ -156,8 +175,9 @@ def main() -> None:
     def loop_ms(stages: tuple[int, int, int]) -> float:
         flags = np.array(stages, np.int64)
         t0 = time.perf_counter()
-        for packed, ev, kkt, ldl, retraction, _ in setups:
-            _iterations(args.iters, flags, packed, ev, kkt, ldl, retraction)
+        for arrays, _ in setups:
+            if not np.isfinite(_iterations(args.iters, flags, *arrays)):
+                raise SystemExit("a site loop or the factorization failed")
         return 1e3 * (time.perf_counter() - t0) / (len(setups) * args.iters)
 
     def ripm_ms() -> float:
