@@ -164,6 +164,11 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=5, help="alternating rounds (medians kept)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
+    if not 1 <= args.cases <= 100:  # the benchmark's 100 sampled cases
+        ap.error(f"--cases must be in 1..100, got {args.cases}")
+    for name in ("iters", "rounds"):
+        if getattr(args, name) < 1:
+            ap.error(f"--{name} must be at least 1, got {getattr(args, name)}")
     cases = [TASKS[args.task](i) for i in range(args.cases)]
     setups = [_case_arrays(c[0], c[1]) for c in cases]
     variants = {
