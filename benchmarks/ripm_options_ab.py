@@ -9,6 +9,7 @@ before session 7 (monotone μ, full KKT); the others override ``base``.
     python benchmarks/ripm_options_ab.py --tasks chain4 chain16 chain64 --cases 1 --variants base red piv all
     python benchmarks/ripm_options_ab.py --tasks iiwa-com --variants base red --eps 1e-9 1e-10 1e-11
     python benchmarks/ripm_options_ab.py --tasks chain4 chain8 chain16 chain32 chain64 --cases 1 --variants base s6
+    python benchmarks/ripm_options_ab.py --tasks drone drone-limits --cases 100 --variants base deg0
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ VARIANTS = {
     "bar": MEHROTRA,
     "red+bar": REDUCED | MEHROTRA,
     "all": REDUCED | PIVOTED_METIS | MEHROTRA,
+    "deg0": {"degenerate_iters": 0},
 }
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.common import median_of_min, run_in_tree
+from mbplan.benchmarks.common import alternating_runs, median_of_min
 
 KEYS = ("evaluate", "values", "retract", "assembly", "factorize", "solve", "python")
 
@@ -60,12 +60,8 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=4)
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
-    here = Path(__file__).resolve().parents[1]
-    runs: dict[str, list[dict]] = {"baseline": [], "new": []}
-    trees = [("baseline", Path(args.baseline)), ("new", here)]
-    for r in range(args.rounds):  # ABBA: neither tree always runs first
-        for tag, tree in trees if r % 2 == 0 else trees[::-1]:
-            runs[tag].append(run_in_tree(tree, _CHILD, [args.tasks, args.cases, args.repeats]))
+    trees = {"baseline": Path(args.baseline), "new": Path(__file__).resolve().parents[1]}
+    runs = alternating_runs(trees, _CHILD, [args.tasks, args.cases, args.repeats], args.rounds)
     report = {}
     for task in args.tasks:
         report[task] = {tag: summarize(r, task) for tag, r in runs.items()}

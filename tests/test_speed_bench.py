@@ -66,3 +66,22 @@ def test_chain_obstacle_start_and_goal_are_stable_at_every_size():
         bent = np.zeros(n)
         bent[0], bent[n // 2 + 1] = 1.0, 1.5  # the old goal's kind: x bend above, y bend below
         assert _growth_rate(model, bent) > 1.0
+
+
+def test_alternating_runs_run_each_tree_in_abba_order(tmp_path):
+    """Every round runs the code once in each tree (its working directory), the trees' order
+    reversed every other round; each tree's outputs come back in round order."""
+    from mbplan.benchmarks.common import alternating_runs
+
+    log = tmp_path / "order.txt"
+    trees = {name: tmp_path / name for name in ("a", "b")}
+    for path in trees.values():
+        path.mkdir()
+    code = (
+        "import json, os, sys; arg = json.loads(sys.argv[1]); name = os.path.basename(os.getcwd())\n"
+        "n = sum(1 for _ in open(arg)) if os.path.exists(arg) else 0\n"
+        "open(arg, 'a').write(name + '\\n'); print(json.dumps([name, n]))"
+    )
+    runs = alternating_runs(trees, code, str(log), rounds=3)
+    assert log.read_text().split() == ["a", "b", "b", "a", "a", "b"]
+    assert runs == {"a": [["a", 0], ["a", 3], ["a", 4]], "b": [["b", 1], ["b", 2], ["b", 5]]}

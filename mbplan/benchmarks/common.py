@@ -47,6 +47,17 @@ def run_in_tree(tree: Path, code: str, arg: Any) -> Any:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def alternating_runs(trees: dict[str, Path], code: str, arg: Any, rounds: int) -> dict[str, list]:
+    """:func:`run_in_tree` in every tree, ``rounds`` times, the trees' order reversed every other
+    round (ABBA: neither tree always runs first); each tree's outputs in round order."""
+    runs: dict[str, list] = {tag: [] for tag in trees}
+    order = list(trees)
+    for r in range(rounds):
+        for tag in order if r % 2 == 0 else order[::-1]:
+            runs[tag].append(run_in_tree(trees[tag], code, arg))
+    return runs
+
+
 def median_of_min(runs: list[dict], task: str, keys: Iterable[str]) -> dict[str, Any]:
     """Per key of ``runs[round][task][case]``: the minimum over rounds per case, the median over
     cases (the A/B scripts' summary), with the first round's iteration counts."""

@@ -21,6 +21,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import casadi as cs
+import numba as nb
 import numpy as np
 
 from mbplan.errors import InputError, MbplanError
@@ -85,9 +86,11 @@ class SiteLoop:
         self.name = fn.name()
         self._nnz_in = [fn.nnz_in(i) for i in range(fn.n_in())]
         self._nnz_out = [fn.nnz_out(i) for i in range(fn.n_out())]
-        self._loop = ctypes.CDLL(str(path))[f"{self.name}_sites"]
-        self._loop.argtypes = [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p]
-        self._loop.restype = ctypes.c_int
+        self.c_loop = ctypes.CDLL(str(path))[f"{self.name}_sites"]
+        self.c_loop.argtypes = [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p]
+        self.c_loop.restype = ctypes.c_int
+        self.entry_point: int = ctypes.cast(self.c_loop, ctypes.c_void_p).value
+        announce_uncached_numba(data_address)  # first run only
 
     def bind(self, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]) -> BoundLoop:
         """The evaluation at the sites of these arrays, bound to their memory: every call reads
@@ -109,20 +112,24 @@ class SiteLoop:
 
 
 class BoundLoop:
-    """:meth:`SiteLoop.bind`'s call; holds the arrays whose memory it reads and writes."""
+    """:meth:`SiteLoop.bind`'s call; holds the arrays whose memory it reads and writes and the
+    array of their addresses that the loop reads (inputs, then outputs)."""
 
-    __slots__ = ("_args", "_keep", "_loop", "_name", "_res", "_sites")
+    __slots__ = ("_args", "_keep", "_loop", "_name", "_pointers", "_res", "_sites")
 
     def __init__(
         self, loop: SiteLoop, K: int, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]
     ) -> None:
-        self._loop, self._name, self._sites = loop._loop, loop.name, ctypes.c_longlong(K)
+        self._loop, self._name, self._sites = loop, loop.name, K
         self._keep = (tuple(inputs), tuple(outputs))
-        self._args = (ctypes.c_void_p * max(len(inputs), 1))(*[a.ctypes.data for a in inputs])
-        self._res = (ctypes.c_void_p * max(len(outputs), 1))(*[o.ctypes.data for o in outputs])
+        arg = [data_address(a) for a in inputs] or [0]
+        res = [data_address(o) for o in outputs] or [0]
+        self._pointers = np.array(arg + res, np.uintp)
+        self._args = data_address(self._pointers)
+        self._res = self._args + len(arg) * self._pointers.itemsize
 
     def __call__(self) -> None:
-        if self._loop(self._sites, self._args, self._res):
+        if self._loop.c_loop(self._sites, self._args, self._res):
             raise self.failure()
 
     def failure(self) -> MbplanError:
@@ -133,12 +140,13 @@ class BoundLoop:
         """``(entry point, sites, argument pointers, result pointers)`` as addresses: how a
         compiled caller makes this call (:mod:`mbplan.engine.site_table`); valid while this
         object lives."""
-        return (
-            ctypes.cast(self._loop, ctypes.c_void_p).value,
-            self._sites.value,
-            ctypes.addressof(self._args),
-            ctypes.addressof(self._res),
-        )
+        return (self._loop.entry_point, self._sites, self._args, self._res)
+
+
+@nb.njit(cache=True)
+def data_address(a: np.ndarray) -> int:  # pragma: no cover - compiled
+    """The address of ``a``'s first element (``a.ctypes.data`` without its ctypes object)."""
+    return a.ctypes.data
 
 
 def compile_function(fn: cs.Function, flags: tuple[str, ...] = DEFAULT_FLAGS) -> cs.Function:
