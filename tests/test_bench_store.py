@@ -123,6 +123,7 @@ def test_interrupts_at_random_points(tmp_path, signum, workers):
             stderr=subprocess.PIPE,
             text=True,
             env=os.environ | ENV,
+            preexec_fn=_default_sigint,
         )
         assert proc.stdout.readline() == "ready\n"
         time.sleep(rng.uniform(0.0, 1.0))
@@ -145,6 +146,12 @@ def test_interrupts_at_random_points(tmp_path, signum, workers):
     assert final.returncode == 0, final.stderr
     _assert_complete(out / "results.jsonl", n, 0)
     assert not list(out.glob("*.tmp*"))
+
+
+def _default_sigint() -> None:
+    """SIGINT's default in the child, so that Python turns it into KeyboardInterrupt even when
+    the tests run in a background job (which starts with SIGINT ignored)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _script(tmp_path) -> str:
