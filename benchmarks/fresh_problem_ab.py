@@ -2,7 +2,7 @@
 
 Each round runs, in a fresh process per tree (alternating which goes first), over ``--cases``
 drone cases: the binding of a new problem's compiled calls (every term's ``hessian`` and
-``value`` calls and their site tables, timed on a problem built and evaluated once, so with warm
+``value`` calls and their site tables, timed on the problem after its two solves, so with warm
 caches; median over the cases), and two solves of each new problem, the first (fresh: as in
 ``mbplan bench speed``) and a repeat, with the solver's own clock split at its log lines (the
 start, then each iteration). Report: per tree the median over cases of the minimum over rounds.

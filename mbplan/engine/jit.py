@@ -89,7 +89,7 @@ class SiteLoop:
         self.c_loop = ctypes.CDLL(str(path))[f"{self.name}_sites"]
         self.c_loop.argtypes = [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p]
         self.c_loop.restype = ctypes.c_int
-        self.entry_point: int = ctypes.cast(self.c_loop, ctypes.c_void_p).value
+        self.entry_point = int(ctypes.cast(self.c_loop, ctypes.c_void_p).value or 0)
         announce_uncached_numba(data_address)  # first run only
 
     def bind(self, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]) -> BoundLoop:
@@ -115,12 +115,12 @@ class BoundLoop:
     """:meth:`SiteLoop.bind`'s call; holds the arrays whose memory it reads and writes and the
     array of their addresses that the loop reads (inputs, then outputs)."""
 
-    __slots__ = ("_args", "_keep", "_loop", "_name", "_pointers", "_res", "_sites")
+    __slots__ = ("_args", "_keep", "_loop", "_pointers", "_res", "_sites")
 
     def __init__(
         self, loop: SiteLoop, K: int, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]
     ) -> None:
-        self._loop, self._name, self._sites = loop, loop.name, K
+        self._loop, self._sites = loop, K
         self._keep = (tuple(inputs), tuple(outputs))
         arg = [data_address(a) for a in inputs] or [0]
         res = [data_address(o) for o in outputs] or [0]
@@ -134,7 +134,7 @@ class BoundLoop:
 
     def failure(self) -> MbplanError:
         """The error of a call whose loop reported a failure."""
-        return MbplanError(f"{self._name}: compiled evaluation failed")
+        return MbplanError(f"{self._loop.name}: compiled evaluation failed")
 
     def table_row(self) -> tuple[int, int, int, int]:
         """``(entry point, sites, argument pointers, result pointers)`` as addresses: how a
