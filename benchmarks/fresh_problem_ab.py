@@ -14,13 +14,12 @@ start, then each iteration). Report: per tree the median over cases of the minim
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.common import alternating_runs, median_of_min
+from mbplan.benchmarks.common import alternating_runs, median_of_min, write_json
 
 SEGMENTS = 3  # the start and the first two iterations
 KEYS = (
@@ -82,11 +81,7 @@ def main() -> None:
     for k in KEYS:
         print(f"{k:24s} {b[k]:9.3f} -> {n[k]:9.3f} ({n[k] / b[k]:.2f}x)")
     if args.out:
-        out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_suffix(".tmp")
-        tmp.write_text(json.dumps({"command": sys.argv, "report": report, "runs": runs}, indent=1))
-        tmp.replace(out)
+        write_json(Path(args.out), {"command": sys.argv, "report": report, "runs": runs})
 
 
 if __name__ == "__main__":

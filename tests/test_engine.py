@@ -667,6 +667,20 @@ def test_bound_calls_equal_the_mapped_evaluation(tmp_path, monkeypatch):
         loop.bind([z[:, :-1], p], outs["value"])
     with pytest.raises(InputError, match="C-ordered"):
         loop.bind([np.asfortranarray(z), p], outs["value"])
+    with pytest.raises(InputError, match="2 inputs expected, got 1"):
+        loop.bind([z], outs["value"])
+    read_only = np.empty_like(outs["value"][0])
+    read_only.setflags(write=False)
+    with pytest.raises(InputError, match="output arrays must be writeable"):
+        loop.bind([z, p], [read_only])
+    # the compiled caller's view (table_row): the inputs' addresses, then the outputs'
+    bound = loop.bind([z, p], outs["value"])  # owns the address array read below
+    entry, sites, args, res = bound.table_row()
+    assert (entry, sites) == (loop.entry_point, 5)
+    pointers = ctypes.c_uint64 * 2
+    assert list(pointers.from_address(args)) == [z.ctypes.data, p.ctypes.data]
+    assert list((ctypes.c_uint64 * 1).from_address(res)) == [outs["value"][0].ctypes.data]
+    assert res == args + 2 * ctypes.sizeof(ctypes.c_uint64)
 
 
 @pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None, reason="no C compiler")

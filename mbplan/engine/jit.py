@@ -108,6 +108,8 @@ class SiteLoop:
                         f"{self.name}: {what} must be a C-ordered float array of shape "
                         f"{(K, width)}, got {a.dtype} {a.shape}"
                     )
+                if what == "output" and not a.flags.writeable:
+                    raise InputError(f"{self.name}: output arrays must be writeable")
         return BoundLoop(self, K, inputs, outputs)
 
 
