@@ -35,7 +35,6 @@ import json, sys, time
 import numpy as np
 sys.path.insert(0, ".")
 from mbplan.benchmarks.speed_tasks import TASKS
-from mbplan.engine.site_table import bound_calls
 from mbplan.solvers.ripm import solve_ripm
 task, cases, segments = json.loads(sys.argv[1])
 solve_ripm(*TASKS[task](0))
@@ -45,9 +44,7 @@ for i in range(cases):
     fresh, repeat = solve_ripm(problem, x0, options), solve_ripm(problem, x0, options)
     t0 = time.perf_counter()
     for kind in ("hessian", "value"):
-        bound_calls([lay.term.function.bind(
-            kind, [lay.z, lay.parameters] + [lay.lam] * (kind == "hessian"), lay.outputs[kind]
-        ) for lay in problem._all_layouts])
+        problem.bind_calls(kind)
     bind = time.perf_counter() - t0
     row = {"iterations": fresh.iterations, "bind_us": 1e6 * bind,
            "fresh_ms_per_iter": 1e3 * fresh.wall_time_s / fresh.iterations,

@@ -234,6 +234,15 @@ def test_compiled_term_pass_equals_the_term_by_term_calls(monkeypatch):
     results = [evaluations(compiled)]
     kinds = ("value", "jacobian", "hessian")
     assert all(isinstance(compiled._bound[k], SiteTable) for k in kinds)
+    # bound anew: a second table over the same buffers recomputes the last Hessian
+    again = compiled.bind_calls("hessian")
+    assert isinstance(again, SiteTable) and again is not compiled._bound["hessian"]
+    hessians = compiled._hessians.copy()
+    compiled._hessians[:] = np.nan
+    again()
+    np.testing.assert_array_equal(compiled._hessians, hessians)
+    with pytest.raises(InputError, match="call kind: expected one of"):
+        compiled.bind_calls("gradient")
     monkeypatch.setattr(problem_module, "bound_calls", CallsInOrder)
     by_term = build()
     results.append(evaluations(by_term))

@@ -203,20 +203,15 @@ class _TermLayout:
         self.term, self.index = term, index
         self.parameters = term.function.pack_parameters(term.parameters, term.sites)
         # evaluation buffers, views of the problem's arrays: inputs ``(K, nz)`` and multipliers
-        # ``(K, m)`` refilled in place, outputs (set by TrajectoryProblem); the compiled calls
-        # are bound to them on first use
+        # ``(K, m)`` refilled in place, outputs (set by TrajectoryProblem), to which the
+        # problem binds the compiled calls on first use
         self.z, self.lam = z, lam
         self.outputs: dict[str, list[np.ndarray]] = {}
-        self._calls: dict[str, Callable[[], None]] = {}
 
-    def call(self, kind: str) -> Callable[[], None]:
+    def bind(self, kind: str) -> Callable[[], None]:
         """The term's ``value``/``jacobian``/``hessian`` bound to its buffers."""
-        bound = self._calls.get(kind)
-        if bound is None:
-            inputs = [self.z, self.parameters] + ([self.lam] if kind == "hessian" else [])
-            bound = self.term.function.bind(kind, inputs, self.outputs[kind])
-            self._calls[kind] = bound
-        return bound
+        inputs = [self.z, self.parameters] + ([self.lam] if kind == "hessian" else [])
+        return self.term.function.bind(kind, inputs, self.outputs[kind])
 
 
 class TrajectoryProblem:
@@ -290,12 +285,18 @@ class TrajectoryProblem:
             source, out = s.lam_source, self._lam
         gather_inputs(self.variables.packed(point), s.z_gather, self._z, *lam, source, out)
 
+    def bind_calls(self, kind: str) -> Callable[[], None]:
+        """Every term's ``value``, ``jacobian`` or ``hessian`` call bound anew to the problem's
+        buffers, as one call: the compiled terms' C loops in one compiled pass
+        (:func:`~mbplan.engine.site_table.bound_calls`). Evaluation binds each kind once."""
+        if kind not in _CALL_KINDS:
+            raise InputError(f"call kind: expected one of {_CALL_KINDS}, got {kind!r}")
+        return bound_calls([lay.bind(kind) for lay in self._all_layouts])
+
     def _run(self, kind: str) -> None:
-        """Every term's bound ``value``, ``jacobian`` or ``hessian`` call: the compiled terms'
-        C loops in one compiled pass (:func:`~mbplan.engine.site_table.bound_calls`)."""
         run = self._bound.get(kind)
         if run is None:
-            run = self._bound[kind] = bound_calls([lay.call(kind) for lay in self._all_layouts])
+            run = self._bound[kind] = self.bind_calls(kind)
         run()
 
     def values(self, point: Point) -> tuple[float, np.ndarray, np.ndarray]:
@@ -350,6 +351,7 @@ class TrajectoryProblem:
         )
 
 
+_CALL_KINDS = ("value", "jacobian", "hessian")
 _NO_MULTIPLIERS = np.zeros(0)  # no y, z; as the lam buffer: skips the multipliers (unwritten)
 _NO_INDEX = np.zeros(0, np.int64)
 _NO_INDEX.setflags(write=False)  # typed as the structure's read-only index arrays
