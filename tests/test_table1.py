@@ -21,8 +21,10 @@ differs, the printed version is kept as its own function and a test shows the di
   ``(R_1 ξ_1^∧ e_i)ᵀ(R_2 ξ_2^∧ e_z)``; without it the Hessian block coupling the two bodies would
   be zero. (Read literally with ``ξ^∧`` instead of ``ξ^{∧2}`` it is not even second order.)
 * Row 1 (rotational kinematics) is right at a feasible point (``Y = R_{k+1}ᵀ R_k F_k = I``, so
-  ``Y⁻¹ = I``). Elsewhere it is the expansion of ``log(Y⁻¹·perturbed product)``; the expansion of
-  ``log`` itself is ``J_r⁻¹(log Y)`` times it to first order (tested below).
+  ``Y⁻¹ = I``). Elsewhere it is the expansion of ``log(Y⁻¹·perturbed product)``. mbplan's residual
+  is the inverse Cayley map ``cay⁻¹(Y)`` instead of ``log Y`` (equal to third order at ``Y = I``:
+  the row holds for it at feasible points); off them its first-order term is the map's
+  differential at ``Y`` applied to the printed row (tested below).
 * Row 4 (translational dynamics) and eq. 40 (kinematic chain) are right as printed.
 """
 
@@ -98,7 +100,7 @@ def differs(f, variables, parameters, closed_form, rng, which: int) -> float:
 
 
 # ---------------------------------------------------------------------------------------------
-# Row 1: rotational kinematics log(R_{k+1}ᵀ R_k F_k)
+# Row 1: rotational kinematics log(R_{k+1}ᵀ R_k F_k) (mbplan: cay⁻¹ of the same product)
 # ---------------------------------------------------------------------------------------------
 def rotational_kinematics_terms(v, p, x):
     """Table I row 1 (as printed; exact at Y = I).
@@ -128,18 +130,44 @@ def test_row1_rotational_kinematics_at_a_feasible_point():
         assert_terms(f, variables, {}, rotational_kinematics_terms, rng)
 
 
-def test_row1_off_the_feasible_set_needs_the_log_jacobian():
-    """At Y ≠ I the printed row expands log(Y⁻¹·product); log adds J_r⁻¹(log Y) to first order."""
+def cayley_inverse(M: np.ndarray) -> np.ndarray:
+    """``cay⁻¹(M) = 2 (M - Mᵀ)^∨ / (1 + tr M)`` (``2 tan(θ/2) a`` for ``M = exp(θ a)``)."""
+    return 2.0 * vee(M - M.T) / (1.0 + np.trace(M))
+
+
+def test_row1_residual_is_the_log_to_third_order_with_no_root_but_the_identity():
+    rng = np.random.default_rng(5)
+    for theta in (1e-3, 1e-2, 0.1, 1.0, 2.5, np.pi - 1e-3):
+        a = rng.standard_normal(3)
+        a /= np.linalg.norm(a)
+        got = cayley_inverse(SO3.exp(theta * a))
+        np.testing.assert_allclose(got, 2.0 * np.tan(theta / 2) * a, rtol=1e-9)
+        if theta <= 0.1:  # 2 tan(θ/2) - θ = θ³/12 + O(θ⁵)
+            assert np.linalg.norm(got - theta * a) <= theta**3 / 12 * 1.01 + 1e-16
+        assert np.linalg.norm(got) >= theta  # no root but θ = 0 (the skew part vanishes at π)
+    f = RiemannianFunction("t1_rot_kin_cayley", **ROT_KIN)
+    R0, F0 = SO3.random(rng), SO3.random(rng)
+    Y = SO3.exp(0.3 * rng.standard_normal(3))
+    got = f.value({"R0": R0, "R1": R0 @ F0 @ Y.T, "F0": F0})
+    np.testing.assert_allclose(got[0], cayley_inverse(Y), rtol=1e-12, atol=1e-15)
+
+
+def test_row1_off_the_feasible_set_takes_the_residuals_differential():
+    """At Y ≠ I the printed row expands the product (right-trivialized: ``Y exp(t ξ)``); the
+    residual adds its differential at Y: ``d cay⁻¹(Y)[Y ξ^]``."""
     f = RiemannianFunction("t1_rot_kin_off", **ROT_KIN)
     rng = np.random.default_rng(11)
     R0, F0 = SO3.random(rng), SO3.random(rng)
     variables = {"R0": R0, "R1": R0 @ F0 @ SO3.exp(0.5 * rng.standard_normal(3)), "F0": F0}
-    log_Y = SO3.log(variables["R1"].T @ R0 @ F0)
+    Y = variables["R1"].T @ R0 @ F0
     for _ in range(N_DIRECTIONS):
         xi = rng.standard_normal(f.n)
         first, _ = engine_terms(f, variables, {}, xi)
         printed, _ = rotational_kinematics_terms(variables, {}, split(f, xi))
-        np.testing.assert_allclose(first, SO3.jac_right_inv(log_Y) @ printed, atol=1e-12)
+        dY = Y @ hat(printed)
+        scale = 1.0 + np.trace(Y)
+        want = 2.0 * vee(dY - dY.T) / scale - 2.0 * vee(Y - Y.T) * np.trace(dY) / scale**2
+        np.testing.assert_allclose(first, want, atol=1e-12)
         assert np.abs(first - printed).max() > 1e-3
 
 
