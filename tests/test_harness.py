@@ -22,9 +22,10 @@ def _jobs(n: int) -> list[Job]:
     return [Job(i, m, square, (i,)) for i in range(n) for m in ("a", "b")]
 
 
-def test_resume_after_interrupted_run(tmp_path):
+def test_resume_after_interrupted_run(tmp_path, capsys):
     path = tmp_path / "results.jsonl"
     run_jobs(_jobs(3), path)
+    assert "already in" not in capsys.readouterr().err
     # A kill mid-write leaves a truncated last line.
     with path.open("a") as f:
         f.write('{"case": 3, "method": "a", "succ')
@@ -35,6 +36,7 @@ def test_resume_after_interrupted_run(tmp_path):
     assert len(keys) == len(set(keys)) == 10  # nothing lost, nothing twice
     assert sorted(keys) == sorted((i, m) for i in range(5) for m in ("a", "b"))
     assert len(rows) == 10
+    assert "benchmark: 6 of 10 jobs already in" in capsys.readouterr().err  # says what it kept
     # A third run has nothing left to do and leaves the file unchanged.
     before = path.read_text()
     run_jobs(_jobs(5), path)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -68,6 +69,12 @@ def run_jobs(
         rows = repair(results_path, key)
         done = {(r["case"], r["method"]) for r in rows}
         todo = [j for j in jobs if j.key not in done]
+        if len(todo) < len(jobs):  # rows of an earlier run of this configuration, kept as they are
+            print(
+                f"{description}: {len(jobs) - len(todo)} of {len(jobs)} jobs already in "
+                f"{results_path}, not re-run (delete it to re-run them with the current code)",
+                file=sys.stderr,
+            )
         sink = Appender(results_path)
         try:
             with tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc=description) as bar:
