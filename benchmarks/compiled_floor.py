@@ -34,6 +34,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from mbplan.benchmarks.common import write_json
 from mbplan.benchmarks.speed_tasks import TASKS
 from mbplan.engine.site_table import run_site_loops
 from mbplan.solvers.kkt_scatter import matrix_values, scatter_blocks
@@ -213,11 +214,7 @@ def main() -> None:
     }
     print(json.dumps({k: summary[k] for k in ("ms_per_iteration_median", "floor_over_ripm")}))
     if args.out:
-        out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = out.with_suffix(".tmp")
-        tmp.write_text(json.dumps(summary, indent=1))
-        tmp.replace(out)
+        write_json(Path(args.out), summary)
 
 
 if __name__ == "__main__":
