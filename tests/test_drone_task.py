@@ -13,6 +13,7 @@ from mbplan import paper
 from mbplan.errors import InfeasibleRequestError, InputError
 from mbplan.formulations.free_body import FreeBodyNLP
 from mbplan.planning.initial_guess import initial_path
+from mbplan.solvers import RIPMStatus, solve_ripm
 from mbplan.tasks import (
     CostWeights,
     DockingTask,
@@ -51,6 +52,25 @@ def test_sampling_is_reproducible_and_within_bounds() -> None:
     assert all(np.array_equal(t.R_goal, np.eye(3)) and not t.p_goal.any() for t in a)
     small = sample_docking_cases(20, seed=1, max_angle=0.3)
     assert rotation_angles([t.R0 for t in small]).max() <= 0.3
+
+
+def test_a_start_outside_the_kinematics_residuals_domain_is_reported_as_a_failure() -> None:
+    """One knot's ``F`` turned by π puts ``R₁ᵀR₀F₀`` at the edge of the Cayley residual's
+    domain (``1 + tr = 0``): the RIPM must not report that start's outcome as converged; the
+    same start without the turn converges."""
+    task = sample_docking_cases(1, seed=3)[0]
+    ocp = paper.drone_docking(task)
+    nlp = FreeBodyNLP(ocp, jit=False)
+    statuses = []
+    for flip in (None, np.diag([1.0, -1.0, -1.0])):
+        x = nlp.initial_point(initial_path(ocp, "linear"))
+        if flip is not None:
+            x["F"][5] = x["F"][5] @ flip
+            M = x["R"][6].T @ x["R"][5] @ x["F"][5]
+            assert abs(1.0 + np.trace(M)) < 1e-12
+        statuses.append(solve_ripm(nlp.problem, x, max_iter=100).status)
+    assert statuses[0] is RIPMStatus.CONVERGED
+    assert statuses[1] is not RIPMStatus.CONVERGED
 
 
 def test_geodesic_guess_connects_start_and_goal() -> None:

@@ -136,20 +136,53 @@ def cayley_inverse(M: np.ndarray) -> np.ndarray:
 
 
 def test_row1_residual_is_the_log_to_third_order_with_no_root_but_the_identity():
+    """mbplan's residual at ``R₁ᵀR₀F₀ = exp(θa)`` is ``2 tan(θ/2) a``: within ``θ³/12`` of the
+    log near 0, and along ``(0, π)`` its norm grows strictly (no root but ``θ = 0``)."""
+    f = RiemannianFunction("t1_rot_kin_cayley", **ROT_KIN)
     rng = np.random.default_rng(5)
-    for theta in (1e-3, 1e-2, 0.1, 1.0, 2.5, np.pi - 1e-3):
-        a = rng.standard_normal(3)
-        a /= np.linalg.norm(a)
-        got = cayley_inverse(SO3.exp(theta * a))
+    R0, F0 = SO3.random(rng), SO3.random(rng)
+    a = rng.standard_normal(3)
+    a /= np.linalg.norm(a)
+    thetas = np.concatenate([[1e-3, 1e-2, 0.1], np.linspace(0.2, np.pi - 1e-3, 40)])
+    norms = []
+    for theta in thetas:
+        Y = SO3.exp(theta * a)
+        got = f.value({"R0": R0, "R1": R0 @ F0 @ Y.T, "F0": F0})[0]  # R₁ᵀR₀F₀ = Y
+        np.testing.assert_allclose(got, cayley_inverse(Y), rtol=1e-9, atol=1e-15)
         np.testing.assert_allclose(got, 2.0 * np.tan(theta / 2) * a, rtol=1e-9)
         if theta <= 0.1:  # 2 tan(θ/2) - θ = θ³/12 + O(θ⁵)
             assert np.linalg.norm(got - theta * a) <= theta**3 / 12 * 1.01 + 1e-16
-        assert np.linalg.norm(got) >= theta  # no root but θ = 0 (the skew part vanishes at π)
-    f = RiemannianFunction("t1_rot_kin_cayley", **ROT_KIN)
-    R0, F0 = SO3.random(rng), SO3.random(rng)
-    Y = SO3.exp(0.3 * rng.standard_normal(3))
-    got = f.value({"R0": R0, "R1": R0 @ F0 @ Y.T, "F0": F0})
-    np.testing.assert_allclose(got[0], cayley_inverse(Y), rtol=1e-12, atol=1e-15)
+        norms.append(np.linalg.norm(got))
+    assert norms[0] > 0 and np.all(np.diff(norms) > 0)
+
+
+def test_row1_residual_equals_the_log_on_the_constraint_set():
+    """At feasible points the Cayley residual and Table I's ``log(R₁ᵀR₀F₀)`` have the same
+    value, Jacobian and multiplier-contracted Hessian (the engine's, for a random ``λ``); off
+    the set they differ (the comparison can fail)."""
+    f = RiemannianFunction("t1_rot_kin_vs_log_cayley", **ROT_KIN)
+    log = RiemannianFunction(
+        "t1_rot_kin_vs_log_log",
+        variables=ROT_KIN["variables"],
+        residual=lambda R0, R1, F0: SO3.log(cs.mtimes([R1.T, R0, F0])),
+    )
+    rng = np.random.default_rng(17)
+
+    def derivatives(g, variables, lam):
+        value, j, h = g.hessian(variables, {}, lam[None])
+        return value[0], g.dense_jacobian(j)[0], g.dense_hessian(h)[0]
+
+    for off in (0.0, 0.2):
+        R0, F0 = SO3.random(rng), SO3.random(rng)
+        R1 = R0 @ F0 @ SO3.exp(off * rng.standard_normal(3))
+        variables = {"R0": R0, "R1": R1, "F0": F0}
+        lam = 10.0 * rng.standard_normal(3)
+        pairs = zip(derivatives(f, variables, lam), derivatives(log, variables, lam), strict=True)
+        gaps = [np.abs(x - y).max() for x, y in pairs]
+        if off == 0.0:
+            assert max(gaps) < 1e-12, gaps
+        else:
+            assert min(gaps) > 1e-5, gaps
 
 
 def test_row1_off_the_feasible_set_takes_the_residuals_differential():

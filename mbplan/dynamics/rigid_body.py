@@ -18,12 +18,17 @@ def rotational_kinematics(R0: cs.SX, R1: cs.SX, F0: cs.SX) -> cs.SX:
     """``R₁ = R₀F₀`` (eq. 30) as ``cay⁻¹(R₁ᵀ R₀ F₀) = 0``, the inverse Cayley map
     ``cay⁻¹(M) = 2 (M - Mᵀ)^∨ / (1 + tr M)``, which is ``2 tan(θ/2) a`` for ``M = exp(θ a)``.
 
-    Table I row 1 writes the residual as ``log(R₁ᵀ R₀ F₀)`` (``θ a``). The two agree to third
-    order in ``θ``, so wherever the constraint holds they have the same value, Jacobian and
-    Lagrangian Hessian. For ``|θ| < π`` both vanish only at ``M = I``; the skew part alone would
-    also vanish at ``θ = π``. Being rational in the entries of the rotations, this residual has
-    derivatives several times cheaper than the symbolic log with its branches (docs/ripm-speed.md,
-    session 17)."""
+    Table I row 1 writes the residual as ``log(R₁ᵀ R₀ F₀)`` (``θ a``). The two differ by
+    ``θ³/12 a + O(θ⁵)``, so wherever the constraint holds they have the same value, Jacobian
+    and Lagrangian Hessian. For ``|θ| < π`` both vanish only at ``M = I``; the skew part alone
+    would also vanish at ``θ = π``. Being rational in the entries of the rotations, its
+    derivatives cost about half the symbolic log's with its branches (docs/ripm-speed.md,
+    session 17).
+
+    Domain: ``|θ| < π``. The residual grows like ``tan(θ/2)`` towards ``θ = π``, where it is
+    not finite, and a Newton step on it from near ``π`` is short: the RIPM does not converge
+    from a point with a knot there (it reports the failure). Points built by the formulations
+    (``F_k = R_kᵀ R_{k+1}``) have ``θ = 0``."""
     M = cs.mtimes([R1.T, R0, F0])
     return SO3.vee(M - M.T) * (2.0 / (1.0 + cs.trace(M)))
 
