@@ -673,6 +673,11 @@ def test_bound_calls_equal_the_mapped_evaluation(tmp_path, monkeypatch):
     read_only.setflags(write=False)
     with pytest.raises(InputError, match="output arrays must be writeable"):
         loop.bind([z, p], [read_only])
+    for either in (case.build(name="bind_probe"), fn):  # the function's bind, both paths
+        with pytest.raises(InputError, match="output arrays must be writeable"):
+            either.bind("value", [z, p], [read_only])
+        with pytest.raises(InputError, match="shape"):
+            either.bind("value", [z[:, :-1], p], outs["value"])
     # the compiled caller's view (table_row): the inputs' addresses, then the outputs'
     bound = loop.bind([z, p], outs["value"])  # owns the address array read below
     entry, sites, args, res = bound.table_row()

@@ -95,22 +95,33 @@ class SiteLoop:
     def bind(self, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]) -> BoundLoop:
         """The evaluation at the sites of these arrays, bound to their memory: every call reads
         the inputs' current values and overwrites the outputs."""
-        K = inputs[0].shape[0] if inputs else 0
-        for what, arrays, widths in (
-            ("input", inputs, self._nnz_in),
-            ("output", outputs, self._nnz_out),
-        ):
-            if len(arrays) != len(widths):
-                raise InputError(f"{self.name}: {len(widths)} {what}s expected, got {len(arrays)}")
-            for a, width in zip(arrays, widths, strict=True):
-                if a.dtype != np.float64 or a.shape != (K, width) or not a.flags.c_contiguous:
-                    raise InputError(
-                        f"{self.name}: {what} must be a C-ordered float array of shape "
-                        f"{(K, width)}, got {a.dtype} {a.shape}"
-                    )
-                if what == "output" and not a.flags.writeable:
-                    raise InputError(f"{self.name}: output arrays must be writeable")
+        K = check_site_arrays(self.name, inputs, outputs, self._nnz_in, self._nnz_out)
         return BoundLoop(self, K, inputs, outputs)
+
+
+def check_site_arrays(
+    name: str,
+    inputs: Sequence[np.ndarray],
+    outputs: Sequence[np.ndarray],
+    in_widths: Sequence[int],
+    out_widths: Sequence[int],
+) -> int:
+    """The number of sites ``K`` of arrays to bind a site function's evaluation to; an
+    :class:`InputError` naming ``name`` unless every array is a C-ordered float array of shape
+    ``(K, width)`` and every output is writeable."""
+    K = inputs[0].shape[0] if inputs else 0
+    for what, arrays, widths in (("input", inputs, in_widths), ("output", outputs, out_widths)):
+        if len(arrays) != len(widths):
+            raise InputError(f"{name}: {len(widths)} {what}s expected, got {len(arrays)}")
+        for a, width in zip(arrays, widths, strict=True):
+            if a.dtype != np.float64 or a.shape != (K, width) or not a.flags.c_contiguous:
+                raise InputError(
+                    f"{name}: {what} must be a C-ordered float array of shape "
+                    f"{(K, width)}, got {a.dtype} {a.shape}"
+                )
+            if what == "output" and not a.flags.writeable:
+                raise InputError(f"{name}: output arrays must be writeable")
+    return K
 
 
 class BoundLoop:

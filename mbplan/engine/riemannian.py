@@ -26,7 +26,7 @@ from typing import Any
 import casadi as cs
 import numpy as np
 
-from mbplan.engine.jit import SiteLoop, compile_site_loops
+from mbplan.engine.jit import SiteLoop, check_site_arrays, compile_site_loops
 from mbplan.engine.site_function import SiteFunction, Slot
 
 
@@ -149,7 +149,11 @@ class RiemannianFunction(SiteFunction):
         else a CasADi buffer of its own pointing at the arrays once."""
         if kind in self._loops:
             return self._loops[kind].bind(inputs, outputs)
-        fn = self._mapped(kind, inputs[0].shape[0])
+        K = inputs[0].shape[0] if inputs else 0
+        fn = self._mapped(kind, K)
+        widths = [[fn.nnz_in(i) // max(K, 1) for i in range(fn.n_in())]]
+        widths.append([fn.nnz_out(i) // max(K, 1) for i in range(fn.n_out())])
+        check_site_arrays(self.name, inputs, outputs, *widths)
         buf, evaluate = fn.buffer()
         for i, a in enumerate(inputs):
             buf.set_arg(i, memoryview(a))
