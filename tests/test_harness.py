@@ -41,6 +41,7 @@ def test_resume_after_interrupted_run(tmp_path, capsys):
     before = path.read_text()
     run_jobs(_jobs(5), path)
     assert path.read_text() == before
+    assert "benchmark: 10 of 10 jobs already in" in capsys.readouterr().err
 
 
 def test_process_pool_matches_serial(tmp_path):

@@ -72,7 +72,7 @@ def run_jobs(
         if len(todo) < len(jobs):  # rows of an earlier run of this configuration, kept as they are
             print(
                 f"{description}: {len(jobs) - len(todo)} of {len(jobs)} jobs already in "
-                f"{results_path}, not re-run (delete it to re-run them with the current code)",
+                f"{results_path}, not re-run (delete that file to re-run them with the current code)",
                 file=sys.stderr,
             )
         sink = Appender(results_path)
