@@ -464,6 +464,30 @@ def test_mehrotra_corrector_and_mu_cap_options():
         RIPMOptions(corrector=1)
 
 
+def test_degenerate_mode_retries_zero_once_the_perturbation_is_small():
+    """Drone case 0: δ_w > 0 on consecutive iterations puts the inertia correction in the
+    ``degenerate_iters`` mode (first trial ``κ_w⁻ δ_w,last``). Without
+    ``degenerate_zero_below`` δ_w only shrinks 3× per iteration to the end; with it, once the
+    first trial would fall below the bound the zero trial runs again, succeeds on this positive
+    definite tail and the solve needs fewer iterations and factorizations."""
+    from mbplan.benchmarks.speed_tasks import TASKS
+
+    problem, x0, options = TASKS["drone"](0)
+    runs = {
+        z: solve_ripm(problem, x0, options.replace(degenerate_zero_below=z)) for z in (0.0, 1e-2)
+    }
+    never, default = (np.array(runs[z].history.delta_w[1:]) for z in (0.0, 1e-2))
+    assert all(r.status is RIPMStatus.CONVERGED for r in runs.values())
+    start = int(np.argmax(never > 0))  # the first perturbed iteration; the mode follows
+    assert np.all(never[start:] > 0) and never[-1] < 1e-2
+    tail = default[start + options.degenerate_iters :]
+    assert tail[-1] == 0.0 and np.all(tail[tail > 0] >= 1e-2 * options.kappa_w_minus)
+    assert runs[1e-2].iterations < runs[0.0].iterations
+    assert runs[1e-2].n_factorizations < runs[0.0].n_factorizations
+    with pytest.raises(InputError, match="degenerate_zero_below"):
+        RIPMOptions(degenerate_zero_below=-1.0)
+
+
 def _sqrt_problem(objective) -> EuclideanNLP:
     return EuclideanNLP(
         1,

@@ -148,9 +148,11 @@ class NewtonStep:
         self.compl_shift = None
         dw = dc = 0.0
         if o.degenerate_iters and self.n_perturbed >= o.degenerate_iters and self.delta_w_last:
-            # IPOPT's structurally degenerate Hessian: the zero trial has failed every time
-            # lately, start from the last iteration's δ_w
+            # the zero trial has failed every time lately: start from the last iteration's δ_w
+            # while that is large
             dw = max(o.delta_w_min, o.kappa_w_minus * self.delta_w_last)
+            if dw < o.degenerate_zero_below:
+                dw = 0.0
         pretend_singular = False
         while True:
             inertia = self.kkt.factorize(self._diagonal(dw, dc), o.static_regularization)

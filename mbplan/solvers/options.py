@@ -116,7 +116,14 @@ class RIPMOptions:
     degenerate_iters: int = 2
     """After this many consecutive iterations that needed ``δ_w > 0``, the first trial is
     ``κ_w⁻ δ_w,last`` instead of 0 (one factorization fewer per such iteration; 0: always try
-    ``δ_w = 0`` first, WB Algorithm IC)."""
+    ``δ_w = 0`` first, WB Algorithm IC). IPOPT enters this mode only for singular matrices,
+    not for wrong inertia: measured worse here (docs/ripm-speed.md, session 18)."""
+    degenerate_zero_below: float = 1e-2
+    """In the mode of ``degenerate_iters``, a first trial ``κ_w⁻ δ_w,last`` below this is
+    ``δ_w = 0`` instead: the zero trial is skipped only while the perturbation is large, so an
+    iterate whose Hessian has become positive definite stops being regularized by a
+    ``δ_w`` that shrinks only 3× per iteration (drone: 1 063 → 1 003 iterations and 1 430 →
+    1 384 factorizations in 100 solves; docs/ripm-speed.md, session 18). 0: never."""
 
     # --- linear solver (IPOPT's PDFullSpaceSolver) ---
     kkt_ordering: str = "amd"
@@ -205,6 +212,7 @@ class RIPMOptions:
             "kappa_w_plus_first": self.kappa_w_plus_first > 1,
             "print_level": self.print_level >= 0,
             "degenerate_iters": self.degenerate_iters >= 0,
+            "degenerate_zero_below": self.degenerate_zero_below >= 0,
             "kkt_ordering": self.kkt_ordering in ORDERINGS,
             "kkt_pivot_threshold": 0 <= self.kkt_pivot_threshold <= 1,
             "kkt_method": self.kkt_method in KKT_METHODS,
