@@ -2,11 +2,13 @@
 per KKT pattern (and so depends on the process's solve history), measured on the iiwa's first
 KKT matrices (the RIPM's warm start of each case).
 
-For each case: the choice QR pivoting makes on that case's own values (distinct choices are
-counted), the time of the symbolic phase that builds a choice (:class:`Reduction`), and whether
-the choices picked on other values take the case's values (no breakdown): the first case's
-(what the memo keeps today), and choices picked on reference values made from the pattern alone
-(seeded normal values on every stored entry, or only on the case's nonzero entries).
+Every case shares one memo key (plan and patterns: checked). For each case: the choice QR
+pivoting makes on that case's own values (distinct choices are counted), the time of the
+symbolic phase that builds a choice (:class:`Reduction`), and which choices picked on other
+values take the case's values (no breakdown): every case's own choice (the smallest number of
+cases any one choice takes), the first case's (what the memo keeps after a first solve), and
+choices picked on reference values made from the pattern alone (seeded normal values on every
+stored entry of ``A_E``, or only on the first case's nonzero entries).
 
     python benchmarks/reduction_picks.py --cases 30 --constraint com \\
         --out benchmarks/results/reduction-picks/iiwa-com.json
@@ -27,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from mbplan.benchmarks.common import write_json
 from mbplan.benchmarks.speed_tasks import maximal_ripm_problem
 from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
-from mbplan.solvers.reduction import Reduction
+from mbplan.solvers.reduction import Reduction, _key
 
 SEEDS = 3
 
@@ -66,14 +68,16 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args()
     matrices = first_matrices(args.cases, args.constraint)
-    picks, build_s = [], []
+    keys = {_key(plan, h, ae, ai, "amd", 0.0) for plan, h, ae, ai in matrices}
+    assert len(keys) == 1, "the cases do not share one KKT pattern and plan"
+    reductions, build_s = [], []
     for plan, h, ae, ai in matrices:
         t = time.perf_counter()
-        red = Reduction(plan, h, ae, ai, "amd", 0.0)
+        reductions.append(Reduction(plan, h, ae, ai, "amd", 0.0))
         build_s.append(time.perf_counter() - t)
-        picks.append(choice(red))
+    picks = [choice(red) for red in reductions]
     plan, h, ae, ai = matrices[0]
-    first = Reduction(plan, h, ae, ai, "amd", 0.0)
+    first = reductions[0]
     references = {
         f"{kind}_seed{seed}": takes(
             Reduction(plan, h, reference(ae, seed, kind == "nonzero"), ai, "amd", 0.0), matrices
@@ -88,9 +92,10 @@ def main() -> None:
         "distinct_own_choices": len(set(picks)),
         "symbolic_phase_s_median": float(np.median(build_s)),
         "first_case_choice_takes": takes(first, matrices),
+        "fewest_cases_any_own_choice_takes": min(takes(red, matrices) for red in reductions),
         "reference_choice_takes": references,
-        "same_nonzero_pattern_as_first": sum(
-            np.array_equal(m[2].data != 0, ae.data != 0) for m in matrices
+        "other_cases_with_the_first_cases_nonzeros_of_A_E": sum(
+            np.array_equal(m[2].data != 0, ae.data != 0) for m in matrices[1:]
         ),
     }
     print(data)

@@ -25,10 +25,10 @@ def rotational_kinematics(R0: cs.SX, R1: cs.SX, F0: cs.SX) -> cs.SX:
     derivatives cost about half the symbolic log's with its branches (docs/ripm-speed.md,
     session 17).
 
-    Domain: ``|θ| < π``. The residual grows like ``tan(θ/2)`` towards ``θ = π``, where it is
-    not finite, and a Newton step on it from near ``π`` is short: the RIPM does not converge
-    from a point with a knot there (it reports the failure). Points built by the formulations
-    (``F_k = R_kᵀ R_{k+1}``) have ``θ = 0``."""
+    Domain: ``|θ| < π``. The residual grows like ``tan(θ/2)`` towards ``θ = π`` and a Newton
+    step on it there is short (``≈ -sin θ``), so convergence from near ``π`` is slower; at
+    ``θ = π`` it is ``0/0`` (rounding) and the RIPM reports a failure. Points built by the
+    formulations (``F_k = R_kᵀ R_{k+1}``) have ``θ = 0``."""
     M = cs.mtimes([R1.T, R0, F0])
     return SO3.vee(M - M.T) * (2.0 / (1.0 + cs.trace(M)))
 

@@ -149,17 +149,27 @@ class RiemannianFunction(SiteFunction):
         else a CasADi buffer of its own pointing at the arrays once."""
         if kind in self._loops:
             return self._loops[kind].bind(inputs, outputs)
-        K = inputs[0].shape[0] if inputs else 0
+        site = self._functions[kind]
+        K = check_site_arrays(
+            self.name,
+            inputs,
+            outputs,
+            [site.nnz_in(i) for i in range(site.n_in())],
+            [site.nnz_out(i) for i in range(site.n_out())],
+        )
+        if K == 0:  # no sites: nothing to evaluate (CasADi has no 0-fold map)
+            return _BoundCall(_no_sites, (tuple(inputs), tuple(outputs)))
         fn = self._mapped(kind, K)
-        widths = [[fn.nnz_in(i) // max(K, 1) for i in range(fn.n_in())]]
-        widths.append([fn.nnz_out(i) // max(K, 1) for i in range(fn.n_out())])
-        check_site_arrays(self.name, inputs, outputs, *widths)
         buf, evaluate = fn.buffer()
         for i, a in enumerate(inputs):
             buf.set_arg(i, memoryview(a))
         for i, o in enumerate(outputs):
             buf.set_res(i, memoryview(o))
         return _BoundCall(evaluate, (buf, tuple(inputs), tuple(outputs)))
+
+
+def _no_sites() -> None:
+    """The bound evaluation of a function at no sites."""
 
 
 class _BoundCall:
