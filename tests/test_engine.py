@@ -678,8 +678,9 @@ def test_bound_calls_equal_the_mapped_evaluation(tmp_path, monkeypatch):
             either.bind("value", [z, p], [read_only])
         with pytest.raises(InputError, match="shape"):
             either.bind("value", [np.empty((5, fn.nz - 1)), p], outs["value"])
-        empty = [np.empty((0, w)) for w in (fn.nz, fn.np, fn.m, fn.jac_nnz, fn.hess_nnz)]
-        either.bind("hessian", empty[:3], empty[2:])()  # no sites: nothing to evaluate
+        no_sites = [np.empty((0, w)) for w in (fn.nz, fn.np, fn.m)]  # z, p, λ
+        no_outputs = [np.empty((0, w)) for w in (fn.m, fn.jac_nnz, fn.hess_nnz)]
+        either.bind("hessian", no_sites, no_outputs)()  # no sites: nothing to evaluate
     # the compiled caller's view (table_row): the inputs' addresses, then the outputs'
     bound = loop.bind([z, p], outs["value"])  # owns the address array read below
     entry, sites, args, res = bound.table_row()
