@@ -29,7 +29,7 @@ from mbplan.dynamics import (
     translational_dynamics,
     translational_kinematics,
 )
-from mbplan.engine import DerivativeCheck, RiemannianFunction, check_derivatives
+from mbplan.engine import CallbackFunction, DerivativeCheck, RiemannianFunction, check_derivatives
 from mbplan.engine.site_table import CallsInOrder, SiteTable, bound_calls, run_site_loops
 from mbplan.errors import InputError, MbplanError
 from mbplan.lie import SE3, SL, SO, SO3, R
@@ -816,6 +816,15 @@ BAD_EVALUATIONS = [
         lambda v, p: (_replace(v, F0=np.stack([np.eye(3)] * 3)), p, np.ones((2, 3))),
         r"'F0' has 3 knots, expected 2",
     ),
+    (
+        "parameter knots vs variables",
+        lambda v, p: (
+            _replace(v, F0=np.stack([np.eye(3)] * 3)),
+            _replace(p, dt=np.full((2, 1), 0.1)),
+            None,
+        ),
+        r"'dt' has 2 knots, expected 3",
+    ),
 ]
 
 
@@ -834,6 +843,48 @@ def test_bad_evaluation_input_raises(rk, rk_point, make, match):
     for call in calls:
         with pytest.raises(InputError, match=match):
             call()
+
+
+def test_packed_parameters_must_match_the_sites(rk, rk_point):
+    variables, parameters = rk_point
+    at_three = {k: np.stack([np.asarray(v)] * 3) for k, v in variables.items()}
+    packed = rk.pack_parameters(parameters, 2)
+    with pytest.raises(InputError, match=r"packed parameters must have shape \(1 or 3, 10\)"):
+        rk.value(at_three, packed)
+    assert rk.value(at_three, rk.pack_parameters(parameters, 3)).shape == (3, rk.m)
+
+
+def _zero_site_callback() -> CallbackFunction:
+    def evaluate(variables, params, lam, order):
+        y = variables["y"]
+        r = y[:, :1] * params[:, :1]
+        outs = [r, params[:, :1].copy(), np.zeros((len(y), 0))]
+        return outs[: order + 1]
+
+    return CallbackFunction("scaled", [("y", R(2))], [("a", 1)], 1, ([0], [0]), ([], []), evaluate)
+
+
+@pytest.mark.parametrize("which", ["riemannian", "callback"])
+def test_every_entry_point_evaluates_at_no_sites(rk, which):
+    """``K = 0`` sites give empty ``(0, ·)`` outputs of the right widths on every entry point
+    (CasADi has no 0-fold map; a callback is not called)."""
+    if which == "riemannian":
+        fn = rk
+        variables = {s.name: np.zeros((0, *s.shape)) for s in rk.variables}
+        parameters = {"J": np.eye(3), "dt": 0.1}
+    else:
+        fn = _zero_site_callback()
+        variables, parameters = {"y": np.zeros((0, 2))}, {"a": 2.0}
+    widths = (fn.m, fn.jac_nnz, fn.hess_nnz)
+    outs = [
+        [fn.value(variables, parameters)],
+        list(fn.jacobian(variables, parameters)),
+        list(fn.hessian(variables, parameters, np.zeros((0, fn.m)))),
+    ]
+    for order, got in enumerate(outs):
+        assert [a.shape for a in got] == [(0, w) for w in widths[: order + 1]]
+    at_one_site = {k: np.zeros((1, *v.shape[1:])) for k, v in variables.items()}
+    assert fn.value(at_one_site, parameters).shape == (1, fn.m)  # the same call at one site
 
 
 def test_bad_construction_raises():

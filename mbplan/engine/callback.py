@@ -63,9 +63,8 @@ class CallbackFunction(SiteFunction):
         z, p, *lam = inputs
         order = _ORDER[kind]
         outs = self._evaluate(self.unpack_variables(z), p, lam[0] if lam else None, order)
-        widths = (self.m, self.jac_nnz, self.hess_nnz)[: order + 1]
         K = len(z)
-        for out, width in zip(outs, widths, strict=True):
+        for out, width in zip(outs, self._output_widths(kind), strict=True):
             if out.shape != (K, width):
                 raise InputError(
                     f"{self.name}: callback returned {out.shape}, expected {(K, width)}"

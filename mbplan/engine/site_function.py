@@ -138,11 +138,11 @@ class SiteFunction(ABC):
                     )
                 K = a.shape[0]
             arrays.append(a)
-        K = K or 1
+        K = 1 if K is None else K
         out = np.empty((K, width))
         for s, a in zip(slots, arrays, strict=True):
             # Column-major flattening per knot, as CasADi reshapes.
-            out[:, s.offset : s.offset + s.size] = np.swapaxes(a, 1, -1).reshape(a.shape[0], -1)
+            out[:, s.offset : s.offset + s.size] = np.swapaxes(a, 1, -1).reshape(a.shape[0], s.size)
         if not np.isfinite(out).all():
             bad = next(
                 s.name for s, a in zip(slots, arrays, strict=True) if not np.isfinite(a).all()
@@ -161,8 +161,17 @@ class SiteFunction(ABC):
 
     def call_packed(self, kind: str, inputs: list[np.ndarray]) -> list[np.ndarray]:
         """:meth:`_call` on inputs already packed as :meth:`pack` does, without any checks: the
-        fast path for a caller that packs (and validates) a whole point once."""
+        fast path for a caller that packs (and validates) a whole point once. At no sites
+        (``K = 0``) the outputs are empty ``(0, ·)`` arrays."""
+        if inputs[0].shape[0] == 0:
+            return [np.empty((0, width)) for width in self._output_widths(kind)]
         return self._call(kind, inputs)
+
+    def _output_widths(self, kind: str) -> tuple[int, ...]:
+        """The widths of the outputs of ``kind``: residuals, Jacobian and Hessian nonzeros."""
+        return (self.m, self.jac_nnz, self.hess_nnz)[
+            : ("value", "jacobian", "hessian").index(kind) + 1
+        ]
 
     def bind(
         self, kind: str, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]
@@ -173,18 +182,28 @@ class SiteFunction(ABC):
         handling per call."""
 
         def call() -> None:
-            for out, res in zip(outputs, self._call(kind, list(inputs)), strict=True):
+            for out, res in zip(outputs, self.call_packed(kind, list(inputs)), strict=True):
                 out[...] = res
 
         return call
 
     def _inputs(self, variables, parameters, K: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Packed variables and parameters with one common number of sites: an argument given
+        once (one row) is repeated at every site, any other count must agree."""
         z = self.pack(self.variables, variables, self.nz, "variables", K)
+        if z.shape[0] != 1:
+            K = z.shape[0]
         if isinstance(parameters, np.ndarray):
             p = parameters
+            if p.ndim != 2 or p.shape[1] != self.np or (K is not None and p.shape[0] not in (1, K)):
+                sites = "K" if K is None else f"1 or {K}"
+                raise InputError(
+                    f"{self.name}: packed parameters must have shape ({sites}, {self.np}), "
+                    f"got {p.shape}"
+                )
         else:
             p = self.pack(self.parameters, parameters or {}, self.np, "parameters", K)
-        K = max(z.shape[0], p.shape[0])
+        K = z.shape[0] if z.shape[0] != 1 else p.shape[0]
         return _tile(z, K), _tile(p, K)
 
     # ------------------------------------------------------------------ evaluation
@@ -192,13 +211,13 @@ class SiteFunction(ABC):
         self, variables: Mapping[str, Any], parameters: Mapping[str, Any] | None = None
     ) -> np.ndarray:
         """Residuals, shape ``(K, m)``."""
-        return self._call("value", list(self._inputs(variables, parameters)))[0]
+        return self.call_packed("value", list(self._inputs(variables, parameters)))[0]
 
     def jacobian(
         self, variables: Mapping[str, Any], parameters: Mapping[str, Any] | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Residuals ``(K, m)`` and Jacobian nonzeros ``(K, jac_nnz)``."""
-        r, j = self._call("jacobian", list(self._inputs(variables, parameters)))
+        r, j = self.call_packed("jacobian", list(self._inputs(variables, parameters)))
         return r, j
 
     def hessian(
@@ -217,9 +236,11 @@ class SiteFunction(ABC):
             )
         if not np.all(np.isfinite(lam)):
             raise InputError(f"{self.name}: multipliers contain NaN or inf")
-        z, p = self._inputs(variables, parameters, lam.shape[0] if lam.shape[0] > 1 else None)
+        z, p = self._inputs(variables, parameters, None if lam.shape[0] == 1 else lam.shape[0])
         K = z.shape[0]
-        r, j, h = self._call("hessian", [z, p, _tile(np.ascontiguousarray(lam), K)])
+        if lam.shape[0] not in (1, K):
+            raise InputError(f"{self.name}: multipliers have {lam.shape[0]} sites, expected {K}")
+        r, j, h = self.call_packed("hessian", [z, p, _tile(np.ascontiguousarray(lam), K)])
         return r, j, h
 
     # ------------------------------------------------------------------ dense views
