@@ -814,7 +814,12 @@ BAD_EVALUATIONS = [
     (
         "multiplier knots vs variables",
         lambda v, p: (_replace(v, F0=np.stack([np.eye(3)] * 3)), p, np.ones((2, 3))),
-        r"'F0' has 3 knots, expected 2",
+        r"multipliers have 2 knots, expected 1 or 3",
+    ),
+    (
+        "NaN variable given once, at no sites",
+        lambda v, p: (_replace(v, torque=[np.nan, 0.0, 0.0]), p, np.zeros((0, 3))),
+        r"'torque' contains NaN",
     ),
     (
         "parameter knots vs variables",
@@ -851,12 +856,17 @@ def test_packed_parameters_must_match_the_sites(rk, rk_point):
     packed = rk.pack_parameters(parameters, 2)
     with pytest.raises(InputError, match=r"packed parameters must have shape \(1 or 3, 10\)"):
         rk.value(at_three, packed)
+    with pytest.raises(InputError, match="packed parameters contain NaN"):
+        rk.value(at_three, np.full((3, 10), np.nan))
     assert rk.value(at_three, rk.pack_parameters(parameters, 3)).shape == (3, rk.m)
+    as_ints = rk.pack_parameters(parameters, 1).round().astype(np.int64)
+    assert np.array_equal(rk.value(variables, as_ints), rk.value(variables, as_ints.astype(float)))
 
 
 def _zero_site_callback() -> CallbackFunction:
     def evaluate(variables, params, lam, order):
         y = variables["y"]
+        assert len(y), "the callback is called at no sites"
         r = y[:, :1] * params[:, :1]
         outs = [r, params[:, :1].copy(), np.zeros((len(y), 0))]
         return outs[: order + 1]

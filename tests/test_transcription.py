@@ -89,6 +89,31 @@ def test_additive_rows_sum_contributions():
     np.testing.assert_allclose(J[0], np.concatenate([2 * u[0], 2 * u[1], np.zeros(4)]))
 
 
+def test_a_term_at_no_knots_contributes_nothing():
+    """Terms bound to no knots (e.g. a constraint list that came out empty) build and
+    evaluate: the problem equals the one without them."""
+    f = _input_cost()
+    variables = TrajectoryVariables([Block("u", f.variables[0].group, 3)])
+    params = {"u_ref": np.ones(4), "w": 2.0}
+    terms = [
+        Term("a", "eq", f, {"u": ("u", [0, 2])}, params),
+        Term("c", "cost", f, {"u": ("u", [1])}, params),
+    ]
+    empty = [
+        Term("no_eq", "eq", f, {"u": ("u", [])}, params, rows=np.zeros((0, 1), np.int64)),
+        Term("no_cost", "cost", f, {"u": ("u", [])}, params),
+    ]
+    u = {"u": np.arange(12.0).reshape(3, 4)}
+    y = np.array([0.5, -2.0])
+    base, with_empty = (TrajectoryProblem(variables, t) for t in (terms, terms + empty))
+    for got, want in zip(with_empty.values(u), base.values(u), strict=True):
+        np.testing.assert_array_equal(got, want)
+    got, want = (p.evaluate(u, 1.0, y, np.zeros(0)) for p in (with_empty, base))
+    np.testing.assert_array_equal(got.gradient, want.gradient)
+    for name in ("eq_jacobian", "hessian_lower"):
+        np.testing.assert_array_equal(getattr(got, name).toarray(), getattr(want, name).toarray())
+
+
 def test_bad_points_and_bindings_are_named():
     prob, x = _drone_problem(with_input_limits=False)
     with pytest.raises(InputError, match="block 'p'"):

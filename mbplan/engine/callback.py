@@ -14,13 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from mbplan.engine.site_function import SiteFunction
+from mbplan.engine.site_function import ORDER, SiteFunction
 from mbplan.errors import InputError
 
 # evaluate(variables {name: (K, *shape)}, parameters (K, np), multipliers (K, m) or None,
 #          order 0/1/2) -> [r (K, m)] + [jac_nz (K, jac_nnz)] + [hess_nz (K, hess_nnz)]
 Evaluate = Callable[[dict[str, np.ndarray], np.ndarray, np.ndarray | None, int], list[np.ndarray]]
-_ORDER = {"value": 0, "jacobian": 1, "hessian": 2}
 
 
 class CallbackFunction(SiteFunction):
@@ -61,7 +60,7 @@ class CallbackFunction(SiteFunction):
 
     def _call(self, kind: str, inputs: list[np.ndarray]) -> list[np.ndarray]:
         z, p, *lam = inputs
-        order = _ORDER[kind]
+        order = ORDER[kind]
         outs = self._evaluate(self.unpack_variables(z), p, lam[0] if lam else None, order)
         K = len(z)
         for out, width in zip(outs, self._output_widths(kind), strict=True):

@@ -53,6 +53,14 @@ def _layout(items: Sequence[tuple[str, Any]], is_variable: bool) -> tuple[list[S
     return slots, offset, tangent
 
 
+ORDER = {"value": 0, "jacobian": 1, "hessian": 2}
+"""The evaluation kinds and their derivative order (their outputs: the first ``order + 1`` of
+residuals, Jacobian nonzeros, Hessian nonzeros)."""
+
+Parameters = Mapping[str, Any] | np.ndarray | None
+"""Named parameters, or a ``(K, np)`` array from :meth:`SiteFunction.pack_parameters`."""
+
+
 def _tile(a: np.ndarray, K: int) -> np.ndarray:
     """A C-contiguous ``(K, ·)`` array, repeating a single row if needed."""
     return np.ascontiguousarray(np.broadcast_to(a, (K, a.shape[1])))
@@ -139,15 +147,15 @@ class SiteFunction(ABC):
                 K = a.shape[0]
             arrays.append(a)
         K = 1 if K is None else K
+        bad = next(
+            (s.name for s, a in zip(slots, arrays, strict=True) if not np.isfinite(a).all()), None
+        )
+        if bad is not None:  # checked on the arguments: a row given once counts at no sites too
+            raise InputError(f"{self.name}: {what} {bad!r} contains NaN or inf")
         out = np.empty((K, width))
         for s, a in zip(slots, arrays, strict=True):
             # Column-major flattening per knot, as CasADi reshapes.
             out[:, s.offset : s.offset + s.size] = np.swapaxes(a, 1, -1).reshape(a.shape[0], s.size)
-        if not np.isfinite(out).all():
-            bad = next(
-                s.name for s, a in zip(slots, arrays, strict=True) if not np.isfinite(a).all()
-            )
-            raise InputError(f"{self.name}: {what} {bad!r} contains NaN or inf")
         return out
 
     def pack_parameters(self, parameters: Mapping[str, Any] | None, K: int) -> np.ndarray:
@@ -160,18 +168,18 @@ class SiteFunction(ABC):
         ``(K, nz)`` variables, ``(K, np)`` parameters (and ``(K, m)`` multipliers)."""
 
     def call_packed(self, kind: str, inputs: list[np.ndarray]) -> list[np.ndarray]:
-        """:meth:`_call` on inputs already packed as :meth:`pack` does, without any checks: the
+        """:meth:`_call` on inputs already packed as :meth:`pack` does, without validation: the
         fast path for a caller that packs (and validates) a whole point once. At no sites
-        (``K = 0``) the outputs are empty ``(0, ·)`` arrays."""
+        (``K = 0``) the outputs are empty ``(0, ·)`` arrays and :meth:`_call` is not called."""
         if inputs[0].shape[0] == 0:
             return [np.empty((0, width)) for width in self._output_widths(kind)]
         return self._call(kind, inputs)
 
     def _output_widths(self, kind: str) -> tuple[int, ...]:
         """The widths of the outputs of ``kind``: residuals, Jacobian and Hessian nonzeros."""
-        return (self.m, self.jac_nnz, self.hess_nnz)[
-            : ("value", "jacobian", "hessian").index(kind) + 1
-        ]
+        if kind not in ORDER:
+            raise InputError(f"{self.name}: unknown evaluation {kind!r}; choose from {list(ORDER)}")
+        return (self.m, self.jac_nnz, self.hess_nnz)[: ORDER[kind] + 1]
 
     def bind(
         self, kind: str, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]
@@ -187,34 +195,40 @@ class SiteFunction(ABC):
 
         return call
 
-    def _inputs(self, variables, parameters, K: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Packed variables and parameters with one common number of sites: an argument given
-        once (one row) is repeated at every site, any other count must agree."""
-        z = self.pack(self.variables, variables, self.nz, "variables", K)
-        if z.shape[0] != 1:
-            K = z.shape[0]
+    def _inputs(
+        self, variables: Mapping[str, Any], parameters: Parameters, sites: int = 1
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Packed variables and parameters at one common number of sites (at least ``sites``,
+        the multipliers' count): an argument given once (one row) is repeated at every site,
+        any other count must agree."""
+        z = self.pack(self.variables, variables, self.nz, "variables")
+        K = z.shape[0] if z.shape[0] != 1 else None
         if isinstance(parameters, np.ndarray):
-            p = parameters
+            p = np.asarray(parameters, dtype=float)
             if p.ndim != 2 or p.shape[1] != self.np or (K is not None and p.shape[0] not in (1, K)):
-                sites = "K" if K is None else f"1 or {K}"
+                rows = "K" if K is None else f"1 or {K}"
                 raise InputError(
-                    f"{self.name}: packed parameters must have shape ({sites}, {self.np}), "
+                    f"{self.name}: packed parameters must have shape ({rows}, {self.np}), "
                     f"got {p.shape}"
                 )
+            if not np.isfinite(p).all():
+                raise InputError(f"{self.name}: packed parameters contain NaN or inf")
         else:
             p = self.pack(self.parameters, parameters or {}, self.np, "parameters", K)
         K = z.shape[0] if z.shape[0] != 1 else p.shape[0]
+        if sites != 1:
+            if K not in (1, sites):
+                raise InputError(f"{self.name}: multipliers have {sites} knots, expected 1 or {K}")
+            K = sites
         return _tile(z, K), _tile(p, K)
 
     # ------------------------------------------------------------------ evaluation
-    def value(
-        self, variables: Mapping[str, Any], parameters: Mapping[str, Any] | None = None
-    ) -> np.ndarray:
+    def value(self, variables: Mapping[str, Any], parameters: Parameters = None) -> np.ndarray:
         """Residuals, shape ``(K, m)``."""
         return self.call_packed("value", list(self._inputs(variables, parameters)))[0]
 
     def jacobian(
-        self, variables: Mapping[str, Any], parameters: Mapping[str, Any] | None = None
+        self, variables: Mapping[str, Any], parameters: Parameters = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Residuals ``(K, m)`` and Jacobian nonzeros ``(K, jac_nnz)``."""
         r, j = self.call_packed("jacobian", list(self._inputs(variables, parameters)))
@@ -223,10 +237,12 @@ class SiteFunction(ABC):
     def hessian(
         self,
         variables: Mapping[str, Any],
-        parameters: Mapping[str, Any] | None,
+        parameters: Parameters,
         multipliers: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Residuals, Jacobian nonzeros and lower-triangle Hessian nonzeros of ``λᵀr``."""
+        """Residuals, Jacobian nonzeros and lower-triangle Hessian nonzeros of ``λᵀr``; multipliers
+        given once (``(m,)`` or one row) are used at every site, and arguments given once are
+        repeated at every site of the multipliers."""
         lam = np.asarray(multipliers, dtype=float)
         if lam.ndim == 1:
             lam = lam[None]
@@ -236,11 +252,8 @@ class SiteFunction(ABC):
             )
         if not np.all(np.isfinite(lam)):
             raise InputError(f"{self.name}: multipliers contain NaN or inf")
-        z, p = self._inputs(variables, parameters, None if lam.shape[0] == 1 else lam.shape[0])
-        K = z.shape[0]
-        if lam.shape[0] not in (1, K):
-            raise InputError(f"{self.name}: multipliers have {lam.shape[0]} sites, expected {K}")
-        r, j, h = self.call_packed("hessian", [z, p, _tile(np.ascontiguousarray(lam), K)])
+        z, p = self._inputs(variables, parameters, lam.shape[0])
+        r, j, h = self.call_packed("hessian", [z, p, _tile(lam, z.shape[0])])
         return r, j, h
 
     # ------------------------------------------------------------------ dense views

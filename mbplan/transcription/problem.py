@@ -84,7 +84,7 @@ class _TermIndex:
         for sl in f.variables:
             a = args[sl.name].reshape(term.sites, *sl.shape)
             z_index[:, sl.offset : sl.offset + sl.size] = np.swapaxes(a, 1, -1).reshape(
-                term.sites, -1
+                term.sites, sl.size
             )
         return cls(
             rows,
@@ -251,8 +251,8 @@ class TrajectoryProblem:
             jac_shapes = [(lay.term.sites * lay.term.function.jac_nnz,) for lay in lays]
             self._jacobians[kind], jac = _views(jac_shapes)
             for lay, r, j in zip(lays, res, jac, strict=True):
-                K = lay.term.sites
-                r2, j2 = r.reshape(K, -1), j.reshape(K, -1)
+                K, f = lay.term.sites, lay.term.function
+                r2, j2 = r.reshape(K, f.m), j.reshape(K, f.jac_nnz)
                 lay.outputs = {"value": [r2], "jacobian": [r2, j2], "hessian": [r2, j2]}
             if kind == "cost":
                 self._cost_residuals = res
@@ -260,7 +260,7 @@ class TrajectoryProblem:
             [(lay.term.sites * lay.term.function.hess_nnz,) for lay in self._all_layouts]
         )
         for lay, h in zip(self._all_layouts, hess, strict=True):
-            lay.outputs["hessian"].append(h.reshape(lay.term.sites, -1))
+            lay.outputs["hessian"].append(h.reshape(lay.term.sites, lay.term.function.hess_nnz))
 
     # ------------------------------------------------------------------ manifold
     def term_rows(self, kind: str) -> dict[str, np.ndarray]:
