@@ -85,3 +85,61 @@ def test_alternating_runs_run_each_tree_in_abba_order(tmp_path):
     runs = alternating_runs(trees, code, str(log), rounds=3)
     assert log.read_text().split() == ["a", "b", "b", "a", "a", "b"]
     assert runs == {"a": [["a", 0], ["a", 3], ["a", 4]], "b": [["b", 1], ["b", 2], ["b", 5]]}
+
+
+def test_median_ratio_interval_is_a_paired_bootstrap_of_the_medians():
+    import pytest
+
+    from mbplan.benchmarks.common import median_ratio_interval
+    from mbplan.errors import InputError
+
+    rng = np.random.default_rng(3)
+    den = {c: float(t) for c, t in enumerate(rng.lognormal(0.0, 0.5, 60))}
+    # twice as slow on every case: every paired draw has the ratio 2 exactly
+    assert median_ratio_interval({c: 2.0 * t for c, t in den.items()}, den) == (2.0, 2.0)
+    noisy = {c: t * float(rng.uniform(0.8, 1.2)) for c, t in den.items()}
+    lo, hi = median_ratio_interval(noisy, den)
+    point = np.median(list(noisy.values())) / np.median(list(den.values()))
+    assert lo < point < hi and hi - lo < 0.3
+    assert median_ratio_interval(noisy, den) == (lo, hi)  # seeded: the same interval
+    # without a denominator: the interval of the median itself
+    alone = median_ratio_interval(noisy)
+    assert alone is not None and alone[0] < np.median(list(noisy.values())) < alone[1]
+    # a case that did not converge is left out of that method's median only
+    missing = {**noisy, 0: None, 1: None}
+    lo2, hi2 = median_ratio_interval(missing, den)
+    assert lo2 <= hi2 and abs((lo2 + hi2) - (lo + hi)) < 0.2
+    assert median_ratio_interval({0: None}, {0: 1.0}) is None
+    with pytest.raises(InputError, match="level"):
+        median_ratio_interval(noisy, den, level=1.5)
+
+
+def test_speed_tables_show_each_ratio_with_its_interval():
+    from mbplan.benchmarks.speed import _intervals, _markdown, _method_stats
+
+    rng = np.random.default_rng(0)
+    rows = []
+    for case in range(40):
+        base = float(rng.lognormal(0.0, 0.3))
+        for method, scale in (("ipopt", 1.0), ("ripm", 0.25)):
+            t = scale * base * float(rng.uniform(0.9, 1.1))
+            rows.append(
+                {"case": case, "method": method, "success": case != 5 or method == "ipopt",
+                 "verified": True, "iterations": 10, "time_per_iter_s": t / 10,
+                 "total_time_s": t, "solve_time_s": 0.9 * t, "status": "ok"}
+            )  # fmt: skip
+    ci = _intervals(rows, "ipopt")
+    assert set(ci) == {"ipopt", "ripm"} and "total_ratio" not in ci["ipopt"]
+    lo, hi = ci["ripm"]["total_ratio"]
+    assert 0.2 < lo < 0.25 < hi < 0.3
+    tasks = {m: _method_stats([r for r in rows if r["method"] == m]) for m in ("ipopt", "ripm")}
+    summary = {
+        "command": "mbplan bench speed …",
+        "tasks": {"iiwa-com": tasks},
+        "intervals": {"iiwa-com": ci},
+        "profile": {},
+        "orderings": {},
+    }
+    text = _markdown(summary)
+    ripm_row = next(line for line in text.splitlines() if line.startswith("| ripm |"))
+    assert f"({lo:.2f}–{hi:.2f})" in ripm_row and "39/40" in ripm_row

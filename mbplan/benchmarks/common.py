@@ -9,6 +9,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -16,6 +17,8 @@ from typing import TYPE_CHECKING, Any
 
 import casadi as cs
 import numpy as np
+
+from mbplan.errors import InputError
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -91,6 +94,43 @@ def modules_at(rev: str, names: Iterable[str], package: str, prefix: str) -> Pat
             path.write_text(src)
     sys.path.insert(0, str(folder))
     return folder
+
+
+def median_ratio_interval(
+    num: dict[Any, float | None],
+    den: dict[Any, float | None] | None = None,
+    level: float = 0.95,
+    draws: int = 2000,
+    seed: int = 0,
+) -> tuple[float, float] | None:
+    """Percentile bootstrap interval of ``median(num) / median(den)`` over paired cases (or of
+    ``median(num)`` alone): the cases (the keys; ``None`` marks a case left out of that
+    method's median, e.g. not converged) are drawn with replacement, the same draw for both
+    methods, so cases that are slow for every method move both medians together. ``None`` if
+    a method has no value, or a draw leaves one without any."""
+    if not 0.0 < level < 1.0 or draws < 1:
+        raise InputError(
+            f"median_ratio_interval: level {level} must be in (0, 1), draws {draws} >= 1"
+        )
+    cases = sorted(set(num) | set(den or {}), key=str)
+    a = np.array([np.nan if num.get(c) is None else num[c] for c in cases], dtype=float)
+    b = (
+        None
+        if den is None
+        else np.array([np.nan if den.get(c) is None else den[c] for c in cases], dtype=float)
+    )
+    if not cases or np.all(np.isnan(a)) or (b is not None and np.all(np.isnan(b))):
+        return None
+    pick = np.random.default_rng(seed).integers(0, len(cases), size=(draws, len(cases)))
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN draw: checked below
+        stats = np.nanmedian(a[pick], axis=1)
+        if b is not None:
+            stats = stats / np.nanmedian(b[pick], axis=1)
+    if not np.all(np.isfinite(stats)):
+        return None
+    lo, hi = np.percentile(stats, [50 * (1 - level), 50 * (1 + level)])
+    return float(lo), float(hi)
 
 
 def machine_info() -> dict[str, Any]:

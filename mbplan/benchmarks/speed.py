@@ -36,6 +36,39 @@ def _med(rows: list[dict], key: str, ok_only: bool = True) -> float | None:
     return float(np.median(vals)) if vals else None
 
 
+def _baseline(task: str) -> str:
+    """The method every other one of a task is compared with."""
+    return "ipopt" if task.startswith("iiwa") else "ipopt-quaternion"
+
+
+def _by_case(rows: list[dict], method: str, key: str) -> dict[Any, float | None]:
+    """``key`` of ``method``'s rows by case, ``None`` where it did not converge (as :func:`_med`)."""
+    return {r["case"]: r.get(key) if r["success"] else None for r in rows if r["method"] == method}
+
+
+def _intervals(rows: list[dict], base: str) -> dict[str, dict[str, tuple[float, float] | None]]:
+    """95 % paired bootstrap intervals (:func:`~mbplan.benchmarks.common.median_ratio_interval`)
+    of each method's median time per iteration and of its medians' ratios to ``base``'s."""
+    from mbplan.benchmarks.common import median_ratio_interval
+
+    total = (
+        "total_time_s" if any(r.get("total_time_s") is not None for r in rows) else "solve_time_s"
+    )
+    out = {}
+    for m in sorted({r["method"] for r in rows}):
+        out[m] = {"time_per_iter_s": median_ratio_interval(_by_case(rows, m, "time_per_iter_s"))}
+        if m != base:
+            for name, key in (
+                ("total", total),
+                ("solve", "solve_time_s"),
+                ("time_per_iter", "time_per_iter_s"),
+            ):
+                out[m][f"{name}_ratio"] = median_ratio_interval(
+                    _by_case(rows, m, key), _by_case(rows, base, key)
+                )
+    return out
+
+
 def _method_stats(rows: list[dict]) -> dict[str, Any]:
     return {
         "n": len(rows),
@@ -72,7 +105,7 @@ def run(
     out.mkdir(parents=True, exist_ok=True)
     n_dist = n_iiwa if n_iiwa_distance is None else n_iiwa_distance
     pool = {"workers": workers, "scheduler": scheduler}
-    summary: dict[str, Any] = {"tasks": {}}
+    summary: dict[str, Any] = {"tasks": {}, "intervals": {}}
     sections = (
         (
             "iiwa-com",
@@ -139,6 +172,7 @@ def run(
             summary["tasks"][name] = {
                 m: _method_stats([r for r in rows if r["method"] == m]) for m in methods
             }
+            summary["intervals"][name] = _intervals(rows, _baseline(name))
     profile: dict[str, list[dict]] = {}
     names = ["iiwa-com"] * bool(n_iiwa) + ["iiwa-distance"] * bool(n_dist)
     names += ["drone", "drone-limits"] * bool(n_drone)
@@ -182,6 +216,16 @@ def _fmt(v: float | None, scale: float = 1.0, digits: int = 1) -> str:
     return "—" if v is None else f"{scale * v:.{digits}f}"
 
 
+def _within(
+    text: str, interval: tuple[float, float] | None, scale: float = 1.0, digits: int = 2
+) -> str:
+    """A cell's value followed by its bootstrap interval, e.g. ``0.26 (0.24–0.28)``."""
+    if interval is None or text == "—":
+        return text
+    lo, hi = (f"{scale * v:.{digits}f}" for v in interval)
+    return f"{text} ({lo}–{hi})"
+
+
 _ORDERS = ("amd", "metis", "nested", "grid-nd", "time-major", "stage-dense", "body-major")
 
 
@@ -195,14 +239,17 @@ def _markdown(s: dict) -> str:
         "*total* is the wall time of `mbplan.plan` (building the formulation, warm start, solve, "
         "result), *solve* the solver's own time: the quaternion IPOPT builds its CasADi NLP "
         "anew for every case, the maximal formulation reuses its compiled terms, so compare "
-        "the solvers by *solve*.",
+        "the solvers by *solve*. (lo–hi): the 95 % bootstrap interval of that median or ratio "
+        "of medians over the cases (2000 draws of the cases with replacement, the same draw "
+        "for every method, seed 0): how far this run's noise alone moves it.",
         "",
     ]
     for task in ("iiwa-com", "iiwa-distance", "drone"):
         if task not in s["tasks"]:
             continue
         ms = s["tasks"][task]
-        base = "ipopt" if task.startswith("iiwa") else "ipopt-quaternion"
+        base = _baseline(task)
+        ci = s.get("intervals", {}).get(task, {})
         lines += [
             f"## {task}",
             "",
@@ -213,14 +260,17 @@ def _markdown(s: dict) -> str:
         ]
         b = ms.get(base, {})
         for name, m in ms.items():
+            c = ci.get(name, {})
+            per_iter = _fmt(m["median_time_per_iter_s"], 1e3, 2)
             lines.append(
                 f"| {name} | {m['verified']}/{m['n']} | {m['converged']}/{m['n']} "
-                f"| {_fmt(m['median_iters'])} | {_fmt(m['median_time_per_iter_s'], 1e3, 2)} "
+                f"| {_fmt(m['median_iters'])} "
+                f"| {_within(per_iter, c.get('time_per_iter_s'), 1e3)} "
                 f"| {_fmt(m['median_total_time_s'], 1e3)} "
-                f"| {_ratio(m['median_total_time_s'], b.get('median_total_time_s'))} "
+                f"| {_within(_ratio(m['median_total_time_s'], b.get('median_total_time_s')), c.get('total_ratio'))} "
                 f"| {_fmt(m.get('median_solve_time_s'), 1e3)} "
-                f"| {_ratio(m.get('median_solve_time_s'), b.get('median_solve_time_s'))} "
-                f"| {_ratio(m['median_time_per_iter_s'], b.get('median_time_per_iter_s'))} |"
+                f"| {_within(_ratio(m.get('median_solve_time_s'), b.get('median_solve_time_s')), c.get('solve_ratio'))} "
+                f"| {_within(_ratio(m['median_time_per_iter_s'], b.get('median_time_per_iter_s')), c.get('time_per_iter_ratio'))} |"
             )
         lines += ["", "Statuses: " + "; ".join(f"{n}: {m['statuses']}" for n, m in ms.items()), ""]
     for task, title in (
