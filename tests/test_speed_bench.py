@@ -95,51 +95,81 @@ def test_median_ratio_interval_is_a_paired_bootstrap_of_the_medians():
 
     rng = np.random.default_rng(3)
     den = {c: float(t) for c, t in enumerate(rng.lognormal(0.0, 0.5, 60))}
-    # twice as slow on every case: every paired draw has the ratio 2 exactly
+    # twice as slow on every case: every paired draw has the ratio 2 exactly (unpaired draws
+    # would not)
     assert median_ratio_interval({c: 2.0 * t for c, t in den.items()}, den) == (2.0, 2.0)
     noisy = {c: t * float(rng.uniform(0.8, 1.2)) for c, t in den.items()}
     lo, hi = median_ratio_interval(noisy, den)
     point = np.median(list(noisy.values())) / np.median(list(den.values()))
     assert lo < point < hi and hi - lo < 0.3
     assert median_ratio_interval(noisy, den) == (lo, hi)  # seeded: the same interval
-    # without a denominator: the interval of the median itself
-    alone = median_ratio_interval(noisy)
-    assert alone is not None and alone[0] < np.median(list(noisy.values())) < alone[1]
-    # a case that did not converge is left out of that method's median only
-    missing = {**noisy, 0: None, 1: None}
-    lo2, hi2 = median_ratio_interval(missing, den)
-    assert lo2 <= hi2 and abs((lo2 + hi2) - (lo + hi)) < 0.2
+    # the percentiles of the level, over draws of the cases in their sorted order
+    cases = sorted(den, key=str)
+    pick = np.random.default_rng(0).integers(0, len(cases), size=(2000, len(cases)))
+    a, b = (np.array([d[c] for c in cases]) for d in (noisy, den))
+    ref = np.median(a[pick], axis=1) / np.median(b[pick], axis=1)
+    for level in (0.95, 0.5):
+        want = np.percentile(ref, [50 * (1 - level), 50 * (1 + level)])
+        np.testing.assert_allclose(median_ratio_interval(noisy, den, level=level), want)
+    # a case that did not converge leaves only that method's median: here the slow cases 0-9
+    # stay in the denominator's, so some draws' ratios fall well below 1
+    slow = {c: 10.0 if c < 10 else 1.0 for c in range(21)}
+    ones = {c: None if c < 10 else 1.0 for c in range(21)}
+    lo2, hi2 = median_ratio_interval(ones, slow)
+    assert hi2 == 1.0 and lo2 < 0.5
+    assert median_ratio_interval({c: 1.0 for c in range(9)}) is None  # too few cases
     assert median_ratio_interval({0: None}, {0: 1.0}) is None
-    with pytest.raises(InputError, match="level"):
-        median_ratio_interval(noisy, den, level=1.5)
+    for bad in ({"level": 1.5}, {"level": 0.0}, {"draws": 0}, {"draws": 2.5}):
+        with pytest.raises(InputError):
+            median_ratio_interval(noisy, den, **bad)
 
 
 def test_speed_tables_show_each_ratio_with_its_interval():
-    from mbplan.benchmarks.speed import _intervals, _markdown, _method_stats
+    from mbplan.benchmarks.speed import INTERVALS, _intervals, _markdown, _method_stats
 
     rng = np.random.default_rng(0)
     rows = []
     for case in range(40):
         base = float(rng.lognormal(0.0, 0.3))
-        for method, scale in (("ipopt", 1.0), ("ripm", 0.25)):
+        for method, scale, solve, its in (("ipopt", 1.0, 0.9, 10), ("ripm", 0.25, 0.5, 5)):
             t = scale * base * float(rng.uniform(0.9, 1.1))
             rows.append(
                 {"case": case, "method": method, "success": case != 5 or method == "ipopt",
-                 "verified": True, "iterations": 10, "time_per_iter_s": t / 10,
-                 "total_time_s": t, "solve_time_s": 0.9 * t, "status": "ok"}
+                 "verified": True, "iterations": its, "time_per_iter_s": t / its,
+                 "total_time_s": t, "solve_time_s": solve * t, "status": "ok"}
             )  # fmt: skip
     ci = _intervals(rows, "ipopt")
-    assert set(ci) == {"ipopt", "ripm"} and "total_ratio" not in ci["ipopt"]
-    lo, hi = ci["ripm"]["total_ratio"]
-    assert 0.2 < lo < 0.25 < hi < 0.3
-    tasks = {m: _method_stats([r for r in rows if r["method"] == m]) for m in ("ipopt", "ripm")}
+    assert set(ci) == {"ipopt", "ripm"} and set(ci["ipopt"]) == {"time_per_iter_s"}
+    r = ci["ripm"]
+    # total 0.25, solve 0.25 * 0.5 / 0.9, per iteration 0.25 * 10 / 5: one interval each
+    for key, want in (("total_ratio", 0.25), ("solve_ratio", 0.25 * 0.5 / 0.9), ("time_per_iter_ratio", 0.5)):  # fmt: skip
+        assert r[key][0] < want < r[key][1] and r[key][1] - r[key][0] < 0.25 * want
+    tasks = {m: _method_stats([x for x in rows if x["method"] == m]) for m in ("ipopt", "ripm")}
     summary = {
         "command": "mbplan bench speed …",
         "tasks": {"iiwa-com": tasks},
         "intervals": {"iiwa-com": ci},
+        "interval_method": INTERVALS,
         "profile": {},
         "orderings": {},
     }
     text = _markdown(summary)
-    ripm_row = next(line for line in text.splitlines() if line.startswith("| ripm |"))
-    assert f"({lo:.2f}–{hi:.2f})" in ripm_row and "39/40" in ripm_row
+    assert "95 % interval, a paired percentile bootstrap over the cases (2000 draws" in text
+    cells = {
+        line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
+        for line in text.splitlines()
+        if line.startswith(("| ripm |", "| ipopt |"))
+    }
+    ripm, ipopt = cells["ripm"], cells["ipopt"]
+    assert ripm[1] == "39/40" and [ipopt[i] for i in (5, 7, 8)] == ["1.00"] * 3
+    lo, hi = (1e3 * v for v in ci["ripm"]["time_per_iter_s"])
+    value = 1e3 * tasks["ripm"]["median_time_per_iter_s"]
+    d = max(0, 2 - int(np.floor(np.log10(value))))
+    shown = (
+        f"{value:.{d}f} ({np.floor(lo * 10**d) / 10**d:.{d}f}–{np.ceil(hi * 10**d) / 10**d:.{d}f})"
+    )
+    assert ripm[3] == shown  # in ms, the interval rounded outwards
+    for column, key in ((5, "total_ratio"), (7, "solve_ratio"), (8, "time_per_iter_ratio")):
+        lo, hi = ci["ripm"][key]
+        low, high = (float(x) for x in ripm[column].split("(")[1].rstrip(")").split("–"))
+        assert low <= lo and hi <= high and high - low < hi - lo + 0.0021

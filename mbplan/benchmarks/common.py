@@ -10,7 +10,7 @@ import sys
 import tempfile
 import time
 import warnings
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -19,6 +19,7 @@ import casadi as cs
 import numpy as np
 
 from mbplan.errors import InputError
+from mbplan.validation import as_int, as_real
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -96,38 +97,44 @@ def modules_at(rev: str, names: Iterable[str], package: str, prefix: str) -> Pat
     return folder
 
 
+MIN_INTERVAL_CASES = 10
+"""Fewest cases with a value per method for :func:`median_ratio_interval` to give one."""
+
+
 def median_ratio_interval(
-    num: dict[Any, float | None],
-    den: dict[Any, float | None] | None = None,
+    num: Mapping[Any, float | None],
+    den: Mapping[Any, float | None] | None = None,
     level: float = 0.95,
     draws: int = 2000,
     seed: int = 0,
 ) -> tuple[float, float] | None:
     """Percentile bootstrap interval of ``median(num) / median(den)`` over paired cases (or of
-    ``median(num)`` alone): the cases (the keys; ``None`` marks a case left out of that
+    ``median(num)`` alone): the cases (the keys; ``None`` or NaN marks a case left out of that
     method's median, e.g. not converged) are drawn with replacement, the same draw for both
-    methods, so cases that are slow for every method move both medians together. ``None`` if
-    a method has no value, or a draw leaves one without any."""
-    if not 0.0 < level < 1.0 or draws < 1:
-        raise InputError(
-            f"median_ratio_interval: level {level} must be in (0, 1), draws {draws} >= 1"
-        )
+    methods, so cases that are slow for every method move both medians together. It shows how
+    far the choice of cases moves the statistic within one run, not shifts between runs.
+    ``None`` if a method has fewer than :data:`MIN_INTERVAL_CASES` values; draws that leave a
+    method without any value are dropped."""
+    level = as_real(level, "level", positive=True)
+    if not level < 1.0:
+        raise InputError(f"median_ratio_interval: level must be in (0, 1), got {level}")
+    draws = as_int(draws, "draws", minimum=1, what="number of bootstrap draws")
     cases = sorted(set(num) | set(den or {}), key=str)
-    a = np.array([np.nan if num.get(c) is None else num[c] for c in cases], dtype=float)
-    b = (
-        None
-        if den is None
-        else np.array([np.nan if den.get(c) is None else den[c] for c in cases], dtype=float)
-    )
-    if not cases or np.all(np.isnan(a)) or (b is not None and np.all(np.isnan(b))):
+
+    def values(by_case: Mapping[Any, float | None]) -> np.ndarray:
+        return np.array([np.nan if by_case.get(c) is None else by_case[c] for c in cases], float)
+
+    columns = [values(num)] + ([] if den is None else [values(den)])
+    if any(np.count_nonzero(np.isfinite(v)) < MIN_INTERVAL_CASES for v in columns):
         return None
     pick = np.random.default_rng(seed).integers(0, len(cases), size=(draws, len(cases)))
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN draw: checked below
-        stats = np.nanmedian(a[pick], axis=1)
-        if b is not None:
-            stats = stats / np.nanmedian(b[pick], axis=1)
-    if not np.all(np.isfinite(stats)):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN draw: dropped below
+        medians = [np.nanmedian(np.where(np.isfinite(v), v, np.nan)[pick], axis=1) for v in columns]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        stats = medians[0] if den is None else medians[0] / medians[1]
+    stats = stats[np.isfinite(stats)]
+    if stats.size == 0:
         return None
     lo, hi = np.percentile(stats, [50 * (1 - level), 50 * (1 + level)])
     return float(lo), float(hi)

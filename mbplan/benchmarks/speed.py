@@ -46,26 +46,44 @@ def _by_case(rows: list[dict], method: str, key: str) -> dict[Any, float | None]
     return {r["case"]: r.get(key) if r["success"] else None for r in rows if r["method"] == method}
 
 
+INTERVALS = {
+    "kind": "paired percentile bootstrap over the cases",
+    "level": 0.95,
+    "draws": 2000,
+    "seed": 0,
+}
+"""How :func:`_intervals` draws (stored in summary.json and named in results.md)."""
+
+
+def _total_key(rows: list[dict]) -> str:
+    """The key of a method's *total* time: its total, or its solve time where it has none
+    (as :func:`_method_stats`)."""
+    return "total_time_s" if _med(rows, "total_time_s") else "solve_time_s"
+
+
 def _intervals(rows: list[dict], base: str) -> dict[str, dict[str, tuple[float, float] | None]]:
-    """95 % paired bootstrap intervals (:func:`~mbplan.benchmarks.common.median_ratio_interval`)
-    of each method's median time per iteration and of its medians' ratios to ``base``'s."""
+    """:data:`INTERVALS` (:func:`~mbplan.benchmarks.common.median_ratio_interval`) of each
+    method's median time per iteration and of its medians' ratios to ``base``'s."""
     from mbplan.benchmarks.common import median_ratio_interval
 
-    total = (
-        "total_time_s" if any(r.get("total_time_s") is not None for r in rows) else "solve_time_s"
-    )
+    draw = {k: INTERVALS[k] for k in ("level", "draws", "seed")}
+    of = {m: [r for r in rows if r["method"] == m] for m in sorted({r["method"] for r in rows})}
     out = {}
-    for m in sorted({r["method"] for r in rows}):
-        out[m] = {"time_per_iter_s": median_ratio_interval(_by_case(rows, m, "time_per_iter_s"))}
-        if m != base:
-            for name, key in (
-                ("total", total),
-                ("solve", "solve_time_s"),
-                ("time_per_iter", "time_per_iter_s"),
-            ):
-                out[m][f"{name}_ratio"] = median_ratio_interval(
-                    _by_case(rows, m, key), _by_case(rows, base, key)
-                )
+    for m, own in of.items():
+        out[m] = {
+            "time_per_iter_s": median_ratio_interval(_by_case(own, m, "time_per_iter_s"), **draw)
+        }
+        if m == base or base not in of:
+            continue
+        keys = {
+            "total": (_total_key(own), _total_key(of[base])),
+            "solve": ("solve_time_s", "solve_time_s"),
+            "time_per_iter": ("time_per_iter_s", "time_per_iter_s"),
+        }
+        for name, (mine, theirs) in keys.items():
+            out[m][f"{name}_ratio"] = median_ratio_interval(
+                _by_case(own, m, mine), _by_case(of[base], base, theirs), **draw
+            )
     return out
 
 
@@ -173,6 +191,7 @@ def run(
                 m: _method_stats([r for r in rows if r["method"] == m]) for m in methods
             }
             summary["intervals"][name] = _intervals(rows, _baseline(name))
+            summary["interval_method"] = INTERVALS
     profile: dict[str, list[dict]] = {}
     names = ["iiwa-com"] * bool(n_iiwa) + ["iiwa-distance"] * bool(n_dist)
     names += ["drone", "drone-limits"] * bool(n_drone)
@@ -216,14 +235,21 @@ def _fmt(v: float | None, scale: float = 1.0, digits: int = 1) -> str:
     return "—" if v is None else f"{scale * v:.{digits}f}"
 
 
-def _within(
-    text: str, interval: tuple[float, float] | None, scale: float = 1.0, digits: int = 2
-) -> str:
-    """A cell's value followed by its bootstrap interval, e.g. ``0.26 (0.24–0.28)``."""
-    if interval is None or text == "—":
-        return text
-    lo, hi = (f"{scale * v:.{digits}f}" for v in interval)
-    return f"{text} ({lo}–{hi})"
+def _within(value: float | None, interval: tuple[float, float] | None, scale: float = 1.0) -> str:
+    """A cell's value with three significant digits and its interval rounded outwards at the
+    same decimals, e.g. ``0.262 (0.246–0.273)``; the plain two-decimal value without one."""
+    if value is None:
+        return "—"
+    if interval is None:
+        return f"{scale * value:.2f}"
+    v, lo, hi = (scale * x for x in (value, *interval))
+    d = max(0, 2 - int(np.floor(np.log10(max(abs(v), 1e-300)))))
+    f = 10.0**d
+    return f"{v:.{d}f} ({np.floor(lo * f) / f:.{d}f}–{np.ceil(hi * f) / f:.{d}f})"
+
+
+def _quotient(a: float | None, b: float | None) -> float | None:
+    return None if a is None or b is None or b == 0 else a / b
 
 
 _ORDERS = ("amd", "metis", "nested", "grid-nd", "time-major", "stage-dense", "body-major")
@@ -239,11 +265,18 @@ def _markdown(s: dict) -> str:
         "*total* is the wall time of `mbplan.plan` (building the formulation, warm start, solve, "
         "result), *solve* the solver's own time: the quaternion IPOPT builds its CasADi NLP "
         "anew for every case, the maximal formulation reuses its compiled terms, so compare "
-        "the solvers by *solve*. (lo–hi): the 95 % bootstrap interval of that median or ratio "
-        "of medians over the cases (2000 draws of the cases with replacement, the same draw "
-        "for every method, seed 0): how far this run's noise alone moves it.",
+        "the solvers by *solve*.",
         "",
     ]
+    if s.get("intervals"):
+        i = s.get("interval_method", INTERVALS)
+        lines[-1:-1] = [
+            f"(lo–hi) after a time per iteration or a ratio: its {100 * i['level']:.0f} % interval, "
+            f"a {i['kind']} ({i['draws']} draws of the cases with replacement, the same draw for "
+            f"every method, seed {i['seed']}; a case that did not converge is left out of that "
+            "method's median): how far the choice of cases moves it within this run. Shifts "
+            "between runs (the host's load) are not in it.",
+        ]
     for task in ("iiwa-com", "iiwa-distance", "drone"):
         if task not in s["tasks"]:
             continue
@@ -261,16 +294,21 @@ def _markdown(s: dict) -> str:
         b = ms.get(base, {})
         for name, m in ms.items():
             c = ci.get(name, {})
-            per_iter = _fmt(m["median_time_per_iter_s"], 1e3, 2)
+            ratios = (
+                _within(_quotient(m[key], b.get(key)), c.get(f"{what}_ratio"))
+                for key, what in (
+                    ("median_total_time_s", "total"),
+                    ("median_solve_time_s", "solve"),
+                    ("median_time_per_iter_s", "time_per_iter"),
+                )
+            )
+            total, solve, per_iter = ratios
             lines.append(
                 f"| {name} | {m['verified']}/{m['n']} | {m['converged']}/{m['n']} "
                 f"| {_fmt(m['median_iters'])} "
-                f"| {_within(per_iter, c.get('time_per_iter_s'), 1e3)} "
-                f"| {_fmt(m['median_total_time_s'], 1e3)} "
-                f"| {_within(_ratio(m['median_total_time_s'], b.get('median_total_time_s')), c.get('total_ratio'))} "
-                f"| {_fmt(m.get('median_solve_time_s'), 1e3)} "
-                f"| {_within(_ratio(m.get('median_solve_time_s'), b.get('median_solve_time_s')), c.get('solve_ratio'))} "
-                f"| {_within(_ratio(m['median_time_per_iter_s'], b.get('median_time_per_iter_s')), c.get('time_per_iter_ratio'))} |"
+                f"| {_within(m['median_time_per_iter_s'], c.get('time_per_iter_s'), 1e3)} "
+                f"| {_fmt(m['median_total_time_s'], 1e3)} | {total} "
+                f"| {_fmt(m.get('median_solve_time_s'), 1e3)} | {solve} | {per_iter} |"
             )
         lines += ["", "Statuses: " + "; ".join(f"{n}: {m['statuses']}" for n, m in ms.items()), ""]
     for task, title in (
