@@ -41,9 +41,9 @@ def _baseline(task: str) -> str:
     return "ipopt" if task.startswith("iiwa") else "ipopt-quaternion"
 
 
-def _by_case(rows: list[dict], method: str, key: str) -> dict[Any, float | None]:
-    """``key`` of ``method``'s rows by case, ``None`` where it did not converge (as :func:`_med`)."""
-    return {r["case"]: r.get(key) if r["success"] else None for r in rows if r["method"] == method}
+def _by_case(rows: list[dict], key: str) -> dict[Any, float | None]:
+    """``key`` of one method's rows by case, ``None`` where it did not converge (as :func:`_med`)."""
+    return {r["case"]: r.get(key) if r["success"] else None for r in rows}
 
 
 INTERVALS = {
@@ -71,7 +71,7 @@ def _intervals(rows: list[dict], base: str) -> dict[str, dict[str, tuple[float, 
     out = {}
     for m, own in of.items():
         out[m] = {
-            "time_per_iter_s": median_ratio_interval(_by_case(own, m, "time_per_iter_s"), **draw)
+            "time_per_iter_s": median_ratio_interval(_by_case(own, "time_per_iter_s"), **draw)
         }
         if m == base or base not in of:
             continue
@@ -82,7 +82,7 @@ def _intervals(rows: list[dict], base: str) -> dict[str, dict[str, tuple[float, 
         }
         for name, (mine, theirs) in keys.items():
             out[m][f"{name}_ratio"] = median_ratio_interval(
-                _by_case(own, m, mine), _by_case(of[base], base, theirs), **draw
+                _by_case(own, mine), _by_case(of[base], theirs), **draw
             )
     return out
 
@@ -123,7 +123,7 @@ def run(
     out.mkdir(parents=True, exist_ok=True)
     n_dist = n_iiwa if n_iiwa_distance is None else n_iiwa_distance
     pool = {"workers": workers, "scheduler": scheduler}
-    summary: dict[str, Any] = {"tasks": {}, "intervals": {}}
+    summary: dict[str, Any] = {"tasks": {}, "intervals": {}, "interval_method": INTERVALS}
     sections = (
         (
             "iiwa-com",
@@ -191,7 +191,6 @@ def run(
                 m: _method_stats([r for r in rows if r["method"] == m]) for m in methods
             }
             summary["intervals"][name] = _intervals(rows, _baseline(name))
-            summary["interval_method"] = INTERVALS
     profile: dict[str, list[dict]] = {}
     names = ["iiwa-com"] * bool(n_iiwa) + ["iiwa-distance"] * bool(n_dist)
     names += ["drone", "drone-limits"] * bool(n_drone)
@@ -228,7 +227,7 @@ def run(
 
 
 def _ratio(a: float | None, b: float | None) -> str:
-    return "—" if a is None or b is None or b == 0 else f"{a / b:.2f}"
+    return _within(_quotient(a, b), None)
 
 
 def _fmt(v: float | None, scale: float = 1.0, digits: int = 1) -> str:

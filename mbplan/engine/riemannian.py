@@ -157,8 +157,8 @@ class RiemannianFunction(SiteFunction):
             [site.nnz_in(i) for i in range(site.n_in())],
             [site.nnz_out(i) for i in range(site.n_out())],
         )
-        if K == 0:  # no sites: nothing to evaluate (CasADi has no 0-fold map)
-            return _BoundCall(_no_sites, (tuple(inputs), tuple(outputs)))
+        if K == 0:  # CasADi has no 0-fold map: the shared path's empty call
+            return super().bind(kind, inputs, outputs)
         fn = self._mapped(kind, K)
         buf, evaluate = fn.buffer()
         for i, a in enumerate(inputs):
@@ -166,10 +166,6 @@ class RiemannianFunction(SiteFunction):
         for i, o in enumerate(outputs):
             buf.set_res(i, memoryview(o))
         return _BoundCall(evaluate, (buf, tuple(inputs), tuple(outputs)))
-
-
-def _no_sites() -> None:
-    """The bound evaluation of a function at no sites."""
 
 
 class _BoundCall:
