@@ -30,6 +30,7 @@ from mbplan.dynamics import (
     translational_kinematics,
 )
 from mbplan.engine import CallbackFunction, DerivativeCheck, RiemannianFunction, check_derivatives
+from mbplan.engine.site_loop_source import SITE_CHUNK, site_loop_source
 from mbplan.engine.site_table import CallsInOrder, SiteTable, bound_calls, run_site_loops
 from mbplan.errors import InputError, MbplanError
 from mbplan.lie import SE3, SL, SO, SO3, R
@@ -740,6 +741,75 @@ def test_site_table_runs_the_bound_loops_and_reports_a_failure(tmp_path, monkeyp
     mixed()
     np.testing.assert_allclose(plain_out, expected[0], rtol=1e-14)
     assert not any(isinstance(c, SiteTable) for c in bound_calls([plain]).calls)
+
+
+def _site_loop_of(fn: cs.Function, folder) -> str:
+    """The ``<name>_sites`` source the JIT appends to ``fn``'s generated C."""
+    return jit_module._generate(fn, folder).read_text().split(f"\nint {fn.name()}_sites(")[1]
+
+
+@pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None, reason="no C compiler")
+@pytest.mark.parametrize("vectorized", [True, False])
+def test_site_loops_in_chunks_equal_the_interpreted_evaluation(tmp_path, monkeypatch, vectorized):
+    """Straight-line arithmetic gets the vectorized site loop (chunks of ``SITE_CHUNK`` sites, one
+    SIMD lane per site), a body with another call (``sin``) the scalar one; both equal the
+    interpreted evaluation at every count of sites, full and partial chunks, and write no row
+    past the last site."""
+    monkeypatch.setenv("MBPLAN_CACHE_DIR", str(tmp_path))
+    case = CASE["rotational_dynamics_torque"]
+    if vectorized:
+        residual = case.residual
+    else:
+
+        def residual(F0, F1, torque, J, dt):
+            return case.residual(F0, F1, cs.sin(torque), J, dt)
+
+    name = f"chunk_probe_{vectorized}"
+    interpreted = RiemannianFunction(name, case.variables, residual, case.parameters)
+    compiled = RiemannianFunction(name, case.variables, residual, case.parameters, jit=True)
+    source = _site_loop_of(interpreted._functions["hessian"], tmp_path)
+    assert ("#pragma omp simd" in source) == vectorized
+    rng = np.random.default_rng(3)
+    for K in (0, 1, SITE_CHUNK - 1, SITE_CHUNK, SITE_CHUNK + 1, 2 * SITE_CHUNK + 3):
+        pts = [case.sample(rng) for _ in range(K)]
+        z = np.zeros((K, compiled.nz))
+        p = np.zeros((K, compiled.np))
+        if K:
+            v = {s.name: np.stack([pt[0][s.name] for pt in pts]) for s in compiled.variables}
+            q = {s.name: np.stack([pt[1][s.name] for pt in pts]) for s in compiled.parameters}
+            z = compiled.pack(compiled.variables, v, compiled.nz, "variables")
+            p = compiled.pack(compiled.parameters, q, compiled.np, "parameters")
+        lam = rng.standard_normal((K, compiled.m))
+        widths = (compiled.m, compiled.jac_nnz, compiled.hess_nnz)
+        padded = [np.full((K + 2, w), np.nan) for w in widths]
+        compiled.bind("hessian", [z, p, lam], [a[:K] for a in padded])()
+        expected = interpreted.call_packed("hessian", [z, p, lam])
+        for a, b in zip(padded, expected, strict=True):
+            np.testing.assert_allclose(a[:K], b, rtol=1e-13, atol=1e-13)
+            assert np.isnan(a[K:]).all()
+
+
+@pytest.mark.parametrize(
+    "body, why",
+    [
+        ("  a0=arg[0]? arg[0][0] : 0;\n  if (res[0]!=0) res[0][0]=sin(a0);", "another call"),
+        ("  a0=arg[0]? arg[0][0] : 0;\n  if (res[0]!=0) res[0][1]=a0;", "an entry not written"),
+        ("  a0=arg[0]? arg[0][0] : 0;\n  w[0]=a0;\n  if (res[0]!=0) res[0][0]=a0;", "work vector"),
+    ],
+)
+def test_site_loop_falls_back_to_scalar_on_anything_else(body, why):
+    """A body that is not straight-line arithmetic writing every result entry once gets the
+    scalar loop (CasADi's function per site)."""
+    x = cs.SX.sym("x")
+    fn = cs.Function("fallback_probe", [x], [x])
+    source = (
+        "static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, "
+        f"casadi_real* w, int mem) {{\n  casadi_real a0;\n{body}\n  return 0;\n}}\n"
+    )
+    loop = site_loop_source(fn, source)
+    assert "#pragma omp simd" not in loop and "fallback_probe(a, r, iw, w, 0)" in loop, why
+    good = source.replace(body, "  a0=arg[0]? arg[0][0] : 0;\n  if (res[0]!=0) res[0][0]=a0;")
+    assert "#pragma omp simd" in site_loop_source(fn, good)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,9 +1,10 @@
 """Compile CasADi Functions to C with the system compiler, cached on disk by content hash.
 
-A second run with the same Function (same expression graph, compiler, flags and the site-loop
-source below) loads the shared object from the cache instead of recompiling. The cache
+A second run with the same Function (same expression graph, compiler, flags and site-loop
+generator) loads the shared object from the cache instead of recompiling. The cache
 directory is ``$MBPLAN_CACHE_DIR`` or ``~/.cache/mbplan/jit``. Every shared object also holds
-``<name>_sites``, the function evaluated at ``K`` sites in one C loop (:class:`SiteLoop`).
+``<name>_sites``, the function evaluated at ``K`` sites in one C call (:class:`SiteLoop`;
+its source: :mod:`mbplan.engine.site_loop_source`).
 """
 
 from __future__ import annotations
@@ -24,9 +25,10 @@ import casadi as cs
 import numba as nb
 import numpy as np
 
+from mbplan.engine.site_loop_source import COMPILE_FLAGS, GENERATOR_KEY, site_loop_source
 from mbplan.errors import InputError, MbplanError
 
-DEFAULT_FLAGS = ("-O2", "-fPIC", "-shared", "-march=native")
+DEFAULT_FLAGS = ("-O2", "-fPIC", "-shared", "-march=native", *COMPILE_FLAGS)
 
 
 def cache_dir() -> Path:
@@ -41,41 +43,6 @@ def compiler() -> str:
     if shutil.which(cc) is None:
         raise MbplanError(f"JIT compilation needs a C compiler; '{cc}' was not found (set CC)")
     return cc
-
-
-# argument i and result i of site k at arg[i] + k * nnz_in(i), res[i] + k * nnz_out(i)
-_SITE_LOOP = """
-int {name}_sites(casadi_int K, const casadi_real** arg, casadi_real** res) {{
-  static const casadi_int nnz_in[] = {{{nnz_in}}}, nnz_out[] = {{{nnz_out}}};
-  casadi_int sz_arg, sz_res, sz_iw, sz_w, i, k;
-  {name}_work(&sz_arg, &sz_res, &sz_iw, &sz_w);
-  const casadi_real* a[sz_arg + 1];
-  casadi_real* r[sz_res + 1];
-  casadi_int iw[sz_iw + 1];
-  casadi_real w[sz_w + 1];
-  for (i = 0; i < sz_arg; ++i) a[i] = 0;
-  for (i = 0; i < sz_res; ++i) r[i] = 0;
-  for (k = 0; k < K; ++k) {{
-    for (i = 0; i < {n_in}; ++i) a[i] = arg[i] + k * nnz_in[i];
-    for (i = 0; i < {n_out}; ++i) r[i] = res[i] + k * nnz_out[i];
-    if ({name}(a, r, iw, w, 0)) return 1;
-  }}
-  return 0;
-}}
-"""
-
-
-def _site_loop_source(fn: cs.Function) -> str:
-    def sizes(n: int, nnz) -> str:
-        return ", ".join(str(nnz(i)) for i in range(n)) or "0"
-
-    return _SITE_LOOP.format(
-        name=fn.name(),
-        n_in=fn.n_in(),
-        n_out=fn.n_out(),
-        nnz_in=sizes(fn.n_in(), fn.nnz_in),
-        nnz_out=sizes(fn.n_out(), fn.nnz_out),
-    )
 
 
 class SiteLoop:
@@ -97,6 +64,13 @@ class SiteLoop:
         the inputs' current values and overwrites the outputs."""
         K = check_site_arrays(self.name, inputs, outputs, self._nnz_in, self._nnz_out)
         return BoundLoop(self, K, inputs, outputs)
+
+    def evaluate(self, inputs: Sequence[np.ndarray]) -> list[np.ndarray]:
+        """The outputs, new ``(K, nnz)`` arrays, at the sites of ``inputs``."""
+        K = inputs[0].shape[0] if inputs else 0
+        outputs = [np.empty((K, width)) for width in self._nnz_out]
+        self.bind(inputs, outputs)()
+        return outputs
 
 
 def check_site_arrays(
@@ -191,7 +165,7 @@ def _compiled(fns: Mapping[str, cs.Function], flags: tuple[str, ...]) -> dict[st
     targets = {}
     for key, fn in fns.items():
         digest = hashlib.sha256(
-            "\0".join([fn.serialize(), cc, *flags, cs.__version__, _SITE_LOOP]).encode()
+            "\0".join([fn.serialize(), cc, *flags, cs.__version__, GENERATOR_KEY]).encode()
         ).hexdigest()[:24]
         targets[key] = cache_dir() / f"{fn.name()}_{digest}.so"
     missing = [k for k in fns if not targets[k].exists()]
@@ -209,8 +183,9 @@ def _generate(fn: cs.Function, folder: Path) -> Path:
     cg = cs.CodeGenerator(src.name, {"with_header": False})
     cg.add(fn)
     cg.generate(str(folder) + os.sep)
+    loop = site_loop_source(fn, src.read_text())
     with src.open("a") as out:
-        out.write(_site_loop_source(fn))
+        out.write(loop)
     return src
 
 

@@ -124,7 +124,10 @@ class RiemannianFunction(SiteFunction):
         return fn
 
     def _call(self, kind: str, inputs: list[np.ndarray]) -> list[np.ndarray]:
-        """Evaluate the ``K``-fold map of a function on C-ordered ``(K, ·)`` arrays, zero-copy."""
+        """Evaluate a function at the sites of C-ordered ``(K, ·)`` arrays, zero-copy: compiled,
+        its site loop (what :meth:`bind` calls); else the ``K``-fold map."""
+        if kind in self._loops:
+            return self._loops[kind].evaluate(inputs)
         K = inputs[0].shape[0]
         key = (kind, K)
         cached = self._buffers.get(key)
