@@ -30,6 +30,7 @@ from mbplan.dynamics import (
     translational_kinematics,
 )
 from mbplan.engine import CallbackFunction, DerivativeCheck, RiemannianFunction, check_derivatives
+from mbplan.engine.site_function import ORDER
 from mbplan.engine.site_loop_source import SITE_CHUNK, site_loop_source
 from mbplan.engine.site_table import CallsInOrder, SiteTable, bound_calls, run_site_loops
 from mbplan.errors import InputError, MbplanError
@@ -781,12 +782,47 @@ def test_site_loops_in_chunks_equal_the_interpreted_evaluation(tmp_path, monkeyp
             p = compiled.pack(compiled.parameters, q, compiled.np, "parameters")
         lam = rng.standard_normal((K, compiled.m))
         widths = (compiled.m, compiled.jac_nnz, compiled.hess_nnz)
-        padded = [np.full((K + 2, w), np.nan) for w in widths]
-        compiled.bind("hessian", [z, p, lam], [a[:K] for a in padded])()
-        expected = interpreted.call_packed("hessian", [z, p, lam])
-        for a, b in zip(padded, expected, strict=True):
-            np.testing.assert_allclose(a[:K], b, rtol=1e-13, atol=1e-13)
-            assert np.isnan(a[K:]).all()
+        for kind, order in ORDER.items():
+            inputs = [z, p, lam][: 2 + (kind == "hessian")]
+            padded = [np.full((K + 2, w), np.nan) for w in widths[: order + 1]]
+            compiled.bind(kind, inputs, [a[:K] for a in padded])()
+            expected = interpreted.call_packed(kind, inputs)
+            if K:  # and CasADi's map of the same compiled function (its scalar code)
+                scalar = compiled._functions[kind].map(K)(*(a.T for a in inputs))
+                scalar = [np.asarray(scalar).T] if order == 0 else [np.asarray(o).T for o in scalar]
+            for i, (a, b) in enumerate(zip(padded, expected, strict=True)):
+                np.testing.assert_allclose(a[:K], b, rtol=1e-13, atol=1e-13)
+                assert np.isnan(a[K:]).all()
+                if K:
+                    np.testing.assert_allclose(a[:K], scalar[i], rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None, reason="no C compiler")
+def test_vectorized_site_loop_of_branches_constants_and_nan(tmp_path):
+    """The vectorized loop of a body with CasADi's conditionals (``if_else``), comparisons,
+    logic, ``inf``, ``sqrt``, ``fabs`` and squares, and an output without entries, equals
+    CasADi's evaluation (NaN where it gives NaN) at full and partial chunks, NaN inputs
+    included."""
+    x, p = cs.SX.sym("x", 3), cs.SX.sym("p", 2)
+    out = cs.vertcat(
+        cs.if_else(x[0] > p[0], x[1] ** 2 + x[2] ** 2, cs.sqrt(x[0] ** 2 + 1)),
+        (x[0] < x[1]) + cs.logic_and(x[1] > 0, x[2] < 0) + cs.logic_not(x[0] >= 0),
+        x[0] * cs.inf + cs.fabs(x[1]),
+        cs.if_else(x[2] != x[2], 5, x[2] / p[1]),
+    )
+    fn = cs.Function("branch_probe", [x, p], [out, cs.SX(2, 1)])
+    src = jit_module._generate(fn, tmp_path)
+    assert "#pragma omp simd" in src.read_text().split("\nint branch_probe_sites(")[1]
+    jit_module._build(jit_module.compiler(), jit_module.DEFAULT_FLAGS, src, tmp_path / "b.so")
+    loop = jit_module.SiteLoop(fn, tmp_path / "b.so")
+    rng = np.random.default_rng(4)
+    for K in (1, SITE_CHUNK - 1, SITE_CHUNK, 2 * SITE_CHUNK + 3):
+        X, P = rng.standard_normal((K, 3)), rng.standard_normal((K, 2))
+        X[K // 2, 2], X[K - 1, 0] = np.nan, 0.0
+        got = loop.evaluate([X, P])
+        expected = np.asarray(fn.map(K)(X.T, P.T)[0]).T
+        assert got[1].shape == (K, 0)
+        np.testing.assert_allclose(got[0], expected, rtol=1e-15, atol=0, equal_nan=True)
 
 
 @pytest.mark.parametrize(
@@ -795,6 +831,9 @@ def test_site_loops_in_chunks_equal_the_interpreted_evaluation(tmp_path, monkeyp
         ("  a0=arg[0]? arg[0][0] : 0;\n  if (res[0]!=0) res[0][0]=sin(a0);", "another call"),
         ("  a0=arg[0]? arg[0][0] : 0;\n  if (res[0]!=0) res[0][1]=a0;", "an entry not written"),
         ("  a0=arg[0]? arg[0][0] : 0;\n  w[0]=a0;\n  if (res[0]!=0) res[0][0]=a0;", "work vector"),
+        ("  a0=arg[0]? arg[0][1] : 0;\n  if (res[0]!=0) res[0][0]=a0;", "no such argument entry"),
+        ("  a0=arg[0]? arg[0][0] : 0;\n  if (res[0]!=0) res[0][0]=(k+a0);", "a name not local"),
+        ("  casadi_int i0;\n  a0=arg[0]? arg[0][0] : 0;\n  if (res[0]!=0) res[0][0]=a0;", "an int"),
     ],
 )
 def test_site_loop_falls_back_to_scalar_on_anything_else(body, why):
@@ -810,6 +849,15 @@ def test_site_loop_falls_back_to_scalar_on_anything_else(body, why):
     assert "#pragma omp simd" not in loop and "fallback_probe(a, r, iw, w, 0)" in loop, why
     good = source.replace(body, "  a0=arg[0]? arg[0][0] : 0;\n  if (res[0]!=0) res[0][0]=a0;")
     assert "#pragma omp simd" in site_loop_source(fn, good)
+
+
+@pytest.mark.parametrize("op", [cs.fmax, cs.atan2, lambda a, b: cs.sin(a) * b])
+def test_site_loop_of_casadi_calls_it_cannot_inline_is_scalar(tmp_path, op):
+    """CasADi's own code with a call other than its square, ``fabs`` and ``sqrt`` (``fmax``,
+    ``atan2``, ``sin``) gets the scalar loop."""
+    x = cs.SX.sym("x", 2)
+    fn = cs.Function("call_probe", [x], [op(x[0], x[1]) + x[0] ** 2])
+    assert "#pragma omp simd" not in _site_loop_of(fn, tmp_path)
 
 
 # ---------------------------------------------------------------------------------------------

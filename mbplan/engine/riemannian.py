@@ -12,7 +12,8 @@ Under a bi-invariant metric the exponential curve is a geodesic (RIPM paper Rema
 Only the second-order Taylor polynomial ``X(I + ξ^ + ξ^²/2)`` of the retraction (eq. 43) enters,
 so derivatives are exact and free of the removable singularities of closed-form ``exp``.
 
-All outputs are evaluated for ``K`` knots in one call (``casadi.Function.map``). Sparsity
+All outputs are evaluated for ``K`` knots in one call (compiled: one C loop over the sites,
+:mod:`mbplan.engine.site_loop_source`; else ``casadi.Function.map``). Sparsity
 patterns are fixed at construction: ``jac_rows/jac_cols`` and ``hess_rows/hess_cols`` (lower
 triangle) index the nonzero arrays returned per knot, so callers assemble sparse matrices by
 index arithmetic with no Python loop over knots.

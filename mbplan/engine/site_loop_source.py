@@ -4,30 +4,41 @@ Argument ``i`` and result ``i`` of site ``k`` are at ``arg[i] + k * nnz_in(i)`` 
 ``res[i] + k * nnz_out(i)`` (C-ordered ``(K, nnz)`` arrays). Two forms:
 
 * **vectorized**, when CasADi's code of the function is straight-line scalar arithmetic (SX:
-  assignments of local variables, ``casadi_sq``, ``sqrt``, ``fabs``, ``fmin``, ``fmax``):
-  the sites go in chunks of :data:`SITE_CHUNK`; a chunk's arguments are transposed into
-  site-minor scratch arrays, the function's statements run once for the whole chunk in a
-  ``#pragma omp simd`` loop (one SIMD lane per site) and the results are transposed back. The
-  same operations in the same order per site as the scalar code; a partial last chunk fills
-  its idle lanes with the chunk's first site and stores only its own sites;
-* **scalar** otherwise: CasADi's function called once per site.
+  assignments of local variables from the arguments, constants and each other, with
+  ``casadi_sq``, ``casadi_fabs`` and ``sqrt`` the only calls): the sites go in chunks of
+  :data:`SITE_CHUNK`; a chunk's arguments are transposed into site-minor scratch arrays, the
+  function's statements run once for the whole chunk in a ``#pragma omp simd`` loop (one SIMD
+  lane per site) and the results are transposed back. The same operations per site as the
+  scalar code, except that the compiler may fuse a multiply and an add where the scalar code
+  calls ``casadi_sq`` (a difference in the last bit); a partial last chunk fills its idle lanes
+  with the chunk's first site and stores only its own sites;
+* **scalar** otherwise (other calls, work vectors, a result entry not written exactly once, or
+  scratch beyond :data:`STACK_MAX` bytes): CasADi's function called once per site.
 """
 
 from __future__ import annotations
 
+import hashlib
 import re
-from pathlib import Path
+from importlib import resources
 
 import casadi as cs
 
 SITE_CHUNK = 8
 """Sites per SIMD chunk: one AVX-512 vector of doubles (two AVX2 vectors)."""
 
-VECTOR_CALLS = frozenset({"casadi_sq", "sqrt", "fabs", "fmin", "fmax"})
-"""Calls a vectorized site loop may contain (compiled inline by ``-fno-math-errno``)."""
+STACK_MAX = 1 << 18
+"""Largest stack scratch of a vectorized loop (bytes: a chunk of every argument, result and
+local variable); a larger function keeps the scalar loop."""
+
+_INLINE = {"casadi_sq": None, "casadi_fabs": "fabs"}
+"""CasADi's helper functions in a vectorized body, written inline (``None``: ``(a*a)``)."""
+
+_NAMES = frozenset({"sqrt", "fabs", "casadi_inf", "casadi_nan"})
+"""Names other than local variables a rewritten statement may contain."""
 
 COMPILE_FLAGS = ("-fopenmp-simd", "-fno-math-errno")
-"""What the vectorized loop needs of the C compiler, besides optimization."""
+"""What the vectorized loop needs of the C compiler, besides optimization (``sqrt`` inline)."""
 
 _SCALAR = """
 int {name}_sites(casadi_int K, const casadi_real** arg, casadi_real** res) {{
@@ -41,8 +52,8 @@ int {name}_sites(casadi_int K, const casadi_real** arg, casadi_real** res) {{
   for (i = 0; i < sz_arg; ++i) a[i] = 0;
   for (i = 0; i < sz_res; ++i) r[i] = 0;
   for (k = 0; k < K; ++k) {{
-    for (i = 0; i < {n_in}; ++i) a[i] = arg[i] + k * nnz_in[i];
-    for (i = 0; i < {n_out}; ++i) r[i] = res[i] + k * nnz_out[i];
+    for (i = 0; i < {n_in}; ++i) a[i] = arg[i] ? arg[i] + k * nnz_in[i] : 0;
+    for (i = 0; i < {n_out}; ++i) r[i] = res[i] ? res[i] + k * nnz_out[i] : 0;
     if ({name}(a, r, iw, w, 0)) return 1;
   }}
   return 0;
@@ -53,22 +64,27 @@ _BODY_START = (
     "static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, "
     "casadi_real* w, int mem) {\n"
 )
-_BODY_END = "\n  return 0;\n}\n"
+_DECLARATION = re.compile(r"casadi_real ((?:a\d+, )*a\d+);")
 _ARG = re.compile(r"(a\d+)=arg\[(\d+)\]\? arg\[\2\]\[(\d+)\] : 0;")
 _RES = re.compile(r"if \(res\[(\d+)\]!=0\) res\[\1\]\[(\d+)\]=([^;\[\]]+);")
-_ASSIGN = re.compile(r"a\d+=[^;\[\]]+;")
-_CALL = re.compile(r"([A-Za-z_]\w*)\(")
-_SQ = re.compile(r"casadi_sq\((a\d+)\)")
+_ASSIGN = re.compile(r"(a\d+)=([^;\[\]]+);")
+_HELPER = re.compile(r"\b(casadi_sq|casadi_fabs)\((a\d+)\)")
+_NAME = re.compile(r"\b[A-Za-z_]\w*")
+_LOCAL = re.compile(r"a\d+")
 
-GENERATOR_KEY = Path(__file__).read_text()
-"""This module's source: what the generated loops depend on besides the function (part of the
-compiled objects' cache key)."""
+GENERATOR_KEY = hashlib.sha256(
+    resources.files(__package__).joinpath("site_loop_source.py").read_bytes()
+).hexdigest()
+"""The hash of this module's source: what the generated loops depend on besides the function
+(part of the compiled objects' cache key)."""
 
 
 def site_loop_source(fn: cs.Function, casadi_source: str) -> str:
     """``<name>_sites`` for ``fn``, whose CasADi-generated C is ``casadi_source``: vectorized
     if its body allows (module docstring), else the scalar loop."""
-    statements = _vector_statements(casadi_source, [fn.nnz_out(i) for i in range(fn.n_out())])
+    nnz_in = [fn.nnz_in(i) for i in range(fn.n_in())]
+    nnz_out = [fn.nnz_out(i) for i in range(fn.n_out())]
+    statements = _vector_statements(casadi_source, nnz_in, nnz_out)
     if statements is None:
         return _scalar_source(fn)
     return _vector_source(fn, *statements)
@@ -87,40 +103,60 @@ def _scalar_source(fn: cs.Function) -> str:
     )
 
 
-def _vector_statements(source: str, nnz_out: list[int]) -> tuple[list[str], list[str]] | None:
+def _vector_statements(
+    source: str, nnz_in: list[int], nnz_out: list[int]
+) -> tuple[list[str], list[str]] | None:
     """The declarations and the statements of the function's body rewritten for a chunk (site
     ``c`` of argument ``i``'s entry ``j`` at ``x{i}[j * SITE_CHUNK + c]``, results in ``y{i}``),
-    or ``None`` if the body is not straight-line arithmetic of the allowed calls or does not
-    write every result entry (``nnz_out``) exactly once."""
+    or ``None`` if the body is not straight-line arithmetic of the allowed names, reads an
+    argument entry that does not exist, does not write every result entry exactly once or
+    needs more than :data:`STACK_MAX` bytes of scratch."""
     parts = source.split(_BODY_START)
-    if len(parts) != 2 or _BODY_END not in parts[1]:
+    if len(parts) != 2 or "\n}\n" not in parts[1]:
         return None
-    declarations, statements, written = [], [], []
-    for line in parts[1].split(_BODY_END, 1)[0].split("\n"):
-        s = line.strip()
-        if not s:
-            continue
-        if s.startswith("casadi_real ") and re.fullmatch(r"casadi_real (a\d+, )*a\d+;", s):
+    lines = [line.strip() for line in parts[1].split("\n}\n", 1)[0].split("\n")]
+    lines = [line for line in lines if line]
+    if not lines or lines.pop() != "return 0;":
+        return None
+    declarations, statements, written, n_local = [], [], [], 0
+    for s in lines:
+        if m := _DECLARATION.fullmatch(s):
             declarations.append(s)
+            n_local += m[1].count(",") + 1
         elif m := _ARG.fullmatch(s):
+            if int(m[2]) >= len(nnz_in) or int(m[3]) >= nnz_in[int(m[2])]:
+                return None
             statements.append(f"{m[1]}=x{m[2]}[{m[3]}*{SITE_CHUNK}+c];")
         elif m := _RES.fullmatch(s):
-            if not set(_CALL.findall(m[3])) <= VECTOR_CALLS:
+            value = _inline(m[3])
+            if value is None:
                 return None
-            statements.append(f"y{m[1]}[{m[2]}*{SITE_CHUNK}+c]={_squares(m[3])};")
+            statements.append(f"y{m[1]}[{m[2]}*{SITE_CHUNK}+c]={value};")
             written.append((int(m[1]), int(m[2])))
-        elif _ASSIGN.fullmatch(s) and set(_CALL.findall(s)) <= VECTOR_CALLS:
-            statements.append(_squares(s))
+        elif (m := _ASSIGN.fullmatch(s)) and (value := _inline(m[2])) is not None:
+            statements.append(f"{m[1]}={value};")
         else:
             return None
     if sorted(written) != [(i, j) for i, q in enumerate(nnz_out) for j in range(q)]:
         return None
+    if 8 * SITE_CHUNK * (sum(nnz_in) + sum(nnz_out) + n_local) > STACK_MAX:
+        return None
     return declarations, statements
 
 
-def _squares(expression: str) -> str:
-    """``casadi_sq(a)`` written as ``(a*a)`` (CasADi's inline helper, for the vectorizer)."""
-    return _SQ.sub(r"(\1*\1)", expression)
+def _inline(expression: str) -> str | None:
+    """``expression`` with CasADi's helpers written inline (``casadi_sq(a)`` as ``(a*a)``,
+    ``casadi_fabs`` as ``fabs``), or ``None`` if it then names anything but local variables and
+    :data:`_NAMES`."""
+
+    def helper(m: re.Match) -> str:
+        name = _INLINE[m[1]]
+        return f"({m[2]}*{m[2]})" if name is None else f"{name}({m[2]})"
+
+    expression = _HELPER.sub(helper, expression)
+    if any(not _LOCAL.fullmatch(n) and n not in _NAMES for n in _NAME.findall(expression)):
+        return None
+    return expression
 
 
 def _vector_source(fn: cs.Function, declarations: list[str], statements: list[str]) -> str:
