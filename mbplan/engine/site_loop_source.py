@@ -86,20 +86,20 @@ def site_loop_source(fn: cs.Function, casadi_source: str) -> str:
     nnz_out = [fn.nnz_out(i) for i in range(fn.n_out())]
     statements = _vector_statements(casadi_source, nnz_in, nnz_out)
     if statements is None:
-        return _scalar_source(fn)
-    return _vector_source(fn, *statements)
+        return _scalar_source(fn.name(), nnz_in, nnz_out)
+    return _vector_source(fn.name(), nnz_in, nnz_out, *statements)
 
 
-def _scalar_source(fn: cs.Function) -> str:
-    def sizes(n: int, nnz) -> str:
-        return ", ".join(str(nnz(i)) for i in range(n)) or "0"
+def _scalar_source(name: str, nnz_in: list[int], nnz_out: list[int]) -> str:
+    def sizes(nnz: list[int]) -> str:
+        return ", ".join(map(str, nnz)) or "0"
 
     return _SCALAR.format(
-        name=fn.name(),
-        n_in=fn.n_in(),
-        n_out=fn.n_out(),
-        nnz_in=sizes(fn.n_in(), fn.nnz_in),
-        nnz_out=sizes(fn.n_out(), fn.nnz_out),
+        name=name,
+        n_in=len(nnz_in),
+        n_out=len(nnz_out),
+        nnz_in=sizes(nnz_in),
+        nnz_out=sizes(nnz_out),
     )
 
 
@@ -159,13 +159,13 @@ def _inline(expression: str) -> str | None:
     return expression
 
 
-def _vector_source(fn: cs.Function, declarations: list[str], statements: list[str]) -> str:
+def _vector_source(
+    name: str, nnz_in: list[int], nnz_out: list[int], declarations: list[str], statements: list[str]
+) -> str:
     """The chunked loop (module docstring) around the rewritten body."""
     C = SITE_CHUNK
-    nnz_in = [fn.nnz_in(i) for i in range(fn.n_in())]
-    nnz_out = [fn.nnz_out(i) for i in range(fn.n_out())]
     lines = [
-        f"int {fn.name()}_sites(casadi_int K, const casadi_real** arg, casadi_real** res) {{",
+        f"int {name}_sites(casadi_int K, const casadi_real** arg, casadi_real** res) {{",
         "  casadi_int k0, c, j, n;",
         *(f"  casadi_real x{i}[{max(q, 1) * C}];" for i, q in enumerate(nnz_in)),
         *(f"  casadi_real y{i}[{max(q, 1) * C}];" for i, q in enumerate(nnz_out)),
