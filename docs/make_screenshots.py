@@ -6,7 +6,7 @@
 Each robot is planned by the RIPM (maximal coordinates) and IPOPT (generalized coordinates) on
 the same task and shown side by side, tinted by formulation, at the middle knot, from a static
 page (``mbplan.viz.static_html``): docs/iiwa_plan.png and docs/side_by_side.png (case 1 of
-``mbplan.paper.iiwa_obstacle_cases(2, 0)``, primitives only), docs/meshes_<robot>.png for the arms
+``mbplan.tasks.paper.iiwa_obstacle_cases(2, 0)``, primitives only), docs/meshes_<robot>.png for the arms
 with visual meshes and docs/meshes_panda_materials.png (the IPOPT plan in the meshes' own
 materials), and docs/drone.png (the RIPM's docking through clutter of
 ``examples/drone_cluttered.py``, halfway). The pages are kept in out/screenshots/.
@@ -27,8 +27,8 @@ import panda_between_boxes  # noqa: E402
 from test_browser import screenshot  # noqa: E402
 
 import mbplan as mb  # noqa: E402
-from mbplan.paper import drone_docking, iiwa_obstacle_cases, tracking_ocp  # noqa: E402
 from mbplan.tasks.drone import cluttered_task  # noqa: E402
+from mbplan.tasks.paper import drone_docking, iiwa_obstacle_cases, tracking_ocp  # noqa: E402
 from mbplan.viz import drone_replay, static_html  # noqa: E402
 
 OUT = ROOT / "out" / "screenshots"

@@ -1,5 +1,5 @@
 """Maximal (RIPM on SO(3)×R³ bodies) vs generalized (IPOPT on joint angles) coordinates on the
-same iiwa task (an :class:`mbplan.OCP` of :mod:`mbplan.paper`), same warm start, both verified
+same iiwa task (an :class:`mbplan.OCP` of :mod:`mbplan.tasks.paper`), same warm start, both verified
 by the same independent replay.
 
     python examples/compare_formulations.py --out out/compare
@@ -14,7 +14,7 @@ import argparse
 from pathlib import Path
 
 import mbplan as mb
-from mbplan.paper import iiwa_obstacle, iiwa_obstacle_cases
+from mbplan.tasks.paper import iiwa_obstacle, iiwa_obstacle_cases
 from mbplan.viz import plot_convergence, static_html
 
 

@@ -18,7 +18,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import mbplan as mb
-from mbplan import paper
+from mbplan.tasks import paper
 from mbplan.tasks.drone import cluttered_task
 
 

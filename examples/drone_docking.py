@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 import mbplan as mb
-from mbplan import paper
+from mbplan.tasks import paper
 from mbplan.tasks.drone import rotation_angles, sample_docking_cases
 from mbplan.viz import drone_replay
 

@@ -1,7 +1,7 @@
 """Plan for another example-robot-data arm (UR5 by default) in both formulations.
 
     python examples/other_arm.py --robot ur5 --out out/ur5
-A joint-space point-to-point :class:`mbplan.OCP` (:func:`mbplan.paper.tracking_ocp`) with an
+A joint-space point-to-point :class:`mbplan.OCP` (:func:`mbplan.tasks.paper.tracking_ocp`) with an
 obstacle out of the way. Any fixed-base arm whose joints are all revolute works in maximal
 coordinates; prismatic joints (the panda's fingers) must be locked (``load_robot(..., lock=)``).
 Exits with status 1 unless both plans are solved and verified.
@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 import mbplan as mb
-from mbplan.paper import add_obstacle_constraint, tracking_ocp
+from mbplan.tasks.paper import add_obstacle_constraint, tracking_ocp
 
 
 def main(robot: str, out: Path, N: int, max_iter: int) -> int:

@@ -1,5 +1,5 @@
 import sys
 
-from mbplan.cli import main
+from mbplan.cli.main import main
 
 sys.exit(main())

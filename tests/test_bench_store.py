@@ -162,7 +162,7 @@ def _script(tmp_path) -> str:
             import random, sys, time
             from pathlib import Path
             from mbplan.benchmarks.harness import Job, run_jobs
-            from mbplan.cli_support import run_command
+            from mbplan.cli.support import run_command
 
             def job(case, method, seed):
                 time.sleep(random.uniform(0.02, 0.06))

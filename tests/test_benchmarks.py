@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mbplan.benchmarks import drone_docking, iiwa_obstacle
-from mbplan.cli import main
+from mbplan.cli.main import main
 from mbplan.errors import InputError
 from mbplan.results import load_npz
 

@@ -2,7 +2,7 @@
 
 import webbrowser
 
-from mbplan.cli import main
+from mbplan.cli.main import main
 from mbplan.viz import server as meshcat_server
 
 

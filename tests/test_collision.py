@@ -181,7 +181,7 @@ def test_maximal_hessian_is_the_fixed_witness_point_model() -> None:
 def test_distance_task_validation_names_the_geometry() -> None:
     import mbplan as mb
     from mbplan.ocp.residuals import Distance
-    from mbplan.paper import IIWA_START, IIWA_TARGET, iiwa_obstacle
+    from mbplan.tasks.paper import IIWA_START, IIWA_TARGET, iiwa_obstacle
 
     with pytest.raises(InputError, match="constraint"):
         iiwa_obstacle(constraint="mesh")
@@ -207,9 +207,9 @@ def test_distance_task_validation_names_the_geometry() -> None:
 def test_verification_measures_coal_distances_of_distance_tasks() -> None:
     """For a "distance" task the verifier's clearance is the coal distance to every obstacle
     (the cylinder as a finite solid), here negative along the straight path of case 0."""
-    from mbplan.paper import iiwa_obstacle_cases
     from mbplan.planning.initial_guess import initial_path
-    from mbplan.verification import _clearance
+    from mbplan.tasks.paper import iiwa_obstacle_cases
+    from mbplan.verification.multibody import _clearance
 
     ocp = iiwa_obstacle_cases(1, 0, constraint="distance")[0]
     path = initial_path(ocp, "linear")
@@ -229,7 +229,7 @@ def test_a_wrong_tight_gjk_distance_is_caught_by_the_default_request():
     too); the default request cross-checks it and its result is used."""
     import mbplan.multibody.collision as collision
     from mbplan.formulations.joint_space import distance_values
-    from mbplan.paper import iiwa_obstacle
+    from mbplan.tasks.paper import iiwa_obstacle
 
     q = np.array([1.003111497864807, 0.3706807128646723, 0.001580589416948418,
                   -1.2336641508135646, 0.004269912837888549, 1.001412071015906,

@@ -16,8 +16,8 @@ from mbplan.formulations.joint_space import evaluate
 from mbplan.formulations.maximal import MaximalNLP
 from mbplan.ocp import residuals as res
 from mbplan.ocp.continuous import from_angles, to_angles
-from mbplan.paper import tracking_ocp
 from mbplan.robots import load
+from mbplan.tasks.paper import tracking_ocp
 
 LIMITS = {"torque_limit": [20.0, 20.0], "velocity_limit": [10.0, 10.0]}  # the URDF's are 0
 

@@ -14,14 +14,15 @@ from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.ocp import load_robot
 from mbplan.ocp import residuals as res
 from mbplan.ocp.robot import robot_from_source
-from mbplan.paper import IIWA_START, tracking_ocp
 from mbplan.simulation.reference import (
     damped_aba,
     damped_euler_velocity,
     integrate_aba,
     mass_matrix,
 )
-from mbplan.verification import SUBSTEPS, substeps, verify
+from mbplan.tasks.paper import IIWA_START, tracking_ocp
+from mbplan.verification import verify
+from mbplan.verification.multibody import SUBSTEPS, substeps
 
 DAMPING = np.linspace(0.5, 3.5, 7)  # N m s/rad, distinct per joint (the iiwa URDF's is 0.5)
 
@@ -74,7 +75,7 @@ def test_damped_generalized_dynamics_derivatives_match_finite_differences() -> N
 
 def test_crocoddyl_damped_actuation_matches_damped_aba() -> None:
     crocoddyl = pytest.importorskip("crocoddyl")
-    from mbplan.formulations.shooting import ShootingBuilder
+    from mbplan.formulations.crocoddyl import ShootingBuilder
 
     proximal = DAMPING * [1, 1, 1, 1, 0.01, 0.01, 0.01]  # λ(M⁻¹D) Δt < 1 at Δt = 0.02
     ocp = mb.OCP(damped_iiwa(proximal), N=2, dt=0.02, q0=IIWA_START)

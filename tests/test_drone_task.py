@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mbplan import paper
 from mbplan.errors import InfeasibleRequestError, InputError
 from mbplan.formulations.free_body import FreeBodyNLP
 from mbplan.planning.initial_guess import initial_path
 from mbplan.solvers import RIPMStatus, solve_ripm
-from mbplan.tasks import (
+from mbplan.tasks import paper
+from mbplan.tasks.drone import (
     CostWeights,
     DockingTask,
     QuadrotorParams,

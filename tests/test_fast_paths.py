@@ -7,7 +7,7 @@ import scipy.sparse as sp
 from mbplan.errors import InputError
 from mbplan.lie import SO3, R
 from mbplan.lie.group import check_orthogonal
-from mbplan.solvers.iterate import transpose_times
+from mbplan.solvers.ripm.iterate import transpose_times
 from mbplan.transcription.sparse import SparsePattern, sparse_pattern
 from mbplan.transcription.variables import Block, TrajectoryVariables
 

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 import mbplan as mb
-from mbplan import paper
-from mbplan.cli import main
+from mbplan.cli.main import main
 from mbplan.engine.checks import check_derivatives
 from mbplan.formulations.free_body import FreeBodyNLP, input_bounds, lgvi_inputs
 from mbplan.formulations.quaternion import QuaternionNLP
@@ -22,6 +21,7 @@ from mbplan.ocp import body_residuals as br
 from mbplan.ocp import residuals as res
 from mbplan.ocp.free_body import FreeBody, body_state, free_flyer_state, quaternions
 from mbplan.planning.initial_guess import initial_path
+from mbplan.tasks import paper
 from mbplan.tasks.drone import cluttered_task, sample_docking_cases, simulate, trajectory_cost
 from mbplan.viz.drone import free_body_scene
 
@@ -304,7 +304,7 @@ def test_lgvi_plans_start_from_zero_equality_multipliers(monkeypatch: pytest.Mon
     """``plan`` on the LGVI skips the least-squares ``y₀`` (``LGVI_RIPM_OPTIONS``): on a docking
     case that ``y₀`` exceeds ``constr_mult_init_max = 1`` and is discarded, so the plan with it
     takes the same iterates; a user's option brings it back."""
-    from mbplan.solvers import ripm
+    from mbplan.solvers.ripm import driver as ripm
 
     kept = []
     original = ripm._RIPM._least_squares_y

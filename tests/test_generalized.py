@@ -11,8 +11,8 @@ from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.joint_space import distance_values, evaluate
 from mbplan.multibody.collision import chain_kinematics, joint_space_contacts, point_jacobians
 from mbplan.ocp.residuals import JointPosition
-from mbplan.paper import IIWA_TARGET, add_obstacle_constraint, tracking_ocp
 from mbplan.planning.initial_guess import initial_path
+from mbplan.tasks.paper import IIWA_TARGET, add_obstacle_constraint, tracking_ocp
 
 
 def small_cases(n: int = 3, constraint: str = "com", radius: float = 0.08) -> list[mb.OCP]:

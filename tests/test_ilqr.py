@@ -10,12 +10,12 @@ import casadi as cs
 import numpy as np
 import pytest
 
-from mbplan.benchmarks.ilqr.scenarios import build
-from mbplan.cli import main
+from mbplan.cli.main import main
 from mbplan.errors import InputError
 from mbplan.lie import SE3, R, RnGroup
 from mbplan.shooting import DiscreteDynamics, ShootingProblem, StateSpace, TrackingCost
 from mbplan.solvers.ilqr import ILQROptions, ILQRStatus, solve_ilqr, solve_ilqr_bounded
+from mbplan.tasks.ilqr import build
 
 
 def _retract(space: StateSpace, q: np.ndarray, dx: np.ndarray) -> np.ndarray:

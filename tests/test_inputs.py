@@ -13,11 +13,16 @@ import pytest
 
 import mbplan.benchmarks.harness as harness
 from mbplan.benchmarks.harness import Job, run_jobs
-from mbplan.cli import main
-from mbplan.cli_support import run_command
+from mbplan.cli.main import main
+from mbplan.cli.support import run_command
 from mbplan.errors import InputError, MbplanError, RobotModelError, WarmStartWarning
 from mbplan.ocp import Scene
-from mbplan.paper import (
+from mbplan.planning.initial_guess import initial_path
+from mbplan.planning.solve import METHODS, Method, plan
+from mbplan.results import PlanResult, load_npz, save_npz
+from mbplan.robots import load
+from mbplan.solvers import RIPMOptions
+from mbplan.tasks.paper import (
     IIWA_START,
     IIWA_TARGET,
     add_obstacle_constraint,
@@ -25,11 +30,6 @@ from mbplan.paper import (
     iiwa_obstacle_starts,
     tracking_ocp,
 )
-from mbplan.planning.initial_guess import initial_path
-from mbplan.planning.solve import METHODS, Method, plan
-from mbplan.results import PlanResult, load_npz, save_npz
-from mbplan.robots import load
-from mbplan.solvers import RIPMOptions
 
 
 def _no_solve(*args, **kwargs):

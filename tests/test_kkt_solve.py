@@ -9,9 +9,9 @@ import pytest
 import scipy.sparse as sp
 from test_linear_solver import _dense, _kkt_blocks
 
-from mbplan.solvers.kkt_scatter import same_arrays
-from mbplan.solvers.ldl_solve import _residual_into
-from mbplan.solvers.linear_solver import KKTSystem
+from mbplan.solvers.kkt.ldl.solve import _residual_into
+from mbplan.solvers.kkt.scatter import same_arrays
+from mbplan.solvers.kkt.system import KKTSystem
 
 
 def _system(seed, n=240, me=108, mi=30, band=24, shift=1e-3):
@@ -139,7 +139,7 @@ def test_blas_thread_limit_is_restored_by_the_last_of_nested_users():
     taken by the first and restored by the last."""
     import threadpoolctl
 
-    from mbplan.solvers.supernodal_ldl import OneBlasThread
+    from mbplan.solvers.kkt.ldl.supernodal import OneBlasThread
 
     def blas_threads() -> list[int]:
         return [

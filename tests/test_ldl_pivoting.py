@@ -19,7 +19,7 @@ from test_linear_solver import (
 
 from mbplan.errors import InputError
 from mbplan.solvers import RIPMOptions
-from mbplan.solvers.linear_solver import KKTSystem
+from mbplan.solvers.kkt.system import KKTSystem
 
 NONSINGULAR = [c for c in CASES[1:] if c[0] != 40]  # (40, 12, 10): structurally singular
 
@@ -143,7 +143,7 @@ def chain_first_kkt():
     import sys
     from pathlib import Path
 
-    from mbplan.benchmarks.speed_tasks import chain_task, maximal_ripm_problem
+    from mbplan.tasks.speed import chain_task, maximal_ripm_problem
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
     from kkt_orderings import _first_ripm_kkt

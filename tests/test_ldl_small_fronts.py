@@ -13,9 +13,10 @@ import scipy.sparse as sp
 from test_linear_solver import CASES, _dense, _kkt_blocks, _kkt_blocks_without_empty_eq_rows
 
 from mbplan.memo import RecentMemo
-from mbplan.solvers import kkt_pattern, ldl_layout
-from mbplan.solvers.linear_solver import KKTSystem
-from mbplan.solvers.numba_borrow import borrowed
+from mbplan.solvers.kkt import pattern as kkt_pattern
+from mbplan.solvers.kkt.borrow import borrowed
+from mbplan.solvers.kkt.ldl import layout as ldl_layout
+from mbplan.solvers.kkt.system import KKTSystem
 
 
 def _pivots_by_variable(kkt):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from mbplan.solvers.linear_solver import KKTSystem
+from mbplan.solvers.kkt.system import KKTSystem
 
 
 def _kkt_blocks(rng, n, me, mi, density, band=None):
@@ -259,7 +259,7 @@ def test_auto_ordering_keeps_the_analysis_with_fewer_flops(blocks, expected):
     """``"auto"`` is AMD's memoized analysis, or METIS's when AMD's factorization reaches
     ``AUTO_MIN_FLOPS`` and METIS predicts fewer multiply-adds: AMD on a thin time × body grid
     and on a small 3-D grid, METIS on a larger 3-D grid."""
-    from mbplan.solvers.kkt_pattern import AUTO_MIN_FLOPS
+    from mbplan.solvers.kkt.pattern import AUTO_MIN_FLOPS
 
     hess, *jacs = blocks
     n = hess.shape[0]
@@ -275,8 +275,9 @@ def test_auto_ordering_keeps_the_analysis_with_fewer_flops(blocks, expected):
 
 @pytest.mark.parametrize("ordering", ["nested", "metis", "auto"])
 def test_ripm_steps_do_not_depend_on_the_ordering(ordering):
+    from reference_problems import BandedControlNLP
+
     from mbplan.solvers import solve_ripm
-    from mbplan.solvers.examples import BandedControlNLP
 
     prob = BandedControlNLP(nx=4, nu=2, horizon=20)
     runs = [solve_ripm(prob, prob.initial_guess(), kkt_ordering=o) for o in ("amd", ordering)]
@@ -292,7 +293,7 @@ def test_blas_update_of_large_fronts_matches_the_blocked_kernels(case, monkeypat
     """The BLAS Schur update (fronts with at least ``BLAS_FRONT_ROWS`` update rows, lowered here
     so that the banded cases reach it) gives the blocked kernels' inertia, pivots and steps, on
     positive, mixed and wrong inertias."""
-    from mbplan.solvers import supernodal_ldl
+    from mbplan.solvers.kkt.ldl import supernodal as supernodal_ldl
 
     n, me, mi, density, band = case
     rng = np.random.default_rng(n + me)
@@ -319,7 +320,7 @@ def test_blas_update_of_large_fronts_matches_the_blocked_kernels(case, monkeypat
 def test_banded_cases_exercise_the_blocked_kernels(case):
     """The dense knot-to-knot fronts of the banded cases reach the 4 x 4 kernels (fronts with
     at least ``_WIDE`` rows below four or more pivot columns), which the test above checks."""
-    from mbplan.solvers.ldl_kernels import _WIDE
+    from mbplan.solvers.kkt.ldl.kernels import _WIDE
 
     n, me, mi, density, band = case
     kkt = KKTSystem(n, me, mi)

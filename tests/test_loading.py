@@ -11,7 +11,7 @@ from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.joint_space import evaluate
 from mbplan.ocp import residuals as res
 from mbplan.ocp.robot import robot_from_source
-from mbplan.paper import IIWA_START
+from mbplan.tasks.paper import IIWA_START
 
 ARM = """<mujoco model="tiny_arm">
   <compiler angle="radian"/>

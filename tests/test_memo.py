@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from mbplan import memo
-from mbplan.benchmarks.speed_tasks import TASKS
 from mbplan.memo import RecentMemo
-from mbplan.solvers import reduction as reduction_module
 from mbplan.solvers import solve_ripm
+from mbplan.solvers.kkt.reduced import reduction as reduction_module
+from mbplan.tasks.speed import TASKS
 
 
 def test_recent_memo_builds_once_and_drops_the_least_recently_used():

@@ -8,15 +8,15 @@ import json
 import numpy as np
 import pytest
 import scipy.linalg
+from reference_problems import HS071_X0, hs071
 
 from mbplan.benchmarks.lie_ipm_stats import SUMMARY_KEYS
 from mbplan.errors import InputError
 from mbplan.lie import SL
-from mbplan.problems import SLTraceProblem, SOLogProblem, make_problem, sample_instance
 from mbplan.solvers import RIPMStatus, solve_ripm
-from mbplan.solvers.examples import HS071_X0, hs071
-from mbplan.solvers.lai_yoshise import LaiYoshiseOptions, solve_lai_yoshise
-from mbplan.solvers.mlgipm import MLGIPMOptions, solve_mlgipm
+from mbplan.solvers.lie_ipm.lai_yoshise import LaiYoshiseOptions, solve_lai_yoshise
+from mbplan.solvers.lie_ipm.mlgipm import MLGIPMOptions, solve_mlgipm
+from mbplan.tasks.lie_ipm import SLTraceProblem, SOLogProblem, make_problem, sample_instance
 
 
 def _problems():
@@ -229,8 +229,8 @@ def test_bench_lie_ipm_writes_the_issue_schema_and_resumes(tmp_path) -> None:
 
 def test_mlgipm_plans_a_drone_docking_case_through_the_planning_registry() -> None:
     import mbplan as mb
-    from mbplan import paper
     from mbplan.solvers.dispatch import options_for, solve_with
+    from mbplan.tasks import paper
 
     ocp = paper.drone_docking_cases(1, 0, with_input_limits=True)[0]
     result = mb.plan(ocp, "mlgipm", tol=1e-6, max_iter=100)
@@ -247,16 +247,16 @@ def test_mlgipm_plans_a_drone_docking_case_through_the_planning_registry() -> No
 
 def test_reduced_sparse_newton_step_equals_the_full_system() -> None:
     """The LDLᵀ of the reduced symmetric system gives the step of the full 𝕵_F (sparse LU)."""
-    from mbplan import paper
     from mbplan.formulations.free_body import FreeBodyNLP
     from mbplan.planning.initial_guess import initial_path
-    from mbplan.solvers.kkt_field import (
+    from mbplan.solvers.lie_ipm.kkt_field import (
         NewtonSolver,
         evaluate_field,
         initial_duals,
         newton_matrix,
         solve_newton,
     )
+    from mbplan.tasks import paper
 
     ocp = paper.drone_docking_cases(1, 0, with_input_limits=True)[0]
     nlp = FreeBodyNLP(ocp, jit=False)

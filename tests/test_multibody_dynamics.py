@@ -34,7 +34,7 @@ from mbplan.transcription.multibody import (
     _kinematics_function,
     multibody_layout,
 )
-from mbplan.transcription.problem import TrajectoryProblem
+from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import TrajectoryVariables
 
 # revolute (damped), revolute (damping zeroed), continuous, prismatic + revolute

@@ -12,8 +12,8 @@ import mbplan as mb
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.maximal import MaximalNLP
 from mbplan.ocp import residuals as res
-from mbplan.paper import IIWA_START
 from mbplan.planning.initial_guess import inverse_kinematics
+from mbplan.tasks.paper import IIWA_START
 
 GOAL = pin.SE3(pin.rpy.rpyToMatrix(0.3, -0.2, 0.5), np.array([0.4, 0.1, 0.6]))
 
@@ -158,7 +158,7 @@ def test_prismatic_residuals_equal_the_joint_space_ones() -> None:
 
 def test_panda_with_prismatic_fingers_plans_in_maximal_coordinates_and_verifies() -> None:
     """Issue #11: the fingers not locked, the RIPM on SO(3)×R³ bodies, Pinocchio's verifier."""
-    from mbplan.paper import tracking_ocp
+    from mbplan.tasks.paper import tracking_ocp
 
     goal = np.array([0.4, -0.1, 0.1, -1.9, 0.0, 2.1, 0.6, 0.03, 0.03])
     ocp = tracking_ocp("panda", PANDA_START, goal, N=8, dt=0.06)

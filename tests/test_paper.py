@@ -1,4 +1,4 @@
-"""The paper's iiwa obstacle task as OCPs (:mod:`mbplan.paper`): defaults, sampler, start
+"""The paper's iiwa obstacle task as OCPs (:mod:`mbplan.tasks.paper`): defaults, sampler, start
 checks and the warm starts."""
 
 from __future__ import annotations
@@ -10,7 +10,8 @@ import pytest
 import mbplan as mb
 from mbplan.formulations.joint_space import evaluate
 from mbplan.ocp.continuous import joint_ranges
-from mbplan.paper import (
+from mbplan.planning.initial_guess import VIA_CANDIDATES, initial_path, path_clearance
+from mbplan.tasks.paper import (
     IIWA_CYLINDER,
     IIWA_START,
     IIWA_TARGET,
@@ -20,7 +21,6 @@ from mbplan.paper import (
     iiwa_obstacle_cases,
     tracking_ocp,
 )
-from mbplan.planning.initial_guess import VIA_CANDIDATES, initial_path, path_clearance
 
 MODEL = mb.load_robot("iiwa").model
 
@@ -143,8 +143,8 @@ def test_via_warm_start_is_collision_free_where_linear_is_not() -> None:
 def test_path_clearances_of_a_batch_are_each_paths_own(constraint: str) -> None:
     """The via search's batched check (all paths' knots in one evaluation per obstacle
     constraint) gives every path exactly its own :func:`path_clearance`, clear or not."""
-    from mbplan.benchmarks.speed_tasks import iiwa_task
     from mbplan.planning.initial_guess import path_clearances
+    from mbplan.tasks.speed import iiwa_task
 
     ocp = iiwa_task(2, constraint=constraint)
     linear = initial_path(ocp, "linear")

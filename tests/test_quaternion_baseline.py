@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 import mbplan as mb
-from mbplan import paper
 from mbplan.errors import InputError
 from mbplan.ocp.free_body import body_state
-from mbplan.tasks import sample_docking_cases, simulate, trajectory_cost
+from mbplan.tasks import paper
+from mbplan.tasks.drone import sample_docking_cases, simulate, trajectory_cost
 
 
 def _assert_consistent(result: mb.PlanResult) -> None:

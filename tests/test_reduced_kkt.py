@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from mbplan.benchmarks.reduced_kkt import ReducedKKT
-from mbplan.benchmarks.speed_tasks import chain_task, maximal_ripm_problem
 from mbplan.errors import InputError
 from mbplan.formulations.maximal_layout import maximal_layout
-from mbplan.solvers.linear_solver import KKTSystem
+from mbplan.solvers.kkt.system import KKTSystem
+from mbplan.tasks.speed import chain_task, maximal_ripm_problem
 
 
 @pytest.fixture(scope="module")

@@ -1,23 +1,23 @@
-"""The KKT factorized through the joint elimination plan (mbplan.solvers.reduced_step) against
+"""The KKT factorized through the joint elimination plan (mbplan.solvers.kkt.reduced.system) against
 the full LDLᵀ and the dense eigenvalues: same inertia (also wrong and singular), same steps,
 the cases it leaves to the full factorization, and a RIPM solve with kkt_method="reduced"."""
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from reference_problems import hs071
 
-from mbplan.benchmarks.speed_tasks import chain_task, maximal_ripm_problem
 from mbplan.errors import InputError
 from mbplan.formulations import maximal_layout
 from mbplan.formulations.maximal_layout import JointEliminationPlans, joint_elimination_plan
 from mbplan.memo import RecentMemo
-from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
 from mbplan.solvers import RIPMOptions, solve_ripm
-from mbplan.solvers import reduction as reduction_module
-from mbplan.solvers.elimination import EliminationPlan
-from mbplan.solvers.examples import hs071
-from mbplan.solvers.linear_solver import Inertia, KKTSystem
-from mbplan.solvers.reduced_step import ReducedKKTSystem, kkt_system
+from mbplan.solvers.kkt.elimination import EliminationPlan
+from mbplan.solvers.kkt.reduced import reduction as reduction_module
+from mbplan.solvers.kkt.reduced.system import ReducedKKTSystem, kkt_system
+from mbplan.solvers.kkt.system import Inertia, KKTSystem
+from mbplan.tasks.paper import iiwa_obstacle, iiwa_obstacle_starts
+from mbplan.tasks.speed import chain_task, maximal_ripm_problem
 
 
 def _kkt(problem, x0, seed):
@@ -189,7 +189,7 @@ def test_least_squares_y0_through_the_newton_system_is_the_least_squares_solutio
 def test_least_squares_y0_goes_through_the_reduction():
     """With ``kkt_method="reduced"`` the start's least-squares system is factorized through the
     reduction, not by the full fallback (which would also pass the test above)."""
-    from mbplan.solvers.ripm import _RIPM
+    from mbplan.solvers.ripm.driver import _RIPM
 
     problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
     ripm = _RIPM(problem, RIPMOptions(max_iter=0, constr_mult_init_max=1e12, kkt_method="reduced"))

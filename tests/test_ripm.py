@@ -10,6 +10,14 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import scipy.sparse as sp
+from reference_problems import (
+    HS071_X0,
+    INFEASIBLE_X0,
+    BandedControlNLP,
+    hs071,
+    infeasible_equality,
+    infeasible_inequalities,
+)
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
@@ -22,16 +30,8 @@ from mbplan.solvers import (
     RIPMStatus,
     solve_ripm,
 )
-from mbplan.solvers.barrier import MU_MIN
-from mbplan.solvers.examples import (
-    HS071_X0,
-    INFEASIBLE_X0,
-    BandedControlNLP,
-    hs071,
-    infeasible_equality,
-    infeasible_inequalities,
-)
-from mbplan.solvers.linear_solver import KKTSystem
+from mbplan.solvers.kkt.system import KKTSystem
+from mbplan.solvers.ripm.barrier import MU_MIN
 
 
 def _ipopt(x, f, g, x0, lbg, ubg):
@@ -311,7 +311,7 @@ def test_least_squares_multipliers_without_inequalities_and_after_restoration():
     a = problem.evaluate(x0).eq_jacobian.toarray()
     expected = np.linalg.lstsq(a.T, -problem.evaluate(x0).gradient, rcond=None)[0]
     np.testing.assert_allclose(y0, expected, rtol=1e-10, atol=1e-12)
-    from mbplan.solvers.ripm import _RIPM
+    from mbplan.solvers.ripm.driver import _RIPM
 
     calls = []
     least_squares = _RIPM._least_squares_y
@@ -363,7 +363,7 @@ def test_multipliers_of_a_blocked_step_follow_the_primal_step(monkeypatch):
     with ``dual_step_cap`` (default 1e-2) ``z`` steps ``α_z = α_s`` there, with 0 its own full
     ``α_z`` (WB eq. 15); steps with ``α_s`` at or above the cap keep their own ``α_z``. Both
     solve the test problems; a cap outside [0, 1] is rejected by name."""
-    from mbplan.solvers.iterate import IterateState, frac_to_boundary
+    from mbplan.solvers.ripm.iterate import IterateState, frac_to_boundary
 
     multipliers_at = IterateState._multipliers_at
     steps = []
@@ -470,7 +470,7 @@ def test_degenerate_mode_retries_zero_once_the_perturbation_is_small():
     ``degenerate_zero_below`` δ_w only shrinks 3× per iteration to the end; with it, once the
     first trial would fall below the bound the zero trial runs again, succeeds on this positive
     definite tail and the solve needs fewer iterations and factorizations."""
-    from mbplan.benchmarks.speed_tasks import TASKS
+    from mbplan.tasks.speed import TASKS
 
     problem, x0, options = TASKS["drone"](0)
     runs = {
@@ -696,7 +696,7 @@ def test_first_trials_evaluated_with_their_multipliers_take_the_same_steps(make,
     would be accepted with, and the accepted point reuses that evaluation: the iterates are
     those of the values-then-evaluate order, one ``values`` call fewer per accepted first trial
     and one evaluation more per rejected one."""
-    from mbplan.solvers.iterate import IterateState
+    from mbplan.solvers.ripm.iterate import IterateState
 
     problem = make()
     x0 = problem.initial_guess() if x0 is None else x0
@@ -727,8 +727,8 @@ def test_soft_restoration_steps_where_the_line_search_fails(monkeypatch):
     solve ends at the optimum) or they reduce the primal-dual error (Wächter-Biegler from
     (-0.4, 1, 1): one or two steps, the path is sensitive to rounding); the first that does neither starts the restoration phase (which
     fails here: its line search too), as does every failure with ``max_soft_resto_iters=0``."""
-    from mbplan.solvers.iterate import IterateState
-    from mbplan.solvers.line_search import FilterLineSearch, Search
+    from mbplan.solvers.ripm.iterate import IterateState
+    from mbplan.solvers.ripm.line_search import FilterLineSearch, Search
 
     reference = solve_ripm(hs071(), HS071_X0)
     monkeypatch.setattr(FilterLineSearch, "_line_search", lambda self, step, cur: Search(None))
@@ -758,7 +758,7 @@ def test_no_restoration_phase_at_an_almost_feasible_point(monkeypatch):
     """IPOPT's rule: where the line search fails at ‖c‖∞ ≤ min(tol/100, constr_viol_tol/10) the
     restoration phase cannot help; the solve stops there (LINE_SEARCH_FAILED, no restoration
     iteration). From an infeasible start the same failure starts the restoration phase."""
-    from mbplan.solvers.line_search import FilterLineSearch, Search
+    from mbplan.solvers.ripm.line_search import FilterLineSearch, Search
 
     opt = solve_ripm(hs071(), HS071_X0)
     monkeypatch.setattr(FilterLineSearch, "_line_search", lambda self, step, cur: Search(None))
@@ -774,8 +774,8 @@ def test_no_restoration_phase_at_an_almost_feasible_point(monkeypatch):
 def test_a_non_finite_predictor_step_leaves_mu_finite(monkeypatch):
     """A predictor solve that breaks down (NaN, e.g. a failed fallback factorization) gives
     LOQO's μ and no corrector instead of μ = NaN: HS071 still converges to its optimum."""
-    from mbplan.solvers.iterate import Step
-    from mbplan.solvers.newton import NewtonStep
+    from mbplan.solvers.ripm.iterate import Step
+    from mbplan.solvers.ripm.newton import NewtonStep
 
     affine = NewtonStep._affine_step
     broken = []

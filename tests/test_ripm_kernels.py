@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from mbplan.solvers import ripm_kernels as k
-from mbplan.solvers.iterate import amax, finite, transpose_times
+from mbplan.solvers.ripm import kernels as k
+from mbplan.solvers.ripm.iterate import amax, finite, transpose_times
 
 SIZES = [0, 1, 7, 8, 9, 127, 128, 129, 300, 1024, 1031, 4099]
 

@@ -16,11 +16,11 @@ import pinocchio as pin
 
 import mbplan as mb
 from mbplan.errors import MbplanError
-from mbplan.formulations import shooting as sh
+from mbplan.formulations import crocoddyl as sh
 from mbplan.formulations.joint_space import evaluate, knot_function
 from mbplan.ocp import residuals as res
-from mbplan.paper import IIWA_TARGET, add_obstacle_constraint, iiwa_obstacle, tracking_ocp
-from mbplan.verification import CONSTRAINT_TOLERANCE
+from mbplan.tasks.paper import IIWA_TARGET, add_obstacle_constraint, iiwa_obstacle, tracking_ocp
+from mbplan.verification.report import CONSTRAINT_TOLERANCE
 
 MODEL = mb.load_robot("iiwa", damping=False).model  # the paper task: no damping
 

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
+from reference_problems import BandedControlNLP
 
 from mbplan.benchmarks.kkt_profile import PROFILE_KEYS, profile_solve
-from mbplan.benchmarks.speed_tasks import chain_start, chain_target, chain_task
 from mbplan.solvers import RIPMOptions
-from mbplan.solvers.examples import BandedControlNLP
+from mbplan.tasks.speed import chain_start, chain_target, chain_task
 
 
 def test_chain_task_is_a_hanging_chain_of_n_revolute_links():

@@ -10,11 +10,11 @@ import pinocchio as pin
 import pytest
 
 import mbplan as mb
-from mbplan.benchmarks.arm_sweep import sweep_robot, sweep_tasks
 from mbplan.engine.jit import jit_available
 from mbplan.formulations import maximal
 from mbplan.robots import available_robots
 from mbplan.solvers import RIPMStatus, solve_ripm
+from mbplan.tasks.arm_sweep import sweep_robot, sweep_tasks
 from mbplan.viz import static_html
 
 # Known failures, asserted so that a fix shows up: IPOPT's restoration fails on the 3-dof

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from test_inputs import _GOOD, _INERTIAL, USAGE, no_solves  # noqa: F401  (fixture)
 
-from mbplan.cli import main
+from mbplan.cli.main import main
 
 BASE = """\
 [robot]

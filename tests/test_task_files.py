@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import mbplan as mb
-from mbplan.cli import main
-from mbplan.paper import iiwa_obstacle
+from mbplan.cli.main import main
 from mbplan.taskfile import load_task
+from mbplan.tasks.paper import iiwa_obstacle
 
 EXAMPLES_TASKS = Path(__file__).resolve().parents[1] / "examples" / "tasks"
 PANDA = str(EXAMPLES_TASKS / "panda_boxes.toml")
@@ -93,7 +93,7 @@ def test_goal_tolerance_is_the_acceptance_of_the_terminal_constraint():
     """``[goal] tolerance`` without ``weight``: a hard constraint whose violation at the planned
     knots is accepted up to the tolerance (instead of the verifier's default), saved with the
     OCP."""
-    from mbplan.verification import hard_constraints_met
+    from mbplan.verification.report import hard_constraints_met
 
     ocp = load_task(PANDA, {"horizon.N": 4}).ocp
     goal = ocp["goal"]

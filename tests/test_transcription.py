@@ -5,7 +5,6 @@ import casadi as cs
 import numpy as np
 import pytest
 
-from mbplan import paper
 from mbplan.engine import RiemannianFunction
 from mbplan.engine.jit import jit_available
 from mbplan.engine.site_table import CallsInOrder, SiteTable
@@ -13,6 +12,7 @@ from mbplan.errors import InputError
 from mbplan.formulations.free_body import FreeBodyNLP
 from mbplan.lie import SO3, R
 from mbplan.planning.initial_guess import initial_path
+from mbplan.tasks import paper
 from mbplan.tasks.drone import cluttered_task
 from mbplan.transcription import Block, Term, TrajectoryProblem, TrajectoryVariables
 
@@ -220,7 +220,7 @@ def test_problems_of_one_structure_share_patterns_not_parameters_or_buffers():
 def test_compiled_term_pass_equals_the_term_by_term_calls(monkeypatch):
     """A problem of compiled terms runs their site loops in one compiled pass; its values,
     derivatives and Hessian equal, bit for bit, those of the term-by-term calls."""
-    import mbplan.transcription.problem as problem_module
+    import mbplan.transcription.trajectory as problem_module
 
     A = np.arange(9.0).reshape(3, 3) + np.eye(3)
     step = RiemannianFunction(

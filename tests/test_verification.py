@@ -11,7 +11,9 @@ import pytest
 
 from mbplan.errors import InputError
 from mbplan.ocp import OCP, Scene, load_robot
-from mbplan.paper import (
+from mbplan.results import PlanResult, load_npz, save_npz
+from mbplan.simulation.reference import integrate_aba
+from mbplan.tasks.paper import (
     IIWA_GOAL_TOLERANCE,
     IIWA_START,
     IIWA_TARGET,
@@ -19,9 +21,8 @@ from mbplan.paper import (
     iiwa_obstacle_starts,
     tracking_ocp,
 )
-from mbplan.results import PlanResult, load_npz, save_npz
-from mbplan.simulation.reference import integrate_aba
-from mbplan.verification import SUBSTEPS, verify
+from mbplan.verification import verify
+from mbplan.verification.multibody import SUBSTEPS
 
 MODEL = load_robot("iiwa", damping=False).model  # the paper task: no damping
 

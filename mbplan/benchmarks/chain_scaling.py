@@ -21,7 +21,7 @@ from mbplan.benchmarks.common import machine_info, median_time, save_plot, write
 from mbplan.multibody import maximal_model
 from mbplan.simulation.warm_start import maximal_warm_start
 from mbplan.transcription.multibody import multibody_layout
-from mbplan.transcription.problem import TrajectoryProblem
+from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import TrajectoryVariables
 
 BODIES = (1, 2, 4, 8, 16, 32, 64)

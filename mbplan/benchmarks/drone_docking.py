@@ -1,7 +1,7 @@
 """Drone docking benchmark (RIPM paper §VIII.B, Table II, Fig. 4).
 
 Methods on the same seeded cases and the same geodesic initial guess, each through
-:func:`mbplan.plan` of the OCP :func:`mbplan.paper.drone_docking` (and :func:`mbplan.verify`):
+:func:`mbplan.plan` of the OCP :func:`mbplan.tasks.paper.drone_docking` (and :func:`mbplan.verify`):
 
 * ``ripm``: RIPM on SO(3)×R³, no input limits;
 * ``ripm-input-limits``: RIPM with ``u_z ∈ [0, u_lim]``, ``τ ∈ [-τ_lim, τ_lim]³``;
@@ -28,9 +28,9 @@ from mbplan.benchmarks.common import (
 )
 from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
-from mbplan.paper import drone_docking
 from mbplan.planning.solve import plan
 from mbplan.tasks.drone import DockingTask, rotation_angles, sample_docking_cases
+from mbplan.tasks.paper import drone_docking
 from mbplan.validation import as_int, as_real
 
 METHODS = ("ripm", "ripm-input-limits", "ipopt-quaternion")  # the default run
@@ -48,7 +48,7 @@ def _case(n: int, seed: int, index: int, limits: bool) -> DockingTask:
 
 def solve_case(method: str, n: int, seed: int, index: int, tol: float) -> dict:
     """One (case, method) solve through :func:`mbplan.plan` of
-    :func:`mbplan.paper.drone_docking`, verified, as a JSON-serialisable row."""
+    :func:`mbplan.tasks.paper.drone_docking`, verified, as a JSON-serialisable row."""
     if method not in ALL_METHODS:
         raise InputError(f"unknown method {method!r}; choose from {', '.join(ALL_METHODS)}")
     task = _case(n, seed, index, limits=method.endswith("-input-limits"))
@@ -109,7 +109,7 @@ def run(
     jobs = [Job(i, m, solve_case, (m, n, seed, i, tol)) for m in methods for i in range(n)]
     t0 = time.perf_counter()
     config = {"benchmark": "drone-docking", "seed": seed, "tol": tol, "max_iter": MAX_ITER}
-    config["through"] = "mbplan.plan(mbplan.paper.drone_docking(case))"
+    config["through"] = "mbplan.plan(mbplan.tasks.paper.drone_docking(case))"
     rows = run_jobs(
         jobs,
         out / "results.jsonl",

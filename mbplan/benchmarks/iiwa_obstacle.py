@@ -2,7 +2,7 @@
 (RIPM paper §VIII.C, Table III), every solution independently verified.
 
 Regenerate: ``mbplan bench iiwa-obstacle --n 100 --seed 0 --out benchmarks/results/iiwa-obstacle``.
-A case counts as solved only if the solver reports success AND :func:`mbplan.verification.verify`
+A case counts as solved only if the solver reports success AND :func:`mbplan.verify`
 passes.
 """
 
@@ -21,8 +21,8 @@ from mbplan.benchmarks.common import (
 )
 from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
-from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
 from mbplan.planning.solve import METHODS, check_plan_request
+from mbplan.tasks.paper import iiwa_obstacle, iiwa_obstacle_starts
 
 
 def solve_case(
@@ -37,7 +37,7 @@ def solve_case(
     constraint: str = "com",
 ) -> dict:
     """One (case, method) solve and its verification as a JSON-serialisable row: the case's
-    OCP (:func:`mbplan.paper.iiwa_obstacle`) planned with :func:`mbplan.plan`."""
+    OCP (:func:`mbplan.tasks.paper.iiwa_obstacle`) planned with :func:`mbplan.plan`."""
     q0 = iiwa_obstacle_starts(n, seed, constraint)[index]
     problem = iiwa_obstacle(q0, N=N, constraint=constraint)
     row, result, check = plan_row(

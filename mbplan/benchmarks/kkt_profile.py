@@ -11,10 +11,10 @@ from typing import Any
 import numpy as np
 
 from mbplan.solvers import RIPMOptions, RIPMResult, solve_ripm
-from mbplan.solvers import linear_solver as ls
-from mbplan.solvers.ldl_symbolic import Analysis
-from mbplan.solvers.ordering import amd_order, coordinate_dissection_order
-from mbplan.solvers.reduced_step import ReducedKKTSystem
+from mbplan.solvers.kkt import system as ls
+from mbplan.solvers.kkt.ldl.symbolic import Analysis
+from mbplan.solvers.kkt.ordering import amd_order, coordinate_dissection_order
+from mbplan.solvers.kkt.reduced.system import ReducedKKTSystem
 
 
 class _TimedProblem:
@@ -155,7 +155,7 @@ def _grid_keys(problem: Any, ev: Any) -> tuple[np.ndarray, np.ndarray] | None:
 
 def ordering_stats(problem: Any, x0: Any) -> dict[str, dict[str, float]]:
     """Predicted flops (multiply-adds) and stored factor entries of the KKT matrix at ``x0`` for
-    each elimination order: AMD, METIS and BFS nested dissection (:mod:`mbplan.solvers.ordering`)
+    each elimination order: AMD, METIS and BFS nested dissection (:mod:`mbplan.solvers.kkt.ordering`)
     and, for a
     trajectory problem, AMD constrained to eliminate knot by knot (time-major, stage-wise) or
     body by body (body-major)."""

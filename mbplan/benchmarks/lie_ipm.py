@@ -2,11 +2,11 @@
 
 Every method solves the same seeded instances from the same initial iterate ``G0``:
 
-* ``mlgipm``: :func:`~mbplan.solvers.mlgipm.solve_mlgipm` with its defaults;
+* ``mlgipm``: :func:`~mbplan.solvers.lie_ipm.mlgipm.solve_mlgipm` with its defaults;
 * ``mlgipm-paper``: Algorithm 1 literally (fixed σ = 0.1, τ = 0.995, exact 𝕳_ℒ, no line search);
 * ``mlgipm-symmetric``: defaults with the symmetric Riemannian Hessian;
 * ``mlgipm-nols``: defaults without the merit line search;
-* ``lai-yoshise``: :func:`~mbplan.solvers.lai_yoshise.solve_lai_yoshise` (the paper's "RIPM");
+* ``lai-yoshise``: :func:`~mbplan.solvers.lie_ipm.lai_yoshise.solve_lai_yoshise` (the paper's "RIPM");
 * ``ripm``: our RIPM (Teng et al.), ``solve_ripm`` with ``max_iter=500``;
 * ``ipopt``: IPOPT on the embedded form of (11) (SL only).
 
@@ -31,11 +31,11 @@ from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, writ
 from mbplan.benchmarks.harness import Job, run_jobs
 from mbplan.benchmarks.lie_ipm_stats import SUMMARY_KEYS, compare, describe
 from mbplan.errors import InputError
-from mbplan.problems.lie_ipm import make_problem, sample_instance
 from mbplan.solvers import solve_ripm
-from mbplan.solvers.kkt_field import PrimalDual, evaluate_field
-from mbplan.solvers.lai_yoshise import LaiYoshiseOptions, solve_lai_yoshise
-from mbplan.solvers.mlgipm import MLGIPMOptions, solve_mlgipm
+from mbplan.solvers.lie_ipm.kkt_field import PrimalDual, evaluate_field
+from mbplan.solvers.lie_ipm.lai_yoshise import LaiYoshiseOptions, solve_lai_yoshise
+from mbplan.solvers.lie_ipm.mlgipm import MLGIPMOptions, solve_mlgipm
+from mbplan.tasks.lie_ipm import make_problem, sample_instance
 
 PROBLEMS = {"so7": "so", "sl7": "sl"}
 METHODS = (

@@ -1,7 +1,7 @@
 """Study: the RIPM's KKT matrix of a maximal-coordinate multibody problem with the joints
 eliminated knot by knot (a reduced, generalized-coordinate-sized KKT), and its cost.
 
-Unknowns of the KKT ``K`` (:mod:`mbplan.solvers.linear_solver`): primal tangent coordinates
+Unknowns of the KKT ``K`` (:mod:`mbplan.solvers.kkt.system`): primal tangent coordinates
 ``x``, equality multipliers ``y``, inequality multipliers ``z``. Per knot ``k`` and body ``b``
 the state ``s = (R, F, p, v)`` (12), the joint force ``λ`` (5) and torque ``τ`` (1); per step
 the kinematics rows ``g(X_{k+1}, (R, p)_{k+1})`` with ``X_{k+1} = (R_k F_k, p_k + v_k Δt)``
@@ -26,7 +26,7 @@ Each eliminated pair ``[[G, Bᵀ], [B, 0]]`` with ``B`` square nonsingular has i
 whatever ``G`` is, so ``inertia(K) = inertia(K_reduced) + (m, m, 0)`` with ``m`` the number of
 eliminated primal coordinates. The eliminated multiplier rows must carry no ``-δ_c`` (the
 default; a ``δ_c > 0`` step is left to the full factorization). The reduced matrix is
-factorized by :class:`~mbplan.solvers.linear_solver.KKTSystem` (AMD, static regularization
+factorized by :class:`~mbplan.solvers.kkt.system.KKTSystem` (AMD, static regularization
 ``1e-8``: with ``1e-9`` its zero-diagonal ``λ``/``τ`` pivots broke the unpivoted LDLᵀ down on a
 nonsingular matrix), and every solve is refined against the full ``K``.
 """
@@ -42,7 +42,7 @@ import scipy.sparse.linalg as spla
 
 from mbplan.errors import InputError
 from mbplan.formulations.maximal_layout import MaximalLayout
-from mbplan.solvers.linear_solver import Inertia, KKTSystem
+from mbplan.solvers.kkt.system import Inertia, KKTSystem
 
 
 class _Entries:

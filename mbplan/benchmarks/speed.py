@@ -1,6 +1,6 @@
 """Speed of the RIPM against the baselines on its own tasks, with a per-iteration profile.
 
-Tasks: :mod:`mbplan.benchmarks.speed_tasks`; profile and orderings:
+Tasks: :mod:`mbplan.tasks.speed`; profile and orderings:
 :mod:`mbplan.benchmarks.kkt_profile`.
 """
 
@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from mbplan.benchmarks.kkt_profile import ordering_stats, profile_solve
-from mbplan.benchmarks.speed_tasks import (
+from mbplan.tasks.speed import (
     CHAIN_LINKS,
     TASKS,
     chain_case,

@@ -30,8 +30,8 @@ from mbplan.ocp.body_residuals import (
 )
 from mbplan.ocp.free_body import FreeBody, free_flyer_state, path_state
 from mbplan.ocp.problem import OCP, Item
-from mbplan.transcription.problem import TrajectoryProblem
 from mbplan.transcription.terms import Term
+from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import Block, Point, TrajectoryVariables
 
 STATE = (("R", SO3), ("p", R(3)), ("F", SO3), ("v", R(3)))

@@ -43,8 +43,8 @@ from mbplan.simulation.warm_start import maximal_warm_start
 from mbplan.transcription.constraints import cylinder_clearance_function
 from mbplan.transcription.distance import distance_constraint_function, pair_bodies
 from mbplan.transcription.multibody import multibody_layout
-from mbplan.transcription.problem import TrajectoryProblem
 from mbplan.transcription.terms import Term
+from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import Point, trajectory_variables
 
 _TORQUE = {

@@ -1,6 +1,6 @@
 """Where a maximal-coordinate RIPM problem keeps each knot's and body's state, joint forces and
 multibody rows in its KKT matrix, and the joint elimination plan built from it
-(:mod:`mbplan.solvers.elimination`; the study :mod:`mbplan.benchmarks.reduced_kkt`)."""
+(:mod:`mbplan.solvers.kkt.elimination`; the study :mod:`mbplan.benchmarks.reduced_kkt`)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.memo import RecentMemo
-from mbplan.solvers.elimination import EliminationPlan
+from mbplan.solvers.kkt.elimination import EliminationPlan
 
 
 @dataclass(frozen=True)

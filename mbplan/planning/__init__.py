@@ -1,3 +1,2 @@
 """Planning: an OCP → a formulation's NLP → a solver (a method of :data:`solve.METHODS`) → one
-result type; warm starts in :mod:`.initial_guess`. The drone docking task keeps its own path
-(:mod:`.drone`)."""
+result type; warm starts in :mod:`.initial_guess`."""

@@ -43,11 +43,11 @@ METHODS: dict[str, Method] = {
 
 
 def _shooting(name: str) -> Callable[[OCP, np.ndarray, m.Settings], PlanResult]:
-    """The adapter ``name`` of :mod:`mbplan.planning.shooting_methods`, imported when called
+    """The adapter ``name`` of :mod:`mbplan.baselines.crocoddyl`, imported when called
     (Crocoddyl and mim-solvers are the optional ``baselines`` extra)."""
 
     def solve(ocp: OCP, q_guess: np.ndarray, settings: m.Settings) -> PlanResult:
-        from mbplan.planning import shooting_methods
+        from mbplan.baselines import crocoddyl as shooting_methods
 
         return getattr(shooting_methods, name)(ocp, q_guess, settings)
 
@@ -79,7 +79,7 @@ def plan(
     formulation = METHODS[method].formulation
     ocp.check()
     if formulation == "maximal":
-        from mbplan.solvers.linear_solver import compile_kernels_in_background
+        from mbplan.solvers.kkt.system import compile_kernels_in_background
 
         compile_kernels_in_background()  # first run: numba compiles while the C compiler runs
     t0 = time.perf_counter()
@@ -126,7 +126,7 @@ def check_plan_request(
 
 def finish(ocp: OCP, result: PlanResult, guess_time: float = 0.0) -> PlanResult:
     """Attach ``ocp``, the constraint violations and goal errors; set ``success`` (one meaning)."""
-    from mbplan.verification import constraint_violations, goal_errors, hard_constraints_met
+    from mbplan.verification.report import constraint_violations, goal_errors, hard_constraints_met
 
     finite = all(np.all(np.isfinite(a)) for a in (result.q, result.v, result.tau))
     violations = goal = {}

@@ -17,7 +17,7 @@ from mbplan.errors import InputError, MbplanError
 from mbplan.lie import SO3
 from mbplan.multibody import MaximalModel, body_poses
 from mbplan.transcription.multibody import LAMBDA_DIM, multibody_layout
-from mbplan.transcription.problem import TrajectoryProblem
+from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import TrajectoryVariables
 
 

@@ -1,15 +1,15 @@
-"""Solve a :class:`~mbplan.solvers.problem.RIPMProblem` with a solver named by a string."""
+"""Solve a :class:`~mbplan.solvers.nlp.RIPMProblem` with a solver named by a string."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from mbplan.errors import InputError
-from mbplan.solvers.mlgipm import MLGIPMOptions, solve_mlgipm
-from mbplan.solvers.options import RIPMOptions
-from mbplan.solvers.problem import Point, RIPMProblem
+from mbplan.solvers.lie_ipm.mlgipm import MLGIPMOptions, solve_mlgipm
+from mbplan.solvers.nlp import Point, RIPMProblem
 from mbplan.solvers.result import RIPMResult
-from mbplan.solvers.ripm import solve_ripm
+from mbplan.solvers.ripm.driver import solve_ripm
+from mbplan.solvers.ripm.options import RIPMOptions
 
 SOLVERS = {"ripm": (solve_ripm, RIPMOptions), "mlgipm": (solve_mlgipm, MLGIPMOptions)}
 

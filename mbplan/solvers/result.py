@@ -68,7 +68,7 @@ class IterationHistory:
 
 @dataclass
 class RIPMResult:
-    """Outcome of :func:`~mbplan.solvers.ripm.solve_ripm` (like ``scipy.optimize.OptimizeResult``).
+    """Outcome of :func:`~mbplan.solvers.ripm.driver.solve_ripm` (like ``scipy.optimize.OptimizeResult``).
 
     ``x`` is a manifold point (the last accepted iterate); ``y``, ``z`` are the multipliers of
     ``h = 0`` and ``g ≤ 0`` (``z > 0``) and ``s > 0`` the slacks (``s = -g(x)`` at convergence).

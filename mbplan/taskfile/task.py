@@ -4,7 +4,7 @@ Every key is documented in README ("Task files"). Tables: ``[robot]`` (:mod:`.ro
 ``[horizon]``, ``[start]``, ``[goal]``, ``[[obstacle]]``, ``[cost]``, ``[constraints]``,
 ``[solver]``. Item names of the OCP: ``goal`` (terminal), ``goal_tracking`` (running),
 ``velocity``, ``velocity_terminal``, ``torque``, ``position_limits``, ``velocity_limits``,
-``torque_limits``, and the obstacle constraints of :func:`mbplan.paper.add_obstacle_constraint`
+``torque_limits``, and the obstacle constraints of :func:`mbplan.tasks.paper.add_obstacle_constraint`
 (``clearance``, or ``com_outside_<name>`` per cylinder).
 """
 
@@ -34,11 +34,11 @@ from mbplan.ocp.residuals import (
 )
 from mbplan.ocp.robot import Robot
 from mbplan.ocp.scene import Scene
-from mbplan.paper import add_obstacle_constraint
 from mbplan.planning.solve import METHODS, plan
 from mbplan.results import PlanResult
 from mbplan.taskfile.robot import read_robot
 from mbplan.taskfile.toml_table import Document, Table, read_toml
+from mbplan.tasks.paper import add_obstacle_constraint
 
 TABLES = ("robot", "horizon", "start", "goal", "obstacle", "cost", "constraints", "solver")
 SHAPES = {"box": 3, "cylinder": 2, "sphere": 1, "capsule": 2, "mesh": 3}

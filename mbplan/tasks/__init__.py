@@ -1,10 +1,5 @@
-"""Benchmark tasks of the RIPM paper (§VIII) as plain data, with samplers and simulators.
-
-The package exports the drone docking task (:mod:`mbplan.tasks.drone`, whose ``__all__`` lists
-the names); the iiwa obstacle task is an :class:`mbplan.OCP` of :mod:`mbplan.paper`.
-"""
-
-from mbplan.tasks import drone
-from mbplan.tasks.drone import *  # noqa: F403  (the names of drone.__all__)
-
-__all__ = drone.__all__
+"""Every task mbplan ships, as plain data (OCPs, problems and their seeded samplers):
+:mod:`.paper` (the RIPM paper's iiwa and drone OCPs), :mod:`.drone` (drone docking cases and
+the cluttered scene), :mod:`.lie_ipm` (the MLG-IPM paper's problems on SO(n)² and SL(n)²),
+:mod:`.ilqr` (the Lie-group iLQR thesis' scenarios), :mod:`.speed` (the speed benchmark's
+iiwa, drone and chain problems) and :mod:`.arm_sweep` (reach tasks for every bundled arm)."""

@@ -246,7 +246,7 @@ def trajectory_cost(task: DockingTask, traj: dict[str, np.ndarray]) -> float:
     """Objective of Problem 1 (eq. 18) for ``traj`` with keys R, p, F, v (N+1 knots) and u (N).
 
     The state terms of the fixed knot 0 are a constant and left out, so the value equals the
-    objective of both formulations of :func:`mbplan.paper.drone_docking` (an independent NumPy
+    objective of both formulations of :func:`mbplan.tasks.paper.drone_docking` (an independent NumPy
     evaluation, for tests).
     """
     N, w = task.N, task.weights

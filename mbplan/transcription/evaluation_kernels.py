@@ -1,4 +1,4 @@
-"""Compiled passes of :class:`~mbplan.transcription.problem.TrajectoryProblem`'s evaluation:
+"""Compiled passes of :class:`~mbplan.transcription.trajectory.TrajectoryProblem`'s evaluation:
 every term's inputs gathered from the packed point and the multipliers before the terms' calls,
 every output summed into the NLP's vectors and matrix nonzeros after them, one call each. The
 sums are NumPy's ``bincount`` (:func:`~mbplan.transcription.sparse.accumulate`): the same

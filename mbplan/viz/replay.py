@@ -138,7 +138,7 @@ def replay_main(
     if all(r.ocp is not None for r in results):
         task, name = results[0].ocp, None  # the scene and robot each plan was made with
     else:  # files from before the OCP API: guess the robot, the iiwa's default task
-        from mbplan.paper import iiwa_obstacle
+        from mbplan.tasks.paper import iiwa_obstacle
 
         name = infer_robot(results, robot)
         task = iiwa_obstacle() if name == "iiwa" else None

@@ -20,12 +20,12 @@ from dataclasses import dataclass, field
 import casadi as cs
 import numpy as np
 
-from mbplan.benchmarks.ilqr.scenarios import Scenario
 from mbplan.engine import RiemannianFunction
 from mbplan.engine.jit import jit_available
 from mbplan.lie import SE3, SO3, R
 from mbplan.shooting.cost import tracking_value
 from mbplan.solvers import RIPMOptions, solve_ripm
+from mbplan.tasks.ilqr import Scenario
 from mbplan.transcription import Block, Term, TrajectoryProblem, TrajectoryVariables
 
 

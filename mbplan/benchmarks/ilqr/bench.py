@@ -1,6 +1,6 @@
 """``mbplan bench ilqr``: SS-/MS-iLQR against the thesis' baselines (Tables 4-2, 4-3).
 
-Every method solves the same scenario (:mod:`~mbplan.benchmarks.ilqr.scenarios`) in one process,
+Every method solves the same scenario (:mod:`~mbplan.tasks.ilqr`) in one process,
 one after another; times are medians over ``repeats`` solves after a warm-up solve (JIT and numba
 compilation excluded), so only ratios within one run are meaningful. ``final_cost`` is the
 thesis' cost (2-55) of each solution (rotations of the embedded baselines projected onto SO(3)
@@ -26,10 +26,10 @@ from tqdm import tqdm
 from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, write_json
 from mbplan.benchmarks.ilqr.baselines import BaselineRun, ipopt_baseline, ripm_baseline
 from mbplan.benchmarks.ilqr.fddp import FDDP_SCENARIOS, fddp_baseline
-from mbplan.benchmarks.ilqr.scenarios import SCENARIOS, Scenario, build
 from mbplan.errors import InputError
 from mbplan.lie import SO3
 from mbplan.solvers.ilqr import ILQROptions, solve_ilqr
+from mbplan.tasks.ilqr import SCENARIOS, Scenario, build
 
 METHODS = (
     "ss-ilqr",

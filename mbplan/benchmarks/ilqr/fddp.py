@@ -19,8 +19,8 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.benchmarks.ilqr.baselines import BaselineRun, rotation_to_quaternion
-from mbplan.benchmarks.ilqr.scenarios import Scenario
 from mbplan.lie import SO3
+from mbplan.tasks.ilqr import Scenario
 
 FDDP_SCENARIOS = ("so3-tracking", "se3-tracking")
 

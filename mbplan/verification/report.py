@@ -1,0 +1,97 @@
+"""What a verification reports, and the checks every replay shares: each constraint of the OCP
+by name at the planned knots, the soft goals at their last knot, the hard constraints met.
+
+Thresholds are documented in :mod:`mbplan.verification.multibody`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mbplan.formulations.joint_space import evaluate
+from mbplan.ocp.problem import OCP, Item
+from mbplan.ocp.residuals import ComOutsideCylinder, Distance, JointTorqueLimits
+
+TORQUE_TOLERANCE = 1e-6
+CONSTRAINT_TOLERANCE = 1e-4  # residual units (m, rad, rad/s, N m): IPOPT's default constr_viol_tol
+
+
+@dataclass(frozen=True)
+class Verification:
+    """Outcome of :func:`mbplan.verify` (:mod:`mbplan.verification.multibody` for the metrics and
+    thresholds)."""
+
+    max_joint_deviation_rad: float
+    min_obstacle_distance_m: float
+    final_goal_error_rad: float
+    torque_limit_violation: float
+    passed: bool
+    reasons: list[str] = field(default_factory=list)
+    max_velocity_deviation: float = float("nan")
+    joint_deviation_ratio: float = float("nan")
+    velocity_deviation_ratio: float = float("nan")
+    open_loop_deviation_rad: float = float("nan")
+    violations: dict[str, float] = field(default_factory=dict)
+    goal_errors: dict[str, float] = field(default_factory=dict)
+
+
+def is_obstacle(item: Item) -> bool:
+    return isinstance(item.residual, (Distance, ComOutsideCylinder))
+
+
+def at_knots(ocp: OCP, item: Item, q, v, tau) -> np.ndarray:
+    """The residual of ``item`` at its knots of the trajectory ``q, v (N+1, ·)``, ``tau``."""
+    k = item.knots
+    if item.residual.space == "control":
+        return evaluate(ocp.robot, ocp.scene, item.residual, None, None, tau[k])
+    return evaluate(ocp.robot, ocp.scene, item.residual, q[k], v[k], None, ocp.dt)
+
+
+def constraint_violations(
+    ocp: OCP, q: np.ndarray, v: np.ndarray, tau: np.ndarray, tau_knots: np.ndarray | None = None
+) -> dict[str, float]:
+    """Largest violation of every constraint of ``ocp`` at the planned knots (``|r|`` for an
+    equality, ``max(r, 0)`` for an inequality; torque limits also at ``tau_knots``)."""
+    out = {}
+    for item in ocp.constraints:
+        r = at_knots(ocp, item, q, v, tau)
+        if isinstance(item.residual, JointTorqueLimits) and tau_knots is not None:
+            r = np.concatenate(
+                [r, evaluate(ocp.robot, ocp.scene, item.residual, None, None, tau_knots)]
+            )
+        viol = np.abs(r) if item.residual.sense == "eq" else np.maximum(r, 0.0)
+        out[item.name] = float(np.max(viol)) if viol.size else 0.0
+    return out
+
+
+def goal_errors(ocp: OCP, q: np.ndarray, v: np.ndarray) -> dict[str, float]:
+    """∞-norm of every soft goal (cost with a tolerance) at its last knot of ``q, v``."""
+    out = {}
+    for item in ocp.costs:
+        if item.tolerance is None or item.residual.space != "state":
+            continue
+        k = int(item.knots[-1])
+        r = evaluate(ocp.robot, ocp.scene, item.residual, q[k : k + 1], v[k : k + 1], None, ocp.dt)
+        out[item.name] = float(np.max(np.abs(r)))
+    return out
+
+
+def hard_constraints_met(ocp: OCP, violations: dict[str, float]) -> list[str]:
+    """Reasons the planned knots violate a hard constraint (empty: all met)."""
+    reasons = []
+    for item in ocp.constraints:
+        tol = CONSTRAINT_TOLERANCE if item.tolerance is None else item.tolerance
+        if isinstance(item.residual, JointTorqueLimits):
+            tol = TORQUE_TOLERANCE * max(1.0, float(np.max(np.abs(item.residual.upper))))
+        if violations[item.name] > tol and isinstance(item.residual, JointTorqueLimits):
+            reasons.append(
+                f"torques exceed the limits ({item.name!r}) by up to "
+                f"{violations[item.name]:.3g} N m"
+            )
+        elif violations[item.name] > tol:
+            reasons.append(
+                f"constraint {item.name!r} is violated by {violations[item.name]:.3g} at the "
+                f"planned knots (tolerance {tol:g})"
+            )
+    return reasons
