@@ -6,7 +6,10 @@ per-iteration profiles with each variant.
 
     python benchmarks/kkt_orderings.py [--tasks drone iiwa-com chain4 ...] [--reps 10]
         [--pivot 1e-10] [--solves chain32 chain64] [--profile chain4 chain32 chain64]
-        [--out benchmarks/results/kkt-orderings]
+        [--out out/bench/kkt-orderings]
+
+``tests/test_ldl_pivoting.py`` imports :func:`_first_ripm_kkt` from this script. The orderings'
+predicted costs on the speed tasks are part of ``mbplan bench speed``'s results.
 
 Factorization times: the KKT matrix at the task's warm start (Hessian and Jacobians from the
 problem, diagonal ``1e-4`` on the primal, ``-1e-8`` on equality and ``-1`` on inequality rows,

@@ -1,7 +1,7 @@
 """Reference problems for the RIPM: HS071 (Hock-Schittkowski no. 71, IPOPT's tutorial problem),
 two infeasible problems (restoration and infeasibility detection) and a block-banded, vectorised
 optimal-control NLP whose KKT matrix has the structure of a trajectory optimization (used by the
-tests and ``benchmarks/ripm_linear_solver.py``)."""
+tests)."""
 
 from __future__ import annotations
 

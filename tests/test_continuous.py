@@ -1,4 +1,4 @@
-"""Continuous joints through the OCP API (issue #11, item 2): one unbounded angle per joint
+"""Continuous joints through the OCP API: one unbounded angle per joint
 (:mod:`mbplan.ocp.continuous`), planned in maximal (RIPM) and generalized (IPOPT) coordinates."""
 
 from __future__ import annotations

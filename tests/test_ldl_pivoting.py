@@ -165,7 +165,7 @@ def test_first_chain_kkt_breaks_unpivoted_metis_and_not_the_pivoted_one(chain_fi
     for key, kkt in systems.items():
         kkt.set_matrices(*blocks)
         inertia[key] = kkt.factorize(diag, 1e-9)
-    assert inertia["metis", 0.0] is None  # the breakdown of session 5
+    assert inertia["metis", 0.0] is None  # unpivoted METIS breaks down here
     expected = (n, me + mi, 0)
     rhs = np.random.default_rng(0).normal(size=n + me + mi)
     ref = systems["amd", 0.0].solve(rhs)[0]

@@ -1,4 +1,4 @@
-"""The LDLᵀ's paths for small supernodes (docs/ripm-speed.md, session 7, branch ``ldl``): leaf
+"""The LDLᵀ's paths for small supernodes (see docs/ripm-design.md): leaf
 supernodes that subtract their Schur update straight from their parent's front, sibling leaves
 with equal rows merged into one supernode, kernels on borrowed arrays — against dense linear
 algebra, against the factorization without them, with pivoting, breakdowns and wrong

@@ -157,7 +157,7 @@ def test_prismatic_residuals_equal_the_joint_space_ones() -> None:
 
 
 def test_panda_with_prismatic_fingers_plans_in_maximal_coordinates_and_verifies() -> None:
-    """Issue #11: the fingers not locked, the RIPM on SO(3)×R³ bodies, Pinocchio's verifier."""
+    """The panda with its fingers not locked, the RIPM on SO(3)×R³ bodies, Pinocchio's verifier."""
     from mbplan.tasks.paper import tracking_ocp
 
     goal = np.array([0.4, -0.1, 0.1, -1.9, 0.0, 2.1, 0.6, 0.03, 0.03])

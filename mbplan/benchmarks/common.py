@@ -7,7 +7,6 @@ import os
 import platform
 import subprocess
 import sys
-import tempfile
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -72,29 +71,6 @@ def median_of_min(runs: list[dict], task: str, keys: Iterable[str]) -> dict[str,
     }
     out["iterations"] = [runs[0][task][c]["iterations"] for c in cases]
     return out
-
-
-def modules_at(rev: str, names: Iterable[str], package: str, prefix: str) -> Path:
-    """The modules ``package.<name>`` of git commit ``rev`` (those that exist there) written as
-    top-level modules ``<prefix><name>`` importing each other, in a per-commit temporary folder
-    that is put on ``sys.path`` and returned: a baseline's solver beside the working tree's."""
-    root = Path(__file__).resolve().parents[2]
-    folder = Path(tempfile.gettempdir()) / f"{prefix}{rev}"
-    folder.mkdir(exist_ok=True)
-    sources = {}
-    for name in names:
-        path = f"{rev}:{package.replace('.', '/')}/{name}.py"
-        out = subprocess.run(["git", "show", path], cwd=root, capture_output=True, text=True)
-        if out.returncode == 0:
-            sources[name] = out.stdout
-    for name, src in sources.items():
-        for other in sources:
-            src = src.replace(f"from {package}.{other} import", f"from {prefix}{other} import")
-        path = folder / f"{prefix}{name}.py"
-        if not path.exists() or path.read_text() != src:
-            path.write_text(src)
-    sys.path.insert(0, str(folder))
-    return folder
 
 
 MIN_INTERVAL_CASES = 10

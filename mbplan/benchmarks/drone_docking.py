@@ -8,7 +8,7 @@ Methods on the same seeded cases and the same geodesic initial guess, each throu
 * ``ipopt-quaternion``: unit-quaternion variational integrator solved by IPOPT (ref. [7]);
 * ``mlgipm``, ``mlgipm-input-limits``: the RIPM's two problems solved by MLG-IPM.
 
-Regenerate: ``mbplan bench drone-docking --n 100 --seed 0 --out benchmarks/results/drone-docking``.
+Regenerate: ``mbplan bench drone-docking --n 100 --seed 0 --tol 1e-6 --out benchmarks/results/drone-docking/tol-1e-6``.
 """
 
 from __future__ import annotations

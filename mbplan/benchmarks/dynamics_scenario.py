@@ -1,4 +1,4 @@
-"""A smooth, non-chaotic motion for validating the LGVI against Pinocchio (issue #11 item 4).
+"""A smooth, non-chaotic motion for validating the LGVI against Pinocchio.
 
 From rest at ``q₀`` (each joint in the central half of its range), joint ``i`` follows the
 nominal motion ``δ_i(t) = A_i (1 - cos ω_i t)`` (``A_i`` 10 % of its range, at most 0.3 rad,

@@ -352,8 +352,8 @@ def _markdown(s: dict) -> str:
         "",
         "Mflop = multiply-adds of the numeric LDLᵀ (supernodal, relaxed amalgamation), fill = "
         "stored factor entries (millions). metis: METIS's nested dissection (opt-in "
-        '`kkt_ordering` "metis" or "auto", the cheaper of amd and metis; docs/ripm-speed.md '
-        "session 5: without pivoting it breaks down on the first iterations' KKT matrices); "
+        '`kkt_ordering` "metis" or "auto", the cheaper of amd and metis; '
+        "without pivoting it breaks down on the first iterations' KKT matrices); "
         "nested: dissection by BFS levels of the graph; grid-nd: "
         "dissection of the time × body grid by coordinates; time-/body-major: AMD's order made to eliminate the "
         "time × body grid knot by knot (a stage-wise, Riccati-like elimination) or body by body; "

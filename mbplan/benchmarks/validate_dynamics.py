@@ -7,7 +7,7 @@ URDF has none), the LGVI runs for ``T`` seconds at each ``Δt`` from the configu
 reference at ``t = 0`` and ``t = Δt``. Reported per case: the worst joint error at the knots
 (rad, m for prismatic joints) at each ``Δt``, the observed order ``p`` and error constant ``C``
 of the least-squares fit ``error ≈ C Δt^p``, and the worst joint constraint residual at any knot.
-Targets (issue #11): ``p = 2 ± 0.2``, error ≤ 1e-3 at Δt = 1 ms, residual ≤ 1e-10.
+Targets: ``p = 2 ± 0.2``, error ≤ 1e-3 at Δt = 1 ms, residual ≤ 1e-10.
 """
 
 from __future__ import annotations

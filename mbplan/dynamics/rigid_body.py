@@ -22,8 +22,8 @@ def rotational_kinematics(R0: cs.SX, R1: cs.SX, F0: cs.SX) -> cs.SX:
     ``θ³/12 a + O(θ⁵)``, so wherever the constraint holds they have the same value, Jacobian
     and Lagrangian Hessian. For ``|θ| < π`` both vanish only at ``M = I``; the skew part alone
     would also vanish at ``θ = π``. Being rational in the entries of the rotations, its
-    derivatives cost about half the symbolic log's with its branches (docs/ripm-speed.md,
-    session 17).
+    derivatives cost about half the symbolic log's with its branches
+    (measured on the drone).
 
     Domain: ``|θ| < π``. The residual grows like ``tan(θ/2)`` towards ``θ = π`` and a Newton
     step on it there is short (``≈ -sin θ``), so convergence from near ``π`` is slower; at

@@ -196,7 +196,7 @@ class FreeBodyNLP:
 
 
 WARM_START_INPUTS = "inverse"
-"""The default kind of :func:`warm_start_inputs` (measured in docs/ripm-speed.md, session 5)."""
+"""The default kind of :func:`warm_start_inputs` (fewer RIPM iterations on the drone than the hover input)."""
 BOUND_PUSH = BOUND_FRAC = 0.01
 """How far inside the input limits warm-start inputs stay, at both bounds:
 ``min(BOUND_FRAC (upper - lower), BOUND_PUSH max(1, |lower|))`` (IPOPT's

@@ -61,13 +61,13 @@ WRENCH_MAX_DEPTH = 8
 """The default plan eliminates the joint wrenches too (:func:`joint_elimination_plan`) for body
 trees at most this deep: a wrench block is dense over the free coordinates of the body's
 subtree and their paths, so its cost grows with the depth (iiwa: 0.88× the joints-only step's
-time per iteration, chain8 equal, chain16 1.1–1.3×; docs/ripm-speed.md, session 7)."""
+time per iteration, chain8 equal, chain16 1.1–1.3×)."""
 
 SEGMENT_DEPTH = 8
 """The default plan's segment (:func:`joint_elimination_plan`): every 8th body along a path
 keeps its maximal coordinates, so that the reduction's blocks stay dense over at most 8 bodies
 (chain64: the joints-only step per iteration 0.46× the full factorization's, one segment
-0.8×; docs/ripm-speed.md, session 7, branch ``chain``)."""
+0.8×)."""
 
 
 _LAYOUTS: RecentMemo[MaximalLayout] = RecentMemo(8)
@@ -158,7 +158,7 @@ def joint_elimination_plan(
     and bodies from the leaves to the root, a block of the body's joint wrench (``λ_k`` and
     ``τ_k``) with its six dynamics rows of step ``k-1`` (inverse dynamics: they touch the
     states, which are blocks before, and the wrenches of its children; the reduced matrix shrinks
-    ~5×, the reduction's products grow: docs/ripm-speed.md, session 7). ``None``: the wrench
+    ~5×, the reduction's products grow). ``None``: the wrench
     blocks when every joint has a torque and the tree is at most :data:`WRENCH_MAX_DEPTH`
     deep. ``segment`` (``None``: :data:`SEGMENT_DEPTH`): the bodies at depths ``segment + 1,
     2 segment + 1, …`` keep their maximal coordinates (state and wrench blocks without local

@@ -48,8 +48,8 @@ _FAILED = 1e100  # coal reports a failed GJK/EPA as ±DBL_MAX
 # the iiwa's link cylinders: 0.021 m where 1e-9 rad away it is 0.085 m, and errors of 1e-7 to
 # 1e-5 m near solutions); a request at CHECK_TOLERANCE is the cross-check, and where the two
 # differ by more than _CROSS_CHECK its result is used. (Coal's default request, 1e-6, as the
-# check let value jumps of up to 6.5e-6 through, above the RIPM's tol: docs/ripm-speed.md,
-# session 7, branch distls.)
+# check let value jumps of up to 6.5e-6 through, above the RIPM's tol, and
+# line searches failed on them.)
 CHECK_TOLERANCE = 1e-11
 _CROSS_CHECK = 1e-8
 

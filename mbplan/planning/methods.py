@@ -34,8 +34,7 @@ LGVI_RIPM_OPTIONS: dict[str, Any] = {"constr_mult_init_max": 0.0}
 ``Settings.options``: ``y₀ = 0``, no least-squares multipliers. The LGVI rows' least-squares
 multipliers are forces and momenta, above ``RIPMOptions.constr_mult_init_max`` = 1 (and so
 discarded) on every benchmark task, at the cost of one KKT factorization and solve per solve;
-where kept (IPOPT's 10³) they cost the drone iterations (docs/ripm-speed.md, sessions 5 and
-12)."""
+where kept (IPOPT's 10³) they cost the drone iterations."""
 
 _ITERATION_LINE = re.compile(r"^\s*\d+(r?)\s+[-+]?\d\.\d+e[-+]\d+\s")
 

@@ -1,4 +1,4 @@
-"""The arm sweep's tasks (``tests/test_sweep.py``, ``benchmarks/barrier_variants.py``): every arm
+"""The arm sweep's tasks (``tests/test_sweep.py``): every arm
 of ``mbplan robots`` (prismatic joints locked) with a sampled joint goal and a frame goal, N = 6,
 planned from rest."""
 

@@ -12,7 +12,7 @@ level) separates the two halves, which are ordered first, the separator last. Pi
 time (or body) direction by itself. :func:`coordinate_dissection_order` cuts by given
 coordinates (knot, body) instead. :func:`metis_order` is Karypis & Kumar's (1998)
 ``METIS_NodeND`` through pymetis (multilevel vertex separators, supervariable compression,
-minimum degree on the small pieces). Their flop counts against AMD: docs/ripm-speed.md.
+minimum degree on the small pieces). Their flop counts against AMD: ``mbplan bench speed``.
 """
 
 from __future__ import annotations

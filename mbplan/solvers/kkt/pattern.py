@@ -48,7 +48,7 @@ ORDERINGS = ("amd", "nested", "metis", "auto")
 _ORDERS = {"amd": amd_order, "nested": nested_dissection_order, "metis": metis_order}
 AUTO_MIN_FLOPS = 1e7
 """``"auto"`` orders by METIS too only when AMD's factorization needs at least this many
-multiply-adds: below it METIS's ordering costs more than it can save (docs/ripm-speed.md)."""
+multiply-adds: below it METIS's ordering costs more than it can save."""
 
 
 def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> Analysis:

@@ -241,7 +241,7 @@ def affine_complementarity(s, ds, z, dz, tau) -> float:  # pragma: no cover - nu
 def corrector_shift(s, ds, z, dz, tau) -> tuple[np.ndarray, float]:  # pragma: no cover - numba
     """Mehrotra's second-order term ``(α_p Δs_aff)(α_d Δz_aff)`` with the affine step's
     fraction-to-boundary step lengths (a long affine step corrects fully, a cut one little: the
-    unscaled term lost iterations on the iiwa; docs/ripm-speed.md, session 6), and the affine
+    unscaled term lost iterations on the iiwa), and the affine
     step's reach ``min(α_p, α_d)``."""
     a_p = frac_to_boundary(s, ds, tau)
     a_d = frac_to_boundary(z, dz, tau)

@@ -1,7 +1,7 @@
 """Parameters of the RIPM: Table IV of the RIPM paper where it gives one, IPOPT's defaults
 (Wächter & Biegler 2006, "WB" below) for the rest, except the barrier strategy (Mehrotra's
-probing μ capped at μ_init with the corrector) and the joint-eliminated Newton step, measured
-in docs/ripm-speed.md (sessions 6 and 7)."""
+probing μ capped at μ_init with the corrector) and the joint-eliminated Newton step, chosen
+on the benchmark tasks (docs/ripm-design.md)."""
 
 from __future__ import annotations
 
@@ -92,7 +92,7 @@ class RIPMOptions:
     """When the fraction-to-the-boundary rule cuts the slacks' step to ``α_s`` below this, the
     multipliers ``z`` step at most ``α_s`` too instead of their own ``α_z`` (WB eq. 15): a
     primal step blocked at ``α_s ≪ 1`` must not take the full ``dz ≈ -z ds/s`` that the whole
-    ``ds`` implies (docs/ripm-speed.md, session 11); 0: always ``α_z`` (IPOPT)."""
+    ``ds`` implies (multipliers of violated rows grow without bound otherwise); 0: always ``α_z`` (IPOPT)."""
     tiny_step_tol: float = 10 * float(np.finfo(float).eps)
 
     # --- initialization (WB) ---
@@ -102,7 +102,7 @@ class RIPMOptions:
     """Initial multipliers z_0 of the inequalities."""
     constr_mult_init_max: float = 1.0
     """Least-squares initial y_0 is discarded (y_0 = 0) if larger than this in max norm
-    (IPOPT: 1e3; the choice is measured in docs/ripm-speed.md, session 5; 0: always y_0 = 0)."""
+    (IPOPT: 1e3; larger multipliers cost the drone iterations; 0: always y_0 = 0)."""
 
     # --- inertia correction (WB Algorithm IC) ---
     delta_w_init: float = 1e-4
@@ -117,13 +117,13 @@ class RIPMOptions:
     """After this many consecutive iterations that needed ``δ_w > 0``, the first trial is
     ``κ_w⁻ δ_w,last`` instead of 0 (one factorization fewer per such iteration; 0: always try
     ``δ_w = 0`` first, WB Algorithm IC). IPOPT enters this mode only for singular matrices,
-    not for wrong inertia: measured worse here (docs/ripm-speed.md, session 18)."""
+    not for wrong inertia: measured worse here."""
     degenerate_zero_below: float = 1e-2
     """In the mode of ``degenerate_iters``, a first trial ``κ_w⁻ δ_w,last`` below this is
     ``δ_w = 0`` instead: the zero trial is skipped only while the perturbation is large, so an
     iterate whose Hessian has become positive definite stops being regularized by a
     ``δ_w`` that shrinks only 3× per iteration (drone: 1 063 → 1 003 iterations and 1 430 →
-    1 384 factorizations in 100 solves; docs/ripm-speed.md, session 18). 0: never."""
+    1 384 factorizations in 100 solves). 0: never."""
 
     # --- linear solver (IPOPT's PDFullSpaceSolver) ---
     kkt_ordering: str = "amd"
@@ -132,8 +132,8 @@ class RIPMOptions:
     ``AUTO_MIN_FLOPS`` multiply-adds and METIS predicts fewer) or ``"nested"`` (nested
     dissection along the trajectory's level structure), :mod:`mbplan.solvers.kkt.ordering`. AMD is
     the default: the LDLᵀ without pivoting breaks down more often with METIS orders
-    (docs/ripm-speed.md, session 5; with ``kkt_pivot_threshold = 1e-10`` it does not on the
-    benchmark tasks, session 6)."""
+    (with ``kkt_pivot_threshold = 1e-10`` it does not on the
+    benchmark tasks)."""
     static_regularization: float = 1e-9
     """±ε on the diagonal of the factorized KKT matrix only (removed by iterative refinement),
     so that the LDLᵀ factorization, which does not pivot, never meets an exact zero pivot."""

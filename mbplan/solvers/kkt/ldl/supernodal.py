@@ -18,7 +18,7 @@ from mbplan.solvers.kkt.ldl.symbolic import Analysis
 
 BLAS_FRONT_ROWS = 256
 """Fronts with at least this many update rows get their Schur update from single-threaded BLAS
-(measured in docs/ripm-speed.md, session 5)."""
+(faster than the numba kernels from this size on)."""
 
 
 class OneBlasThread:

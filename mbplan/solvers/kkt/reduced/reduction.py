@@ -33,7 +33,7 @@ from mbplan.solvers.kkt.system import Inertia, KKTSystem
 
 REDUCED_STATIC_REG = 1e-8
 """Static regularization of ``K_r`` (at least): its zero-diagonal multiplier-like columns break
-the unpivoted LDLᵀ down with ``1e-9`` (docs/ripm-speed.md, session 5)."""
+the unpivoted LDLᵀ down with ``1e-9``."""
 
 
 _REDUCTIONS: RecentMemo[list[Reduction]] = RecentMemo(8)

@@ -38,7 +38,7 @@ from mbplan.solvers.kkt.system import Inertia, KKTSystem, _csr
 
 INNER_RATIO = 0.1
 """Each solve through the reduction refines ``K_r``'s solve to this times the requested residual
-ratio: one pass then usually meets the ratio against ``K`` (docs/ripm-speed.md, session 7)."""
+ratio: one pass then usually meets the ratio against ``K``."""
 
 
 class ReducedKKTSystem:
