@@ -18,7 +18,7 @@ from test_linear_solver import (
 )
 
 from mbplan.errors import InputError
-from mbplan.solvers import RIPMOptions
+from mbplan.solvers import RIPMOptions, solve_ripm
 from mbplan.solvers.kkt.system import KKTSystem
 
 NONSINGULAR = [c for c in CASES[1:] if c[0] != 40]  # (40, 12, 10): structurally singular
@@ -137,16 +137,35 @@ def test_singular_matrix_with_pivoting_is_reported_by_refinement():
             np.testing.assert_allclose(kkt.matvec(sol), consistent, atol=1e-8 * np.abs(sol).max())
 
 
+def _first_ripm_kkt(problem, x0, options) -> tuple[tuple, np.ndarray]:
+    """The blocks and diagonal of the first full KKT matrix of a RIPM solve (``δ_w = 0``)."""
+    saved: dict = {}
+    factorize, set_matrices = KKTSystem.factorize, KKTSystem.set_matrices
+    dim = problem.n + problem.n_eq + problem.n_ineq
+
+    def capture_blocks(self, *blocks):
+        if self.dim == dim and "diagonal" not in saved:
+            saved["blocks"] = tuple(b.copy() if b is not None else None for b in blocks)
+        return set_matrices(self, *blocks)
+
+    def capture(self, diagonal, static_reg=0.0):
+        if self.dim == dim and "diagonal" not in saved and not np.any(diagonal[: self.n]):
+            saved["diagonal"] = diagonal.copy()
+        return factorize(self, diagonal, static_reg)
+
+    KKTSystem.factorize, KKTSystem.set_matrices = capture, capture_blocks
+    try:
+        solve_ripm(problem, x0, options.replace(max_iter=1, kkt_method="full"))
+    finally:
+        KKTSystem.factorize, KKTSystem.set_matrices = factorize, set_matrices
+    return saved["blocks"], saved["diagonal"]
+
+
 @pytest.fixture(scope="module")
 def chain_first_kkt():
     """The first RIPM KKT matrix (δ_w = 0) of a 4-link chain reach with N = 6."""
-    import sys
-    from pathlib import Path
 
     from mbplan.tasks.speed import chain_task, maximal_ripm_problem
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from kkt_orderings import _first_ripm_kkt
 
     problem, x0 = maximal_ripm_problem(chain_task(4, N=6), "linear")
     blocks, diag = _first_ripm_kkt(problem, x0, RIPMOptions(tol=1e-6))
@@ -181,7 +200,6 @@ def test_first_chain_kkt_breaks_unpivoted_metis_and_not_the_pivoted_one(chain_fi
 
 
 def test_ripm_with_pivoted_metis_matches_amd_on_the_chain(chain_first_kkt):
-    from mbplan.solvers import solve_ripm
 
     problem, x0, _, _ = chain_first_kkt
     opts = RIPMOptions(tol=1e-6)
