@@ -6,16 +6,18 @@ Tasks: :mod:`mbplan.tasks.speed`; profile and orderings:
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mbplan.benchmarks.common import plan_row
 from mbplan.benchmarks.kkt_profile import ordering_stats, profile_solve
+from mbplan.planning.solve import plan
 from mbplan.tasks.speed import (
     CHAIN_LINKS,
     TASKS,
-    chain_case,
     chain_problem,
     chain_task,
     drone_task,
@@ -438,3 +440,15 @@ def _chain_plot(s: dict, links: tuple[int, ...], out: Path) -> None:
     fig.suptitle("Chain reach, N = 40: maximal (RIPM) vs generalized (IPOPT)")
     fig.tight_layout()
     save_plot(fig, out / "chain_scaling.png", dpi=110)
+
+
+def chain_case(method: str, links: int, obstacle: bool = False) -> dict:
+    """One chain reach solve (``ripm`` or ``ipopt``; ``obstacle``: around the cylinder) from the
+    linear warm start, with its verification, as a JSON row. The linear start crosses the
+    obstacle; the via warm start's random via points are poor starts for long chains."""
+    ocp = chain_task(links, obstacle=obstacle)
+    t0 = time.perf_counter()
+    plan(ocp, method, warm_start="linear")  # cold: compilation, symbolic analysis
+    cold = time.perf_counter() - t0
+    row, _, _ = plan_row(ocp, method, warm_start="linear", tol=1e-6, max_iter=500)
+    return {"cold_total_time_s": cold, **row}

@@ -12,7 +12,6 @@ from typing import Any
 
 import numpy as np
 
-from mbplan.benchmarks.common import plan_row
 from mbplan.planning.methods import LGVI_RIPM_OPTIONS
 from mbplan.solvers import RIPMOptions
 
@@ -164,17 +163,3 @@ TASKS: dict[str, Callable[[int], tuple]] = {
     **{f"chain{n}": (lambda _i, n=n: chain_problem(n)) for n in CHAIN_LINKS},
     **{f"chain{n}-obstacle": (lambda _i, n=n: chain_problem(n, True)) for n in CHAIN_LINKS},
 }
-
-
-def chain_case(method: str, links: int, obstacle: bool = False) -> dict:
-    """One chain reach solve (``ripm`` or ``ipopt``; ``obstacle``: around the cylinder) from the
-    linear warm start, with its verification, as a JSON row. The linear start crosses the
-    obstacle; the via warm start's random via points are poor starts for long chains."""
-    from mbplan.planning.solve import plan
-
-    ocp = chain_task(links, obstacle=obstacle)
-    t0 = time.perf_counter()
-    plan(ocp, method, warm_start="linear")  # cold: compilation, symbolic analysis
-    cold = time.perf_counter() - t0
-    row, _, _ = plan_row(ocp, method, warm_start="linear", tol=1e-6, max_iter=500)
-    return {"cold_total_time_s": cold, **row}
