@@ -180,7 +180,7 @@ def test_maximal_hessian_is_the_fixed_witness_point_model() -> None:
 
 def test_distance_task_validation_names_the_geometry() -> None:
     import mbplan as mb
-    from mbplan.ocp.residuals import Distance
+    from mbplan.residuals import Distance
     from mbplan.tasks.paper import IIWA_START, IIWA_TARGET, iiwa_obstacle
 
     with pytest.raises(InputError, match="constraint"):
@@ -228,7 +228,7 @@ def test_a_wrong_tight_gjk_distance_is_caught_by_the_default_request():
     tolerance stops at 0.021 m from the obstacle where the distance is 0.085 m (1e-9 rad away
     too); the default request cross-checks it and its result is used."""
     import mbplan.multibody.collision as collision
-    from mbplan.formulations.joint_space import distance_values
+    from mbplan.residuals.distance import distance_values
     from mbplan.tasks.paper import iiwa_obstacle
 
     q = np.array([1.003111497864807, 0.3706807128646723, 0.001580589416948418,

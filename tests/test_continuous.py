@@ -11,10 +11,10 @@ import pytest
 from fd import check_generalized_derivatives
 
 import mbplan as mb
+from mbplan import residuals as res
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.joint_space import evaluate
 from mbplan.formulations.maximal import MaximalNLP
-from mbplan.ocp import residuals as res
 from mbplan.ocp.continuous import from_angles, to_angles
 from mbplan.robots import load
 from mbplan.tasks.paper import tracking_ocp

@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 import mbplan as mb
+from mbplan import residuals as br
+from mbplan import residuals as res
 from mbplan.cli.main import main
 from mbplan.engine.checks import check_derivatives
 from mbplan.formulations.free_body import FreeBodyNLP, input_bounds, lgvi_inputs
 from mbplan.formulations.quaternion import QuaternionNLP
 from mbplan.lie import SO3
-from mbplan.ocp import body_residuals as br
-from mbplan.ocp import residuals as res
 from mbplan.ocp.free_body import FreeBody, body_state, free_flyer_state, quaternions
 from mbplan.planning.initial_guess import initial_path
 from mbplan.tasks import paper

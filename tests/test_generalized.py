@@ -8,10 +8,11 @@ import pytest
 import mbplan as mb
 import mbplan.planning.methods as methods
 from mbplan.formulations.generalized import GeneralizedNLP
-from mbplan.formulations.joint_space import distance_values, evaluate
+from mbplan.formulations.joint_space import evaluate
 from mbplan.multibody.collision import chain_kinematics, joint_space_contacts, point_jacobians
-from mbplan.ocp.residuals import JointPosition
 from mbplan.planning.initial_guess import initial_path
+from mbplan.residuals import JointPosition
+from mbplan.residuals.distance import distance_values
 from mbplan.tasks.paper import IIWA_TARGET, add_obstacle_constraint, tracking_ocp
 
 
@@ -62,7 +63,7 @@ def test_residuals_of_new_ocps_reuse_the_robots_symbolic_kinematics(
     js._state_symbols.cache_clear()
     rows = []
     original_rows = js._rows
-    monkeypatch.setattr(js, "_rows", lambda *a: rows.append(a[1]) or original_rows(*a))
+    monkeypatch.setattr(js, "_rows", lambda *a: rows.append(a[1].key) or original_rows(*a))
     js._parametric.cache_clear()
     for ocp in small_cases(3):
         item = ocp.constraints[-1]
@@ -194,7 +195,7 @@ def test_distance_rows_hessian_is_the_fixed_witness_point_model() -> None:
     lam[row0:] = mu.ravel()
     U = nlp.lagrangian_hessian(z, 0.0, lam).toarray()
     H = U + U.T - np.diag(np.diag(U))
-    from mbplan.formulations.joint_space import distance_pairs
+    from mbplan.residuals.distance import distance_pairs
 
     pairs = distance_pairs(ocp.robot, ocp.scene, item.residual.objects)
     q = nlp.unpack(z)[0]

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import mbplan as mb
+from mbplan import residuals as res
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.joint_space import evaluate
-from mbplan.ocp import residuals as res
 from mbplan.ocp.robot import robot_from_source
 from mbplan.tasks.paper import IIWA_START
 

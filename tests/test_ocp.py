@@ -9,9 +9,9 @@ import pytest
 from fd import check_generalized_derivatives
 
 import mbplan as mb
+from mbplan import residuals as res
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.maximal import MaximalNLP
-from mbplan.ocp import residuals as res
 from mbplan.planning.initial_guess import inverse_kinematics
 from mbplan.tasks.paper import IIWA_START
 

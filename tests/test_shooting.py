@@ -15,10 +15,10 @@ import crocoddyl
 import pinocchio as pin
 
 import mbplan as mb
+from mbplan import residuals as res
 from mbplan.errors import MbplanError
 from mbplan.formulations import crocoddyl as sh
 from mbplan.formulations.joint_space import evaluate, knot_function
-from mbplan.ocp import residuals as res
 from mbplan.tasks.paper import IIWA_TARGET, add_obstacle_constraint, iiwa_obstacle, tracking_ocp
 from mbplan.verification.report import CONSTRAINT_TOLERANCE
 

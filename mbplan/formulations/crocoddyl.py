@@ -10,17 +10,14 @@ carries the state items at knot ``k`` (``k ≥ 1``) and the
 control items of interval ``k``; the terminal node the state items at knot ``N``. Crocoddyl
 multiplies running costs by Δt, so their weights are divided by Δt.
 
-Residuals, each kind translated once:
-
-* joint position / velocity costs: ``ResidualModelState`` with a weighted quadratic activation
-  (weights on the selected joints); torque costs: ``ResidualModelControl``;
-* frame placement / translation and any other state residual: the joint-space residual of
-  :mod:`mbplan.formulations.joint_space` (CasADi value and Jacobian) as a Python residual;
-* eq. (62): ``‖(x_i, y_i) - c‖ - r ≥ margin`` per link (:class:`ResidualModelCylinderClearance`;
-  in metres, the form the FDDP penalty is tuned for); coal distances ``d ≥ margin`` per pair
-  (:class:`ResidualModelCoalDistance`, through :mod:`mbplan.multibody.collision`);
-* joint position / velocity limits: bounds on ``ResidualModelState``; torque limits: control
-  bounds (box-FDDP) and, for CSQP, a constraint.
+Each residual translates itself (:meth:`mbplan.residuals.Residual.shooting`, with the
+:class:`ShootingBuilder` as the context: Crocoddyl's state, the OCP, the residual models below):
+Crocoddyl's state and control residuals for joint costs and limits,
+:meth:`ShootingBuilder.symbolic` (the joint-space CasADi value and Jacobian as a Python residual)
+for any other state residual, :class:`ResidualModelCylinderClearance` for eq. (62),
+:class:`ResidualModelCoalDistance` for coal distances. Constraints that bound the torques
+(:meth:`~mbplan.residuals.Residual.variable_bounds`) are also the nodes' control bounds
+(box-FDDP).
 
 Constraints: CSQP (``hard=True``) imposes every constraint (``ConstraintModelResidual``). FDDP
 has none: inequality constraints become ``½ W max(violation, 0)²`` penalties
@@ -45,19 +42,10 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import InputError, MbplanError
-from mbplan.formulations.joint_space import distance_values, knot_function
+from mbplan.formulations.joint_space import knot_function
 from mbplan.multibody.collision import chain_kinematics, point_jacobians
 from mbplan.ocp.problem import OCP, Item
-from mbplan.ocp.residuals import (
-    ComOutsideCylinder,
-    Distance,
-    JointPosition,
-    JointPositionLimits,
-    JointTorque,
-    JointTorqueLimits,
-    JointVelocity,
-    JointVelocityLimits,
-)
+from mbplan.residuals.base import ShootingResidual
 from mbplan.simulation.reference import damping_rate
 
 try:
@@ -179,22 +167,18 @@ class ResidualModelCylinderClearance(crocoddyl.ResidualModelAbstract):
 
 class ResidualModelCoalDistance(crocoddyl.ResidualModelAbstract):
     """``r_p = d_p(q)``: coal's signed distance of every (link geometry, object) pair of a
-    :class:`~mbplan.ocp.residuals.Distance`, with the Jacobian ``-nᵀ J₁``."""
+    :class:`~mbplan.residuals.Distance` from its rows ``margin - d``
+    (:class:`~mbplan.residuals.distance.DistanceRows`), with the Jacobian ``-nᵀ J₁``."""
 
-    def __init__(self, state: crocoddyl.StateMultibody, nu: int, ocp: OCP, residual: Distance):
-        self.ocp, self.residual = ocp, residual
-        m = residual.dim(ocp.robot, ocp.scene)
-        crocoddyl.ResidualModelAbstract.__init__(self, state, m, nu, True, False, False)
+    def __init__(self, state: crocoddyl.StateMultibody, nu: int, ocp: OCP, residual: Any):
+        self.rows = rows = residual.joint_space(ocp.robot, ocp.scene)
+        crocoddyl.ResidualModelAbstract.__init__(self, state, rows.size, nu, True, False, False)
 
     def calc(self, data: _Data, x: np.ndarray, u: np.ndarray | None = None) -> None:
-        q = x[None, : self.state.nq]
-        value = distance_values(self.ocp.robot, self.ocp.scene, self.residual, q)[0][0]
-        data.r[:] = self.residual.margin - value
+        data.r[:] = self.rows.margin - self.rows.values(x[None, : self.state.nq])[0]
 
     def calcDiff(self, data: _Data, x: np.ndarray, u: np.ndarray | None = None) -> None:
-        q = x[None, : self.state.nq]
-        _, grad, *_ = distance_values(self.ocp.robot, self.ocp.scene, self.residual, q, 1)
-        data.Rx[:, : self.state.nv] = -grad[0]
+        data.Rx[:, : self.state.nv] = -self.rows.jacobian(x[None, : self.state.nq])[0]
 
     def createData(self, collector: Any) -> _Data:
         return _Data(self, collector)
@@ -223,7 +207,12 @@ class ActuationModelDamped(crocoddyl.ActuationModelAbstract):
 
 
 class ShootingBuilder:
-    """The shooting problem of ``ocp`` for FDDP (``hard=False``) or CSQP (``hard=True``)."""
+    """The shooting problem of ``ocp`` for FDDP (``hard=False``) or CSQP (``hard=True``); the
+    context of the residuals' :meth:`~mbplan.residuals.Residual.shooting`."""
+
+    crocoddyl = crocoddyl
+    limit_weight = LIMIT_WEIGHT
+    obstacle_weight = OBSTACLE_WEIGHT
 
     def __init__(self, ocp: OCP, hard: bool, method: str):
         check_forward_dynamics()
@@ -239,9 +228,10 @@ class ShootingBuilder:
         self.u_lb = np.full(self.nu, -np.inf)
         self.u_ub = np.full(self.nu, np.inf)
         for item in ocp.constraints:
-            if isinstance(item.residual, JointTorqueLimits):
-                self.u_lb = np.maximum(self.u_lb, item.residual.lower)
-                self.u_ub = np.minimum(self.u_ub, item.residual.upper)
+            bounds = item.residual.variable_bounds(ocp.robot)
+            if bounds is not None and bounds[0] == "tau":
+                self.u_lb = np.maximum(self.u_lb, bounds[1])
+                self.u_ub = np.minimum(self.u_ub, bounds[2])
             elif item.residual.sense == "eq" and not hard:
                 raise InputError(
                     f"{method} cannot express the equality constraint {item.name!r} (FDDP has "
@@ -257,63 +247,20 @@ class ShootingBuilder:
                 "damping=False, or plan with ipopt"
             )
 
-    def _residual(self, item: Item) -> tuple[Any, np.ndarray, np.ndarray, float]:
-        """Crocoddyl residual of a state or control item, its bounds ``r ∈ [lo, hi]`` (for
-        constraints) and the FDDP penalty weight."""
-        r, state, nu, nv = item.residual, self.state, self.nu, self.model.nv
-        if isinstance(r, (JointPositionLimits, JointVelocityLimits)):
-            lo, hi = np.full(2 * nv, -np.inf), np.full(2 * nv, np.inf)
-            part = slice(0, nv) if isinstance(r, JointPositionLimits) else slice(nv, 2 * nv)
-            lo[part], hi[part] = r.lower, r.upper
-            return crocoddyl.ResidualModelState(state, np.zeros(state.nx), nu), lo, hi, LIMIT_WEIGHT
-        if isinstance(r, ComOutsideCylinder):
-            x, y, radius = r.circle(self.ocp.scene)
-            res = ResidualModelCylinderClearance(state, nu, (x, y), radius - r.margin)
-            return res, np.full(res.nr, r.margin), np.full(res.nr, np.inf), OBSTACLE_WEIGHT
-        if isinstance(r, Distance):
-            res = ResidualModelCoalDistance(state, nu, self.ocp, r)
-            return res, np.full(res.nr, -np.inf), np.zeros(res.nr), OBSTACLE_WEIGHT
-        if isinstance(r, JointTorque):
-            res = crocoddyl.ResidualModelControl(state, self._full(r, nu))
-            return res, *self._equality(res.nr), 0.0
-        if isinstance(r, JointTorqueLimits):
-            res = crocoddyl.ResidualModelControl(state, nu)
-            return res, r.lower, r.upper, 0.0
-        if isinstance(r, (JointPosition, JointVelocity)) and item.role == "cost":
-            ref = np.zeros(state.nx)
-            offset = 0 if isinstance(r, JointPosition) else nv
-            ref[offset + self.ocp.robot.joint_indices(r.joints)] = r.target
-            return crocoddyl.ResidualModelState(state, ref, nu), *self._equality(state.nx), 0.0
-        res = ResidualModelJointSpace(state, nu, knot_function(self.ocp.robot, self.ocp.scene, r))
-        bounds = (
-            self._equality(res.nr)
-            if r.sense == "eq"
-            else (
-                np.full(res.nr, -np.inf),
-                np.zeros(res.nr),
-            )
-        )
-        return res, *bounds, OBSTACLE_WEIGHT
+    def symbolic(self, item: Item) -> ShootingResidual:
+        """A state residual's joint-space CasADi rows as a Python residual (bounds ``r = 0`` or
+        ``r ≤ 0``; FDDP: a penalty of weight :data:`OBSTACLE_WEIGHT`)."""
+        r = item.residual
+        fn = knot_function(self.ocp.robot, self.ocp.scene, r)
+        res = ResidualModelJointSpace(self.state, self.nu, fn)
+        lower = np.zeros(res.nr) if r.sense == "eq" else np.full(res.nr, -np.inf)
+        return ShootingResidual(res, lower, np.zeros(res.nr), OBSTACLE_WEIGHT)
 
-    def _full(self, r: JointTorque, n: int) -> np.ndarray:
-        ref = np.zeros(n)
-        ref[self.ocp.robot.joint_indices(r.joints)] = r.target
-        return ref
+    def com_clearance(self, center: Any, radius: float) -> ResidualModelCylinderClearance:
+        return ResidualModelCylinderClearance(self.state, self.nu, center, radius)
 
-    @staticmethod
-    def _equality(n: int) -> tuple[np.ndarray, np.ndarray]:
-        return np.zeros(n), np.zeros(n)
-
-    def _activation_weights(self, item: Item) -> np.ndarray:
-        r, nv = item.residual, self.model.nv
-        idx = self.ocp.robot.joint_indices(getattr(r, "joints", None))
-        if isinstance(r, JointTorque):
-            w = np.zeros(self.nu)
-            w[idx] = 1.0
-            return w
-        w = np.zeros(2 * nv)
-        w[(0 if isinstance(r, JointPosition) else nv) + idx] = 1.0
-        return w
+    def coal_distance(self, residual: Any) -> ResidualModelCoalDistance:
+        return ResidualModelCoalDistance(self.state, self.nu, self.ocp, residual)
 
     def _node(self, k: int) -> crocoddyl.IntegratedActionModelEuler:
         ocp = self.ocp
@@ -328,24 +275,26 @@ class ShootingBuilder:
         constraints = crocoddyl.ConstraintModelManager(state, nu)
         for name in active:
             item = ocp[name]
-            res, lo, hi, weight = self._residual(item)
+            res = item.residual.shooting(self, item)
             if item.role == "cost":
-                if isinstance(item.residual, (JointPosition, JointVelocity, JointTorque)):
-                    act = crocoddyl.ActivationModelWeightedQuad(self._activation_weights(item))
-                    cost = crocoddyl.CostModelResidual(state, act, res)
+                if res.activation is not None:
+                    act = crocoddyl.ActivationModelWeightedQuad(res.activation)
+                    cost = crocoddyl.CostModelResidual(state, act, res.model)
                 else:
-                    cost = crocoddyl.CostModelResidual(state, res)
+                    cost = crocoddyl.CostModelResidual(state, res.model)
                 costs.addCost(name, cost, item.weight * scale)
             elif self.hard:
-                constraints.addConstraint(
-                    name, crocoddyl.ConstraintModelResidual(state, res, lo, hi)
+                constraint = crocoddyl.ConstraintModelResidual(
+                    state, res.model, res.lower, res.upper
                 )
-            elif not isinstance(item.residual, JointTorqueLimits):  # box-FDDP: control bounds
-                bounds = crocoddyl.ActivationBounds(lo + PENALTY_MARGIN, hi - PENALTY_MARGIN)
+                constraints.addConstraint(name, constraint)
+            elif res.weight is not None:  # None: box-FDDP's control bounds
+                bounds = crocoddyl.ActivationBounds(
+                    res.lower + PENALTY_MARGIN, res.upper - PENALTY_MARGIN
+                )
                 barrier = crocoddyl.ActivationModelQuadraticBarrier(bounds)
-                costs.addCost(
-                    name, crocoddyl.CostModelResidual(state, barrier, res), weight * scale
-                )
+                penalty = crocoddyl.CostModelResidual(state, barrier, res.model)
+                costs.addCost(name, penalty, res.weight * scale)
         dam = crocoddyl.DifferentialActionModelFreeFwdDynamics(
             state, self.actuation, costs, constraints
         )

@@ -4,7 +4,7 @@ RIPM (RIPM paper §VIII.B).
 Knots ``k = 0..N`` carry ``(R_k, p_k, F_k, v_k)`` (knot 0 fixed to the OCP's initial state),
 intervals ``k = 0..N-1`` the input ``u_k``; step ``k`` is
 :func:`mbplan.dynamics.free_body_step` (eq. 30–35, 60). Each OCP item is one :class:`Term`: its
-residual (:func:`mbplan.ocp.body_residuals.body_expression`) at its knots, ``½ w ‖r‖²`` as a
+residual (:meth:`mbplan.residuals.Residual.body_rows`) at its knots, ``½ w ‖r‖²`` as a
 cost. The items of one residual kind and role share one :class:`Term`, and the costs of one
 space (state or input) one summed term: fewer kernel calls per iteration, the same sums.
 """
@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import time
 from functools import cache
+from typing import Any
 
 import casadi as cs
 import numpy as np
@@ -22,19 +23,21 @@ from mbplan.dynamics import free_body_step
 from mbplan.engine import RiemannianFunction
 from mbplan.errors import InputError
 from mbplan.lie import SO3, R
-from mbplan.ocp.body_residuals import (
-    BodyInputLimits,
-    body_expression,
-    body_parameters,
-    parameter_shapes,
-)
-from mbplan.ocp.free_body import FreeBody, free_flyer_state, path_state
+from mbplan.ocp.free_body import FreeBody, body_state, free_flyer_state, path_state
 from mbplan.ocp.problem import OCP, Item
+from mbplan.ocp.scene import Scene
+from mbplan.residuals.base import Residual
 from mbplan.transcription.terms import Term
 from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import Block, Point, TrajectoryVariables
 
 STATE = (("R", SO3), ("p", R(3)), ("F", SO3), ("v", R(3)))
+
+
+def parameter_shapes(residual: Residual, scene: Scene) -> list[tuple[str, Any]]:
+    """``(name, shape)`` of the residual's body parameters (a vector's length as an int)."""
+    shapes = ((k, np.shape(v)) for k, v in residual.body_parameters(scene).items())
+    return [(k, s[0] if len(s) == 1 else s) for k, s in shapes]
 
 
 @cache
@@ -60,7 +63,7 @@ def _item_function(kind: type, shapes: tuple, cost: bool, nu: int, jit: bool) ->
 
     def fn(w=None, **args):
         x = {n: args.pop(n) for n in [v for v, _ in variables]}
-        r = body_expression(kind, x, args)
+        r = kind.body_rows(x, args)
         return 0.5 * w * cs.sumsqr(r) if cost else r
 
     params = list(shapes) + ([("w", 1)] if cost else [])
@@ -78,7 +81,7 @@ def _cost_function(slots: tuple, space: str, nu: int, jit: bool) -> RiemannianFu
         x = {n: args[n] for n, _ in variables}
         total = 0
         for j, (kind, shapes) in enumerate(slots):
-            r = body_expression(kind, x, {name: args[f"{j}_{name}"] for name, _ in shapes})
+            r = kind.body_rows(x, {name: args[f"{j}_{name}"] for name, _ in shapes})
             total += 0.5 * args[f"{j}_w"] * cs.sumsqr(r)
         return total
 
@@ -133,7 +136,7 @@ class FreeBodyNLP:
             params[name] = np.concatenate(
                 [
                     np.broadcast_to(
-                        body_parameters(i.residual, self.ocp.scene)[name], (len(i.knots), *shape)
+                        i.residual.body_parameters(self.ocp.scene)[name], (len(i.knots), *shape)
                     )
                     for i in items
                 ]
@@ -238,11 +241,10 @@ def input_bounds(ocp: OCP) -> tuple[np.ndarray, np.ndarray]:
     """The tightest ``lower, upper`` (nu,) of the OCP's input-limit constraints (±inf without)."""
     nu = ocp.robot.nu
     lower, upper = np.full(nu, -np.inf), np.full(nu, np.inf)
-    for item in ocp.items:
-        r = item.residual
-        if isinstance(r, BodyInputLimits) and item.role == "constraint":
-            r = r.resolve(ocp.robot, ocp.scene)
-            lower, upper = np.maximum(lower, r.lower), np.minimum(upper, r.upper)
+    for item in ocp.constraints:
+        bounds = item.residual.variable_bounds(ocp.robot)
+        if bounds is not None and bounds[0] == "u":
+            lower, upper = np.maximum(lower, bounds[1]), np.minimum(upper, bounds[2])
     return lower, upper
 
 
@@ -250,3 +252,44 @@ def build(ocp: OCP, jit: bool) -> tuple[FreeBodyNLP, float]:
     """:class:`FreeBodyNLP` of ``ocp`` and the build time (s)."""
     t0 = time.perf_counter()
     return FreeBodyNLP(ocp, jit), time.perf_counter() - t0
+
+
+@cache
+def _numeric(kind: type, shapes: tuple, nu: int) -> cs.Function:
+    x = {"R": cs.SX.sym("R", 3, 3), "p": cs.SX.sym("p", 3), "F": cs.SX.sym("F", 3, 3)}
+    x |= {"v": cs.SX.sym("v", 3), "u": cs.SX.sym("u", nu)}
+    P = {k: cs.SX.sym(k, *(s if isinstance(s, tuple) else (s, 1))) for k, s in shapes}
+    r = kind.body_rows(x, P)
+    inputs = list(x.values()) + list(P.values())
+    return cs.Function(f"body_{kind.__name__}", inputs, [r])
+
+
+def evaluate_body(
+    body: FreeBody,
+    scene: Scene,
+    residual: Residual,
+    q: np.ndarray | None,
+    v: np.ndarray | None,
+    u: np.ndarray | None,
+    dt: float | None,
+) -> np.ndarray:
+    """The residual ``(K, m)`` at ``K`` knots of a plan: ``q (K, 7)``, ``v (K, 6)`` for state
+    residuals (``dt`` for the rotation step), ``u (K, nu)`` for input residuals."""
+    params = residual.body_parameters(scene)
+    fn = _numeric(type(residual), tuple(parameter_shapes(residual, scene)), body.nu)
+    if residual.space == "control":
+        u = np.atleast_2d(u)
+        K = len(u)
+        x = {"R": np.eye(3), "p": np.zeros(3), "F": np.eye(3), "v": np.zeros(3)}
+        states = [x | {"u": u[k]} for k in range(K)]
+    else:
+        if residual.steps and dt is None:
+            raise InputError(f"{type(residual).__name__}: evaluating the rotation step needs dt")
+        s = body_state(q, np.zeros((len(np.atleast_2d(q)), 6)) if v is None else v, dt or 1.0)
+        K = len(s["R"])
+        states = [
+            {"R": s["R"][k], "p": s["p"][k], "F": s["F"][k], "v": s["v"][k], "u": np.zeros(body.nu)}
+            for k in range(K)
+        ]
+    rows = [np.array(fn(*x.values(), *params.values())).ravel() for x in states]
+    return np.array(rows).reshape(K, -1)

@@ -11,9 +11,10 @@ For ``k = 0..N-1`` (eq. 61, explicit Euler as the paper writes it)::
 and the step relaxes to the quasi-static ``D v = τ - h``), then the OCP's constraints, item by item
 and knot by knot (equalities ``r = 0``, inequalities
 ``r ≤ 0``); joint position, velocity and torque limits become bounds on ``z``. Costs are
-``Σ w ½‖r(x_k)‖²`` (a CasADi expression of ``z``). Residuals come from
-:mod:`mbplan.formulations.joint_space`: exact first and second derivatives by CasADi, except coal
-distances (witness-point gradient, fixed-witness-point Hessian, :mod:`mbplan.multibody.collision`).
+``Σ w ½‖r(x_k)‖²`` (a CasADi expression of ``z``). Residuals are their joint-space rows
+(:mod:`mbplan.formulations.joint_space`): exact first and second derivatives by CasADi, or the
+rows' own derivatives in ``q`` (coal distances: witness-point gradient, fixed-witness-point
+Hessian, :mod:`mbplan.residuals.distance`).
 
 Pinocchio's pip wheel has no CasADi bindings, so the constraint function, its Jacobian and the
 Lagrangian Hessian are ``casadi.Callback`` functions given to ``casadi.nlpsol`` (``g`` and the
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as cs
 import numpy as np
@@ -34,15 +36,9 @@ import pinocchio as pin
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
-from mbplan.formulations.joint_space import distance_pairs, distance_values, knot_function
-from mbplan.multibody.collision import point_hessians
+from mbplan.formulations.joint_space import knot_function
 from mbplan.ocp.problem import OCP, Item
-from mbplan.ocp.residuals import (
-    Distance,
-    JointPositionLimits,
-    JointTorqueLimits,
-    JointVelocityLimits,
-)
+from mbplan.residuals.base import SymbolicRows
 
 FD_STEP_Q = 1e-5  # rad: central differences of the analytic RNEA derivatives in q
 
@@ -111,15 +107,17 @@ class GeneralizedNLP:
         row = 2 * N * nv
         self.rows: list[_Rows] = []
         self.distances: list[tuple[Item, int]] = []
+        self._own: list[Any] = []  # the rows with their own derivatives of self.distances
         self.costs: list[_Rows] = []
         for item in ocp.items:
             r = item.residual
-            if item.role == "constraint" and isinstance(r, _BOUNDS):
+            if item.role == "constraint" and r.variable_bounds(robot) is not None:
                 continue
-            if isinstance(r, Distance):
-                m = distance_pairs(robot, ocp.scene, r.objects).size
+            form = r.joint_space(robot, ocp.scene)
+            if not isinstance(form, SymbolicRows):  # rows with their own derivatives in q
                 self.distances.append((item, row))
-                row += m * len(item.knots)
+                self._own.append(form)
+                row += form.size * len(item.knots)
                 continue
             fn = knot_function(robot, ocp.scene, r)
             x = cs.SX.sym("x", fn.size1_in(0))
@@ -141,8 +139,8 @@ class GeneralizedNLP:
         for r in self.rows:
             if r.item.sense == "ineq":
                 self.lbg[r.row0 : r.row0 + r.m * r.K] = -np.inf
-        for item, row0 in self.distances:
-            size = distance_pairs(robot, ocp.scene, item.residual.objects).size * len(item.knots)
+        for (item, row0), form in zip(self.distances, self._own, strict=True):
+            size = form.size * len(item.knots)
             self.lbg[row0 : row0 + size] = -np.inf
         self._jacobian_pattern()
         self._hessian_pattern()
@@ -174,17 +172,15 @@ class GeneralizedNLP:
 
     def _bounds(self) -> None:
         self.lbz, self.ubz = np.full(self.n, -np.inf), np.full(self.n, np.inf)
+        columns = {"q": self.iq, "v": self.iv, "tau": self.itau}
         for item in self.ocp.constraints:
-            r = item.residual
-            if not isinstance(r, _BOUNDS):
+            bounds = item.residual.variable_bounds(self.ocp.robot)
+            if bounds is None:
                 continue
-            index = {
-                JointPositionLimits: self.iq,
-                JointVelocityLimits: self.iv,
-                JointTorqueLimits: self.itau,
-            }[type(r)](item.knots)
-            self.lbz[index] = np.maximum(self.lbz[index], r.lower)
-            self.ubz[index] = np.minimum(self.ubz[index], r.upper)
+            variable, lower, upper = bounds
+            index = columns[variable](item.knots)
+            self.lbz[index] = np.maximum(self.lbz[index], lower)
+            self.ubz[index] = np.minimum(self.ubz[index], upper)
 
     def initial_guess(self, q: np.ndarray) -> np.ndarray:
         """``z`` from a joint path ``q (N+1, nq)`` with eq. (61) met: ``v_k = (q_{k+1} -
@@ -231,12 +227,8 @@ class GeneralizedNLP:
         parts = [kin.ravel(), (dyn + self.damping * v[1:] - tau).ravel()]
         for r in self.rows:
             parts.append(np.asarray(r.value.map(r.K)(self._x(r, z))).T.ravel())
-        for item, _ in self.distances:
-            parts.append(
-                distance_values(self.ocp.robot, self.ocp.scene, item.residual, q[item.knots])[
-                    0
-                ].ravel()
-            )
+        for (item, _), form in zip(self.distances, self._own, strict=True):
+            parts.append(form.values(q[item.knots]).ravel())
         return np.concatenate(parts)
 
     def _jacobian_pattern(self) -> None:
@@ -257,14 +249,10 @@ class GeneralizedNLP:
             lr, lc = (np.array(a, dtype=np.int64) for a in r.jac.sparsity_out(0).get_triplet())
             k = np.arange(r.K)[:, None]
             triplets.append(((r.row0 + k * r.m + lr).ravel(), r.cols[:, lc].ravel()))
-        from mbplan.multibody.collision import joint_support
-
-        support = joint_support(self.model)
         self._dist_masks = []
-        for item, row0 in self.distances:
-            pairs = distance_pairs(self.ocp.robot, self.ocp.scene, item.residual.objects)
-            K, P = len(item.knots), pairs.size
-            mask = np.broadcast_to(support[pairs.joint][None], (K, P, nv))
+        for (item, row0), form in zip(self.distances, self._own, strict=True):
+            K, P = len(item.knots), form.size
+            mask = np.broadcast_to(form.jacobian_support()[None], (K, P, nv))
             rows = row0 + np.arange(K * P).reshape(K, P)
             cols = self.iq(item.knots)[:, None, :]
             self._dist_masks.append(mask)
@@ -300,11 +288,8 @@ class GeneralizedNLP:
         ]
         for r in self.rows:
             parts.append(np.asarray(r.jac.map(r.K)(self._x(r, z)).nonzeros()))
-        for (item, _), mask in zip(self.distances, self._dist_masks, strict=True):
-            _, grad, *_ = distance_values(
-                self.ocp.robot, self.ocp.scene, item.residual, q[item.knots], 1
-            )
-            parts.append(grad[mask])
+        for (item, _), form, mask in zip(self.distances, self._own, self._dist_masks, strict=True):
+            parts.append(form.jacobian(q[item.knots])[mask])
         return np.concatenate(parts)
 
     def jacobian(self, z: np.ndarray) -> sp.csc_matrix:
@@ -361,16 +346,10 @@ class GeneralizedNLP:
             parts.append(np.asarray(r.hess.map(r.K)(self._x(r, z), L).nonzeros()))
         for r in self.costs:
             parts.append(sigma * np.asarray(r.hess.map(r.K)(self._x(r, z)).nonzeros()))
-        for item, row0 in self.distances:
-            _, _, kin, contacts, J = distance_values(
-                self.ocp.robot, self.ocp.scene, item.residual, q[item.knots], 1
-            )
-            pairs = distance_pairs(self.ocp.robot, self.ocp.scene, item.residual.objects)
-            mu = lam[row0 : row0 + len(item.knots) * pairs.size].reshape(
-                len(item.knots), pairs.size
-            )
-            P = point_hessians(kin, pairs.joint, J)
-            parts.append(np.einsum("kp,kpa,kpjla->kjl", mu, contacts.normal, P).ravel())
+        for (item, row0), form in zip(self.distances, self._own, strict=True):
+            K = len(item.knots)
+            mu = lam[row0 : row0 + K * form.size].reshape(K, form.size)
+            parts.append(form.hessian(q[item.knots], mu).ravel())
         return np.concatenate(parts)
 
     def lagrangian_hessian(self, z: np.ndarray, sigma: float, lam: np.ndarray) -> sp.csc_matrix:
@@ -401,9 +380,6 @@ class GeneralizedNLP:
                 "generalized_hess_lag", [dense_z, no_p, scalar, dense_g], [hess.sparsity], hess_lag
             ),
         )
-
-
-_BOUNDS = (JointPositionLimits, JointVelocityLimits, JointTorqueLimits)
 
 
 class _Callback(cs.Callback):

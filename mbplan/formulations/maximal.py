@@ -1,79 +1,30 @@
 """Maximal coordinates: an :class:`~mbplan.OCP` on SO(3)×R³ bodies with the LGVI, for the RIPM.
 
 The multi-body LGVI of :mod:`mbplan.transcription.multibody` plus one group of terms per OCP
-item, each residual kind written once on the bodies' poses:
-
-* joint positions, velocities and their limits of revolute and prismatic joints
-  (:mod:`mbplan.formulations.maximal_joints`);
-* torques (forces for prismatic joints) ``τ`` at the knots (interval ``k`` of the OCP is the LGVI's knot ``k+1``, eq. 29);
-* frame translation and placement on the pose ``(R_b R_jf, p_b + R_b c)`` of the frame's body;
-* eq. (62) on the body COMs, coal distances on the body poses (:mod:`.distance`).
+item, which its residual writes on the bodies' poses
+(:meth:`mbplan.residuals.Residual.maximal_terms`, with this NLP as the context: the maximal
+model ``mm``, the OCP, the joints' bodies and :meth:`MaximalNLP.joint_terms`).
 """
 
 from __future__ import annotations
 
 import time
-from functools import cache, lru_cache
+from functools import lru_cache
 
-import casadi as cs
 import numpy as np
 import pinocchio as pin
 
-from mbplan.engine import RiemannianFunction
 from mbplan.errors import InputError
-from mbplan.formulations.joint_space import distance_pairs, frame_error
 from mbplan.formulations.maximal_joints import joint_terms
 from mbplan.formulations.maximal_layout import JointEliminationPlans
-from mbplan.lie import SO3, R
+from mbplan.lie import SO3
 from mbplan.multibody import MaximalModel, joint_positions, maximal_model
 from mbplan.ocp.problem import OCP, Item
-from mbplan.ocp.residuals import (
-    ComOutsideCylinder,
-    Distance,
-    FramePlacement,
-    FrameTranslation,
-    JointPosition,
-    JointPositionLimits,
-    JointTorque,
-    JointTorqueLimits,
-    JointVelocity,
-    JointVelocityLimits,
-)
 from mbplan.simulation.warm_start import maximal_warm_start
-from mbplan.transcription.constraints import cylinder_clearance_function
-from mbplan.transcription.distance import distance_constraint_function, pair_bodies
 from mbplan.transcription.multibody import multibody_layout
 from mbplan.transcription.terms import Term
 from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import Point, trajectory_variables
-
-_TORQUE = {
-    "cost": (lambda tau, t, w: 0.5 * w * (tau - t) ** 2, [("t", 1), ("w", 1)]),
-    "eq": (lambda tau, t: tau - t, [("t", 1)]),
-    "limits": (lambda tau, lo, hi: cs.vertcat(tau - hi, lo - tau), [("lo", 1), ("hi", 1)]),
-}
-
-
-@cache
-def _torque_function(kind: str, jit: bool) -> RiemannianFunction:
-    fn, params = _TORQUE[kind]
-    return RiemannianFunction(f"torque_{kind}", [("tau", R(1))], fn, params, jit=jit)
-
-
-@cache
-def _frame_function(kind: str, cost: bool, jit: bool) -> RiemannianFunction:
-    """Frame translation ``p_f - p_g`` or placement ``(p_f - p_g, log(R_gᵀ R_f))`` of the frame
-    at ``(R_b R_jf, p_b + R_b c)`` on body ``(R_b, p_b)``; as a cost ``½ w ‖r‖²``."""
-    goal = [("R_g", (3, 3)), ("p_g", 3)] if kind == "placement" else [("p_g", 3)]
-
-    def fn(Rb, pb, R_jf, c, p_g, R_g=None, w=None):
-        Rf, pf = cs.mtimes(Rb, R_jf), pb + cs.mtimes(Rb, c)
-        r = frame_error(Rf, pf, p_g, R_g)
-        return 0.5 * w * cs.sumsqr(r) if cost else r
-
-    params = [("R_jf", (3, 3)), ("c", 3), *goal] + ([("w", 1)] if cost else [])
-    name = f"frame_{kind}_{'cost' if cost else 'eq'}"
-    return RiemannianFunction(name, [("Rb", SO3), ("pb", R(3))], fn, params, jit=jit)
 
 
 @lru_cache(maxsize=16)
@@ -92,7 +43,7 @@ class MaximalNLP:
         terms = list(layout.terms)
         for item in ocp.items:
             try:
-                terms += self._terms(item)
+                terms += item.residual.maximal_terms(self, item)
             except InputError as err:
                 raise InputError(f"maximal formulation, {item.role} {item.name!r}: {err}") from None
         self.problem = TrajectoryProblem(trajectory_variables(layout.blocks), terms)
@@ -100,19 +51,19 @@ class MaximalNLP:
         self.problem.elimination_plan = JointEliminationPlans(self.problem)
 
     # -- item translations ---------------------------------------------------------------------
-    def _bodies(self, item: Item) -> np.ndarray:
+    def bodies(self, item: Item) -> np.ndarray:
         """Bodies of the joints a joint residual selects (in the residual's order)."""
         idx = self.ocp.robot.joint_indices(getattr(item.residual, "joints", None))
         where = {int(v): b for b, v in enumerate(self.mm.idx_v)}
         return np.array([where[int(i)] for i in idx], dtype=np.int64)
 
-    def _about_axis(self, bodies: np.ndarray, angles: np.ndarray) -> np.ndarray:
+    def about_axis(self, bodies: np.ndarray, angles: np.ndarray) -> np.ndarray:
         """``R_rel0 exp(θ a)`` of revolute joints (identity for other joints' entries)."""
         mm = self.mm
         angles = np.where(mm.revolute[bodies], angles, 0.0)
         return mm.R_rel0[bodies] @ SO3.exp(angles[:, None] * mm.axis_child[bodies])
 
-    def _joint_terms(
+    def joint_terms(
         self,
         item: Item,
         kind: str,
@@ -126,102 +77,6 @@ class MaximalNLP:
         common = {"revolute": dict(shared or {}), "prismatic": dict(shared or {})}
         common["revolute"] |= {"dt": self.ocp.dt} if kind == "velocity_eq" else {}
         return joint_terms(self.mm, item, kind, self.jit, bodies, per, common, self.ocp.dt)
-
-    def _terms(self, item: Item) -> list[Term]:
-        r, mm, nb, ocp = item.residual, self.mm, self.mm.nb, self.ocp
-        cost = item.role == "cost"
-        rev = mm.revolute
-        if isinstance(r, JointPosition):
-            b = self._bodies(item)
-            t = np.asarray(r.target, dtype=float)
-            R_t = self._about_axis(b, t)
-            if cost:
-                w = {"w": item.weight}
-                return self._joint_terms(item, "position_cost", b, {"R_t": R_t}, {"t": t}, w)
-            per = {"R_t": R_t, "a": mm.axis_child[b]}
-            return self._joint_terms(item, "position_eq", b, per, {"t": t})
-        if isinstance(r, JointVelocity):
-            b = self._bodies(item)
-            target = np.asarray(r.target, dtype=float)
-            if cost:
-                if np.any(target != 0.0):
-                    raise InputError("a velocity cost with a nonzero target is not expressible")
-                w = {"w": item.weight / ocp.dt**2}
-                return self._joint_terms(item, "velocity_cost", b, {}, {}, w)
-            per = {"a": mm.axis_child[b], "target": target}
-            return self._joint_terms(item, "velocity_eq", b, per, {"target": target})
-        if isinstance(r, JointPositionLimits):
-            lo, hi = np.asarray(r.lower)[mm.idx_v], np.asarray(r.upper)[mm.idx_v]
-            # no rows for continuous joints, nor for a revolute range of 2π or more (it limits
-            # no rotation: cos ≥ -1)
-            limited = np.isin(mm.idx_v, r.indices(ocp.robot))
-            b = np.flatnonzero(limited & (~rev | (hi - lo < 2 * np.pi)))
-            if not b.size:
-                return []
-            lo, hi = lo[b], hi[b]
-            half = np.minimum(0.5 * (hi - lo), np.pi)
-            per = {"R_mid": self._about_axis(b, 0.5 * (lo + hi)), "cos_half": np.cos(half)}
-            return self._joint_terms(item, "position_limits", b, per, {"lo": lo, "hi": hi})
-        if isinstance(r, JointVelocityLimits):
-            lo, hi = np.asarray(r.lower)[mm.idx_v], np.asarray(r.upper)[mm.idx_v]
-            if not np.allclose(lo[rev], -hi[rev]):
-                raise InputError(
-                    "asymmetric velocity limits of revolute joints are not expressible"
-                )
-            per = {"cos_step": np.cos(np.minimum(hi * ocp.dt, np.pi))}
-            b = np.arange(nb)
-            return self._joint_terms(item, "velocity_limits", b, per, {"lo": lo, "hi": hi})
-        if isinstance(r, (JointTorque, JointTorqueLimits)):
-            if isinstance(r, JointTorque):
-                b = self._bodies(item)
-                per = {"t": np.asarray(r.target)}
-                kind = "cost" if cost else "eq"
-            else:
-                b = np.arange(nb)
-                per = {"lo": np.asarray(r.lower)[mm.idx_v], "hi": np.asarray(r.upper)[mm.idx_v]}
-                kind = "limits"
-            k, i = (
-                a.ravel() for a in np.meshgrid(item.knots + 1, np.arange(len(b)), indexing="ij")
-            )
-            params = {n: v[i] for n, v in per.items()} | ({"w": item.weight} if cost else {})
-            sense = "cost" if cost else r.sense
-            fn = _torque_function(kind, self.jit)
-            return [Term(item.name, sense, fn, {"tau": ("tau", k * nb + b[i])}, params)]
-        if isinstance(r, (FramePlacement, FrameTranslation)):
-            frame = ocp.robot.model.frames[ocp.robot.frame_id(r.frame)]
-            b = self.body_of_joint[int(frame.parentJoint)]
-            params = {
-                "R_jf": frame.placement.rotation,
-                "c": frame.placement.translation - mm.com_in_joint[b],
-                "p_g": np.asarray(r.translation),
-            }
-            kind = "placement" if isinstance(r, FramePlacement) else "translation"
-            if kind == "placement":
-                params["R_g"] = r.rotation
-            if cost:
-                params["w"] = item.weight
-            sites = item.knots * nb + b
-            fn = _frame_function(kind, cost, self.jit)
-            sense = "cost" if cost else r.sense
-            return [Term(item.name, sense, fn, {"Rb": ("R", sites), "pb": ("p", sites)}, params)]
-        if isinstance(r, ComOutsideCylinder):
-            k, b = (a.ravel() for a in np.meshgrid(item.knots, np.arange(nb), indexing="ij"))
-            fn = cylinder_clearance_function(self.jit)
-            return [
-                Term(item.name, "ineq", fn, {"p": ("p", k * nb + b)}, {"c": r.circle(ocp.scene)})
-            ]
-        if isinstance(r, Distance):
-            pairs = distance_pairs(ocp.robot, ocp.scene, r.objects)
-            k, i = (
-                a.ravel() for a in np.meshgrid(item.knots, np.arange(pairs.size), indexing="ij")
-            )
-            sites = k * nb + pair_bodies(mm, pairs)[i]
-            fn = distance_constraint_function(mm, pairs)
-            bind = {"R": ("R", sites), "p": ("p", sites)}
-            return [
-                Term(item.name, "ineq", fn, bind, {"pair": i.astype(float), "margin": r.margin})
-            ]
-        raise InputError(f"{type(r).__name__} has no maximal-coordinate translation")
 
     # -- points and results --------------------------------------------------------------------
     def initial_point(self, q: np.ndarray) -> Point:

@@ -12,7 +12,7 @@ quadratic map ``Rot(q) = (w² - ‖q_v‖²) I + 2 q_v q_vᵀ + 2 w q_v^``; the 
 with ``‖q_k‖² = 1`` (``k ≥ 2``), ``‖f_N‖² = 1``, ``w(q_k), w(f_k) ≥ 0`` (the other norms follow
 from ``q_{k+1} = q_k ⊗ f_k`` and the fixed unit ``q_0, f_0``; a redundant row would make the
 constraint Jacobian rank deficient). Each OCP item is its residual
-(:func:`mbplan.ocp.body_residuals.body_expression`) on ``Rot(q_k), p_k, Rot(f_k), v_k`` or
+(:meth:`mbplan.residuals.Residual.body_rows`) on ``Rot(q_k), p_k, Rot(f_k), v_k`` or
 ``u_k``; input limits are variable bounds.
 """
 
@@ -24,7 +24,6 @@ from scipy.spatial.transform import Rotation
 
 from mbplan.formulations.free_body import warm_start_inputs
 from mbplan.lie import SO3
-from mbplan.ocp.body_residuals import BodyInputLimits, body_expression, body_parameters
 from mbplan.ocp.free_body import body_state, free_flyer_state, path_state
 from mbplan.ocp.problem import OCP
 
@@ -106,17 +105,18 @@ class QuaternionNLP:
         cost = 0
         for item in ocp.items:
             r = item.residual
-            params = {k: cs.DM(val) for k, val in body_parameters(r, ocp.scene).items()}
-            if isinstance(r, BodyInputLimits):
-                lower[4][:, item.knots] = r.lower[:, None]
-                upper[4][:, item.knots] = r.upper[:, None]
+            bounds = r.variable_bounds(ocp.robot) if item.role == "constraint" else None
+            if bounds is not None:  # input limits: bounds on u
+                lower[4][:, item.knots] = bounds[1][:, None]
+                upper[4][:, item.knots] = bounds[2][:, None]
                 continue
+            params = {k: cs.DM(val) for k, val in r.body_parameters(ocp.scene).items()}
             for k in item.knots:
                 if r.space == "control":
                     x = {"u": U[:, k]}
                 else:
                     x = {"R": Rq[k], "p": p[k], "F": Rf[k], "v": v[k]}
-                expr = body_expression(type(r), x, params)
+                expr = r.body_rows(x, params)
                 if item.role == "cost":
                     cost += 0.5 * item.weight * cs.sumsqr(expr)
                 elif r.sense == "eq":

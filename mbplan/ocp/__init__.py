@@ -1,6 +1,5 @@
-"""The problem layer: robot, scene, residual library and the :class:`OCP` itself."""
+"""The problem layer: robot, scene and the :class:`OCP` itself (residuals: :mod:`mbplan.residuals`)."""
 
-from mbplan.ocp import body_residuals, residuals
 from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.problem import OCP, Item
 from mbplan.ocp.robot import Robot, load_robot
@@ -13,7 +12,5 @@ __all__ = [
     "Robot",
     "Scene",
     "SceneObject",
-    "body_residuals",
     "load_robot",
-    "residuals",
 ]

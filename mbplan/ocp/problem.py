@@ -3,7 +3,7 @@
 An :class:`OCP` holds a robot (a fixed-base :class:`~mbplan.ocp.robot.Robot` or a
 :class:`~mbplan.ocp.free_body.FreeBody`, whose ``q0, v0`` follow Pinocchio's free flyer), a scene, a horizon of ``N`` steps of ``dt`` from the initial state
 ``(q0, v0)`` (knot 0, fixed), and named costs and constraints built from
-:mod:`mbplan.ocp.residuals`. Knots: ``"all"`` (state knots ``1..N``, intervals ``0..N-1``),
+:mod:`mbplan.residuals`. Knots: ``"all"`` (state knots ``1..N``, intervals ``0..N-1``),
 ``"running"`` (state knots ``1..N-1``, intervals ``0..N-1``), ``"terminal"`` (knot ``N``) or a
 list of indices. A cost is ``weight · ½‖r‖²`` summed over its knots; ``tolerance`` marks a soft
 goal whose error :func:`mbplan.verify` checks at the last knot. A constraint's ``tolerance``
@@ -20,11 +20,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mbplan.errors import InfeasibleRequestError, InputError
-from mbplan.ocp.body_residuals import FREE_BODY_RESIDUALS
 from mbplan.ocp.free_body import FreeBody
-from mbplan.ocp.residuals import Distance, Residual
 from mbplan.ocp.robot import Robot, load_robot, robot_from_source
 from mbplan.ocp.scene import Scene
+from mbplan.residuals.base import RESIDUALS, Residual
 from mbplan.validation import as_array, as_int, as_real
 
 Knots = str | Sequence[int]
@@ -125,10 +124,11 @@ class OCP:
             raise InputError(f"name: expected a non-empty string, got {item.name!r}")
         if item.name in self.names:
             raise InputError(f"the OCP already has a cost or constraint named {item.name!r}")
-        if isinstance(self.robot, FreeBody) and type(item.residual) not in FREE_BODY_RESIDUALS:
+        if isinstance(self.robot, FreeBody) and not item.residual.free_body:
+            kinds = [name for name, cls in RESIDUALS.items() if cls.free_body]
             raise InputError(
                 f"{item.role} {item.name!r}: {type(item.residual).__name__} is not a residual "
-                f"of a free body; use {[c.__name__ for c in FREE_BODY_RESIDUALS]}"
+                f"of a free body; use {kinds}"
             )
         try:
             resolved = item.residual.resolve(self.robot, self.scene)
@@ -181,7 +181,7 @@ class OCP:
     def check(self) -> None:
         """Raise before any solve if the start violates a state inequality constraint at knot 1
         (at rest knot 1 equals knot 0: an obstacle overlapping the start, a limit violated)."""
-        from mbplan.formulations.joint_space import evaluate, row_label
+        from mbplan.formulations.joint_space import evaluate
 
         for item in self.constraints:
             r = item.residual
@@ -191,13 +191,9 @@ class OCP:
             value = value[0]
             i = int(np.argmax(value)) if value.size else 0
             if value.size and value[i] > 1e-9:
-                what = row_label(self.robot, self.scene, r, i)
-                extra = ""
-                if isinstance(r, Distance):
-                    extra = f" (distance {r.margin - value[i]:.4f} m, margin {r.margin:g} m)"
+                what = r.start_violation(self.robot, self.scene, i, float(value[i]))
                 raise InfeasibleRequestError(
-                    f"the start q0 violates constraint {item.name!r}: {what} by "
-                    f"{value[i]:.4g}{extra}"
+                    f"the start q0 violates constraint {item.name!r}: {what}"
                 )
 
     def __repr__(self) -> str:

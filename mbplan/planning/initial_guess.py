@@ -6,7 +6,7 @@
   shortest collision-free two-segment path ``q0 → q_via → q_goal`` among :data:`VIA_CANDIDATES`
   seeded random via points (falls back to linear if none is collision-free at the knots).
 
-The goal configuration is the target of a terminal :class:`~mbplan.ocp.residuals.JointPosition`
+The goal configuration is the target of a terminal :class:`~mbplan.residuals.JointPosition`
 (constraint or cost), else the inverse kinematics of a terminal frame goal
 (:func:`inverse_kinematics`, which reports an unreachable goal before any solve), else ``q0``.
 A free body's warm start is the geodesic of :func:`geodesic_path`.
@@ -24,18 +24,19 @@ import pinocchio as pin
 from mbplan.errors import InfeasibleRequestError, InputError, WarmStartWarning
 from mbplan.formulations.joint_space import evaluate
 from mbplan.lie import SO3
-from mbplan.ocp.body_residuals import BodyOrientation, BodyPosition
 from mbplan.ocp.continuous import joint_ranges
 from mbplan.ocp.free_body import FreeBody, quaternions, rotations
 from mbplan.ocp.problem import OCP
-from mbplan.ocp.residuals import (
+from mbplan.ocp.robot import Robot
+from mbplan.residuals import (
+    BodyOrientation,
+    BodyPosition,
     ComOutsideCylinder,
     Distance,
     FramePlacement,
     FrameTranslation,
     JointPosition,
 )
-from mbplan.ocp.robot import Robot
 
 VIA_CANDIDATES = 256  # random via points tried by the "via" warm start
 IK_STARTS = 32  # random restarts of the inverse kinematics
@@ -168,8 +169,8 @@ VIA_FALLBACK = (
 def geodesic_path(ocp: OCP) -> np.ndarray:
     """A free body's warm start (both kinds; no via-point search): the uniform geodesic
     ``R_k = R_0 exp(t_k log(R_0ᵀ R_g))``, ``p_k = p_0 + t_k (p_g - p_0)``, ``t_k = k/N``
-    (§VIII.B) to the targets of the terminal :class:`~mbplan.ocp.body_residuals.BodyOrientation`
-    and :class:`~mbplan.ocp.body_residuals.BodyPosition` items (the start if there are none)."""
+    (§VIII.B) to the targets of the terminal :class:`~mbplan.residuals.BodyOrientation`
+    and :class:`~mbplan.residuals.BodyPosition` items (the start if there are none)."""
     start = rotations(ocp.q0[3:][None])[0]
     R_goal, p_goal = start, ocp.q0[:3]
     for item in ocp.items:

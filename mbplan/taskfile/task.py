@@ -21,7 +21,10 @@ import pinocchio as pin
 
 from mbplan.errors import InfeasibleRequestError, InputError
 from mbplan.ocp.problem import OCP
-from mbplan.ocp.residuals import (
+from mbplan.ocp.robot import Robot
+from mbplan.ocp.scene import Scene
+from mbplan.planning.solve import METHODS, plan
+from mbplan.residuals import (
     FramePlacement,
     FrameTranslation,
     JointPosition,
@@ -32,9 +35,6 @@ from mbplan.ocp.residuals import (
     JointVelocityLimits,
     Residual,
 )
-from mbplan.ocp.robot import Robot
-from mbplan.ocp.scene import Scene
-from mbplan.planning.solve import METHODS, plan
 from mbplan.results import PlanResult
 from mbplan.taskfile.robot import read_robot
 from mbplan.taskfile.toml_table import Document, Table, read_toml

@@ -37,17 +37,17 @@ import numpy as np
 
 from mbplan.errors import InfeasibleRequestError, InputError
 from mbplan.formulations.joint_space import evaluate
-from mbplan.ocp.body_residuals import (
+from mbplan.ocp.free_body import FreeBody, free_flyer_state
+from mbplan.ocp.problem import OCP
+from mbplan.ocp.robot import load_robot
+from mbplan.ocp.scene import Scene
+from mbplan.residuals import (
     BodyInput,
     BodyInputLimits,
     BodyOrientation,
     BodyPosition,
     BodyRotationStep,
     BodyVelocity,
-)
-from mbplan.ocp.free_body import FreeBody, free_flyer_state
-from mbplan.ocp.problem import OCP
-from mbplan.ocp.residuals import (
     ComOutsideCylinder,
     Distance,
     JointPosition,
@@ -57,8 +57,6 @@ from mbplan.ocp.residuals import (
     JointVelocity,
     JointVelocityLimits,
 )
-from mbplan.ocp.robot import load_robot
-from mbplan.ocp.scene import Scene
 from mbplan.tasks.drone import DockingTask, sample_docking_cases
 from mbplan.validation import as_int
 

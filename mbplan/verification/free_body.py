@@ -18,10 +18,8 @@ import numpy as np
 
 from mbplan.errors import InputError
 from mbplan.lie import SO3
-from mbplan.ocp.body_residuals import BodyInputLimits
 from mbplan.ocp.free_body import body_state, free_flyer_state
 from mbplan.ocp.problem import OCP
-from mbplan.ocp.residuals import ComOutsideCylinder
 from mbplan.results import PlanResult
 from mbplan.simulation.free_body import lgvi_step
 from mbplan.verification.report import (
@@ -65,18 +63,15 @@ def replay(ocp: OCP, result: PlanResult) -> tuple[dict[str, np.ndarray], np.ndar
 
 
 def clearance(ocp: OCP, result: PlanResult) -> float:
-    """Smallest horizontal clearance (m, without margin) of the segments ``p_k → p_{k+1}`` from
-    the OCP's cylinder constraints (inf without any)."""
+    """Smallest clearance (m, without margin) of the segments ``p_k → p_{k+1}`` from the OCP's
+    obstacle constraints (inf without any)."""
     s = np.linspace(0.0, 1.0, SUBSTEPS + 1)[None, :, None]
     p = result.q[:, :3]
     points = (p[:-1, None] + s * (p[1:, None] - p[:-1, None])).reshape(-1, 3)
     out = np.inf
     for item in ocp.constraints:
-        if isinstance(item.residual, ComOutsideCylinder):
-            xc, yc, radius = item.residual.circle(ocp.scene)
-            base = radius - item.residual.margin
-            d = np.hypot(points[:, 0] - xc, points[:, 1] - yc) - base
-            out = min(out, float(d.min()))
+        if item.residual.is_obstacle:
+            out = min(out, item.residual.clearance(ocp.robot, ocp.scene, points, None))
     return out
 
 
@@ -106,10 +101,7 @@ def verify_free_body(ocp: OCP, result: PlanResult) -> Verification:
         reasons.append(f"the replayed motion enters an obstacle ({gap:.3g} m)")
     reasons += hard_constraints_met(
         ocp,
-        {
-            n: (0.0 if isinstance(ocp[n].residual, ComOutsideCylinder) else x)
-            for n, x in violations.items()
-        },
+        {n: (0.0 if ocp[n].residual.is_obstacle else x) for n, x in violations.items()},
     )
     goals = goal_errors(ocp, *final_state(ocp, result, replayed))
     for item in ocp.costs:
@@ -118,7 +110,7 @@ def verify_free_body(ocp: OCP, result: PlanResult) -> Verification:
                 f"goal {item.name!r}: final error {goals[item.name]:.3g} exceeds the tolerance "
                 f"{item.tolerance:g}"
             )
-    limits = [i for i in ocp.constraints if isinstance(i.residual, BodyInputLimits)]
+    limits = [i for i in ocp.constraints if i.residual.input_limits]
     return Verification(
         max_joint_deviation_rad=dev_pose,
         min_obstacle_distance_m=gap,

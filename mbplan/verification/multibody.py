@@ -50,12 +50,14 @@ Thresholds (all documented values are checked by ``tests/test_verification.py``)
   exceeds 4 (the ``q`` row alone cannot see torque errors: ``q_{k+1} = q_k + Δt v_k`` does not
   involve ``τ``).
 * every constraint of the OCP, by name (:attr:`Verification.violations`): obstacle constraints
-  (:class:`~mbplan.ocp.residuals.Distance`, :class:`~mbplan.ocp.residuals.ComOutsideCylinder`)
-  on every RK4 substep of the replayed intervals without their margin (which exists to absorb
+  (:attr:`~mbplan.residuals.Residual.is_obstacle`: :class:`~mbplan.residuals.Distance`,
+  :class:`~mbplan.residuals.ComOutsideCylinder`) on every RK4 substep of the replayed intervals without their margin (which exists to absorb
   the inter-knot motion): ``min_obstacle_distance_m`` ≥ 0, coal through the planner's own path
   (:mod:`mbplan.multibody.collision`); the others at the planned knots within
-  :data:`CONSTRAINT_TOLERANCE` (or the constraint's own ``tolerance``); torque limits on the applied torques (``tau_knots`` when given)
-  within :data:`TORQUE_TOLERANCE` ``· max(1, limit)``.
+  :data:`~mbplan.residuals.base.CONSTRAINT_TOLERANCE` (or the constraint's own ``tolerance``;
+  :meth:`~mbplan.residuals.Residual.violation_tolerance`); torque limits on the applied torques
+  (``tau_knots`` when given) within :data:`~mbplan.residuals.base.TORQUE_TOLERANCE`
+  ``· max(1, limit)``.
 * a replay that diverges (a non-finite state in any interval, e.g. an open-loop unstable
   configuration held over ``Δt``) fails: its NaN metrics would pass every comparison.
 * soft goals (costs with a ``tolerance``): the residual's ∞-norm at the end of the replayed
@@ -73,7 +75,6 @@ from mbplan.errors import InputError
 from mbplan.formulations.joint_space import evaluate
 from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.problem import OCP, Item
-from mbplan.ocp.residuals import Distance, JointTorqueLimits
 from mbplan.results import PlanResult
 from mbplan.simulation.reference import damped_euler_velocity, damping_rate, integrate_aba
 from mbplan.verification.report import (
@@ -81,7 +82,6 @@ from mbplan.verification.report import (
     constraint_violations,
     goal_errors,
     hard_constraints_met,
-    is_obstacle,
 )
 
 SUBSTEPS = 20  # RK4 steps per interval: at Δt = 0.075 s, 20 and 40 agree to < 1e-8 rad
@@ -172,14 +172,11 @@ def check_shapes(ocp: OCP, result: PlanResult) -> None:
 
 def _clearance(ocp: OCP, item: Item, q: np.ndarray) -> float:
     """Smallest clearance (m) without the margin of an obstacle constraint along ``q (K, nq)``."""
-    r = item.residual
-    value = evaluate(ocp.robot, ocp.scene, r, q, q, None)
-    if isinstance(r, Distance):
-        return float(np.min(r.margin - value))
-    radius = r.circle(ocp.scene)[2]
-    base = radius - r.margin
-    dist2 = radius**2 - value  # squared horizontal distance to the axis
-    return float(np.min(np.sqrt(np.maximum(dist2, 0.0)) - base))
+
+    def rows(residual, path):
+        return evaluate(ocp.robot, ocp.scene, residual, path, path, None)
+
+    return item.residual.clearance(ocp.robot, ocp.scene, q, rows)
 
 
 def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
@@ -208,13 +205,13 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
                 "(twice the explicit-Euler error at that knot)"
             )
     violations = constraint_violations(ocp, result.q, result.v, result.tau, result.tau_knots)
-    obstacles = [i for i in ocp.constraints if is_obstacle(i)]
+    obstacles = [i for i in ocp.constraints if i.residual.is_obstacle]
     substeps = path.reshape(-1, path.shape[-1])
     clearance = min((_clearance(ocp, i, substeps) for i in obstacles), default=np.inf)
     if clearance < 0.0:
         reasons.append(f"the replayed motion enters an obstacle ({clearance:.3g} m)")
     reasons += hard_constraints_met(
-        ocp, {n: (0.0 if is_obstacle(ocp[n]) else x) for n, x in violations.items()}
+        ocp, {n: (0.0 if ocp[n].residual.is_obstacle else x) for n, x in violations.items()}
     )
     q_final = np.vstack([result.q[:-1], q_end[-1:]])
     v_final = np.vstack([result.v[:-1], v_end[-1:]])
@@ -225,7 +222,7 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
                 f"goal {item.name!r}: final error {goals[item.name]:.3g} exceeds the tolerance "
                 f"{item.tolerance:g}"
             )
-    torque = [i for i in ocp.constraints if isinstance(i.residual, JointTorqueLimits)]
+    torque = [i for i in ocp.constraints if i.residual.input_limits]
     violation = max((violations[i.name] for i in torque), default=0.0)
     return Verification(
         max_joint_deviation_rad=float(dev_q.max()),

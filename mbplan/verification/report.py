@@ -11,10 +11,9 @@ import numpy as np
 
 from mbplan.formulations.joint_space import evaluate
 from mbplan.ocp.problem import OCP, Item
-from mbplan.ocp.residuals import ComOutsideCylinder, Distance, JointTorqueLimits
+from mbplan.residuals.base import CONSTRAINT_TOLERANCE, TORQUE_TOLERANCE
 
-TORQUE_TOLERANCE = 1e-6
-CONSTRAINT_TOLERANCE = 1e-4  # residual units (m, rad, rad/s, N m): IPOPT's default constr_viol_tol
+__all__ = ["CONSTRAINT_TOLERANCE", "TORQUE_TOLERANCE", "Verification"]
 
 
 @dataclass(frozen=True)
@@ -36,10 +35,6 @@ class Verification:
     goal_errors: dict[str, float] = field(default_factory=dict)
 
 
-def is_obstacle(item: Item) -> bool:
-    return isinstance(item.residual, (Distance, ComOutsideCylinder))
-
-
 def at_knots(ocp: OCP, item: Item, q, v, tau) -> np.ndarray:
     """The residual of ``item`` at its knots of the trajectory ``q, v (N+1, ·)``, ``tau``."""
     k = item.knots
@@ -52,11 +47,12 @@ def constraint_violations(
     ocp: OCP, q: np.ndarray, v: np.ndarray, tau: np.ndarray, tau_knots: np.ndarray | None = None
 ) -> dict[str, float]:
     """Largest violation of every constraint of ``ocp`` at the planned knots (``|r|`` for an
-    equality, ``max(r, 0)`` for an inequality; torque limits also at ``tau_knots``)."""
+    equality, ``max(r, 0)`` for an inequality; limits of the applied torques also at
+    ``tau_knots``)."""
     out = {}
     for item in ocp.constraints:
         r = at_knots(ocp, item, q, v, tau)
-        if isinstance(item.residual, JointTorqueLimits) and tau_knots is not None:
+        if item.residual.input_limits and tau_knots is not None:
             r = np.concatenate(
                 [r, evaluate(ocp.robot, ocp.scene, item.residual, None, None, tau_knots)]
             )
@@ -81,17 +77,7 @@ def hard_constraints_met(ocp: OCP, violations: dict[str, float]) -> list[str]:
     """Reasons the planned knots violate a hard constraint (empty: all met)."""
     reasons = []
     for item in ocp.constraints:
-        tol = CONSTRAINT_TOLERANCE if item.tolerance is None else item.tolerance
-        if isinstance(item.residual, JointTorqueLimits):
-            tol = TORQUE_TOLERANCE * max(1.0, float(np.max(np.abs(item.residual.upper))))
-        if violations[item.name] > tol and isinstance(item.residual, JointTorqueLimits):
-            reasons.append(
-                f"torques exceed the limits ({item.name!r}) by up to "
-                f"{violations[item.name]:.3g} N m"
-            )
-        elif violations[item.name] > tol:
-            reasons.append(
-                f"constraint {item.name!r} is violated by {violations[item.name]:.3g} at the "
-                f"planned knots (tolerance {tol:g})"
-            )
+        tol = item.residual.violation_tolerance(item.tolerance)
+        if violations[item.name] > tol:
+            reasons.append(item.residual.violation_reason(item.name, violations[item.name], tol))
     return reasons

@@ -270,7 +270,7 @@ def _goal_configuration(ocp: Any) -> np.ndarray | None:
     """The target of a terminal full joint-position goal (drawn as a translucent robot)."""
     if ocp is None:
         return None
-    from mbplan.ocp.residuals import JointPosition
+    from mbplan.residuals import JointPosition
 
     for item in ocp.items:
         if isinstance(item.residual, JointPosition) and item.residual.joints is None:

@@ -1,0 +1,97 @@
+"""Eq. (62): the COM of every moving link (of a free body: its position) outside a vertical scene
+cylinder, ``(r + margin)² - ‖(x_i, y_i) - c‖² ≤ 0``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar
+
+import casadi as cs
+import numpy as np
+
+from mbplan.errors import InputError
+from mbplan.ocp.free_body import FreeBody
+from mbplan.residuals.base import Residual, ShootingResidual, SymbolicContext, SymbolicRows
+from mbplan.transcription.constraints import cylinder_clearance, cylinder_clearance_function
+from mbplan.transcription.terms import Term
+from mbplan.validation import as_real
+
+
+@dataclass(frozen=True, eq=False)
+class ComOutsideCylinder(Residual):
+    """Eq. (62): ``(r + margin)² - ‖(x_i, y_i) - c‖² ≤ 0`` for the COM ``p_i`` of every moving
+    link and the vertical scene cylinder ``obstacle`` (infinite in z). Constraint only."""
+
+    sense: ClassVar[str] = "ineq"
+    cost: ClassVar[bool] = False
+    free_body: ClassVar[bool] = True
+    is_obstacle: ClassVar[bool] = True
+    obstacle: str = ""
+    margin: float = 0.0
+
+    def resolve(self, robot: Any, scene: Any) -> Residual:
+        o = scene[self.obstacle]
+        if o.shape != "cylinder" or not np.allclose(o.pose[:3, 2], [0, 0, 1], atol=1e-9):
+            raise InputError(f"ComOutsideCylinder: {o} is not a vertical cylinder")
+        return replace(self, margin=as_real(self.margin, "ComOutsideCylinder.margin"))
+
+    def dim(self, robot: Any, scene: Any) -> int:
+        return 1 if isinstance(robot, FreeBody) else robot.model.njoints - 1
+
+    def circle(self, scene: Any) -> np.ndarray:
+        """``(x_c, y_c, r + margin)``."""
+        o = scene[self.obstacle]
+        return np.array([*o.pose[:2, 3], o.size[0] + self.margin])
+
+    def joint_space(self, robot: Any, scene: Any) -> SymbolicRows:
+        return SymbolicRows((type(self),), self.circle(scene), self._rows)
+
+    def _rows(self, ctx: SymbolicContext) -> cs.SX:
+        model, placements = ctx.robot.model, ctx.placements()
+        rows = []
+        for j in range(1, model.njoints):
+            Rj, pj = placements[j]
+            com = pj + cs.mtimes(Rj, cs.DM(model.inertias[j].lever))
+            rows.append(cylinder_clearance(com, ctx.theta))
+        return cs.vertcat(*rows)
+
+    def row_label(self, robot: Any, scene: Any, row: int) -> str:
+        if isinstance(robot, FreeBody):
+            return f"row {row} of ComOutsideCylinder on the free body {robot.name!r}"
+        name = robot.model.names[row + 1]
+        return f"the COM of the link of joint {name!r} near cylinder {self.obstacle!r}"
+
+    def maximal_terms(self, ctx: Any, item: Any) -> list[Term]:
+        nb = ctx.mm.nb
+        k, b = (a.ravel() for a in np.meshgrid(item.knots, np.arange(nb), indexing="ij"))
+        fn = cylinder_clearance_function(ctx.jit)
+        return [
+            Term(item.name, "ineq", fn, {"p": ("p", k * nb + b)}, {"c": self.circle(ctx.ocp.scene)})
+        ]
+
+    def body_parameters(self, scene: Any) -> dict[str, Any]:
+        return {"c": self.circle(scene)}
+
+    @classmethod
+    def body_rows(cls, x: dict[str, Any], P: dict[str, Any]) -> Any:
+        return cylinder_clearance(x["p"], P["c"])
+
+    def shooting(self, ctx: Any, item: Any) -> ShootingResidual:
+        """``‖(x_i, y_i) - c‖ - r ≥ margin`` (in metres, the form the FDDP penalty is tuned
+        for)."""
+        x, y, radius = self.circle(ctx.ocp.scene)
+        model = ctx.com_clearance((x, y), radius - self.margin)
+        lower, upper = np.full(model.nr, self.margin), np.full(model.nr, np.inf)
+        return ShootingResidual(model, lower, upper, ctx.obstacle_weight)
+
+    def clearance(
+        self, robot: Any, scene: Any, path: np.ndarray, evaluate: Callable | None
+    ) -> float:
+        """A free body's ``path`` is its positions ``(K, ≥3)``; a robot's, configurations."""
+        xc, yc, radius = self.circle(scene)
+        base = radius - self.margin
+        if isinstance(robot, FreeBody):
+            return float(np.min(np.hypot(path[:, 0] - xc, path[:, 1] - yc) - base))
+        dist2 = radius**2 - evaluate(self, path)  # squared horizontal distance to the axis
+        return float(np.min(np.sqrt(np.maximum(dist2, 0.0)) - base))

@@ -1,0 +1,143 @@
+"""Coal distances: ``margin - d ≤ 0`` for the signed distance ``d`` of every collision geometry on
+a moving link and every scene object, through the one coal path of
+:mod:`mbplan.multibody.collision` (witness-point gradient ``nᵀ J₁``, fixed-witness-point Hessian)
+in joint space, :mod:`mbplan.transcription.distance` on the body poses in maximal coordinates."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from typing import Any, ClassVar
+
+import numpy as np
+
+from mbplan.errors import InputError
+from mbplan.multibody.collision import (
+    CollisionPairs,
+    chain_kinematics,
+    collision_pairs,
+    joint_space_contacts,
+    joint_support,
+    point_hessians,
+)
+from mbplan.residuals.base import Residual, ShootingResidual
+from mbplan.transcription.distance import distance_constraint_function, pair_bodies
+from mbplan.transcription.terms import Term
+from mbplan.validation import as_real
+
+
+@lru_cache(maxsize=64)
+def distance_pairs(robot: Any, scene: Any, objects: tuple[str, ...]) -> CollisionPairs:
+    """The (moving collision geometry, scene object) pairs of a distance residual."""
+    solids = [(scene[n].geometry(), scene[n].pose) for n in objects]
+    return collision_pairs(robot.collision_model, solids)
+
+
+def distance_values(
+    robot: Any, scene: Any, residual: Distance, q: np.ndarray, order: int = 0
+) -> tuple[np.ndarray, ...]:
+    """``margin - d`` ``(K, P)`` at ``q (K, nq)``; with ``order >= 1`` also the Jacobian
+    ``(K, P, nv)`` ``nᵀ J₁`` (and the kinematics and contacts for second order)."""
+    pairs = distance_pairs(robot, scene, residual.objects)
+    kin = chain_kinematics(robot.model, robot.model.createData(), np.atleast_2d(q))
+    contacts, J = joint_space_contacts(pairs, kin)
+    value = residual.margin - contacts.distance
+    if order == 0:
+        return (value,)
+    grad = np.einsum("kpa,kpja->kpj", contacts.normal, J)
+    return value, grad, kin, contacts, J
+
+
+class DistanceRows:
+    """The rows ``margin - d`` of a :class:`Distance` at knots ``q (K, nq)`` with their own
+    derivatives in ``q`` (the joint-space form of a residual CasADi cannot write)."""
+
+    def __init__(self, robot: Any, scene: Any, residual: Distance):
+        self.robot, self.scene, self.residual = robot, scene, residual
+        self.margin = residual.margin
+        self.pairs = distance_pairs(robot, scene, residual.objects)
+        self.size = self.pairs.size
+
+    def values(self, q: np.ndarray) -> np.ndarray:
+        """``margin - d`` ``(K, P)``."""
+        return distance_values(self.robot, self.scene, self.residual, q)[0]
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """``∂(margin - d)/∂q = nᵀ J₁`` ``(K, P, nv)``."""
+        return distance_values(self.robot, self.scene, self.residual, q, 1)[1]
+
+    def jacobian_support(self) -> np.ndarray:
+        """``(P, nv)`` bool: the velocities that move each pair's link."""
+        return joint_support(self.robot.model)[self.pairs.joint]
+
+    def hessian(self, q: np.ndarray, mu: np.ndarray) -> np.ndarray:
+        """``Σ_p μ_kp ∇²(margin - d_p)`` ``(K, nv, nv)`` at fixed witness points."""
+        _, _, kin, contacts, J = distance_values(self.robot, self.scene, self.residual, q, 1)
+        P = point_hessians(kin, self.pairs.joint, J)
+        return np.einsum("kp,kpa,kpjla->kjl", mu, contacts.normal, P)
+
+
+@dataclass(frozen=True, eq=False)
+class Distance(Residual):
+    """``margin - d ≤ 0`` for coal's signed distance ``d`` of every collision geometry on a
+    moving link and every scene object in ``objects`` (all if None). Constraint only."""
+
+    sense: ClassVar[str] = "ineq"
+    cost: ClassVar[bool] = False
+    is_obstacle: ClassVar[bool] = True
+    margin: float = 0.0
+    objects: tuple[str, ...] | None = None
+
+    def resolve(self, robot: Any, scene: Any) -> Residual:
+        margin = as_real(self.margin, "Distance.margin")
+        if robot.collision_model is None or not any(
+            g.parentJoint > 0 for g in robot.collision_model.geometryObjects
+        ):
+            raise InputError(
+                f"Distance: robot {robot.name!r} has no collision geometry on a moving link "
+                "(pass collision_model= with a pinocchio.Model)"
+            )
+        names = scene.names if self.objects is None else list(self.objects)
+        for n in names:
+            scene[n]
+        if not names:
+            raise InputError("Distance: the scene has no objects")
+        return replace(self, margin=margin, objects=tuple(names))
+
+    def dim(self, robot: Any, scene: Any) -> int:
+        n = sum(g.parentJoint > 0 for g in robot.collision_model.geometryObjects)
+        return n * len(self.objects or ())
+
+    def joint_space(self, robot: Any, scene: Any) -> DistanceRows:
+        return DistanceRows(robot, scene, self)
+
+    def row_label(self, robot: Any, scene: Any, row: int) -> str:
+        pairs = distance_pairs(robot, scene, self.objects)
+        geometry = pairs.names[row].split("/")[0]
+        obj = self.objects[int(pairs.obstacle[row])]
+        return f"geometry {geometry!r} and scene object {obj!r}"
+
+    def start_violation(self, robot: Any, scene: Any, row: int, value: float) -> str:
+        distance = f" (distance {self.margin - value:.4f} m, margin {self.margin:g} m)"
+        return super().start_violation(robot, scene, row, value) + distance
+
+    def maximal_terms(self, ctx: Any, item: Any) -> list[Term]:
+        mm = ctx.mm
+        pairs = distance_pairs(ctx.ocp.robot, ctx.ocp.scene, self.objects)
+        k, i = (a.ravel() for a in np.meshgrid(item.knots, np.arange(pairs.size), indexing="ij"))
+        sites = k * mm.nb + pair_bodies(mm, pairs)[i]
+        fn = distance_constraint_function(mm, pairs)
+        bind = {"R": ("R", sites), "p": ("p", sites)}
+        return [Term(item.name, "ineq", fn, bind, {"pair": i.astype(float), "margin": self.margin})]
+
+    def shooting(self, ctx: Any, item: Any) -> ShootingResidual:
+        model = ctx.coal_distance(self)
+        return ShootingResidual(
+            model, np.full(model.nr, -np.inf), np.zeros(model.nr), ctx.obstacle_weight
+        )
+
+    def clearance(
+        self, robot: Any, scene: Any, path: np.ndarray, evaluate: Callable | None
+    ) -> float:
+        return float(np.min(self.margin - evaluate(self, path)))

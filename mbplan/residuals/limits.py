@@ -1,0 +1,170 @@
+"""Joint limits ``(lower - x, x - upper) ≤ 0`` of the positions, velocities and torques (URDF
+limits by default). Constraints only: bounds on the decision variables of the generalized
+NLP, node bounds or penalties in Crocoddyl, the cosine forms of
+:mod:`mbplan.formulations.maximal_joints` in maximal coordinates."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar
+
+import casadi as cs
+import numpy as np
+
+from mbplan.errors import InputError
+from mbplan.residuals.base import (
+    TORQUE_TOLERANCE,
+    Residual,
+    ShootingResidual,
+    SymbolicContext,
+    SymbolicRows,
+)
+from mbplan.residuals.joint import torque_terms
+from mbplan.transcription.terms import Term
+from mbplan.validation import as_array
+
+
+@dataclass(frozen=True, eq=False)
+class _Limits(Residual):
+    """``(lower - x, x - upper) ≤ 0`` (URDF limits by default). Constraint only."""
+
+    sense: ClassVar[str] = "ineq"
+    cost: ClassVar[bool] = False
+    variable: ClassVar[str] = "q"
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
+
+    def _defaults(self, robot: Any) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def resolve(self, robot: Any, scene: Any) -> Residual:
+        lo, hi = self._defaults(robot)
+        name = type(self).__name__
+        lower = lo if self.lower is None else as_array(self.lower, (robot.nv,), f"{name}.lower")
+        upper = hi if self.upper is None else as_array(self.upper, (robot.nv,), f"{name}.upper")
+        free = self._unbounded(robot)
+        if not np.all(np.isfinite(lower[~free])) or not np.all(np.isfinite(upper[~free])):
+            raise InputError(f"{name}: limits must be finite (URDF without limits?)")
+        if np.any((lower >= upper) & ~free):
+            j = int(np.argmax((lower >= upper) & ~free))
+            raise InputError(
+                f"{name}: lower >= upper for joint {robot.model.names[j + 1]!r} "
+                f"({lower[j]:g}, {upper[j]:g}; URDF without limits?)"
+            )
+        return replace(self, lower=np.array(lower), upper=np.array(upper))
+
+    def _unbounded(self, robot: Any) -> np.ndarray:
+        """(nv,) mask of the joints without rows (continuous joints' positions)."""
+        return np.zeros(robot.nv, dtype=bool)
+
+    def indices(self, robot: Any) -> np.ndarray:
+        """Velocity indices of the limited joints: rows ``(lower - x, x - upper)[indices]``."""
+        return np.flatnonzero(~self._unbounded(robot))
+
+    def dim(self, robot: Any, scene: Any) -> int:
+        return 2 * len(self.indices(robot))
+
+    def variable_bounds(self, robot: Any) -> tuple[str, np.ndarray, np.ndarray]:
+        return self.variable, self.lower, self.upper
+
+    def joint_space(self, robot: Any, scene: Any) -> SymbolicRows:
+        """Parameters: the limits ``(lower, upper)`` of the limited joints."""
+        keep = self.indices(robot)
+        lower, upper = (np.asarray(b, dtype=float)[keep] for b in (self.lower, self.upper))
+        key = (type(self), tuple(keep.tolist()))
+        return SymbolicRows(key, np.concatenate([lower, upper]), self._rows)
+
+    def _rows(self, ctx: SymbolicContext) -> cs.SX:
+        keep = self.indices(ctx.robot).tolist()
+        source = {"q": ctx.q, "v": ctx.v, "tau": ctx.x}[self.variable]
+        var = cs.vertcat(*[source[i] for i in keep])
+        return cs.vertcat(ctx.theta[: len(keep)] - var, var - ctx.theta[len(keep) :])
+
+    def row_label(self, robot: Any, scene: Any, row: int) -> str:
+        names = list(robot.model.names[1:])
+        keep = self.indices(robot)
+        side = "lower" if row < len(keep) else "upper"
+        return f"the {side} limit of joint {names[int(keep[row % len(keep)])]!r}"
+
+    def shooting(self, ctx: Any, item: Any) -> ShootingResidual:
+        """Bounds on Crocoddyl's state residual (FDDP: a penalty of the limits' weight)."""
+        nv, nx = ctx.model.nv, ctx.state.nx
+        lo, hi = np.full(nx, -np.inf), np.full(nx, np.inf)
+        part = slice(0, nv) if self.variable == "q" else slice(nv, 2 * nv)
+        lo[part], hi[part] = self.lower, self.upper
+        model = ctx.crocoddyl.ResidualModelState(ctx.state, np.zeros(nx), ctx.nu)
+        return ShootingResidual(model, lo, hi, ctx.limit_weight)
+
+
+@dataclass(frozen=True, eq=False)
+class JointPositionLimits(_Limits):
+    """Position limits of every joint but the continuous ones (no limits, no rows)."""
+
+    def _defaults(self, robot: Any) -> tuple[np.ndarray, np.ndarray]:
+        return robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+
+    def _unbounded(self, robot: Any) -> np.ndarray:
+        free = np.zeros(robot.nv, dtype=bool)
+        free[robot.joint_indices(robot.continuous)] = True
+        return free
+
+    def maximal_terms(self, ctx: Any, item: Any) -> list[Term]:
+        """No rows for continuous joints, nor for a revolute range of 2π or more (it limits no
+        rotation: cos ≥ -1)."""
+        mm = ctx.mm
+        lo, hi = np.asarray(self.lower)[mm.idx_v], np.asarray(self.upper)[mm.idx_v]
+        limited = np.isin(mm.idx_v, self.indices(ctx.ocp.robot))
+        b = np.flatnonzero(limited & (~mm.revolute | (hi - lo < 2 * np.pi)))
+        if not b.size:
+            return []
+        lo, hi = lo[b], hi[b]
+        half = np.minimum(0.5 * (hi - lo), np.pi)
+        per = {"R_mid": ctx.about_axis(b, 0.5 * (lo + hi)), "cos_half": np.cos(half)}
+        return ctx.joint_terms(item, "position_limits", b, per, {"lo": lo, "hi": hi})
+
+
+@dataclass(frozen=True, eq=False)
+class JointVelocityLimits(_Limits):
+    variable: ClassVar[str] = "v"
+
+    def _defaults(self, robot: Any) -> tuple[np.ndarray, np.ndarray]:
+        return -robot.model.velocityLimit, robot.model.velocityLimit
+
+    def maximal_terms(self, ctx: Any, item: Any) -> list[Term]:
+        mm = ctx.mm
+        lo, hi = np.asarray(self.lower)[mm.idx_v], np.asarray(self.upper)[mm.idx_v]
+        if not np.allclose(lo[mm.revolute], -hi[mm.revolute]):
+            raise InputError("asymmetric velocity limits of revolute joints are not expressible")
+        per = {"cos_step": np.cos(np.minimum(hi * ctx.ocp.dt, np.pi))}
+        b = np.arange(mm.nb)
+        return ctx.joint_terms(item, "velocity_limits", b, per, {"lo": lo, "hi": hi})
+
+
+@dataclass(frozen=True, eq=False)
+class JointTorqueLimits(_Limits):
+    """Torque limits, checked by the verifier on the applied torques within
+    :data:`~mbplan.residuals.base.TORQUE_TOLERANCE` ``· max(1, limit)``."""
+
+    space: ClassVar[str] = "control"
+    variable: ClassVar[str] = "tau"
+    input_limits: ClassVar[bool] = True
+
+    def _defaults(self, robot: Any) -> tuple[np.ndarray, np.ndarray]:
+        return -robot.model.effortLimit, robot.model.effortLimit
+
+    def maximal_terms(self, ctx: Any, item: Any) -> list[Term]:
+        mm = ctx.mm
+        per = {"lo": np.asarray(self.lower)[mm.idx_v], "hi": np.asarray(self.upper)[mm.idx_v]}
+        return torque_terms(ctx, item, "limits", np.arange(mm.nb), per)
+
+    def shooting(self, ctx: Any, item: Any) -> ShootingResidual:
+        """Crocoddyl's control residual in ``[lower, upper]`` (CSQP); FDDP imposes the limits
+        as the nodes' control bounds (:meth:`variable_bounds`)."""
+        model = ctx.crocoddyl.ResidualModelControl(ctx.state, ctx.nu)
+        return ShootingResidual(model, self.lower, self.upper, None)
+
+    def violation_tolerance(self, tolerance: float | None) -> float:
+        return TORQUE_TOLERANCE * max(1.0, float(np.max(np.abs(self.upper))))
+
+    def violation_reason(self, name: str, violation: float, tolerance: float) -> str:
+        return f"torques exceed the limits ({name!r}) by up to {violation:.3g} N m"
