@@ -20,6 +20,7 @@ from mbplan.multibody.collision import (
     point_jacobians,
     signed_distances,
 )
+from mbplan.planning.solve import check_start
 from mbplan.robots import load
 from mbplan.transcription.distance import distance_constraint_function, pair_bodies
 
@@ -196,7 +197,7 @@ def test_distance_task_validation_names_the_geometry() -> None:
     ):
         mb.plan(blocked, "ripm")
     task = iiwa_obstacle(constraint="distance")
-    task.check()
+    check_start(task)
     from mbplan.formulations.joint_space import evaluate
 
     r = task["clearance"].residual

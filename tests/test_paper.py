@@ -11,6 +11,7 @@ import mbplan as mb
 from mbplan.formulations.joint_space import evaluate
 from mbplan.ocp.continuous import joint_ranges
 from mbplan.planning.initial_guess import VIA_CANDIDATES, initial_path, path_clearance
+from mbplan.planning.solve import check_start
 from mbplan.tasks.paper import (
     IIWA_CYLINDER,
     IIWA_START,
@@ -42,7 +43,7 @@ def test_defaults_come_from_the_urdf_and_the_paper() -> None:
     assert cylinder.shape == "cylinder" and cylinder.size[0] == IIWA_CYLINDER[1]
     np.testing.assert_array_equal(cylinder.pose[:2, 3], IIWA_CYLINDER[0])
     assert not ocp.q0.flags.writeable
-    ocp.check()
+    check_start(ocp)
     # the straight joint-space path from the default start runs through the cylinder
     assert path_clearance(ocp, initial_path(ocp, "linear")) > 0.0
 
@@ -58,7 +59,7 @@ def test_sampler_is_reproducible_within_limits_and_collision_free() -> None:
     assert np.ptp(q0, axis=0).min() > 0.5 * half.min()  # spread over the range
     touch = mb.residuals.Distance(0.0)
     for ocp in a:
-        ocp.check()
+        check_start(ocp)
         assert path_clearance(ocp, ocp.q0[None]) <= 0.0
         r = touch.resolve(ocp.robot, ocp.scene)
         assert evaluate(ocp.robot, ocp.scene, r, ocp.q0[None], None, None).max() <= 0.0
@@ -76,11 +77,11 @@ def test_start_overlapping_an_obstacle_is_infeasible_naming_link_and_obstacle() 
     scene = mb.Scene().add_cylinder("blocker", 0.1, 1.5, (com4[0] + 0.05, com4[1], 0.75))
     ocp = add_obstacle_constraint(tracking_ocp("iiwa", IIWA_START, IIWA_TARGET, scene), "com")
     with pytest.raises(mb.InfeasibleRequestError, match=r"q0 .*'iiwa_joint_4'.*'blocker'"):
-        ocp.check()
+        check_start(ocp)
     q0 = np.array(IIWA_START)
     q0[1] = 2.5
     with pytest.raises(mb.InfeasibleRequestError, match=r"upper limit of joint 'iiwa_joint_2'"):
-        tracking_ocp("iiwa", q0, IIWA_TARGET).check()
+        check_start(tracking_ocp("iiwa", q0, IIWA_TARGET))
 
 
 def test_bad_input_is_rejected() -> None:

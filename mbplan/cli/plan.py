@@ -55,6 +55,7 @@ def _builtin_task(args: argparse.Namespace) -> tuple[Any, Callable[[], Any]]:
 
 def _task_file(args: argparse.Namespace) -> tuple[Any, Callable[[], Any]]:
     """The OCP of ``mbplan plan TASK.toml``, the flags overriding the file, and its planner."""
+    from mbplan.planning.solve import check_start
     from mbplan.taskfile import load_task
     from mbplan.taskfile.toml_table import parse_value
 
@@ -72,7 +73,7 @@ def _task_file(args: argparse.Namespace) -> tuple[Any, Callable[[], Any]]:
             raise InputError(f"--set: expected TABLE.KEY=VALUE, got {item!r}")
         overrides.append((key.strip(), parse_value(text.strip(), f"--set {key}"), "--set"))
     task = load_task(args.task_file, overrides)
-    task.ocp.check()
+    check_start(task.ocp)
     return task.ocp, task.plan
 
 

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mbplan.errors import InfeasibleRequestError, InputError
+from mbplan.errors import InputError
 from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.robot import Robot, load_robot, robot_from_source
 from mbplan.ocp.scene import Scene
@@ -177,24 +177,6 @@ class OCP:
     @property
     def constraints(self) -> list[Item]:
         return [i for i in self.items if i.role == "constraint"]
-
-    def check(self) -> None:
-        """Raise before any solve if the start violates a state inequality constraint at knot 1
-        (at rest knot 1 equals knot 0: an obstacle overlapping the start, a limit violated)."""
-        from mbplan.formulations.joint_space import evaluate
-
-        for item in self.constraints:
-            r = item.residual
-            if r.space != "state" or r.sense != "ineq" or 1 not in item.knots:
-                continue
-            value = evaluate(self.robot, self.scene, r, self.q0[None], self.v0[None], None, self.dt)
-            value = value[0]
-            i = int(np.argmax(value)) if value.size else 0
-            if value.size and value[i] > 1e-9:
-                what = r.start_violation(self.robot, self.scene, i, float(value[i]))
-                raise InfeasibleRequestError(
-                    f"the start q0 violates constraint {item.name!r}: {what}"
-                )
 
     def __repr__(self) -> str:
         parts = ", ".join(f"{i.role} {i.name}" for i in self.items)

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mbplan.errors import InputError
+from mbplan.errors import InfeasibleRequestError, InputError
+from mbplan.formulations.joint_space import evaluate
 from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.problem import OCP
 from mbplan.planning import methods as m
@@ -77,7 +78,7 @@ def plan(
     """
     settings = check_plan_request(ocp, method, tol, max_iter, options, jit)
     formulation = METHODS[method].formulation
-    ocp.check()
+    check_start(ocp)
     if formulation == "maximal":
         from mbplan.solvers.kkt.system import compile_kernels_in_background
 
@@ -96,6 +97,20 @@ def plan(
     guess_time = time.perf_counter() - t0
     result = METHODS[method].solve(ocp, q_guess, settings)
     return finish(ocp, result, guess_time)
+
+
+def check_start(ocp: OCP) -> None:
+    """Raise before any solve if the start violates a state inequality constraint at knot 1
+    (at rest knot 1 equals knot 0: an obstacle overlapping the start, a limit violated)."""
+    for item in ocp.constraints:
+        r = item.residual
+        if r.space != "state" or r.sense != "ineq" or 1 not in item.knots:
+            continue
+        value = evaluate(ocp.robot, ocp.scene, r, ocp.q0[None], ocp.v0[None], None, ocp.dt)[0]
+        i = int(np.argmax(value)) if value.size else 0
+        if value.size and value[i] > 1e-9:
+            what = r.start_violation(ocp.robot, ocp.scene, i, float(value[i]))
+            raise InfeasibleRequestError(f"the start q0 violates constraint {item.name!r}: {what}")
 
 
 def check_plan_request(
