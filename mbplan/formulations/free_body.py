@@ -33,6 +33,7 @@ from mbplan.ocp.problem import OCP, Item
 from mbplan.transcription.terms import Term
 from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import Block, Point, TrajectoryVariables
+from mbplan.workspace import Workspace
 
 STATE = (("R", SO3), ("p", R(3)), ("F", SO3), ("v", R(3)))
 
@@ -91,7 +92,7 @@ def _cost_function(slots: tuple, space: str, nu: int, jit: bool) -> RiemannianFu
 class FreeBodyNLP:
     """The TrajectoryProblem of a free-body ``ocp`` (module docstring)."""
 
-    def __init__(self, ocp: OCP, jit: bool):
+    def __init__(self, ocp: OCP, jit: bool, workspace: Workspace | None = None):
         self.ocp, self.jit = ocp, jit
         body, N = ocp.robot, ocp.N
         variables = TrajectoryVariables(
@@ -122,7 +123,7 @@ class FreeBodyNLP:
             except InputError as err:
                 names = [i.name for i in items]
                 raise InputError(f"maximal formulation, {role} {names}: {err}") from None
-        self.problem = TrajectoryProblem(variables, terms)
+        self.problem = TrajectoryProblem(variables, terms, workspace)
 
     def _per_site(self, shapes: tuple, items: list[Item]) -> tuple[np.ndarray, dict]:
         """The knots of ``items`` concatenated and their parameters and weights per site."""
@@ -246,7 +247,8 @@ def input_bounds(ocp: OCP) -> tuple[np.ndarray, np.ndarray]:
     return lower, upper
 
 
-def build(ocp: OCP, jit: bool) -> tuple[FreeBodyNLP, float]:
-    """:class:`FreeBodyNLP` of ``ocp`` and the build time (s)."""
+def build(ocp: OCP, jit: bool, workspace: Workspace | None = None) -> tuple[FreeBodyNLP, float]:
+    """:class:`FreeBodyNLP` of ``ocp`` (its structures kept in ``workspace``) and the build
+    time (s)."""
     t0 = time.perf_counter()
-    return FreeBodyNLP(ocp, jit), time.perf_counter() - t0
+    return FreeBodyNLP(ocp, jit, workspace), time.perf_counter() - t0

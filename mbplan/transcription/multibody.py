@@ -40,10 +40,10 @@ from mbplan.dynamics.joints import (
 )
 from mbplan.engine import RiemannianFunction
 from mbplan.lie import SO3, R
-from mbplan.memo import RecentMemo
 from mbplan.multibody import MaximalModel
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Block
+from mbplan.workspace import Workspace, shared
 
 LAMBDA_DIM = 5  # pivot (3) + axis (2) per revolute joint, rotation (3) + slide (2) per prismatic
 
@@ -206,9 +206,6 @@ class MultibodyLayout:
     n_dynamics_rows: int
 
 
-_LAYOUTS: RecentMemo[MultibodyLayout] = RecentMemo(8)
-
-
 def multibody_layout(
     mm: MaximalModel,
     N: int,
@@ -217,15 +214,16 @@ def multibody_layout(
     jit: bool,
     kinematics: bool = True,
     fixed_tau_knots: tuple[int, ...] = (0,),
+    workspace: Workspace | None = None,
 ) -> MultibodyLayout:
-    """Blocks and equality terms for ``N`` steps of the multi-body LGVI (memoized per process:
+    """Blocks and equality terms for ``N`` steps of the multi-body LGVI (kept in ``workspace``:
     the terms are shared, never modified).
 
     ``kinematics=False`` leaves out the kinematics rows (for a one-step simulator whose ``R, p``
     at both knots are data). ``fixed_tau_knots`` are the knots whose torques are data.
     """
     key = (mm, int(N), float(dt), bool(jit), bool(kinematics), tuple(fixed_tau_knots))
-    return _LAYOUTS.get_or_build(key, lambda: _multibody_layout(mm, *key[1:]))
+    return shared(workspace, "multibody_layout", lambda: key, lambda: _multibody_layout(*key))
 
 
 def _multibody_layout(
@@ -236,7 +234,7 @@ def _multibody_layout(
     kinematics: bool,
     fixed_tau_knots: tuple[int, ...],
 ) -> MultibodyLayout:
-    """:func:`multibody_layout`, not memoized."""
+    """:func:`multibody_layout`, built."""
     nb = mm.nb
     blocks = [
         Block("R", SO3, N + 1, (0,) if kinematics else (0, 1), nb),
