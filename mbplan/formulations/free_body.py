@@ -38,6 +38,7 @@ from mbplan.workspace import Workspace
 STATE = (("R", SO3), ("p", R(3)), ("F", SO3), ("v", R(3)))
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _step_function(actuation: bytes, nu: int, jit: bool) -> RiemannianFunction:
     """The LGVI step with the actuation map ``B`` a constant (its zeros are structural: the
@@ -53,6 +54,7 @@ def _step_function(actuation: bytes, nu: int, jit: bool) -> RiemannianFunction:
     return RiemannianFunction(name, variables, step, params, jit=jit)
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _item_function(kind: type, shapes: tuple, cost: bool, nu: int, jit: bool) -> RiemannianFunction:
     """The residual ``kind`` (or its cost ``½ w ‖r‖²``) on the state or the input."""
@@ -69,6 +71,7 @@ def _item_function(kind: type, shapes: tuple, cost: bool, nu: int, jit: bool) ->
     return RiemannianFunction(name, variables, fn, params, jit=jit)
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _cost_function(slots: tuple, space: str, nu: int, jit: bool) -> RiemannianFunction:
     """``Σ_j ½ w_j ‖r_j‖²`` of the residual kinds ``slots = ((kind, shapes), …)`` (parameters

@@ -82,6 +82,7 @@ def frame_error(R, p, p_goal, R_goal=None):
     return cs.vertcat(p - p_goal, SO3.log(cs.mtimes(R_goal.T, R)))
 
 
+# process-wide cache, result-neutral: symbols of the (unmodified) robot's kinematics alone
 @lru_cache(maxsize=16)
 def _state_symbols(robot: Robot) -> tuple[cs.SX, list[tuple[cs.SX, cs.SX]]]:
     """A knot state ``x = (q, v)`` and the joints' :func:`symbolic_placements` at its ``q``, built
@@ -122,6 +123,7 @@ def _parameters(robot: Robot, scene: Scene, residual: Residual) -> np.ndarray:
     return residual.circle(scene)
 
 
+# process-wide cache, result-neutral: CasADi function of the robot and residual structure
 @lru_cache(maxsize=256)
 def _parametric(robot: Robot, structure: tuple, n_parameters: int) -> cs.Function:
     """``r(x, θ)`` at one knot for residuals of ``structure`` (:func:`_structure`), ``θ`` their
@@ -176,6 +178,7 @@ def _parametric_of(
     return _parametric(robot, _structure(robot, residual), theta.size), theta
 
 
+# process-wide cache, result-neutral: CasADi function of the robot, scene and residual
 @lru_cache(maxsize=256)
 def knot_function(robot: Robot, scene: Scene, residual: Residual) -> cs.Function:
     """``r(x)`` at one knot (``x = (q, v)`` or ``τ``), an SX function (cached per residual)."""
@@ -184,6 +187,7 @@ def knot_function(robot: Robot, scene: Scene, residual: Residual) -> cs.Function
     return cs.Function(type(residual).__name__, [x], [fn(x, cs.DM(theta))])
 
 
+# process-wide cache, result-neutral: geometry pairs of the robot, scene and object names
 @lru_cache(maxsize=64)
 def distance_pairs(robot: Robot, scene: Scene, objects: tuple[str, ...]) -> CollisionPairs:
     """The (moving collision geometry, scene object) pairs of a distance residual."""
@@ -226,6 +230,7 @@ def evaluate(
     return np.array(_mapped(fn, len(x))(x.T, theta)).T.reshape(len(x), -1)
 
 
+# process-wide cache, result-neutral: a CasADi map of the function and knot count alone
 @lru_cache(maxsize=256)
 def _mapped(fn: cs.Function, knots: int) -> cs.Function:
     """``fn`` over ``knots`` knots (its parameters shared)."""

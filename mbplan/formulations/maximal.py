@@ -55,12 +55,14 @@ _TORQUE = {
 }
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _torque_function(kind: str, jit: bool) -> RiemannianFunction:
     fn, params = _TORQUE[kind]
     return RiemannianFunction(f"torque_{kind}", [("tau", R(1))], fn, params, jit=jit)
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _frame_function(kind: str, cost: bool, jit: bool) -> RiemannianFunction:
     """Frame translation ``p_f - p_g`` or placement ``(p_f - p_g, log(R_gᵀ R_f))`` of the frame
@@ -77,6 +79,7 @@ def _frame_function(kind: str, cost: bool, jit: bool) -> RiemannianFunction:
     return RiemannianFunction(name, [("Rb", SO3), ("pb", R(3))], fn, params, jit=jit)
 
 
+# process-wide cache, result-neutral: maximal-coordinate data of the (unmodified) model alone
 @lru_cache(maxsize=16)
 def _maximal(model: pin.Model) -> MaximalModel:
     return maximal_model(model)

@@ -184,6 +184,7 @@ def parameter_shapes(residual: Residual, scene: Scene) -> list[tuple[str, tuple[
     return [(k, s[0] if len(s) == 1 else s) for k, s in shapes]
 
 
+# process-wide cache, result-neutral: CasADi function of the residual kind and shapes
 @cache
 def _numeric(kind: type, shapes: tuple, nu: int) -> cs.Function:
     x = {"R": cs.SX.sym("R", 3, 3), "p": cs.SX.sym("p", 3), "F": cs.SX.sym("F", 3, 3)}

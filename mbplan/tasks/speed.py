@@ -80,6 +80,7 @@ def chain_urdf(n: int) -> str:
     return "\n".join(parts)
 
 
+# process-wide cache, result-neutral: the URDF text is a function of n alone
 @functools.cache
 def _chain_path(n: int) -> str:
     path = Path(tempfile.gettempdir()) / f"mbplan-chain{n}.urdf"

@@ -101,6 +101,7 @@ def joint_parameters(mm: MaximalModel, joints: np.ndarray, kind: str) -> dict[st
     return {name: source[name][joints] for name, _ in JOINT_KINDS[kind].params}
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _kinematics_function(jit: bool) -> RiemannianFunction:
     return RiemannianFunction(
@@ -112,6 +113,7 @@ def _kinematics_function(jit: bool) -> RiemannianFunction:
     )
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _dynamics_function(jit: bool) -> RiemannianFunction:
     return RiemannianFunction(
@@ -126,6 +128,7 @@ def _dynamics_function(jit: bool) -> RiemannianFunction:
 _WORLD = [("Rp", (3, 3)), ("pp", 3)]  # a world parent's fixed pose, as parameters
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _joint_forces_function(
     jit: bool, world_parent: bool, kind: str = "revolute"
@@ -140,6 +143,7 @@ def _joint_forces_function(
     return RiemannianFunction(f"{kind}_forces", variables, jk.forces, list(jk.params), jit=jit)
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _constraint_function(
     jit: bool, world_parent: bool, kind: str = "revolute"
@@ -172,6 +176,7 @@ def _side(side: str) -> list[tuple[str, object]]:
     return [(n[0] + side + n[1:], g) for n, g in _MOTION]
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _damping_function(jit: bool, world_parent: bool, kind: str = "revolute") -> RiemannianFunction:
     """Viscous damping ``-c q̇_{k+1}`` of a joint (:mod:`mbplan.dynamics.damping`)."""

@@ -77,6 +77,7 @@ class Inertia:
     zero: int
 
 
+# process-wide cache, result-neutral: a read-only all-zero matrix of the shape alone
 @functools.lru_cache(maxsize=16)
 def _empty_csr(shape: tuple[int, int]) -> sp.csr_matrix:
     """An all-zero block (shared, read only: built once per shape)."""

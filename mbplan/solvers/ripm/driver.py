@@ -84,6 +84,7 @@ def solve_ripm(
     return _RIPM(problem, opts, workspace=workspace).run(x0, y0, z0, s0)
 
 
+# process-wide cache, result-neutral: prints a first-run line only
 @functools.cache
 def _announce_uncached_kernels() -> None:
     """The first-run line if the iteration's numba kernels are not cached yet (once per
