@@ -12,6 +12,7 @@ from mbplan.planning.solve import METHODS, plan
 from mbplan.results import PlanResult, load_npz, save_npz
 from mbplan.taskfile import Task, load_task
 from mbplan.verification import Verification, verify
+from mbplan.workspace import Workspace
 
 __all__ = [
     "METHODS",
@@ -26,6 +27,7 @@ __all__ = [
     "Scene",
     "Task",
     "Verification",
+    "Workspace",
     "load_npz",
     "load_robot",
     "load_task",

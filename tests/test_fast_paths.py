@@ -10,6 +10,7 @@ from mbplan.lie.group import check_orthogonal
 from mbplan.solvers.ripm.iterate import transpose_times
 from mbplan.transcription.sparse import SparsePattern, sparse_pattern
 from mbplan.transcription.variables import Block, TrajectoryVariables
+from mbplan.workspace import Workspace
 
 
 @pytest.mark.parametrize("index", [np.int32, np.int64])
@@ -30,8 +31,8 @@ def test_sparse_pattern_assembles_independent_matrices():
     assert np.array_equal(a.toarray(), [[0, 5, 0], [5, 0, 0]])
     assert np.array_equal(b.toarray(), [[0, -1, 0], [0, 0, 0]])
     assert a.has_canonical_format and a.shape == (2, 3)
-    # the index arrays are shared by every matrix of the pattern (and, memoized, by every
-    # problem of a task family): an in-place index operation must fail, not corrupt the others
+    # the index arrays are shared by every matrix of the pattern (and, through a workspace, by
+    # every problem of a task family): an in-place index operation must fail, not corrupt the others
     with pytest.raises(ValueError, match="read-only"):
         a.indices[0] = 2
     with pytest.raises(ValueError, match="read-only"):
@@ -49,38 +50,41 @@ def test_sparse_pattern_drops_entries_of_fixed_columns():
         pattern.assemble(np.ones(4))
 
 
-def test_sparse_patterns_are_memoized_by_their_index_arrays():
-    """The same index arrays and shape: the same pattern (its matrices stay independent);
-    other entries, dtype or shape: another."""
+def test_sparse_patterns_are_kept_in_a_workspace_by_their_index_arrays():
+    """The same index arrays and shape: the workspace's pattern (its matrices stay
+    independent); other entries, dtype or shape: another; no workspace: a new one."""
+    ws = Workspace()
     rows, cols = np.array([0, 1, 1, 0]), np.array([1, 0, 0, 1])
-    first = sparse_pattern(rows, cols, (2, 3))
-    assert sparse_pattern(rows.copy(), cols.copy(), (2, 3)) is first
+    first = sparse_pattern(rows, cols, (2, 3), ws)
+    assert sparse_pattern(rows.copy(), cols.copy(), (2, 3), ws) is first
+    assert sparse_pattern(rows, cols, (2, 3)) is not first
     a, b = first.assemble(np.ones(4)), first.assemble(np.zeros(4))
     assert np.array_equal(a.toarray(), [[0, 2, 0], [2, 0, 0]]) and not b.toarray().any()
     for other in (
-        sparse_pattern(rows, np.array([1, 0, 2, 1]), (2, 3)),
-        sparse_pattern(rows.astype(np.int32), cols, (2, 3)),
-        sparse_pattern(rows, cols, (2, 4)),
+        sparse_pattern(rows, np.array([1, 0, 2, 1]), (2, 3), ws),
+        sparse_pattern(rows.astype(np.int32), cols, (2, 3), ws),
+        sparse_pattern(rows, cols, (2, 4), ws),
     ):
         assert other is not first
-    assert sparse_pattern(rows, cols, (2, 4)).shape == (2, 4)
+    assert sparse_pattern(rows, cols, (2, 4), ws).shape == (2, 4)
 
 
-def test_sparse_pattern_memo_checks_every_entry_not_only_its_key_sample():
-    """The memo key samples the index arrays; arrays equal on the sample but not elsewhere get
-    their own pattern (and the first one's is kept correct)."""
+def test_sparse_pattern_key_sample_is_checked_against_every_entry():
+    """The workspace key samples the index arrays; arrays equal on the sample but not
+    elsewhere get their own pattern (and the kept one stays correct)."""
+    ws = Workspace()
     rng = np.random.default_rng(0)
     rows, cols = rng.integers(0, 50, 5000), rng.integers(0, 50, 5000)
-    first = sparse_pattern(rows, cols, (50, 50))
+    first = sparse_pattern(rows, cols, (50, 50), ws)
     other_cols = cols.copy()
     other_cols[1] = (cols[1] + 1) % 50  # index 1 is not in the sample (every 4th entry)
-    other = sparse_pattern(rows, other_cols, (50, 50))
+    other = sparse_pattern(rows, other_cols, (50, 50), ws)
     assert other is not first
     values = rng.standard_normal(5000)
     for pattern, c in (
         (first, cols),
         (other, other_cols),
-        (sparse_pattern(rows, cols, (50, 50)), cols),
+        (sparse_pattern(rows, cols, (50, 50), ws), cols),
     ):
         expected = np.zeros((50, 50))
         np.add.at(expected, (rows, c), values)

@@ -12,8 +12,6 @@ import pytest
 import scipy.sparse as sp
 from test_linear_solver import CASES, _dense, _kkt_blocks, _kkt_blocks_without_empty_eq_rows
 
-from mbplan.memo import RecentMemo
-from mbplan.solvers.kkt import pattern as kkt_pattern
 from mbplan.solvers.kkt.borrow import borrowed
 from mbplan.solvers.kkt.ldl import layout as ldl_layout
 from mbplan.solvers.kkt.system import KKTSystem
@@ -57,10 +55,8 @@ def _control_blocks(rng, knots=10, dim=6, nu=3, zero_control=None):
 
 
 def _without_small_front_paths(monkeypatch):
-    """New analyses without direct leaves or merged siblings (every front through its own
-    update matrix)."""
-    monkeypatch.setattr(kkt_pattern, "_ANALYSES", RecentMemo(8))
-    monkeypatch.setattr(kkt_pattern, "_PATTERNS", RecentMemo(8))
+    """Analyses built from now on without direct leaves or merged siblings (every front through
+    its own update matrix; a KKT system without a workspace builds its own)."""
     monkeypatch.setattr(ldl_layout, "DIRECT_COLUMNS", 0)
 
 

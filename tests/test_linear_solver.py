@@ -1,5 +1,6 @@
 """The supernodal LDLᵀ behind the RIPM's KKT system: exact inertia, solves, breakdowns and the
-memoized symbolic analysis, on matrices whose fronts exercise every kernel path."""
+symbolic analysis shared through a workspace, on matrices whose fronts exercise every kernel
+path."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import pytest
 import scipy.sparse as sp
 
 from mbplan.solvers.kkt.system import KKTSystem
+from mbplan.workspace import Workspace
 
 
 def _kkt_blocks(rng, n, me, mi, density, band=None):
@@ -124,10 +126,15 @@ def test_zero_or_nonfinite_pivot_is_a_breakdown():
 def test_systems_sharing_a_pattern_share_the_analysis_not_the_factors():
     rng = np.random.default_rng(3)
     hess, jac_e, jac_i = _kkt_blocks(rng, 50, 20, 10, 0.1, None)
-    first, second = KKTSystem(50, 20, 10), KKTSystem(50, 20, 10)
+    ws = Workspace()
+    first, second = (KKTSystem(50, 20, 10, workspace=ws) for _ in range(2))
     first.set_matrices(hess, jac_e, jac_i)
     second.set_matrices(2 * hess, jac_e, jac_i)
     assert first._solver.a is second._solver.a
+    alone = KKTSystem(50, 20, 10)  # no workspace: its own analysis (an equal one)
+    alone.set_matrices(hess, jac_e, jac_i)
+    assert alone._solver.a is not first._solver.a
+    np.testing.assert_array_equal(alone._solver.a.perm, first._solver.a.perm)
     d1 = np.concatenate([np.full(50, 3.0), np.full(20, -1e-3), -np.ones(10)])
     d2 = np.concatenate([np.full(50, 0.1), np.full(20, -1.0), -np.full(10, 2.0)])
     first.factorize(d1)
@@ -151,20 +158,21 @@ def test_a_released_workspace_serves_the_next_system_of_its_pattern():
         inertia = kkt.factorize(d, static_reg=1e-9)
         return inertia, kkt.solve(rhs)
 
-    first = KKTSystem(60, 24, 12)
+    ws = Workspace()
+    first = KKTSystem(60, 24, 12, workspace=ws)
     expected = solve(first)
     arrays = first._factor_data, first._solver
     del first
-    second = KKTSystem(60, 24, 12)
+    second = KKTSystem(60, 24, 12, workspace=ws)
     got = solve(second)
     assert second._factor_data is arrays[0] and second._solver is arrays[1]  # reused
     assert got[0] == expected[0] and got[1][1] == expected[1][1]
     np.testing.assert_array_equal(got[1][0], expected[1][0])
-    third = KKTSystem(60, 24, 12)
+    third = KKTSystem(60, 24, 12, workspace=ws)
     solve(third)
     assert third._solver is not second._solver and third._factor_data is not arrays[0]
     second.set_matrices(*_kkt_blocks(rng, 60, 24, 12, 0.08, None))  # another pattern
-    fourth = KKTSystem(60, 24, 12)
+    fourth = KKTSystem(60, 24, 12, workspace=ws)
     np.testing.assert_array_equal(solve(fourth)[1][0], expected[1][0])
     assert fourth._solver is arrays[1]  # released by the change of pattern
 
@@ -256,7 +264,7 @@ def _laplacian_3d(m):
     ],
 )
 def test_auto_ordering_keeps_the_analysis_with_fewer_flops(blocks, expected):
-    """``"auto"`` is AMD's memoized analysis, or METIS's when AMD's factorization reaches
+    """``"auto"`` is AMD's kept analysis, or METIS's when AMD's factorization reaches
     ``AUTO_MIN_FLOPS`` and METIS predicts fewer multiply-adds: AMD on a thin time × body grid
     and on a small 3-D grid, METIS on a larger 3-D grid."""
     from mbplan.solvers.kkt.pattern import AUTO_MIN_FLOPS
@@ -264,7 +272,8 @@ def test_auto_ordering_keeps_the_analysis_with_fewer_flops(blocks, expected):
     hess, *jacs = blocks
     n = hess.shape[0]
     me, mi = (j.shape[0] for j in jacs) if jacs else (0, 0)
-    systems = {o: KKTSystem(n, me, mi, ordering=o) for o in ("amd", "metis", "auto")}
+    ws = Workspace()
+    systems = {o: KKTSystem(n, me, mi, ordering=o, workspace=ws) for o in ("amd", "metis", "auto")}
     for kkt in systems.values():
         kkt.set_matrices(hess, *(jacs or (None, None)))
     assert systems["auto"].analysis is systems[expected].analysis

@@ -332,11 +332,12 @@ def test_warm_start_from_pinocchio_is_dynamically_consistent(name: str) -> None:
 
 
 def test_warm_starts_share_one_dynamics_problem_across_threads() -> None:
-    """The dynamics rows' problem is built once per (model, N, Δt) and evaluated under its lock:
-    warm starts from 4 threads at once equal the sequential ones bit for bit."""
+    """The dynamics rows' problem is built once per (model, N, Δt) of a workspace and evaluated
+    under its lock: warm starts from 4 threads at once equal the sequential ones bit for bit."""
     from concurrent.futures import ThreadPoolExecutor
 
     import mbplan.simulation.warm_start as ws
+    from mbplan.workspace import Workspace
 
     mm, dt, N = _mm("iiwa"), 0.01, 10
     paths = [_reference("iiwa", dt, N)[0] + 0.01 * i for i in range(8)]
@@ -347,12 +348,14 @@ def test_warm_starts_share_one_dynamics_problem_across_threads() -> None:
         built.append(args)
         original(self, *args)
 
-    ws._DYNAMICS.clear()
+    shared = Workspace()
     try:
         ws._DynamicsRows.__init__ = counted
-        sequential = [maximal_warm_start(mm, q, dt, N=N) for q in paths]
+        sequential = [maximal_warm_start(mm, q, dt, N=N, workspace=shared) for q in paths]
         with ThreadPoolExecutor(4) as pool:
-            parallel = list(pool.map(lambda q: maximal_warm_start(mm, q, dt, N=N), paths))
+            parallel = list(
+                pool.map(lambda q: maximal_warm_start(mm, q, dt, N=N, workspace=shared), paths)
+            )
     finally:
         ws._DynamicsRows.__init__ = original
     assert len(built) == 1
@@ -372,16 +375,17 @@ def test_warm_start_block_solves_agree_and_report_singular_blocks(
     import dataclasses
 
     import mbplan.simulation.warm_start as ws
+    from mbplan.workspace import Workspace
 
     mm, dt, N = _mm("iiwa"), 0.01, 10
     q = _reference("iiwa", dt, N)[0]
     reference = maximal_warm_start(mm, q, dt, N=N)
     monkeypatch.setattr(ws, "DENSE_BLOCK_MAX", dense_max)
-    ws._DYNAMICS.clear()
     point = maximal_warm_start(mm, q, dt, N=N)
     for block in ("lam", "tau"):
         np.testing.assert_allclose(point[block], reference[block], rtol=1e-9, atol=1e-9)
-    dynamics = ws._dynamics_rows(mm, N, dt, True)
+    shared = Workspace()
+    dynamics = ws._dynamics_rows(mm, N, dt, True, shared)
     evaluate = dynamics.problem.evaluate
 
     def without_torques(*args, **kwargs):  # the τ columns of every block zero: singular
@@ -393,8 +397,7 @@ def test_warm_start_block_solves_agree_and_report_singular_blocks(
 
     monkeypatch.setattr(dynamics.problem, "evaluate", without_torques)
     with pytest.raises(MbplanError, match=r"iiwa.*cannot balance"):
-        maximal_warm_start(mm, q, dt, N=N)
-    ws._DYNAMICS.clear()
+        maximal_warm_start(mm, q, dt, N=N, workspace=shared)
 
 
 def test_warm_start_without_extra_configuration_stops_at_the_last_knot() -> None:

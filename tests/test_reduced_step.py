@@ -10,14 +10,13 @@ from reference_problems import hs071
 from mbplan.errors import InputError
 from mbplan.formulations import maximal_layout
 from mbplan.formulations.maximal_layout import JointEliminationPlans, joint_elimination_plan
-from mbplan.memo import RecentMemo
 from mbplan.solvers import RIPMOptions, solve_ripm
 from mbplan.solvers.kkt.elimination import EliminationPlan
-from mbplan.solvers.kkt.reduced import reduction as reduction_module
 from mbplan.solvers.kkt.reduced.system import ReducedKKTSystem, kkt_system
 from mbplan.solvers.kkt.system import Inertia, KKTSystem
 from mbplan.tasks.paper import iiwa_obstacle, iiwa_obstacle_starts
 from mbplan.tasks.speed import chain_task, maximal_ripm_problem
+from mbplan.workspace import Workspace
 
 
 def _kkt(problem, x0, seed):
@@ -244,16 +243,18 @@ def test_joint_layout_rejects_joint_rows_that_are_empty_or_span_knots():
         maximal_layout.maximal_layout(problem, spanning.tocsr())
 
 
-def test_elimination_plans_are_memoized_per_layout():
-    """Two problems of one family share the layout and the plan; other options, another plan;
-    another pattern, another layout."""
+def test_elimination_plans_are_kept_in_a_workspace_per_layout():
+    """Two problems of one family and workspace share the layout and the plan; other options,
+    another plan; another pattern, another layout; no workspace, a problem's own."""
+    ws = Workspace()
     plans, layouts = [], []
     for _ in range(2):
         problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
         jac = problem.evaluate(x0, 1.0).eq_jacobian
-        plans.append(joint_elimination_plan(problem, jac))
-        layouts.append(maximal_layout.maximal_layout(problem, jac))
+        plans.append(joint_elimination_plan(problem, jac, workspace=ws))
+        layouts.append(maximal_layout.maximal_layout(problem, jac, ws))
     assert plans[0] is plans[1] and layouts[0] is layouts[1]
+    assert joint_elimination_plan(problem, jac) is not plans[0]
     fresh = maximal_layout._layout(problem, jac)
     assert fresh.key() == layouts[0].key()
     coo = jac.tocoo()
@@ -262,8 +263,8 @@ def test_elimination_plans_are_memoized_per_layout():
         (np.r_[coo.data, 1.0], (np.r_[coo.row, 0], np.r_[coo.col, col])), shape=jac.shape
     )
     assert extra.nnz == jac.nnz + 1  # another pattern: built anew
-    assert maximal_layout.maximal_layout(problem, extra) is not layouts[0]
-    other = joint_elimination_plan(problem, jac, segment=2)
+    assert maximal_layout.maximal_layout(problem, extra, ws) is not layouts[0]
+    other = joint_elimination_plan(problem, jac, segment=2, workspace=ws)
     assert other is not plans[0] and other.n_groups < plans[0].n_groups
 
 
@@ -378,11 +379,11 @@ def test_breakdown_and_invalid_plan_fall_back_to_the_full_factorization(systems)
         strict.set_matrices(ev.hessian_lower, ev.eq_jacobian, ev.ineq_jacobian)
 
 
-def test_rows_and_columns_picked_on_another_problem_are_picked_again(monkeypatch):
-    """The replaced rows and dependent columns are picked on the values of the pattern's first
-    matrix and memoized per pattern: a later problem of the same pattern whose values break
-    that choice down gets one picked on its own values (memoized first), not the full
-    factorization for its whole solve (the arm sweep's z1 after the ur arms)."""
+def test_each_system_picks_rows_and_columns_on_its_own_first_matrix():
+    """The replaced rows and dependent columns are picked on the values of a system's first
+    matrix of the pattern, never on another problem's (even with a shared workspace), and
+    picked again on a later matrix of the system that breaks them down (not the full
+    factorization for the rest of its solve: the arm sweep's z1)."""
     problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
     problem.elimination_plan = JointEliminationPlans(problem, forces=True)
     rng = np.random.default_rng(4)
@@ -399,24 +400,34 @@ def test_rows_and_columns_picked_on_another_problem_are_picked_again(monkeypatch
         jac.data[jac.indices == col] *= s
         return jac
 
-    monkeypatch.setattr(reduction_module, "_REDUCTIONS", RecentMemo(8))
     diag = _diag(problem, 1e-4, 0.0, -rng.uniform(0.5, 2.0, problem.n_ineq) / z)
     b = rng.normal(size=probe.dim)
-    choices = []
-    for s in (1e6, 0.0, 0.0, 1e6):  # the first picks the column, the second zeroes it
-        red = ReducedKKTSystem(problem.n, problem.n_eq, problem.n_ineq, lambda _: plan)
+    ws = Workspace()
+
+    def system() -> ReducedKKTSystem:
+        n, me, mi = problem.n, problem.n_eq, problem.n_ineq
+        return ReducedKKTSystem(n, me, mi, lambda _: plan, workspace=ws)
+
+    def choice(red: ReducedKKTSystem, s: float) -> tuple:
+        """The choice ``red`` factorizes and solves ``A_E`` scaled by ``s`` with."""
         full = KKTSystem(problem.n, problem.n_eq, problem.n_ineq)
+        reduced = red.n_reduced
         for kkt in (red, full):
             kkt.set_matrices(ev.hessian_lower, scaled(s), ev.ineq_jacobian)
         inertia, full_inertia = red.factorize(diag, 1e-9), full.factorize(diag, 1e-9)
         eig = np.linalg.eigvalsh(full.matrix().toarray())
-        assert red.n_reduced == 1
+        assert red.n_reduced == reduced + 1
         assert inertia == full_inertia == Inertia(int(np.sum(eig > 0)), int(np.sum(eig < 0)), 0)
         x_full, (x_red, ratio) = full.solve(b)[0], red.solve(b)
         assert red.n_fallbacks == 0 and ratio <= 1e-10
         assert np.abs(x_red - x_full).max() <= 1e-6 * np.abs(x_full).max()
-        choices.append(red.reduction.dep_key)
-        if len(choices) == 1:
-            assert col in red.reduction.dep  # picked on the scaled column
-    assert choices[1] != choices[0]  # broke down on the zeroed column: picked again
-    assert choices[2] == choices[3] == choices[1]  # the new choice is memoized first
+        return red.reduction.dep_key
+
+    red = system()
+    first = choice(red, 1e6)
+    assert col in red.reduction.dep  # picked on the scaled column
+    again = choice(red, 0.0)  # broke down on the zeroed column: picked again on these values
+    assert again != first
+    assert choice(system(), 0.0) == again  # a new system picks on its own first values
+    assert choice(system(), 1e6) == first  # whatever the workspace's systems picked before
+    assert ws.count("reduction") == 2

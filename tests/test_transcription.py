@@ -15,6 +15,7 @@ from mbplan.planning.initial_guess import initial_path
 from mbplan.tasks import paper
 from mbplan.tasks.drone import cluttered_task
 from mbplan.transcription import Block, Term, TrajectoryProblem, TrajectoryVariables
+from mbplan.workspace import Workspace
 
 
 def _drone_problem(with_input_limits: bool):
@@ -178,22 +179,26 @@ def test_packed_point_feeds_each_term_as_its_own_evaluation_would():
 
 
 def test_problems_of_one_structure_share_patterns_not_parameters_or_buffers():
-    """Two problems whose terms differ only in parameters share the memoized index maps and
-    sparsity patterns, yet each evaluates with its own parameters (as a fresh build would) and
-    its own buffers; another binding gives another structure."""
+    """Two problems of one workspace whose terms differ only in parameters share the index maps
+    and sparsity patterns, yet each evaluates with its own parameters (as a fresh build would)
+    and its own buffers; another binding gives another structure, no workspace a problem's
+    own."""
     f = _input_cost()
+    ws = Workspace()
     variables = TrajectoryVariables([Block("u", R(4), 3, fixed=(0,))])
 
     def problem(u_ref: float, sites=(1, 2)) -> TrajectoryProblem:
         term = Term(
             "c", "cost", f, {"u": ("u", list(sites))}, {"u_ref": np.full(4, u_ref), "w": 2.0}
         )
-        return TrajectoryProblem(TrajectoryVariables(list(variables.blocks.values())), [term])
+        return TrajectoryProblem(TrajectoryVariables(list(variables.blocks.values())), [term], ws)
 
     a, b = problem(0.0), problem(1.0)
     assert a._structure is b._structure and a._layouts["cost"][0].index is (
         b._layouts["cost"][0].index
     )
+    own = TrajectoryProblem(variables, a.terms)
+    assert own._structure is not a._structure
     u = {"u": np.arange(12.0).reshape(3, 4)}
     ev_a, ev_b = a.evaluate(u), b.evaluate(u)
     assert ev_a.objective == pytest.approx(np.sum(u["u"][1:] ** 2))
@@ -211,7 +216,7 @@ def test_problems_of_one_structure_share_patterns_not_parameters_or_buffers():
     listed = TrajectoryVariables([Block("u", R(4), 3, fixed=[0])])
     assert listed.blocks["u"] == variables.blocks["u"]
     term = Term("c", "cost", f2, {"u": ("u", [1, 2])}, {"u_ref": np.zeros(4), "w": 2.0})
-    same = TrajectoryProblem(listed, [term])
+    same = TrajectoryProblem(listed, [term], ws)
     assert same._layouts["cost"][0].index is a._layouts["cost"][0].index
     assert same.evaluate(u).objective == ev_a.objective
 

@@ -14,6 +14,7 @@ import numpy as np
 from mbplan.baselines.ipopt import IpoptStats, base_options
 
 
+# process-wide cache, result-neutral: a CasADi solver of its arguments alone
 @functools.lru_cache(maxsize=4)
 def _sl_trace_solver(n: int, k: int, c: float, max_iter: int, tol: float) -> cs.Function:
     X = cs.SX.sym("G", n * n * k)

@@ -78,6 +78,7 @@ def compare_forward_dynamics(xout: np.ndarray, reference: np.ndarray) -> None:
         )
 
 
+# process-wide cache, result-neutral: a check of the installed libraries, returns nothing
 @cache
 def check_forward_dynamics(seed: int = 0) -> None:
     """Compare Crocoddyl's free forward dynamics with ``pinocchio.aba`` at one random state of

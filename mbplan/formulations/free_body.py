@@ -30,6 +30,7 @@ from mbplan.residuals.base import Residual
 from mbplan.transcription.terms import Term
 from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import Block, Point, TrajectoryVariables
+from mbplan.workspace import Workspace
 
 STATE = (("R", SO3), ("p", R(3)), ("F", SO3), ("v", R(3)))
 
@@ -40,6 +41,7 @@ def parameter_shapes(residual: Residual, scene: Scene) -> list[tuple[str, Any]]:
     return [(k, s[0] if len(s) == 1 else s) for k, s in shapes]
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _step_function(actuation: bytes, nu: int, jit: bool) -> RiemannianFunction:
     """The LGVI step with the actuation map ``B`` a constant (its zeros are structural: the
@@ -55,6 +57,7 @@ def _step_function(actuation: bytes, nu: int, jit: bool) -> RiemannianFunction:
     return RiemannianFunction(name, variables, step, params, jit=jit)
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _item_function(kind: type, shapes: tuple, cost: bool, nu: int, jit: bool) -> RiemannianFunction:
     """The residual ``kind`` (or its cost ``½ w ‖r‖²``) on the state or the input."""
@@ -71,6 +74,7 @@ def _item_function(kind: type, shapes: tuple, cost: bool, nu: int, jit: bool) ->
     return RiemannianFunction(name, variables, fn, params, jit=jit)
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _cost_function(slots: tuple, space: str, nu: int, jit: bool) -> RiemannianFunction:
     """``Σ_j ½ w_j ‖r_j‖²`` of the residual kinds ``slots = ((kind, shapes), …)`` (parameters
@@ -94,7 +98,7 @@ def _cost_function(slots: tuple, space: str, nu: int, jit: bool) -> RiemannianFu
 class FreeBodyNLP:
     """The TrajectoryProblem of a free-body ``ocp`` (module docstring)."""
 
-    def __init__(self, ocp: OCP, jit: bool):
+    def __init__(self, ocp: OCP, jit: bool, workspace: Workspace | None = None):
         self.ocp, self.jit = ocp, jit
         body, N = ocp.robot, ocp.N
         variables = TrajectoryVariables(
@@ -125,7 +129,7 @@ class FreeBodyNLP:
             except InputError as err:
                 names = [i.name for i in items]
                 raise InputError(f"maximal formulation, {role} {names}: {err}") from None
-        self.problem = TrajectoryProblem(variables, terms)
+        self.problem = TrajectoryProblem(variables, terms, workspace)
 
     def _per_site(self, shapes: tuple, items: list[Item]) -> tuple[np.ndarray, dict]:
         """The knots of ``items`` concatenated and their parameters and weights per site."""
@@ -248,12 +252,14 @@ def input_bounds(ocp: OCP) -> tuple[np.ndarray, np.ndarray]:
     return lower, upper
 
 
-def build(ocp: OCP, jit: bool) -> tuple[FreeBodyNLP, float]:
-    """:class:`FreeBodyNLP` of ``ocp`` and the build time (s)."""
+def build(ocp: OCP, jit: bool, workspace: Workspace | None = None) -> tuple[FreeBodyNLP, float]:
+    """:class:`FreeBodyNLP` of ``ocp`` (its structures kept in ``workspace``) and the build
+    time (s)."""
     t0 = time.perf_counter()
-    return FreeBodyNLP(ocp, jit), time.perf_counter() - t0
+    return FreeBodyNLP(ocp, jit, workspace), time.perf_counter() - t0
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _numeric(kind: type, shapes: tuple, nu: int) -> cs.Function:
     x = {"R": cs.SX.sym("R", 3, 3), "p": cs.SX.sym("p", 3), "F": cs.SX.sym("F", 3, 3)}

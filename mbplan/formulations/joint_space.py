@@ -57,6 +57,7 @@ def symbolic_placements(model: pin.Model, q: cs.SX) -> list[tuple[cs.SX, cs.SX]]
     return out
 
 
+# process-wide cache, result-neutral: symbols of the (unmodified) robot's kinematics alone
 @lru_cache(maxsize=16)
 def _state_symbols(robot: Robot) -> tuple[cs.SX, list[tuple[cs.SX, cs.SX]]]:
     """A knot state ``x = (q, v)`` and the joints' :func:`symbolic_placements` at its ``q``, built
@@ -74,6 +75,7 @@ def symbolic_rows(robot: Robot, scene: Scene, residual: Residual) -> SymbolicRow
     return form
 
 
+# process-wide cache, result-neutral: CasADi function of the robot and residual structure
 @lru_cache(maxsize=256)
 def _parametric(robot: Robot, form: SymbolicRows, space: str, name: str) -> cs.Function:
     """``r(x, θ)`` at one knot of the rows ``form``: built once per robot and rows of one
@@ -97,6 +99,7 @@ def _parametric_of(
     return fn, form.parameters
 
 
+# process-wide cache, result-neutral: CasADi function of the robot, scene and residual
 @lru_cache(maxsize=256)
 def knot_function(robot: Robot, scene: Scene, residual: Residual) -> cs.Function:
     """``r(x)`` at one knot (``x = (q, v)`` or ``τ``), an SX function (cached per residual)."""
@@ -127,6 +130,7 @@ def evaluate(
     return np.array(_mapped(fn, len(x))(x.T, form.parameters)).T.reshape(len(x), -1)
 
 
+# process-wide cache, result-neutral: a CasADi map of the function and knot count alone
 @lru_cache(maxsize=256)
 def _mapped(fn: cs.Function, knots: int) -> cs.Function:
     """``fn`` over ``knots`` knots (its parameters shared)."""

@@ -25,30 +25,34 @@ from mbplan.transcription.multibody import multibody_layout
 from mbplan.transcription.terms import Term
 from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import Point, trajectory_variables
+from mbplan.workspace import Workspace
 
 
+# process-wide cache, result-neutral: maximal-coordinate data of the (unmodified) model alone
 @lru_cache(maxsize=16)
 def _maximal(model: pin.Model) -> MaximalModel:
     return maximal_model(model)
 
 
 class MaximalNLP:
-    """The TrajectoryProblem of ``ocp`` on SO(3)×R³ bodies (module docstring)."""
+    """The TrajectoryProblem of ``ocp`` on SO(3)×R³ bodies (module docstring); ``workspace``:
+    where its structures, elimination plans and warm start's dynamics rows are kept."""
 
-    def __init__(self, ocp: OCP, jit: bool):
-        self.ocp, self.jit = ocp, jit
+    def __init__(self, ocp: OCP, jit: bool, workspace: Workspace | None = None):
+        self.ocp, self.jit, self.workspace = ocp, jit, workspace
         self.mm = mm = _maximal(ocp.robot.model)
         self.body_of_joint = {int(j): b for b, j in enumerate(mm.pin_joint)}
-        layout = multibody_layout(mm, ocp.N, ocp.dt, jit=jit)
+        layout = multibody_layout(mm, ocp.N, ocp.dt, jit=jit, workspace=workspace)
         terms = list(layout.terms)
         for item in ocp.items:
             try:
                 terms += item.residual.maximal_terms(self, item)
             except InputError as err:
                 raise InputError(f"maximal formulation, {item.role} {item.name!r}: {err}") from None
-        self.problem = TrajectoryProblem(trajectory_variables(layout.blocks), terms)
+        variables = trajectory_variables(layout.blocks, workspace)
+        self.problem = TrajectoryProblem(variables, terms, workspace)
         # the RIPM's kkt_method="reduced" eliminates the joints through this plan
-        self.problem.elimination_plan = JointEliminationPlans(self.problem)
+        self.problem.elimination_plan = JointEliminationPlans(self.problem, workspace=workspace)
 
     # -- item translations ---------------------------------------------------------------------
     def bodies(self, item: Item) -> np.ndarray:
@@ -81,7 +85,7 @@ class MaximalNLP:
     # -- points and results --------------------------------------------------------------------
     def initial_point(self, q: np.ndarray) -> Point:
         """The LGVI point of a joint path ``q (N+1, nq)`` (inverse dynamics for λ, τ)."""
-        point = maximal_warm_start(self.mm, q, self.ocp.dt, jit=self.jit)
+        point = maximal_warm_start(self.mm, q, self.ocp.dt, jit=self.jit, workspace=self.workspace)
         return self.problem.check_point(point)
 
     def trajectory(self, x: Point) -> dict:
@@ -113,7 +117,8 @@ class MaximalNLP:
         return {"q": q[: N + 1], "v": v, "tau": tau, "tau_knots": tau_knots}
 
 
-def build(ocp: OCP, jit: bool) -> tuple[MaximalNLP, float]:
-    """:class:`MaximalNLP` of ``ocp`` and the build time (s)."""
+def build(ocp: OCP, jit: bool, workspace: Workspace | None = None) -> tuple[MaximalNLP, float]:
+    """:class:`MaximalNLP` of ``ocp`` (its structures kept in ``workspace``) and the build time
+    (s)."""
     t0 = time.perf_counter()
-    return MaximalNLP(ocp, jit), time.perf_counter() - t0
+    return MaximalNLP(ocp, jit, workspace), time.perf_counter() - t0

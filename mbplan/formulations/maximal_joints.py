@@ -163,6 +163,7 @@ def _variables(jtype: str, kind: str) -> list:
     return half + prev[: len(prev) // 2] + own[len(own) // 2 :] + prev[len(prev) // 2 :]
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def joint_function(jtype: str, kind: str, jit: bool, world: bool) -> RiemannianFunction:
     """The residual ``kind`` of a ``jtype`` joint to a body parent or to the world."""

@@ -10,8 +10,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from mbplan.errors import InputError
-from mbplan.memo import RecentMemo
 from mbplan.solvers.kkt.elimination import EliminationPlan
+from mbplan.workspace import Workspace, shared
 
 
 @dataclass(frozen=True)
@@ -70,30 +70,33 @@ keeps its maximal coordinates, so that the reduction's blocks stay dense over at
 0.8×)."""
 
 
-_LAYOUTS: RecentMemo[MaximalLayout] = RecentMemo(8)
-
-
-def maximal_layout(problem, eq_jacobian: sp.spmatrix) -> MaximalLayout:
+def maximal_layout(
+    problem, eq_jacobian: sp.spmatrix, workspace: Workspace | None = None
+) -> MaximalLayout:
     """The :class:`MaximalLayout` of the RIPM problem of :mod:`mbplan.formulations.maximal`
     (revolute and prismatic joints with a constraint row group on every body) from the
-    pattern of its equality Jacobian; memoized per process by everything it reads (the blocks'
+    pattern of its equality Jacobian; kept in ``workspace`` by everything it reads (the blocks'
     tangent coordinates, the equality terms' rows, the pattern): every case of a task family
     has the same."""
     jac = sp.csr_matrix(eq_jacobian)
     v = problem.variables
-    key = (
-        problem.n,
-        tuple((name, v.tangent_index(name).tobytes()) for name in v.blocks),
-        tuple((name, rows.shape, rows.tobytes()) for name, rows in problem.term_rows("eq").items()),
-        jac.shape,
-        jac.indptr.tobytes(),
-        jac.indices.tobytes(),
-    )
-    return _LAYOUTS.get_or_build(key, lambda: _layout(problem, jac))
+
+    def key() -> tuple:
+        rows = problem.term_rows("eq").items()
+        return (
+            problem.n,
+            tuple((name, v.tangent_index(name).tobytes()) for name in v.blocks),
+            tuple((name, r.shape, r.tobytes()) for name, r in rows),
+            jac.shape,
+            jac.indptr.tobytes(),
+            jac.indices.tobytes(),
+        )
+
+    return shared(workspace, "maximal_layout", key, lambda: _layout(problem, jac))
 
 
 def _layout(problem, jac: sp.csr_matrix) -> MaximalLayout:
-    """:func:`maximal_layout`, not memoized."""
+    """:func:`maximal_layout`, built."""
     v = problem.variables
     nb = v.blocks["R"].count
     knots = v.blocks["R"].knots
@@ -148,7 +151,11 @@ def _layout(problem, jac: sp.csr_matrix) -> MaximalLayout:
 
 
 def joint_elimination_plan(
-    problem, eq_jacobian: sp.spmatrix, forces: bool | None = None, segment: int | None = None
+    problem,
+    eq_jacobian: sp.spmatrix,
+    forces: bool | None = None,
+    segment: int | None = None,
+    workspace: Workspace | None = None,
 ) -> EliminationPlan:
     """The joints eliminated knot by knot (:mod:`mbplan.benchmarks.reduced_kkt`, stage 1): for
     steps ``k = 1…N-1`` five of each body's kinematics rows become ``M g - h`` (``h`` its joint
@@ -166,9 +173,9 @@ def joint_elimination_plan(
     and dynamics rows), so that an eliminated state depends on the free coordinates of at most
     ``segment`` bodies of its path (and on the state of the cut body above them), an
     eliminated wrench on those of its subtree down to the next cut bodies; a tree at most
-    ``segment`` deep is one segment. Memoized per process for the last few layouts (every
+    ``segment`` deep is one segment. Kept in ``workspace`` by its layout and options (every
     case of a task family has the same)."""
-    lay = maximal_layout(problem, eq_jacobian)
+    lay = maximal_layout(problem, eq_jacobian, workspace)
     actuated = bool(np.all(lay.tau_cols[1:] >= 0))
     if forces is None:
         forces = actuated and lay.depth <= WRENCH_MAX_DEPTH
@@ -177,15 +184,16 @@ def joint_elimination_plan(
     segment = SEGMENT_DEPTH if segment is None else segment
     if segment < 1:
         raise InputError(f"joint_elimination_plan: segment must be at least 1, got {segment}")
-    key = (lay.key(), bool(forces), int(segment))
-    return _PLANS.get_or_build(key, lambda: _plan_of_layout(lay, forces, segment))
-
-
-_PLANS: RecentMemo[EliminationPlan] = RecentMemo(8)
+    return shared(
+        workspace,
+        "elimination_plan",
+        lambda: (lay.key(), bool(forces), int(segment)),
+        lambda: _plan_of_layout(lay, forces, segment),
+    )
 
 
 def _plan_of_layout(lay: MaximalLayout, forces: bool, segment: int) -> EliminationPlan:
-    """:func:`joint_elimination_plan` of a layout, its options resolved (not memoized)."""
+    """:func:`joint_elimination_plan` of a layout, its options resolved (built)."""
     N, nb, parent = lay.N, lay.nb, lay.parent
     depths = lay.depths
     cut = (depths > 1) & ((depths - 1) % segment == 0)
@@ -236,10 +244,18 @@ class JointEliminationPlans:
     """``problem.elimination_plan`` of a maximal-coordinate problem: the
     :func:`joint_elimination_plan` of the equality Jacobian's pattern, kept for the last
     pattern (every solve of the problem asks for it); ``forces``: with the joint-wrench blocks,
-    ``segment``: bodies per segment (``None``: :func:`joint_elimination_plan`'s rules)."""
+    ``segment``: bodies per segment (``None``: :func:`joint_elimination_plan`'s rules);
+    ``workspace``: where layouts and plans are kept (shared by the problems of a family)."""
 
-    def __init__(self, problem, forces: bool | None = None, segment: int | None = None) -> None:
+    def __init__(
+        self,
+        problem,
+        forces: bool | None = None,
+        segment: int | None = None,
+        workspace: Workspace | None = None,
+    ) -> None:
         self.problem, self.forces, self.segment = problem, forces, segment
+        self.workspace = workspace
         self._key: tuple[bytes, bytes] | None = None
         self._plan: EliminationPlan | None = None
 
@@ -248,7 +264,9 @@ class JointEliminationPlans:
         key = (jac.indptr.tobytes(), jac.indices.tobytes())
         if key != self._key or self._plan is None:
             self._plan, self._key = (
-                joint_elimination_plan(self.problem, jac, self.forces, self.segment),
+                joint_elimination_plan(
+                    self.problem, jac, self.forces, self.segment, self.workspace
+                ),
                 key,
             )
         return self._plan

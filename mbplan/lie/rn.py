@@ -114,6 +114,7 @@ def R(n: int) -> RnGroup:
     return _rn(n)
 
 
+# process-wide cache, result-neutral: the group R^n of the dimension alone
 @cache
 def _rn(n: int) -> RnGroup:
     return RnGroup(n)

@@ -191,6 +191,7 @@ def robot_from_source(source: Mapping[str, Any]) -> Robot | FreeBody:
     )
 
 
+# process-wide cache, result-neutral: robot loading by name: the model of the file alone
 @cache
 def _cached(spec: str, package_dirs: tuple[str, ...], lock: tuple | None, damping: bool) -> Robot:
     """One :class:`Robot` per (path or name, package_dirs, lock, damping): shared, do not

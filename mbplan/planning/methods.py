@@ -28,6 +28,7 @@ from mbplan.ocp.problem import OCP
 from mbplan.results import PlanResult
 from mbplan.solvers import RIPMStatus
 from mbplan.solvers.dispatch import options_for, solve_with
+from mbplan.workspace import Workspace
 
 LGVI_RIPM_OPTIONS: dict[str, Any] = {"constr_mult_init_max": 0.0}
 """The RIPM's defaults on the LGVI (maximal and free-body formulations), under
@@ -43,12 +44,14 @@ _ITERATION_LINE = re.compile(r"^\s*\d+(r?)\s+[-+]?\d\.\d+e[-+]\d+\s")
 class Settings:
     """What every adapter gets: tolerance, iteration limit, method-specific ``options``
     (``RIPMOptions`` or ``MLGIPMOptions`` fields for the RIPM or MLG-IPM, IPOPT option names
-    for IPOPT) and ``jit``."""
+    for IPOPT), ``jit`` and the caller's ``workspace`` (the maximal formulation's and the
+    RIPM's structures; ``None``: the solve's own)."""
 
     tol: float = 1e-6
     max_iter: int = 500
     options: dict[str, Any] = field(default_factory=dict)
     jit: bool | None = None
+    workspace: Workspace | None = None
 
 
 def solve_ripm_maximal(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
@@ -66,13 +69,15 @@ def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Setting
     """``solver`` (:mod:`mbplan.solvers.dispatch`) on the maximal-coordinate LGVI of ``ocp``."""
     jit = jit_available() if settings.jit is None else settings.jit
     formulation = free_body if isinstance(ocp.robot, FreeBody) else maximal
-    nlp, build = formulation.build(ocp, jit)
+    nlp, build = formulation.build(ocp, jit, settings.workspace)
     t0 = time.perf_counter()
     x0 = nlp.initial_point(q_guess)
     build += time.perf_counter() - t0
     defaults = LGVI_RIPM_OPTIONS if solver == "ripm" else {}
     options = options_for(solver, tol=settings.tol, max_iter=settings.max_iter, **defaults)
-    result = solve_with(solver, nlp.problem, x0, options.replace(**settings.options))
+    result = solve_with(
+        solver, nlp.problem, x0, options.replace(**settings.options), settings.workspace
+    )
     traj = nlp.trajectory(result.x)
     h = result.history.arrays()
     return PlanResult(

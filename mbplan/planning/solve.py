@@ -25,6 +25,7 @@ from mbplan.planning.initial_guess import initial_path
 from mbplan.resources import check_plan_memory
 from mbplan.results import PlanResult
 from mbplan.validation import as_array, as_int, as_real
+from mbplan.workspace import Workspace
 
 
 @dataclass(frozen=True)
@@ -68,15 +69,20 @@ def plan(
     max_iter: int = 500,
     options: Mapping[str, Any] | None = None,
     jit: bool | None = None,
+    workspace: Workspace | None = None,
 ) -> PlanResult:
     """Plan ``ocp`` with ``method`` (:data:`METHODS`) from ``warm_start`` (``"linear"``,
     ``"via"`` or a joint path ``(N+1, nq)``, :mod:`mbplan.planning.initial_guess`).
+    ``workspace``: where the maximal formulation and the RIPM keep their structures, patterns,
+    analyses and reductions; pass one to the plans of one problem family to build them once
+    (``None``: this plan's own; the result is the same).
 
     Every input is checked and the start checked against the constraints before any solve.
     ``success`` means: the solver converged, the trajectory is finite and every hard constraint
     holds at the planned knots (``result.violations``); soft goals report ``goal_errors``.
     """
     settings = check_plan_request(ocp, method, tol, max_iter, options, jit)
+    settings = dataclasses.replace(settings, workspace=workspace)
     formulation = METHODS[method].formulation
     check_start(ocp)
     if formulation == "maximal":

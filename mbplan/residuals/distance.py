@@ -27,6 +27,7 @@ from mbplan.transcription.terms import Term
 from mbplan.validation import as_real
 
 
+# process-wide cache, result-neutral: geometry pairs of the robot, scene and object names
 @lru_cache(maxsize=64)
 def distance_pairs(robot: Any, scene: Any, objects: tuple[str, ...]) -> CollisionPairs:
     """The (moving collision geometry, scene object) pairs of a distance residual."""

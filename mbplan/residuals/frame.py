@@ -29,6 +29,7 @@ def frame_error(R, p, p_goal, R_goal=None):
     return cs.vertcat(p - p_goal, SO3.log(cs.mtimes(R_goal.T, R)))
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _frame_function(kind: str, cost: bool, jit: bool) -> RiemannianFunction:
     """Frame translation or placement error of the frame at ``(R_b R_jf, p_b + R_b c)`` on body

@@ -35,6 +35,7 @@ _TORQUE = {
 }
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _torque_function(kind: str, jit: bool) -> RiemannianFunction:
     fn, params = _TORQUE[kind]

@@ -22,11 +22,11 @@ import scipy.sparse.linalg as spla
 
 from mbplan.engine.jit import jit_available
 from mbplan.errors import InputError, MbplanError
-from mbplan.memo import RecentMemo
 from mbplan.multibody import MaximalModel, body_poses
 from mbplan.transcription.multibody import LAMBDA_DIM, multibody_layout
 from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import Point, TrajectoryVariables
+from mbplan.workspace import Workspace, shared
 
 
 def maximal_warm_start(
@@ -36,6 +36,7 @@ def maximal_warm_start(
     *,
     N: int | None = None,
     jit: bool | None = None,
+    workspace: Workspace | None = None,
 ) -> Point:
     """A point of ``multibody_layout(mm, N, dt)`` from joint configurations at the knots.
 
@@ -44,7 +45,8 @@ def maximal_warm_start(
     the motion stops after knot ``N`` (``F_N = I``, ``v_N = 0``). ``λ_k`` and ``τ_k``
     (``k = 1 … N``) solve the dynamics rows of step ``k-1`` (one block per knot);
     knot 0, which no equation uses, repeats knot 1. Raises :class:`MbplanError` if the joint
-    forces cannot balance the dynamics (singular system).
+    forces cannot balance the dynamics (singular system). ``workspace``: where the dynamics
+    rows' problem is kept (shared by the warm starts of a problem family).
     """
     q = np.asarray(q_traj, dtype=float)
     N = len(q) - 1 if N is None else N
@@ -63,7 +65,7 @@ def maximal_warm_start(
     F = np.swapaxes(R[:-1], -1, -2) @ R[1:]
     v = (p[1:] - p[:-1]) / dt
     nb = mm.nb
-    dynamics = _dynamics_rows(mm, N, float(dt), bool(jit))
+    dynamics = _dynamics_rows(mm, N, float(dt), bool(jit), workspace)
     blocks = dynamics.variables.blocks
     point = {
         "R": R[: N + 1],
@@ -92,11 +94,13 @@ class _DynamicsRows:
     ``λ_k, τ_k`` (knots 1 … N): one ``6nb × 6nb`` block per knot, gathered from the Jacobian's
     fixed pattern. Shared by every warm start of its key (evaluated under a lock)."""
 
-    def __init__(self, mm: MaximalModel, N: int, dt: float, jit: bool) -> None:
-        layout = multibody_layout(mm, N, dt, jit=jit)
+    def __init__(
+        self, mm: MaximalModel, N: int, dt: float, jit: bool, workspace: Workspace | None = None
+    ) -> None:
+        layout = multibody_layout(mm, N, dt, jit=jit, workspace=workspace)
         self.name = mm.name
         self.variables = TrajectoryVariables(layout.blocks)
-        self.problem = TrajectoryProblem(self.variables, layout.terms)
+        self.problem = TrajectoryProblem(self.variables, layout.terms, workspace)
         self.lock = threading.Lock()
         nb = mm.nb
         self.rows = np.arange(layout.n_dynamics_rows - 6 * N * nb, layout.n_dynamics_rows)
@@ -146,8 +150,12 @@ class _DynamicsRows:
         return src, row, col, (row // d) * d * d + (row % d) * d + col % d
 
 
-_DYNAMICS: RecentMemo[_DynamicsRows] = RecentMemo(4)
-
-
-def _dynamics_rows(mm: MaximalModel, N: int, dt: float, jit: bool) -> _DynamicsRows:
-    return _DYNAMICS.get_or_build((mm, N, dt, jit), lambda: _DynamicsRows(mm, N, dt, jit))
+def _dynamics_rows(
+    mm: MaximalModel, N: int, dt: float, jit: bool, workspace: Workspace | None = None
+) -> _DynamicsRows:
+    return shared(
+        workspace,
+        "dynamics_rows",
+        lambda: (mm, N, dt, jit),
+        lambda: _DynamicsRows(mm, N, dt, jit, workspace),
+    )

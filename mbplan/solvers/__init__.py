@@ -12,6 +12,7 @@ from mbplan.solvers.nlp import EuclideanNLP, ManifoldNLP, NLPEvaluation, RIPMPro
 from mbplan.solvers.result import IterationHistory, RIPMResult, RIPMStatus
 from mbplan.solvers.ripm.driver import solve_ripm
 from mbplan.solvers.ripm.options import RIPMOptions
+from mbplan.workspace import Workspace
 
 __all__ = [
     "EuclideanNLP",
@@ -24,6 +25,7 @@ __all__ = [
     "RIPMProblem",
     "RIPMResult",
     "RIPMStatus",
+    "Workspace",
     "solve_lai_yoshise",
     "solve_mlgipm",
     "solve_ripm",

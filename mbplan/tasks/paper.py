@@ -168,6 +168,7 @@ def iiwa_obstacle_cases(
     return [iiwa_obstacle(q0, N=N, constraint=constraint) for q0 in starts]
 
 
+# process-wide cache, result-neutral: a seeded sampler: a function of its arguments alone
 @lru_cache(maxsize=8)
 def iiwa_obstacle_starts(n: int = 100, seed: int = 0, constraint: str = "com") -> tuple:
     """``n`` random starts (Table III): ``q0`` uniform in the central :data:`SAMPLING_RANGE` of

@@ -14,6 +14,7 @@ import numpy as np
 
 from mbplan.planning.methods import LGVI_RIPM_OPTIONS
 from mbplan.solvers import RIPMOptions
+from mbplan.workspace import Workspace
 
 
 def iiwa_task(index: int, n: int = 100, seed: int = 0, constraint: str = "com"):
@@ -24,16 +25,19 @@ def iiwa_task(index: int, n: int = 100, seed: int = 0, constraint: str = "com"):
     return iiwa_obstacle(q0, N=40, constraint=constraint)
 
 
-def maximal_ripm_problem(ocp, warm_start: str = "via") -> tuple[Any, Any]:
+def maximal_ripm_problem(
+    ocp, warm_start: str = "via", workspace: Workspace | None = None
+) -> tuple[Any, Any]:
     """The RIPM's problem and warm start for an OCP, as ``plan(ocp, "ripm")`` builds them (the
-    free-body formulation for a :class:`~mbplan.ocp.free_body.FreeBody`)."""
+    free-body formulation for a :class:`~mbplan.ocp.free_body.FreeBody`; its structures kept
+    in ``workspace``)."""
     from mbplan.engine.jit import jit_available
     from mbplan.formulations import free_body, maximal
     from mbplan.ocp.free_body import FreeBody
     from mbplan.planning.initial_guess import initial_path
 
     formulation = free_body if isinstance(ocp.robot, FreeBody) else maximal
-    nlp, _ = formulation.build(ocp, jit_available())
+    nlp, _ = formulation.build(ocp, jit_available(), workspace)
     return nlp.problem, nlp.initial_point(initial_path(ocp, warm_start))
 
 
@@ -75,6 +79,7 @@ def chain_urdf(n: int) -> str:
     return "\n".join(parts)
 
 
+# process-wide cache, result-neutral: the URDF text is a function of n alone
 @functools.cache
 def _chain_path(n: int) -> str:
     path = Path(tempfile.gettempdir()) / f"mbplan-chain{n}.urdf"

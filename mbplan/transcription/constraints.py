@@ -17,6 +17,7 @@ def cylinder_clearance(p: cs.SX, c: cs.SX) -> cs.SX:
     return c[2] ** 2 - cs.dot(d, d)
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def cylinder_clearance_function(jit: bool) -> RiemannianFunction:
     """:func:`cylinder_clearance` of a point ``p ∈ R³`` with the cylinder as parameter ``c``."""

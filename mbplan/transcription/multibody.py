@@ -40,10 +40,10 @@ from mbplan.dynamics.joints import (
 )
 from mbplan.engine import RiemannianFunction
 from mbplan.lie import SO3, R
-from mbplan.memo import RecentMemo
 from mbplan.multibody import MaximalModel
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Block
+from mbplan.workspace import Workspace, shared
 
 LAMBDA_DIM = 5  # pivot (3) + axis (2) per revolute joint, rotation (3) + slide (2) per prismatic
 
@@ -101,6 +101,7 @@ def joint_parameters(mm: MaximalModel, joints: np.ndarray, kind: str) -> dict[st
     return {name: source[name][joints] for name, _ in JOINT_KINDS[kind].params}
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _kinematics_function(jit: bool) -> RiemannianFunction:
     return RiemannianFunction(
@@ -112,6 +113,7 @@ def _kinematics_function(jit: bool) -> RiemannianFunction:
     )
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _dynamics_function(jit: bool) -> RiemannianFunction:
     return RiemannianFunction(
@@ -126,6 +128,7 @@ def _dynamics_function(jit: bool) -> RiemannianFunction:
 _WORLD = [("Rp", (3, 3)), ("pp", 3)]  # a world parent's fixed pose, as parameters
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _joint_forces_function(
     jit: bool, world_parent: bool, kind: str = "revolute"
@@ -140,6 +143,7 @@ def _joint_forces_function(
     return RiemannianFunction(f"{kind}_forces", variables, jk.forces, list(jk.params), jit=jit)
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _constraint_function(
     jit: bool, world_parent: bool, kind: str = "revolute"
@@ -172,6 +176,7 @@ def _side(side: str) -> list[tuple[str, object]]:
     return [(n[0] + side + n[1:], g) for n, g in _MOTION]
 
 
+# process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _damping_function(jit: bool, world_parent: bool, kind: str = "revolute") -> RiemannianFunction:
     """Viscous damping ``-c q̇_{k+1}`` of a joint (:mod:`mbplan.dynamics.damping`)."""
@@ -206,9 +211,6 @@ class MultibodyLayout:
     n_dynamics_rows: int
 
 
-_LAYOUTS: RecentMemo[MultibodyLayout] = RecentMemo(8)
-
-
 def multibody_layout(
     mm: MaximalModel,
     N: int,
@@ -217,15 +219,16 @@ def multibody_layout(
     jit: bool,
     kinematics: bool = True,
     fixed_tau_knots: tuple[int, ...] = (0,),
+    workspace: Workspace | None = None,
 ) -> MultibodyLayout:
-    """Blocks and equality terms for ``N`` steps of the multi-body LGVI (memoized per process:
+    """Blocks and equality terms for ``N`` steps of the multi-body LGVI (kept in ``workspace``:
     the terms are shared, never modified).
 
     ``kinematics=False`` leaves out the kinematics rows (for a one-step simulator whose ``R, p``
     at both knots are data). ``fixed_tau_knots`` are the knots whose torques are data.
     """
     key = (mm, int(N), float(dt), bool(jit), bool(kinematics), tuple(fixed_tau_knots))
-    return _LAYOUTS.get_or_build(key, lambda: _multibody_layout(mm, *key[1:]))
+    return shared(workspace, "multibody_layout", lambda: key, lambda: _multibody_layout(*key))
 
 
 def _multibody_layout(
@@ -236,7 +239,7 @@ def _multibody_layout(
     kinematics: bool,
     fixed_tau_knots: tuple[int, ...],
 ) -> MultibodyLayout:
-    """:func:`multibody_layout`, not memoized."""
+    """:func:`multibody_layout`, built."""
     nb = mm.nb
     blocks = [
         Block("R", SO3, N + 1, (0,) if kinematics else (0, 1), nb),

@@ -7,7 +7,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mbplan.errors import InputError
-from mbplan.memo import RecentMemo
+from mbplan.workspace import Workspace
 
 
 class SparsePattern:
@@ -20,7 +20,7 @@ class SparsePattern:
 
     def __init__(self, rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> None:
         self.shape = shape
-        # the index arrays it was built from (read-only copies): what a memo hit is checked against
+        # the index arrays it was built from (read-only copies): what a kept one is checked against
         self.entries = tuple(np.array(a) for a in (rows, cols))
         for a in self.entries:
             a.setflags(write=False)
@@ -36,7 +36,7 @@ class SparsePattern:
         # int32 indices when they fit: scipy then skips an index-dtype pass per assembly
         itype = np.int32 if max(self.nnz, *shape) < np.iinfo(np.int32).max else np.int64
         self._indptr, self._cols = indptr.astype(itype), self.cols.astype(itype)
-        # every assembled matrix shares these (and the memo shares them across problems):
+        # every assembled matrix shares these (and a workspace shares them across problems):
         # read-only, so that an in-place scipy operation on one cannot corrupt the others
         for index in (self._indptr, self._cols, self.slot):
             index.setflags(write=False)
@@ -61,23 +61,27 @@ class SparsePattern:
         return out
 
 
-_PATTERNS: RecentMemo[SparsePattern] = RecentMemo(16)
+_SAMPLES = 1024  # entries of each index array in a workspace key
 
 
-_SAMPLES = 1024  # entries of each index array in a memo key
-
-
-def sparse_pattern(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> SparsePattern:
-    """``SparsePattern(rows, cols, shape)``, memoized per process for the last few index arrays:
-    every problem of a task family has the same (its sort costs ~10× the lookup). The memo key
-    holds an evenly spaced sample of each array; a hit is used only if its arrays are equal."""
+def sparse_pattern(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    shape: tuple[int, int],
+    workspace: Workspace | None = None,
+) -> SparsePattern:
+    """``SparsePattern(rows, cols, shape)``, kept in ``workspace``: every problem of a task
+    family has the same (its sort costs ~10× the lookup). The key holds an evenly spaced sample
+    of each array; a kept pattern is used only if its arrays are equal (else one is built)."""
     rows, cols = np.asarray(rows), np.asarray(cols)
+    if workspace is None:
+        return SparsePattern(rows, cols, shape)
     key = (tuple(shape), rows.dtype.str, cols.dtype.str, rows.shape, cols.shape)
     key += tuple(a[:: max(1, a.size // _SAMPLES)].tobytes() for a in (rows, cols))
-    hit = _PATTERNS.get(key)
-    if hit is not None and all(map(np.array_equal, hit.entries, (rows, cols))):
-        return hit
-    return _PATTERNS.put(key, SparsePattern(rows, cols, shape))
+    kept = workspace.get_or_build("sparse_pattern", key, lambda: SparsePattern(rows, cols, shape))
+    if all(map(np.array_equal, kept.entries, (rows, cols))):
+        return kept
+    return SparsePattern(rows, cols, shape)
 
 
 @nb.njit(cache=True)

@@ -20,7 +20,6 @@ from mbplan.engine.jit import announce_uncached_numba
 from mbplan.engine.site_table import bound_calls
 from mbplan.errors import InputError
 from mbplan.finite import finite_vector
-from mbplan.memo import RecentMemo
 from mbplan.transcription.evaluation_kernels import (
     EVALUATION_KERNELS,
     collect_derivatives,
@@ -30,6 +29,7 @@ from mbplan.transcription.evaluation_kernels import (
 from mbplan.transcription.sparse import sparse_pattern
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Point, TrajectoryVariables
+from mbplan.workspace import Workspace, shared
 
 
 @dataclass(frozen=True)
@@ -101,7 +101,12 @@ class _Structure:
     variables' blocks and of the terms' names, kinds, bindings, rows and functions' layouts
     only, so every problem of a task family shares one (their parameters differ)."""
 
-    def __init__(self, variables: TrajectoryVariables, terms: Sequence[Term]) -> None:
+    def __init__(
+        self,
+        variables: TrajectoryVariables,
+        terms: Sequence[Term],
+        workspace: Workspace | None = None,
+    ) -> None:
         names = [t.name for t in terms]
         if len(set(names)) != len(names):
             raise InputError(f"duplicate term names: {names}")
@@ -150,6 +155,7 @@ class _Structure:
                 _cat_index([ix.jac_rows.ravel() for ix in by_kind[kind]]),
                 _cat_index([ix.jac_cols.ravel() for ix in by_kind[kind]]),
                 (sizes[kind], self.n),
+                workspace,
             )  # fixed columns (-1) dropped
             for kind in ("eq", "ineq")
         }
@@ -169,31 +175,34 @@ class _Structure:
             _cat_index([ix.hess_rows.ravel() for ix in ordered]),
             _cat_index([ix.hess_cols.ravel() for ix in ordered]),
             (self.n, self.n),
+            workspace,
         )
         for a in (*self.rows.values(), self.grad_cols, self.z_gather, self.lam_source):
             a.setflags(write=False)
 
 
-_STRUCTURES: RecentMemo[_Structure] = RecentMemo(8)
-
-
-def _structure(variables: TrajectoryVariables, terms: Sequence[Term]) -> _Structure:
-    """The :class:`_Structure` of ``variables`` and ``terms``, memoized per process by
+def _structure(
+    variables: TrajectoryVariables, terms: Sequence[Term], workspace: Workspace | None
+) -> _Structure:
+    """The :class:`_Structure` of ``variables`` and ``terms``, kept in ``workspace`` by
     everything it reads (of a function: :attr:`~mbplan.engine.SiteFunction.layout_key`)."""
-    key = (
-        tuple(variables.blocks.values()),
-        tuple(
-            (
-                t.name,
-                t.kind,
-                t.function.layout_key,
-                tuple((arg, block, ix.tobytes()) for arg, (block, ix) in t.bind.items()),
-                None if t.rows is None else (t.rows.shape, t.rows.tobytes()),
-            )
-            for t in terms
-        ),
-    )
-    return _STRUCTURES.get_or_build(key, lambda: _Structure(variables, terms))
+
+    def key() -> tuple:
+        return (
+            tuple(variables.blocks.values()),
+            tuple(
+                (
+                    t.name,
+                    t.kind,
+                    t.function.layout_key,
+                    tuple((arg, block, ix.tobytes()) for arg, (block, ix) in t.bind.items()),
+                    None if t.rows is None else (t.rows.shape, t.rows.tobytes()),
+                )
+                for t in terms
+            ),
+        )
+
+    return shared(workspace, "structure", key, lambda: _Structure(variables, terms, workspace))
 
 
 class _TermLayout:
@@ -215,12 +224,19 @@ class _TermLayout:
 
 
 class TrajectoryProblem:
-    """Costs, equalities and inequalities over trajectory variables, evaluated sparsely."""
+    """Costs, equalities and inequalities over trajectory variables, evaluated sparsely
+    (``workspace``: where the index maps and patterns are kept, shared by the problems of a
+    family; ``None``: this problem's own)."""
 
-    def __init__(self, variables: TrajectoryVariables, terms: Sequence[Term]) -> None:
+    def __init__(
+        self,
+        variables: TrajectoryVariables,
+        terms: Sequence[Term],
+        workspace: Workspace | None = None,
+    ) -> None:
         self.variables = variables
         self.terms = list(terms)
-        self._structure = s = _structure(variables, self.terms)
+        self._structure = s = _structure(variables, self.terms, workspace)
         self.n, self.n_eq, self.n_ineq = s.n, s.n_eq, s.n_ineq
         ordered = [(self.terms[i], s.indices[i]) for i in s.order]
         # every term's inputs and multipliers as views of one array each, in the structure's

@@ -16,8 +16,8 @@ import numpy as np
 
 from mbplan.errors import InputError
 from mbplan.finite import finite_vector
-from mbplan.memo import RecentMemo
 from mbplan.transcription.packed import PackedLayout, PackedPoint
+from mbplan.workspace import Workspace, shared
 
 Point = dict[str, np.ndarray]
 
@@ -33,7 +33,7 @@ class Block:
     count: int = 1
 
     def __post_init__(self) -> None:
-        # any sequence of knots (a list, an array) as a tuple of ints: blocks are memo keys
+        # any sequence of knots (a list, an array) as a tuple of ints: blocks are workspace keys
         object.__setattr__(self, "fixed", tuple(int(k) for k in self.fixed))
 
     @property
@@ -174,14 +174,13 @@ class TrajectoryVariables:
         return dx
 
 
-_VARIABLES: RecentMemo[TrajectoryVariables] = RecentMemo(8)
-
-
-def trajectory_variables(blocks: Iterable[Block]) -> TrajectoryVariables:
-    """``TrajectoryVariables(blocks)``, memoized per process by the blocks: a layout without
+def trajectory_variables(
+    blocks: Iterable[Block], workspace: Workspace | None = None
+) -> TrajectoryVariables:
+    """``TrajectoryVariables(blocks)``, kept in ``workspace`` by the blocks: a layout without
     values, shared by every problem of a task family."""
     blocks = tuple(blocks)
-    return _VARIABLES.get_or_build(blocks, lambda: TrajectoryVariables(blocks))
+    return shared(workspace, "variables", lambda: blocks, lambda: TrajectoryVariables(blocks))
 
 
 def _as_slice(index: np.ndarray) -> slice | np.ndarray:

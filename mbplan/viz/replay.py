@@ -165,6 +165,7 @@ def serve(
     )
 
 
+# process-wide cache, result-neutral: maximal-coordinate data of the robot loaded by name
 @functools.cache
 def _maximal(robot: str) -> MaximalModel:
     return maximal_model(robot)

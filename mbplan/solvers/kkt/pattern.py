@@ -1,7 +1,8 @@
 """The pattern of the RIPM's KKT matrix (:mod:`mbplan.solvers.kkt.system`): where its blocks
 land in the lower CSR pattern, the full symmetric pattern for refinement residuals, the
-elimination order and the symbolic analysis; all memoized per process for the last few
-patterns (the KKT systems of one task family share theirs), with pooled work arrays."""
+elimination order and the symbolic analysis; kept in the caller's
+:class:`~mbplan.workspace.Workspace` (the KKT systems of one task family share theirs), with
+pooled work arrays."""
 
 from __future__ import annotations
 
@@ -14,13 +15,13 @@ import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba
 from mbplan.errors import InputError
-from mbplan.memo import RecentMemo
 from mbplan.solvers.kkt.ldl.kernels import NUMERIC_KERNELS
 from mbplan.solvers.kkt.ldl.solve import SOLVE_KERNELS
 from mbplan.solvers.kkt.ldl.supernodal import SupernodalLDL
 from mbplan.solvers.kkt.ldl.symbolic import SYMBOLIC_KERNELS, Analysis
 from mbplan.solvers.kkt.ordering import amd_order, metis_order, nested_dissection_order
 from mbplan.solvers.kkt.scatter import SCATTER_KERNELS, same_csr_pattern
+from mbplan.workspace import Workspace, shared
 
 _ENTRY_KERNELS = SYMBOLIC_KERNELS + NUMERIC_KERNELS + SOLVE_KERNELS + SCATTER_KERNELS
 
@@ -42,8 +43,6 @@ def _same_pattern(a: sp.csr_matrix | _BlockPattern, b: _BlockPattern | None) -> 
     )
 
 
-_ANALYSES: RecentMemo[Analysis] = RecentMemo(8)
-_PATTERNS: RecentMemo[_KKTPattern] = RecentMemo(8)
 ORDERINGS = ("amd", "nested", "metis", "auto")
 _ORDERS = {"amd": amd_order, "nested": nested_dissection_order, "metis": metis_order}
 AUTO_MIN_FLOPS = 1e7
@@ -51,27 +50,38 @@ AUTO_MIN_FLOPS = 1e7
 multiply-adds: below it METIS's ordering costs more than it can save."""
 
 
-def analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str = "amd") -> Analysis:
-    """The analysis of the pattern given as lower CSR arrays, memoized per process for the last
-    few patterns: the KKT systems of one task family (every case of a benchmark, every solve of
-    a receding-horizon loop) share their pattern, and its ordering and symbolic factorization
-    cost as much as a few numeric factorizations. ``ordering``: ``"amd"``, ``"metis"``,
+def analysis(
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    ordering: str = "amd",
+    workspace: Workspace | None = None,
+) -> Analysis:
+    """The analysis of the pattern given as lower CSR arrays, kept in ``workspace``: the KKT
+    systems of one task family (every case of a benchmark, every solve of a receding-horizon
+    loop) share their pattern, and its ordering and symbolic factorization cost as much as a
+    few numeric factorizations. ``ordering``: ``"amd"``, ``"metis"``,
     ``"nested"`` (:mod:`mbplan.solvers.kkt.ordering`) or ``"auto"``: AMD's analysis, or METIS's if
     it predicts fewer multiply-adds (:attr:`Analysis.flops`; METIS is tried only when AMD's
     count reaches :data:`AUTO_MIN_FLOPS`)."""
     if ordering not in ORDERINGS:
         raise InputError(f"ordering: expected one of {ORDERINGS}, got {ordering!r}")
-    key = (len(indptr) - 1, indptr.tobytes(), indices.tobytes(), ordering)
-    return _ANALYSES.get_or_build(key, lambda: _analysis(indptr, indices, ordering))
+    return shared(
+        workspace,
+        "analysis",
+        lambda: (len(indptr) - 1, indptr.tobytes(), indices.tobytes(), ordering),
+        lambda: _analysis(indptr, indices, ordering, workspace),
+    )
 
 
-def _analysis(indptr: np.ndarray, indices: np.ndarray, ordering: str) -> Analysis:
-    """:func:`analysis`, not memoized (``"auto"``: of the memoized candidates)."""
+def _analysis(
+    indptr: np.ndarray, indices: np.ndarray, ordering: str, workspace: Workspace | None
+) -> Analysis:
+    """:func:`analysis`, built (``"auto"``: of the kept candidates)."""
     if ordering == "auto":
-        amd = analysis(indptr, indices, "amd")
+        amd = analysis(indptr, indices, "amd", workspace)
         if amd.flops < AUTO_MIN_FLOPS:
             return amd
-        metis = analysis(indptr, indices, "metis")
+        metis = analysis(indptr, indices, "metis", workspace)
         return metis if metis.flops < amd.flops else amd
     announce_uncached_numba(*_ENTRY_KERNELS)  # first run only
     n = len(indptr) - 1
@@ -98,29 +108,29 @@ class _KKTPattern:
     analysis: Analysis
     blocks: tuple[_BlockPattern, _BlockPattern, _BlockPattern]  # the blocks' patterns (copies)
     sign: np.ndarray  # expected pivot signs in pivot order: + primal, - dual
-    spare: list[_Workspace] = field(default_factory=list, compare=False)
+    spare: list[_WorkArrays] = field(default_factory=list, compare=False)
     spares: ClassVar[int] = 2
     spare_max_entries: ClassVar[int] = 1 << 20
-    """Released workspaces kept (:meth:`release`): at most ``spares``, each with at most
+    """Released work arrays kept (:meth:`release`): at most ``spares``, each with at most
     ``spare_max_entries`` factor entries (8 MB): a new system of a small pattern (each case of a
     task family) then allocates nothing, while a large one's allocation costs little beside its
     factorization. (Class attributes: a
     system's ``__del__`` may run at interpreter exit, after the module's globals are gone.)"""
 
-    def workspace(self) -> _Workspace:
-        """A released workspace of this pattern, or a new one."""
+    def work_arrays(self) -> _WorkArrays:
+        """Released work arrays of this pattern, or new ones."""
         try:
             return self.spare.pop()  # atomic: threads never share one
         except IndexError:
-            return _Workspace(self)
+            return _WorkArrays(self)
 
-    def release(self, ws: _Workspace) -> None:
+    def release(self, ws: _WorkArrays) -> None:
         """Keep ``ws`` for the next system of this pattern (a few, if small)."""
         if len(self.spare) < self.spares and len(ws.solver.lbuf) <= self.spare_max_entries:
             self.spare.append(ws)
 
 
-class _Workspace:
+class _WorkArrays:
     """The arrays one KKT system writes: ``K``'s values in the lower pattern (without and with
     the diagonal and regularization) and in the full pattern, and the numeric factorization."""
 
@@ -140,24 +150,35 @@ def _kkt_pattern(
     jac_eq: sp.csr_matrix,
     jac_in: sp.csr_matrix,
     ordering: str,
+    workspace: Workspace | None = None,
 ) -> _KKTPattern:
-    """The pattern of ``K`` for the blocks' patterns, memoized like :func:`analysis` (a solve
-    builds it once, a benchmark of many cases once per process)."""
-    key = (
-        n,
-        n_eq,
-        n_ineq,
-        ordering,
-        *tuple(a.tobytes() for m in (hess, jac_eq, jac_in) for a in (m.indptr, m.indices)),
-    )
+    """The pattern of ``K`` for the blocks' patterns, kept in ``workspace`` like
+    :func:`analysis` (a solve builds it once, a benchmark of many cases sharing a workspace
+    once)."""
     blocks = (hess, jac_eq, jac_in)
-    return _PATTERNS.get_or_build(key, lambda: _new_kkt_pattern(n, n_eq, n_ineq, blocks, ordering))
+    return shared(
+        workspace,
+        "kkt_pattern",
+        lambda: (
+            n,
+            n_eq,
+            n_ineq,
+            ordering,
+            *(a.tobytes() for m in blocks for a in (m.indptr, m.indices)),
+        ),
+        lambda: _new_kkt_pattern(n, n_eq, n_ineq, blocks, ordering, workspace),
+    )
 
 
 def _new_kkt_pattern(
-    n: int, n_eq: int, n_ineq: int, blocks: tuple[sp.csr_matrix, ...], ordering: str
+    n: int,
+    n_eq: int,
+    n_ineq: int,
+    blocks: tuple[sp.csr_matrix, ...],
+    ordering: str,
+    workspace: Workspace | None,
 ) -> _KKTPattern:
-    """:func:`_kkt_pattern` of the blocks ``(H, A_E, A_I)``, not memoized."""
+    """:func:`_kkt_pattern` of the blocks ``(H, A_E, A_I)``, built."""
     hess, jac_eq, jac_in = blocks
     N = n + n_eq + n_ineq
     h_rows = np.repeat(np.arange(n), np.diff(hess.indptr))
@@ -183,7 +204,7 @@ def _new_kkt_pattern(
     f_rows = np.concatenate([rows, cols[off]])
     f_cols = np.concatenate([cols, rows[off]])
     order = np.lexsort((f_cols, f_rows))
-    hit_analysis = analysis(indptr, indices, ordering)
+    hit_analysis = analysis(indptr, indices, ordering, workspace)
     return _KKTPattern(
         h_src=np.flatnonzero(h_mask).astype(np.int32),
         h_slot=h_slot,

@@ -21,8 +21,8 @@ degree ordering qdldl computes (SuiteSparse AMD), postorders the elimination tre
 columns into fundamental supernodes merged by CHOLMOD's relaxed amalgamation rule, merges
 sibling leaves with equal rows and moves small leaves right before their parent, which they
 update directly (:mod:`mbplan.solvers.kkt.ldl.layout`), and precomputes where every entry of
-``K`` and every child's update matrix lands; it is memoized per
-process for the last few patterns (the KKT systems of one task family share theirs). The numeric
+``K`` and every child's update matrix lands; it is kept in the caller's
+:class:`~mbplan.workspace.Workspace` (the KKT systems of one task family share theirs). The numeric
 factorization works on small dense fronts with register-blocked loops: on trajectory-optimization
 KKT matrices, whose elimination ends in a chain of dense knot-to-knot blocks, it is about twice
 as fast as qdldl's column-by-column up-looking LDLᵀ with the same ordering, and it counts the
@@ -62,6 +62,7 @@ from mbplan.solvers.kkt.pattern import (
     _same_pattern,
 )
 from mbplan.solvers.kkt.scatter import matrix_values, scatter_blocks
+from mbplan.workspace import Workspace
 
 _NONE = np.zeros(0, np.int64)
 _NONE_F = np.zeros(0)
@@ -76,6 +77,7 @@ class Inertia:
     zero: int
 
 
+# process-wide cache, result-neutral: a read-only all-zero matrix of the shape alone
 @functools.lru_cache(maxsize=16)
 def _empty_csr(shape: tuple[int, int]) -> sp.csr_matrix:
     """An all-zero block (shared, read only: built once per shape)."""
@@ -110,11 +112,19 @@ class KKTSystem:
     perturbation of the diagonal (inertia correction) and :meth:`solve` for each right-hand side.
     ``ordering`` selects the elimination order (:func:`analysis`). ``pivot_threshold`` ``u > 0``
     turns on threshold 1 × 1 / 2 × 2 pivoting inside each supernode (a pivot ``|d| < u`` times
-    its column's largest entry is replaced); ``0``: no pivoting.
+    its column's largest entry is replaced); ``0``: no pivoting. ``workspace``: where the
+    patterns and analyses are kept (``None``: this system's own).
     """
 
     def __init__(
-        self, n: int, n_eq: int, n_ineq: int, *, ordering: str = "amd", pivot_threshold: float = 0.0
+        self,
+        n: int,
+        n_eq: int,
+        n_ineq: int,
+        *,
+        ordering: str = "amd",
+        pivot_threshold: float = 0.0,
+        workspace: Workspace | None = None,
     ) -> None:
         if ordering not in ORDERINGS:
             raise InputError(f"ordering: expected one of {ORDERINGS}, got {ordering!r}")
@@ -122,6 +132,7 @@ class KKTSystem:
             raise InputError(f"pivot_threshold: expected a value in [0, 1], got {pivot_threshold}")
         self.ordering = ordering
         self.pivot_threshold = float(pivot_threshold)
+        self.workspace = Workspace() if workspace is None else workspace
         self.n, self.n_eq, self.n_ineq = n, n_eq, n_ineq
         self.dim = n + n_eq + n_ineq
         self._patterns: tuple[_BlockPattern | None, ...] = (None, None, None)
@@ -131,12 +142,14 @@ class KKTSystem:
 
     # ------------------------------------------------------------------ pattern
     def _build_pattern(self, hess: sp.csr_matrix, jac_eq: sp.csr_matrix, jac_in: sp.csr_matrix):
-        pat = _kkt_pattern(self.n, self.n_eq, self.n_ineq, hess, jac_eq, jac_in, self.ordering)
+        pat = _kkt_pattern(
+            self.n, self.n_eq, self.n_ineq, hess, jac_eq, jac_in, self.ordering, self.workspace
+        )
         self._release()
         self._pattern, self._patterns = pat, pat.blocks
         self._diag_slot = pat.diag_slot
         self._indptr, self._indices = pat.indptr, pat.indices
-        self._ws = ws = pat.workspace()
+        self._ws = ws = pat.work_arrays()
         self._base = ws.base
         self._full_data = ws.full_data  # K in the full symmetric pattern
         # the factorized values, entry by entry of the lower CSR arrays (= upper CSC arrays)
@@ -147,7 +160,7 @@ class KKTSystem:
         self.n_analyses += 1
 
     def _release(self) -> None:
-        """Hand the workspace back to its pattern (the system is gone or changes pattern)."""
+        """Hand the work arrays back to their pattern (the system is gone or changes pattern)."""
         ws, self._ws = getattr(self, "_ws", None), None
         if ws is not None:
             self._pattern.release(ws)

@@ -51,6 +51,7 @@ from mbplan.solvers.ripm.line_search import FilterLineSearch, Search
 from mbplan.solvers.ripm.newton import NewtonStep
 from mbplan.solvers.ripm.options import RIPMOptions
 from mbplan.solvers.ripm.restoration import Restoration, Stop
+from mbplan.workspace import Workspace
 
 _HEADER = "iter    objective    inf_pr   inf_du lg(mu)  ||d||  lg(rg) alpha_du alpha_pr  ls"
 
@@ -64,22 +65,26 @@ def solve_ripm(
     z0: np.ndarray | None = None,
     s0: np.ndarray | None = None,
     verbose: bool = False,
+    workspace: Workspace | None = None,
     **overrides: Any,
 ) -> RIPMResult:
     """Solve Problem 2 (eq. 46) from ``x0`` with the RIPM.
 
     ``options`` defaults to :class:`RIPMOptions` (Table IV); keyword ``overrides`` replace single
     parameters (``solve_ripm(p, x0, tol=1e-8)``). ``y0``, ``z0`` (> 0) and ``s0`` (> 0) warm-start
-    the multipliers and slacks. ``verbose=True`` is ``print_level=1``.
+    the multipliers and slacks. ``verbose=True`` is ``print_level=1``. ``workspace``: where the
+    KKT patterns, analyses and reductions are kept (pass one to the solves of a problem family
+    to build them once; ``None``: this solve's own; the result is the same).
     """
     opts = options or RIPMOptions()
     if overrides:
         opts = opts.replace(**overrides)
     if verbose and opts.print_level == 0:
         opts = opts.replace(print_level=1)
-    return _RIPM(problem, opts).run(x0, y0, z0, s0)
+    return _RIPM(problem, opts, workspace=workspace).run(x0, y0, z0, s0)
 
 
+# process-wide cache, result-neutral: prints a first-run line only
 @functools.cache
 def _announce_uncached_kernels() -> None:
     """The first-run line if the iteration's numba kernels are not cached yet (once per
@@ -105,7 +110,11 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
     """State of one solve (or of one restoration phase, ``parent`` given)."""
 
     def __init__(
-        self, problem: RIPMProblem, options: RIPMOptions, parent: _RIPM | None = None
+        self,
+        problem: RIPMProblem,
+        options: RIPMOptions,
+        parent: _RIPM | None = None,
+        workspace: Workspace | None = None,
     ) -> None:
         self.p, self.o = problem, options
         self.n, self.me, self.mi = int(problem.n), int(problem.n_eq), int(problem.n_ineq)
@@ -116,7 +125,11 @@ class _RIPM(IterateState, NewtonStep, FilterLineSearch, BarrierStrategy, Restora
             _announce_uncached_kernels()
             out = (lambda line: print(line, file=sys.stdout)) if options.print_level > 0 else None
             kkt = kkt_system(
-                problem, options.kkt_method, options.kkt_ordering, options.kkt_pivot_threshold
+                problem,
+                options.kkt_method,
+                options.kkt_ordering,
+                options.kkt_pivot_threshold,
+                workspace,
             )
             self.sh = _Shared(kkt, IterationHistory(), out)
         else:

@@ -44,6 +44,7 @@ class OneBlasThread:
                 self._limiter = None
 
 
+# process-wide cache, result-neutral: the BLAS thread-pool handle: no numeric content
 @functools.cache
 def _blas_controller() -> threadpoolctl.ThreadpoolController:
     return threadpoolctl.ThreadpoolController()

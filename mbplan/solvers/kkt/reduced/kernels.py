@@ -14,7 +14,8 @@ from mbplan.solvers.kkt.borrow import borrowed
 PIVOT_TOL = 1e-12
 """A block's or a group's LU breaks down on a pivot below this times the
 block's largest entry: the caller then picks the replaced rows and dependent columns again on
-these values (:func:`~mbplan.solvers.kkt.reduced.reduction.repick`), else factorizes the full matrix."""
+these values (:meth:`~mbplan.solvers.kkt.reduced.system.ReducedKKTSystem._set_values`), else
+factorizes the full matrix."""
 
 U64 = nb.uint64  # unsigned flat indices: no negative-index wraparound code in the loops
 _FAST = {"cache": True, "fastmath": {"contract", "reassoc"}, "error_model": "numpy"}

@@ -1,7 +1,7 @@
 """The two congruences of an :class:`~mbplan.solvers.kkt.elimination.EliminationPlan` for
 :class:`~mbplan.solvers.kkt.reduced.system.ReducedKKTSystem`: the symbolic phase
-(:mod:`mbplan.solvers.kkt.reduced.symbolic`, :mod:`mbplan.solvers.kkt.reduced.layout`, memoized
-per process with the choices of replaced rows and dependent columns made so far), the numeric
+(:mod:`mbplan.solvers.kkt.reduced.symbolic`, :mod:`mbplan.solvers.kkt.reduced.layout`, kept in
+the caller's :class:`~mbplan.workspace.Workspace` by the values it picks on), the numeric
 phase (compiled kernels of :mod:`mbplan.solvers.kkt.reduced.kernels`,
 :mod:`mbplan.solvers.kkt.reduced.products`, :mod:`mbplan.solvers.kkt.reduced.solves`), the
 factorization of the reduced matrix ``K_r`` and one solve through the reduction."""
@@ -16,8 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mbplan.engine.jit import announce_uncached_numba
-from mbplan.memo import RecentMemo
-from mbplan.solvers.kkt.elimination import PLAN_ERRORS, EliminationPlan
+from mbplan.solvers.kkt.elimination import EliminationPlan
 from mbplan.solvers.kkt.reduced.kernels import (
     VALUE_KERNELS,
     block_values,
@@ -30,32 +29,11 @@ from mbplan.solvers.kkt.reduced.products import PRODUCT_KERNELS, hr_values, tdt_
 from mbplan.solvers.kkt.reduced.solves import SOLVE_KERNELS, expand_solution, reduce_rhs, residual
 from mbplan.solvers.kkt.reduced.symbolic import ReductionSymbolic, Slots
 from mbplan.solvers.kkt.system import Inertia, KKTSystem
+from mbplan.workspace import Workspace, shared
 
 REDUCED_STATIC_REG = 1e-8
 """Static regularization of ``K_r`` (at least): its zero-diagonal multiplier-like columns break
 the unpivoted LDLᵀ down with ``1e-9``."""
-
-
-_REDUCTIONS: RecentMemo[list[Reduction]] = RecentMemo(8)
-"""The last patterns' reductions, each a list of choices (replaced rows and dependent columns)
-picked on different values, the last one used first."""
-_CHOICES_KEPT = 4
-
-
-def _key(plan, hess, ae, ai, ordering, pivot_threshold) -> tuple:
-    return (
-        ordering,
-        pivot_threshold,
-        *(getattr(plan, f.name).tobytes() for f in dataclasses.fields(plan)),
-        *(a.tobytes() for m in (hess, ae, ai) for a in (m.indptr, m.indices)),
-    )
-
-
-def _remember(key: tuple, red: Reduction) -> None:
-    """``red`` first among its pattern's choices (the next systems start with it)."""
-    _REDUCTIONS.update(
-        key, lambda choices: [red, *(c for c in choices or [] if c is not red)][:_CHOICES_KEPT]
-    )
 
 
 def reduction(
@@ -65,56 +43,35 @@ def reduction(
     ai: sp.csr_matrix,
     ordering: str,
     pivot_threshold: float = 0.0,
+    workspace: Workspace | None = None,
 ) -> Reduction:
-    """A :class:`Reduction` of its own for ``plan`` and the blocks' patterns; the symbolic
-    phase is memoized per process for the last few patterns (the solves of one task family
-    share it), with the replaced rows and dependent columns picked on the values of the first
-    matrix of the pattern, or of the last one :func:`repick` chose them for."""
-    key = _key(plan, hess, ae, ai, ordering, pivot_threshold)
+    """A :class:`Reduction` of its own for ``plan`` and the blocks' patterns, with the replaced
+    rows and dependent columns picked on the values of ``ae`` (QR with column pivoting): a
+    function of the plan, the patterns and these values, so the symbolic phase is kept in
+    ``workspace`` by all of them (a problem solved again builds it once; another problem
+    of the family picks on its own values). Raises one of ``PLAN_ERRORS`` for a plan or
+    values it cannot use."""
 
-    def first_choice() -> list[Reduction]:
+    def key() -> tuple:
+        return (
+            ordering,
+            pivot_threshold,
+            *(getattr(plan, f.name).tobytes() for f in dataclasses.fields(plan)),
+            *(a.tobytes() for m in (hess, ae, ai) for a in (m.indptr, m.indices)),
+            ae.data.tobytes(),
+        )
+
+    def build() -> Reduction:
         announce_uncached_numba(*VALUE_KERNELS, *PRODUCT_KERNELS, *SOLVE_KERNELS)  # first run only
-        return [Reduction(plan, hess, ae, ai, ordering, pivot_threshold)]
+        return Reduction(plan, hess, ae, ai, ordering, pivot_threshold, workspace)
 
-    return _REDUCTIONS.get_or_build(key, first_choice)[0].fresh()
-
-
-def repick(
-    plan: EliminationPlan,
-    hess: sp.csr_matrix,
-    ae: sp.csr_matrix,
-    ai: sp.csr_matrix,
-    ordering: str,
-    pivot_threshold: float,
-    failed: Reduction,
-) -> Reduction | None:
-    """After ``failed`` broke down on these values (a pivot below the threshold: its replaced
-    rows or dependent columns were picked on another matrix): a memoized choice of the same
-    pattern that takes them, else the rows and columns picked on these values (memoized
-    first); its values set. ``None`` if these values admit no reduction (rank deficient
-    rows, or a breakdown on the very values the choice was picked on)."""
-    key = _key(plan, hess, ae, ai, ordering, pivot_threshold)
-    choices = list(_REDUCTIONS.get(key) or [])
-    for choice in choices:
-        if choice.dep_key != failed.dep_key:
-            red = choice.fresh()
-            if red.set_values(hess, ae, ai):
-                _remember(key, choice)
-                return red
-    try:
-        choice = Reduction(plan, hess, ae, ai, ordering, pivot_threshold)
-    except PLAN_ERRORS:
-        return None
-    red = choice.fresh()
-    if not red.set_values(hess, ae, ai):
-        return None
-    _remember(key, choice)
-    return red
+    return shared(workspace, "reduction", key, build).fresh()
 
 
 class Reduction(ReductionSymbolic, ReductionLayout):
-    """Symbolic phase of one plan and one pattern of ``(H, A_E, A_I)``, and the work arrays of
-    the numeric phase."""
+    """Symbolic phase of one plan and one pattern of ``(H, A_E, A_I)``, its replaced rows and
+    dependent columns picked on the values of ``ae``, and the work arrays of the numeric phase
+    (``workspace``: where ``K_r``'s analysis is kept)."""
 
     def __init__(
         self,
@@ -124,6 +81,7 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         ai: sp.csr_matrix,
         ordering: str,
         pivot_threshold: float = 0.0,
+        workspace: Workspace | None = None,
     ) -> None:
         n, me = ae.shape[1], ae.shape[0]
         self.n, self.me, self.mi = n, me, ai.shape[0]
@@ -132,7 +90,11 @@ class Reduction(ReductionSymbolic, ReductionLayout):
         self._blocks(plan, ae, slots)
         self._transform()
         self._products(hess, ae, ai)
-        self.factor_options = {"ordering": ordering, "pivot_threshold": pivot_threshold}
+        self.factor_options = {
+            "ordering": ordering,
+            "pivot_threshold": pivot_threshold,
+            "workspace": workspace,
+        }
         self.kkt = KKTSystem(self.nr, len(self.kept), 0, **self.factor_options)
         self.ok = False
         self._pool: list[dict] = []  # work arrays of copies no longer alive (:meth:`fresh`)

@@ -53,6 +53,7 @@ def _btf(pattern: np.ndarray) -> tuple[np.ndarray, ...]:
     return _btf_of(pattern.shape[0], np.packbits(pattern).tobytes())
 
 
+# process-wide cache, result-neutral: orders of the boolean pattern (the key), never of values
 @functools.lru_cache(maxsize=4096)
 def _btf_of(g: int, packed: bytes) -> tuple[np.ndarray, ...]:
     pattern = np.unpackbits(np.frombuffer(packed, np.uint8), count=g * g).reshape(g, g) > 0

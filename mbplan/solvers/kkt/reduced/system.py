@@ -13,9 +13,10 @@ inequality rows folded in (``D_I < 0``, ``Σ = -D_I⁻¹``: inertia ``(0, m_I, 0
 :class:`KKTSystem` of its own; a solve refines ``K_r``'s solve to a tenth of the requested
 residual ratio, then against the full ``K`` (IPOPT's ratio).
 
-The symbolic phase (once per pattern) picks the replaced rows and dependent columns by QR
-with column pivoting on the values of the pattern's first matrix (again on those of a matrix
-they break down on: :func:`~mbplan.solvers.kkt.reduced.reduction.repick`) and builds every index array;
+The symbolic phase (once per pattern of a system) picks the replaced rows and dependent
+columns by QR with column pivoting on the values of the system's first matrix of the pattern
+(once more on those of a matrix they break down on) and builds every index array
+(:func:`~mbplan.solvers.kkt.reduced.reduction.reduction`);
 the numeric phase is compiled (:mod:`mbplan.solvers.kkt.reduced.kernels`,
 :mod:`~mbplan.solvers.kkt.reduced.products`, :mod:`~mbplan.solvers.kkt.reduced.solves`).
 The full factorization is the fallback: a nonzero diagonal on an eliminated row (``δ_c > 0``,
@@ -33,8 +34,9 @@ import scipy.sparse as sp
 from mbplan.errors import InputError
 from mbplan.solvers.kkt.elimination import PLAN_ERRORS, EliminationPlan
 from mbplan.solvers.kkt.pattern import _BlockPattern, _same_pattern
-from mbplan.solvers.kkt.reduced.reduction import Reduction, reduction, repick
+from mbplan.solvers.kkt.reduced.reduction import Reduction, reduction
 from mbplan.solvers.kkt.system import Inertia, KKTSystem, _csr
+from mbplan.workspace import Workspace
 
 INNER_RATIO = 0.1
 """Each solve through the reduction refines ``K_r``'s solve to this times the requested residual
@@ -44,7 +46,8 @@ ratio: one pass then usually meets the ratio against ``K``."""
 class ReducedKKTSystem:
     """:class:`KKTSystem`'s interface, factorizing through the plan ``plan_of(A_E)`` returns
     for each new pattern (module docstring); the full factorization when the plan is ``None``
-    or the reduction does not apply (``strict``: an invalid plan raises instead).
+    or the reduction does not apply (``strict``: an invalid plan raises instead); ``workspace``:
+    where the patterns, analyses and reductions are kept (``None``: this system's own).
     ``n_reduced``: factorizations through the reduction;
     ``n_fallbacks``: refined solves that missed ``ratio_max`` and were redone in full."""
 
@@ -58,8 +61,17 @@ class ReducedKKTSystem:
         ordering: str = "amd",
         pivot_threshold: float = 0.0,
         strict: bool = False,
+        workspace: Workspace | None = None,
     ) -> None:
-        self.full = KKTSystem(n, n_eq, n_ineq, ordering=ordering, pivot_threshold=pivot_threshold)
+        self.workspace = Workspace() if workspace is None else workspace
+        self.full = KKTSystem(
+            n,
+            n_eq,
+            n_ineq,
+            ordering=ordering,
+            pivot_threshold=pivot_threshold,
+            workspace=self.workspace,
+        )
         self.n, self.n_eq, self.n_ineq, self.dim = n, n_eq, n_ineq, self.full.dim
         self.ordering, self.pivot_threshold = ordering, pivot_threshold
         self.plan_of, self.strict = plan_of, strict
@@ -112,7 +124,9 @@ class ReducedKKTSystem:
         try:
             self._plan = self.plan_of(ae)
             if self._plan is not None:
-                self._red = reduction(self._plan, hess, ae, ai, self.ordering, self.pivot_threshold)
+                self._red = reduction(
+                    self._plan, hess, ae, ai, self.ordering, self.pivot_threshold, self.workspace
+                )
         except InputError:
             if self.strict:
                 raise
@@ -121,16 +135,22 @@ class ReducedKKTSystem:
                 raise InputError(f"kkt_method='reduced': unusable elimination plan: {err}") from err
 
     def _set_values(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> bool:
-        """The reduction's values; on a breakdown, once per pattern, another choice of its
-        replaced rows and dependent columns (:func:`repick`: they were picked on the values of
-        another matrix, maybe of another problem)."""
+        """The reduction's values; on a breakdown (its replaced rows and dependent columns were
+        picked on an earlier matrix), once per pattern, a reduction picked on these values
+        (none if they admit none: rank deficient rows, or a breakdown on the very values it was
+        picked on)."""
         if self._red.set_values(hess, ae, ai):
             return True
         if self._repicked:
             return False
         self._repicked = True
-        red = repick(self._plan, hess, ae, ai, self.ordering, self.pivot_threshold, self._red)
-        if red is None:
+        try:
+            red = reduction(
+                self._plan, hess, ae, ai, self.ordering, self.pivot_threshold, self.workspace
+            )
+        except PLAN_ERRORS:
+            return False
+        if not red.set_values(hess, ae, ai):
             return False
         self._red = red
         return True
@@ -206,17 +226,24 @@ KKT_METHODS = ("full", "reduced", "auto")
 
 
 def kkt_system(
-    problem, method: str, ordering: str, pivot_threshold: float = 0.0
+    problem,
+    method: str,
+    ordering: str,
+    pivot_threshold: float = 0.0,
+    workspace: Workspace | None = None,
 ) -> KKTSystem | ReducedKKTSystem:
     """The RIPM's KKT system for ``problem``: ``"full"``, ``"reduced"`` (through the problem's
     ``elimination_plan(A_E)``, an :class:`InputError` if it has none or it is invalid) or
-    ``"auto"`` (reduced when the problem has a valid plan, the full factorization otherwise)."""
+    ``"auto"`` (reduced when the problem has a valid plan, the full factorization otherwise);
+    its patterns, analyses and reductions kept in ``workspace``."""
     if method not in KKT_METHODS:
         raise InputError(f"kkt_method: expected one of {KKT_METHODS}, got {method!r}")
     n, me, mi = int(problem.n), int(problem.n_eq), int(problem.n_ineq)
     plan_of = getattr(problem, "elimination_plan", None)
     if method == "full" or (method == "auto" and plan_of is None):
-        return KKTSystem(n, me, mi, ordering=ordering, pivot_threshold=pivot_threshold)
+        return KKTSystem(
+            n, me, mi, ordering=ordering, pivot_threshold=pivot_threshold, workspace=workspace
+        )
     if plan_of is None:
         raise InputError("kkt_method='reduced': the problem provides no elimination_plan")
     return ReducedKKTSystem(
@@ -227,4 +254,5 @@ def kkt_system(
         ordering=ordering,
         pivot_threshold=pivot_threshold,
         strict=method == "reduced",
+        workspace=workspace,
     )
