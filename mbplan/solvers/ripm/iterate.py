@@ -1,14 +1,16 @@
-"""The RIPM's iterate: primal point, slacks, multipliers, their trial points and residuals.
+"""The RIPM's iterate and the barrier problem of a phase.
 
-``_Trial`` is a candidate primal point with its values, ``_Step`` a Newton direction and
-``_IterateState`` the methods that evaluate the problem and the optimality residuals of eq. (50)
-(of the restoration problem in that phase; see :mod:`mbplan.solvers.ripm.restoration`) and the scaled
-KKT error ``E_μ`` (eq. 55-56, WB eq. 5).
+:class:`Iterate` is the primal-dual point, :class:`Trial` a candidate primal point with its
+values, :class:`Step` a Newton direction, :class:`Residuals` the optimality residuals of eq. (50)
+with the scaled KKT error ``E_0`` (eq. 55-56, WB eq. 5), and :class:`Phase` the barrier problem
+(eq. 49, or the restoration problem of :mod:`mbplan.solvers.ripm.restoration`) that evaluates
+them.
 """
 
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,7 +19,8 @@ import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.finite import finite_vector
-from mbplan.solvers.nlp import NLPEvaluation, Point
+from mbplan.solvers.nlp import NLPEvaluation, Point, RIPMProblem
+from mbplan.solvers.result import RIPMStatus
 from mbplan.solvers.ripm.kernels import (
     abs_max,
     abs_sum,
@@ -27,8 +30,10 @@ from mbplan.solvers.ripm.kernels import (
     frac_to_boundary,
     measures,
     pairwise_sum,
+    ratio_sum,
     safeguarded_duals,
 )
+from mbplan.solvers.ripm.options import LineSearchOptions
 
 EPS = float(np.finfo(float).eps)
 
@@ -53,7 +58,7 @@ class Trial:
     p: np.ndarray | None = None
     n: np.ndarray | None = None
     xi: np.ndarray | None = None
-    ev: NLPEvaluation | None = None  # with the Hessian at ``multipliers`` (see _trial_at)
+    ev: NLPEvaluation | None = None  # with the Hessian at ``multipliers`` (Phase.trial_at)
     multipliers: tuple[np.ndarray, np.ndarray, float] | None = None  # y, z, α_z
 
 
@@ -69,6 +74,66 @@ class Step:
     dn: np.ndarray | None = None
     dzp: np.ndarray | None = None
     dzn: np.ndarray | None = None
+
+
+class Stop(Exception):
+    """Ends the solve with a status (raised from any part of an iteration)."""
+
+    def __init__(self, status: RIPMStatus, message: str = "") -> None:
+        super().__init__(message)
+        self.status, self.message = status, message or status.value
+
+
+@dataclass
+class Iterate:
+    """The primal-dual point ``x, s, y, z`` with its evaluation ``ev``; in the restoration phase
+    also the elastic variables ``ep, en``, their multipliers ``zp, zn`` and the displacement
+    ``xi``."""
+
+    x: Point
+    s: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    ev: NLPEvaluation | None = None
+    ep: np.ndarray | None = None
+    en: np.ndarray | None = None
+    zp: np.ndarray | None = None
+    zn: np.ndarray | None = None
+    xi: np.ndarray | None = None
+
+    @property
+    def lam(self) -> np.ndarray:
+        """Multipliers of all rows ``(y, z)``."""
+        return np.concatenate([self.y, self.z])
+
+
+@dataclass
+class Residuals:
+    """The residuals of (50) at an iterate (of the restoration problem in that phase: ``r_pn``
+    are the elastic rows), the scalings ``s_d, s_c`` (WB eq. 5) and ``E_0``; ``of`` holds the
+    ``ev, y, z, s`` they were measured at."""
+
+    r_d: np.ndarray
+    r_c: np.ndarray
+    inf_du: float
+    inf_pr: float
+    s_d: float
+    s_c: float
+    kkt_error: float
+    of: tuple
+    r_pn: tuple[np.ndarray, np.ndarray] | None = None
+
+    def at(self, it: Iterate) -> bool:
+        """Measured at ``it`` as it is now."""
+        return all(map(operator.is_, self.of, (it.ev, it.y, it.z, it.s)))
+
+
+@dataclass
+class Counters:
+    """Problem calls of a solve (the main and the restoration phases together)."""
+
+    n_eval: int = 0
+    n_values: int = 0
 
 
 def finite(*arrays: Any) -> bool:
@@ -90,8 +155,12 @@ amax = abs_max
 
 __all__ = [
     "EPS",
-    "IterateState",
+    "Counters",
+    "Iterate",
+    "Phase",
+    "Residuals",
     "Step",
+    "Stop",
     "Trial",
     "amax",
     "finite",
@@ -123,20 +192,37 @@ def _csr_arrays(a: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return a.indptr, a.indices, a.data
 
 
-class IterateState:
-    """Evaluation, trial points and residuals of one phase (main or restoration).
+class Phase:
+    """The barrier problem of one phase: eq. (49) with ``σ = 1`` (``rho=None``), or the ℓ1
+    restoration problem with penalty ``ρ = rho``, proximity weight ``ζ = proximity · √μ`` and
+    ``σ = 0`` on ``f``. Evaluates the problem, trial points and the residuals of (50)."""
 
-    Attributes set by the driver: ``p`` (problem), ``o`` (options), sizes ``n, me, mi, m``,
-    ``resto`` (restoration phase: elastic variables ``ep, en`` with multipliers ``zp, zn``,
-    displacement ``xi``, penalty ``rho``, proximity weight ``zeta``, ``sigma = 0`` on ``f``),
-    the iterate ``x, s, y, z`` with its evaluation ``ev``, and ``mu``.
-    """
+    def __init__(
+        self,
+        problem: RIPMProblem,
+        counters: Counters,
+        line_search: LineSearchOptions,
+        s_max: float,
+        rho: float | None = None,
+        proximity: float = 0.0,
+    ) -> None:
+        self.problem, self.counters, self.o, self.s_max = problem, counters, line_search, s_max
+        self.n, self.me, self.mi = int(problem.n), int(problem.n_eq), int(problem.n_ineq)
+        self.m = self.me + self.mi
+        self.resto = rho is not None
+        self.sigma = 0.0 if self.resto else 1.0
+        self.rho = 0.0 if rho is None else rho
+        self.proximity = proximity
 
-    def _evaluate(self, x: Point, y: np.ndarray, z: np.ndarray) -> NLPEvaluation | None:
+    def zeta(self, mu: float) -> float:
+        """Weight ``ζ`` of ``½‖ξ‖²`` (0 in the main phase)."""
+        return self.proximity * math.sqrt(mu) if self.resto else 0.0
+
+    def evaluate(self, x: Point, y: np.ndarray, z: np.ndarray) -> NLPEvaluation | None:
         """The problem at ``x`` with the Lagrangian's Hessian for ``σ, y, z``, or ``None`` if
         something is not finite."""
-        self.sh.n_eval += 1
-        ev: NLPEvaluation = self.p.evaluate(x, self.sigma, y, z)
+        self.counters.n_eval += 1
+        ev: NLPEvaluation = self.problem.evaluate(x, self.sigma, y, z)
         h = ev.hessian_lower
         if not finite(
             ev.objective, ev.gradient, ev.eq, ev.ineq, ev.eq_jacobian.data, ev.ineq_jacobian.data,
@@ -154,10 +240,10 @@ class IterateState:
             )
         return ev
 
-    def _values(self, x: Point) -> tuple[float, np.ndarray, np.ndarray] | None:
+    def values(self, x: Point) -> tuple[float, np.ndarray, np.ndarray] | None:
         """``f, h, g`` at a trial point, or ``None`` if they are not finite."""
-        self.sh.n_values += 1
-        f, h, g = self.p.values(x)
+        self.counters.n_values += 1
+        f, h, g = self.problem.values(x)
         h, g = np.asarray(h), np.asarray(g)
         if h.shape != (self.me,) or g.shape != (self.mi,):
             raise InputError(
@@ -166,62 +252,54 @@ class IterateState:
             )
         return (float(f), h, g) if finite(f, h, g) else None
 
-    def _constraints(self, h, g, s, p=None, n=None) -> np.ndarray:
-        c = np.concatenate([h, g + s])
-        if p is not None:
-            c += n - p
-        return c
-
-    def _lam(self) -> np.ndarray:
-        """Multipliers of all rows ``(y, z)`` (the elastic rows of the restoration phase)."""
-        return np.concatenate([self.y, self.z])
-
-    def _make_trial(self, x: Point, s: np.ndarray, f: float, h, g, p=None, n=None, xi=None):
+    def trial(self, x: Point, s, f: float, h, g, mu: float, p=None, n=None, xi=None) -> Trial:
+        """The point with ``θ`` and ``φ_μ`` of this phase."""
         c = np.empty(self.m)
         theta = constraint_values(h, g, s, c)
         if p is not None:
             c += n - p
             theta = abs_sum(c)
         log_s = pairwise_sum(np.log(s)) if len(s) else 0.0
-        phi = self.sigma * f - self.mu * log_s
+        phi = self.sigma * f - mu * log_s
         if p is not None:
             phi += self.rho * float(np.sum(p) + np.sum(n))
-            phi -= self.mu * float(np.sum(np.log(p)) + np.sum(np.log(n)))
+            phi -= mu * float(np.sum(np.log(p)) + np.sum(np.log(n)))
             if xi is not None:
-                phi += 0.5 * self.zeta * float(xi @ xi)
+                phi += 0.5 * self.zeta(mu) * float(xi @ xi)
         return Trial(x, s, f, h, g, c, theta, phi, log_s, p, n, xi)
 
-    def _current_trial(self) -> Trial:
-        ev = self.ev
-        return self._make_trial(
-            self.x, self.s, ev.objective, ev.eq, ev.ineq, self.ep, self.en, self.xi
-        )
+    def current(self, it: Iterate, mu: float) -> Trial:
+        """The iterate as a trial point."""
+        ev = it.ev
+        return self.trial(it.x, it.s, ev.objective, ev.eq, ev.ineq, mu, it.ep, it.en, it.xi)
 
-    def _trial_at(self, step: Step, alpha: float, evaluate: bool = False) -> Trial | None:
+    def trial_at(
+        self, it: Iterate, step: Step, alpha: float, mu: float, tau: float, evaluate: bool = False
+    ) -> Trial | None:
         """The point ``R_x(α dx)``, ``s + α ds`` (and elastics), or ``None`` if not finite.
-        ``evaluate`` (main phase): the evaluation with the Hessian at the multipliers the step
-        would be accepted with, its values those of the trial (:attr:`Trial.ev`); the values
-        alone if that evaluation is not finite."""
-        x = self.p.retract(self.x, alpha * step.dx)
-        if evaluate:
-            s = self.s + alpha * step.ds
-            multipliers = self._multipliers_at(step, alpha, s)
-            ev = self._evaluate(x, *multipliers[:2])
+        ``evaluate`` (main phase only): the evaluation with the Hessian at the multipliers the
+        step would be accepted with, its values those of the trial (:attr:`Trial.ev`); the
+        values alone if that evaluation is not finite."""
+        x = self.problem.retract(it.x, alpha * step.dx)
+        if evaluate and not self.resto:
+            s = it.s + alpha * step.ds
+            multipliers = self.multipliers_at(it, step, alpha, s, mu, tau)
+            ev = self.evaluate(x, *multipliers[:2])
             if ev is not None:
-                trial = self._make_trial(x, s, ev.objective, ev.eq, ev.ineq)
+                trial = self.trial(x, s, ev.objective, ev.eq, ev.ineq, mu)
                 trial.ev, trial.multipliers = ev, multipliers
                 return trial
-        vals = self._values(x)
+        vals = self.values(x)
         if vals is None:
             return None
         p = n = xi = None
         if self.resto:
-            p, n = self.ep + alpha * step.dp, self.en + alpha * step.dn
-            xi = self.xi + alpha * step.dx
-        return self._make_trial(x, self.s + alpha * step.ds, *vals, p, n, xi)
+            p, n = it.ep + alpha * step.dp, it.en + alpha * step.dn
+            xi = it.xi + alpha * step.dx
+        return self.trial(x, it.s + alpha * step.ds, *vals, mu, p, n, xi)
 
-    def _multipliers_at(
-        self, step: Step, alpha: float, s: np.ndarray
+    def multipliers_at(
+        self, it: Iterate, step: Step, alpha: float, s: np.ndarray, mu: float, tau: float
     ) -> tuple[np.ndarray, np.ndarray, float]:
         """``y + α dy``, ``z`` after its own step ``α_z`` (WB eq. 15) within
         ``[μ/(κ_Σ s), κ_Σ μ/s]`` (WB eq. 16) for the slacks ``s``, and ``α_z``.
@@ -229,26 +307,44 @@ class IterateState:
         In the main phase, when the slacks' fraction-to-the-boundary step ``α_s`` is below
         ``dual_step_cap``, ``α_z ≤ α_s``: ``dz`` is the complementarity row's answer to the whole
         ``ds``, of which the primal point takes only ``α_s``."""
-        alpha_z = self._alpha_z_max(step)
+        alpha_z = self.alpha_z_max(it, step, tau)
         if not self.resto and self.o.dual_step_cap > 0:
-            alpha_s = frac_to_boundary(self.s, step.ds, self.tau)
+            alpha_s = frac_to_boundary(it.s, step.ds, tau)
             if alpha_s < self.o.dual_step_cap:
                 alpha_z = min(alpha_z, alpha_s)
-        z = safeguarded_duals(self.z, step.dz, alpha_z, s, self.mu, self.o.kappa_sigma)
-        return self.y + alpha * step.dy, z, alpha_z
+        z = safeguarded_duals(it.z, step.dz, alpha_z, s, mu, self.o.kappa_sigma)
+        return it.y + alpha * step.dy, z, alpha_z
 
-    def _alpha_z_max(self, step: Step) -> float:
+    def alpha_max(self, it: Iterate, step: Step, tau: float) -> float:
+        """The primal fraction-to-boundary step (WB eq. 15)."""
+        a = frac_to_boundary(it.s, step.ds, tau)
+        if self.resto:
+            a = min(a, frac_to_boundary(it.ep, step.dp, tau))
+            a = min(a, frac_to_boundary(it.en, step.dn, tau))
+        return a
+
+    def alpha_z_max(self, it: Iterate, step: Step, tau: float) -> float:
         """The multipliers' fraction-to-boundary step (WB eq. 15)."""
-        alpha_z = frac_to_boundary(self.z, step.dz, self.tau)
+        alpha_z = frac_to_boundary(it.z, step.dz, tau)
         if self.resto:
             alpha_z = min(
                 alpha_z,
-                frac_to_boundary(self.zp, step.dzp, self.tau),
-                frac_to_boundary(self.zn, step.dzn, self.tau),
+                frac_to_boundary(it.zp, step.dzp, tau),
+                frac_to_boundary(it.zn, step.dzn, tau),
             )
         return alpha_z
 
-    def _primal_dual_error(self, ev: NLPEvaluation, y, z, s, mu: float) -> float:
+    def slope(self, it: Iterate, step: Step, mu: float) -> float:
+        """Directional derivative of ``φ_μ`` along the step."""
+        gphi = self.sigma * float(np.dot(it.ev.gradient, step.dx))
+        gphi -= mu * ratio_sum(step.ds, it.s)
+        if self.resto:
+            gphi += self.rho * float(np.sum(step.dp) + np.sum(step.dn))
+            gphi -= mu * float(np.sum(step.dp / it.ep) + np.sum(step.dn / it.en))
+            gphi += self.zeta(mu) * float(it.xi @ step.dx)
+        return gphi
+
+    def primal_dual_error(self, ev: NLPEvaluation, y, z, s, mu: float) -> float:
         """IPOPT's primal-dual system error of the main phase at ``(ev, y, z, s)``: the mean
         absolute entry of ``(r_d, r_c, s∘z - μ)`` (its soft restoration's measure)."""
         r_d, r_c = np.empty(self.n), np.empty(self.m)
@@ -259,15 +355,39 @@ class IterateState:
         total = abs_sum(r_d) + abs_sum(r_c) + (abs_sum(s * z - mu) if self.mi else 0.0)
         return total / (self.n + self.m + self.mi)
 
-    def _scalings(self, y_sum: float, z_sum: float) -> tuple[float, float]:
+    def measures(self, it: Iterate, mu: float) -> Residuals:
+        """Residuals of (50) (of the restoration problem in that phase) at ``it``, the scalings
+        and the KKT error ``E_0``."""
+        ev = it.ev
+        r_d, r_c = np.empty(self.n), np.empty(self.m)
+        inf_du, inf_pr, y_sum, z_sum, compl = measures(
+            ev.gradient, self.sigma, *_csr_arrays(ev.eq_jacobian), it.y,
+            *_csr_arrays(ev.ineq_jacobian), it.z, ev.eq, ev.ineq, it.s, r_d, r_c,
+        )  # fmt: skip
+        r_pn = None
+        if self.resto:
+            zeta = self.zeta(mu)
+            if zeta:
+                r_d += zeta * it.xi
+            r_c += it.en - it.ep
+            lam = it.lam
+            r_pn = (self.rho - lam - it.zp, self.rho + lam - it.zn)
+            inf_du = max(amax(r_d), amax(r_pn[0]), amax(r_pn[1]))
+            inf_pr = amax(r_c)
+        s_d, s_c = self._scalings(it, y_sum, z_sum)
+        res = Residuals(r_d, r_c, inf_du, inf_pr, s_d, s_c, 0.0, (ev, it.y, it.z, it.s), r_pn)
+        res.kkt_error = self.error(it, res, 0.0, compl)
+        return res
+
+    def _scalings(self, it: Iterate, y_sum: float, z_sum: float) -> tuple[float, float]:
         """``s_d``, ``s_c`` of WB eq. 5 (multipliers averaged per component, as in IPOPT) from
         ``Σ|y|`` and ``Σ|z|``."""
-        smax = self.o.s_max
+        smax = self.s_max
         s_d = s_c = 1.0
-        n_bounds = self.mi + (2 * len(self.ep) if self.resto else 0)
+        n_bounds = self.mi + (2 * len(it.ep) if self.resto else 0)
         bound_sum = z_sum
         if self.resto:
-            bound_sum += float(np.sum(self.zp) + np.sum(self.zn))
+            bound_sum += float(np.sum(it.zp) + np.sum(it.zn))
         if self.m:
             avg = (y_sum + bound_sum) / (self.me + n_bounds)
             s_d = max(smax, avg) / smax
@@ -275,36 +395,15 @@ class IterateState:
             s_c = max(smax, bound_sum / n_bounds) / smax
         return s_d, s_c
 
-    def _measures(self) -> None:
-        """Residuals of (50) (of the restoration problem in that phase) at the current iterate,
-        the scalings and the KKT error ``E_0``."""
-        ev = self.ev
-        self.r_d, self.r_c = np.empty(self.n), np.empty(self.m)
-        self.inf_du, self.inf_pr, y_sum, z_sum, compl = measures(
-            ev.gradient, self.sigma, *_csr_arrays(ev.eq_jacobian), self.y,
-            *_csr_arrays(ev.ineq_jacobian), self.z, ev.eq, ev.ineq, self.s, self.r_d, self.r_c,
-        )  # fmt: skip
-        if self.resto:
-            if self.zeta:
-                self.r_d += self.zeta * self.xi
-            self.r_c += self.en - self.ep
-            lam = self._lam()
-            self.r_pn = (self.rho - lam - self.zp, self.rho + lam - self.zn)
-            self.inf_du = max(amax(self.r_d), amax(self.r_pn[0]), amax(self.r_pn[1]))
-            self.inf_pr = amax(self.r_c)
-        self.s_d, self.s_c = self._scalings(y_sum, z_sum)
-        self.kkt_error = self._error(0.0, compl)
-        self.measured = (ev, self.y, self.z, self.s)
-
-    def _error(self, mu: float, compl: float | None = None) -> float:
+    def error(self, it: Iterate, res: Residuals, mu: float, compl: float | None = None) -> float:
         """``E_μ`` (eq. 55-56): scaled dual infeasibility, infeasibility, complementarity
         (``‖s∘z - μ‖∞`` of the main rows given as ``compl``, or computed)."""
         if compl is None:
-            compl = complementarity_error(self.s, self.z, mu)
+            compl = complementarity_error(it.s, it.z, mu)
         if self.resto:
             compl = max(
                 compl,
-                complementarity_error(self.ep, self.zp, mu),
-                complementarity_error(self.en, self.zn, mu),
+                complementarity_error(it.ep, it.zp, mu),
+                complementarity_error(it.en, it.zn, mu),
             )
-        return max(self.inf_du / self.s_d, self.inf_pr, compl / self.s_c)
+        return max(res.inf_du / res.s_d, res.inf_pr, compl / res.s_c)
