@@ -363,7 +363,8 @@ def test_multipliers_of_a_blocked_step_follow_the_primal_step(monkeypatch):
     with ``dual_step_cap`` (default 1e-2) ``z`` steps ``α_z = α_s`` there, with 0 its own full
     ``α_z`` (WB eq. 15); steps with ``α_s`` at or above the cap keep their own ``α_z``. Both
     solve the test problems; a cap outside [0, 1] is rejected by name."""
-    from mbplan.solvers.ripm.iterate import Phase, frac_to_boundary
+    from mbplan.solvers.ripm.iterate import frac_to_boundary
+    from mbplan.solvers.ripm.phase import Phase
 
     multipliers_at = Phase.multipliers_at
     steps = []
@@ -696,7 +697,7 @@ def test_first_trials_evaluated_with_their_multipliers_take_the_same_steps(make,
     would be accepted with, and the accepted point reuses that evaluation: the iterates are
     those of the values-then-evaluate order, one ``values`` call fewer per accepted first trial
     and one evaluation more per rejected one."""
-    from mbplan.solvers.ripm.iterate import Phase
+    from mbplan.solvers.ripm.phase import Phase
 
     problem = make()
     x0 = problem.initial_guess() if x0 is None else x0
@@ -729,8 +730,8 @@ def test_soft_restoration_steps_where_the_line_search_fails(monkeypatch):
     solve ends at the optimum) or they reduce the primal-dual error (Wächter-Biegler from
     (-0.4, 1, 1): one or two steps, the path is sensitive to rounding); the first that does neither starts the restoration phase (which
     fails here: its line search too), as does every failure with ``max_soft_resto_iters=0``."""
-    from mbplan.solvers.ripm.iterate import Phase
     from mbplan.solvers.ripm.line_search import FilterLineSearch, Search
+    from mbplan.solvers.ripm.phase import Phase
 
     reference = solve_ripm(hs071(), HS071_X0)
     monkeypatch.setattr(FilterLineSearch, "search", lambda self, *args: Search(None))

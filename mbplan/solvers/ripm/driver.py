@@ -24,10 +24,6 @@ usually it is), one ``problem.values`` per further trial and a few sparse LDLᵀ
 from __future__ import annotations
 
 import functools
-import math
-import sys
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -38,26 +34,16 @@ from mbplan.errors import InputError
 from mbplan.solvers.kkt.reduced.system import ReducedKKTSystem, kkt_system
 from mbplan.solvers.kkt.system import KKTSystem
 from mbplan.solvers.nlp import NLPEvaluation, Point, RIPMProblem
-from mbplan.solvers.result import IterationHistory, RIPMResult, RIPMStatus
+from mbplan.solvers.result import RIPMResult, RIPMStatus
 from mbplan.solvers.ripm.barrier import BarrierStrategy
-from mbplan.solvers.ripm.iterate import (
-    Counters,
-    Iterate,
-    Phase,
-    Residuals,
-    Step,
-    Stop,
-    Trial,
-    amax,
-    finite,
-)
+from mbplan.solvers.ripm.iterate import Iterate, Residuals, Step, Stop, Trial, amax, finite
 from mbplan.solvers.ripm.kernels import RIPM_KERNELS, safeguarded_duals
 from mbplan.solvers.ripm.line_search import FilterLineSearch, Search
 from mbplan.solvers.ripm.newton import NewtonStep
 from mbplan.solvers.ripm.options import RIPMOptions
+from mbplan.solvers.ripm.output import Recorder, StepRecord
+from mbplan.solvers.ripm.phase import Counters, Phase
 from mbplan.solvers.ripm.restoration import Restoration, SoftRestoration
-
-_HEADER = "iter    objective    inf_pr   inf_du lg(mu)  ||d||  lg(rg) alpha_du alpha_pr  ls"
 
 
 def solve_ripm(
@@ -94,38 +80,25 @@ def _announce_uncached_kernels() -> None:
 
 @dataclass
 class _Shared:
-    """What the main phase and a restoration phase share: counters, log, KKT system."""
+    """What the main phase and a restoration phase share: KKT system, counters, record."""
 
     kkt: KKTSystem | ReducedKKTSystem
-    history: IterationHistory
-    out: Callable[[str], None] | None
     counters: Counters
-    t0: float = 0.0
+    recorder: Recorder
     iter: int = 0
-
-
-@dataclass
-class _Last:
-    """The step that produced the current iterate (for the log and the history)."""
-
-    d: float = 0.0  # ‖α dx‖∞
-    dw: float = 0.0
-    a_du: float = 0.0
-    a_pr: float = 0.0
-    ls: int = 0
-    tag: str = " "
 
 
 def _main_phase(problem: RIPMProblem, o: RIPMOptions) -> _Iterations:
     """The main phase of a solve of ``problem`` with its components."""
     _announce_uncached_kernels()
-    out = (lambda line: print(line, file=sys.stdout)) if o.print_level > 0 else None
-    lin = o.linear_solver
+    lin, term, bar = o.linear_solver, o.termination, o.barrier
     kkt = kkt_system(problem, lin.kkt_method, lin.kkt_ordering, lin.kkt_pivot_threshold)
-    sh = _Shared(kkt, IterationHistory(), out, Counters())
-    phase = Phase(problem, sh.counters, o.line_search, o.s_max)
-    barrier = BarrierStrategy(o.barrier, o.tol, o.mu_init, o.mu_strategy == "adaptive")
-    restoration = Restoration(o.restoration_phase, phase, o.tau_min, o.tol, o.constr_viol_tol)
+    sh = _Shared(kkt, Counters(), Recorder(o.output.print_level))
+    phase = Phase(problem, sh.counters, o.line_search, term.s_max)
+    barrier = BarrierStrategy(bar, term.tol, bar.mu_init, bar.mu_strategy == "adaptive")
+    restoration = Restoration(
+        o.restoration_phase, phase, bar.tau_min, term.tol, term.constr_viol_tol
+    )
     return _Iterations(sh, phase, o, barrier, restoration)
 
 
@@ -145,21 +118,23 @@ class _Iterations:
         self.sh, self.phase, self.o, self.barrier = sh, phase, options, barrier
         self.restoration, self.original = restoration, original
         self.newton = NewtonStep(sh.kkt, phase, options.inertia, options.linear_solver)
-        self.soft = SoftRestoration(options.restoration_phase, phase, options.kappa_sigma)
+        self.soft = SoftRestoration(
+            options.restoration_phase, phase, options.line_search.kappa_sigma
+        )
         self.it: Iterate | None = None
         self.res: Residuals | None = None
         self.filter: FilterLineSearch | None = None
         self.cur: Trial | None = None  # the iterate as a trial point of the current step
-        self.last = _Last()
+        self.last = StepRecord()
 
     # ------------------------------------------------------------------ start
     def _initialize(self, x0: Point, y0, z0, s0) -> None:
         """The starting iterate: the evaluation with the Hessian at ``y0`` (0 unless given), the
         slacks from it, ``y`` by least squares with its Jacobian (WB) unless given; a kept
         least-squares ``y`` is evaluated again (the Hessian of the Lagrangian depends on it)."""
-        o, ph = self.o, self.phase
+        init, ph = self.o.initialization, self.phase
         y = np.zeros(ph.me) if y0 is None else np.asarray(y0, dtype=float)
-        z = np.full(ph.mi, o.bound_mult_init_val) if z0 is None else np.asarray(z0, float)
+        z = np.full(ph.mi, init.bound_mult_init_val) if z0 is None else np.asarray(z0, float)
         s = np.ones(ph.mi) if s0 is None else np.asarray(s0, dtype=float)
         if (y.shape, z.shape, s.shape) != ((ph.me,), (ph.mi,), (ph.mi,)):
             raise InputError(
@@ -176,8 +151,8 @@ class _Iterations:
         if it.ev is None:
             raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the initial point")
         if s0 is None and ph.mi > 0:
-            it.s = np.maximum(-it.ev.ineq, o.bound_push)
-        if y0 is None and ph.me > 0 and o.constr_mult_init_max > 0:
+            it.s = np.maximum(-it.ev.ineq, init.bound_push)
+        if y0 is None and ph.me > 0 and init.constr_mult_init_max > 0:
             y_ls = self._least_squares_y(it.ev, it.z)
             if y_ls is not None:  # kept: the Hessian of the Lagrangian with it
                 it.y = y_ls
@@ -186,18 +161,15 @@ class _Iterations:
                     raise Stop(RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at y0")
         theta0 = ph.current(it, self.barrier.mu).theta
         self.barrier.start(it.s, it.z)
-        self.filter = FilterLineSearch(o.line_search, theta0)
+        self.filter = FilterLineSearch(self.o.line_search, theta0)
 
     def _least_squares_y(self, ev: NLPEvaluation, z: np.ndarray) -> np.ndarray | None:
-        return self.newton.least_squares_y(ev, z, self.o.constr_mult_init_max)
+        return self.newton.least_squares_y(ev, z, self.o.initialization.constr_mult_init_max)
 
     # ------------------------------------------------------------------ loop
     def run(self, x0: Point, y0, z0, s0) -> RIPMResult:
-        self.sh.t0 = time.perf_counter()
-        if self.sh.out:
-            ph = self.phase
-            self.sh.out(f"RIPM: n = {ph.n}, n_eq = {ph.me}, n_ineq = {ph.mi}")
-            self.sh.out(_HEADER)
+        """The solve from ``x0`` (``y0, z0, s0``: given multipliers and slacks, or ``None``)."""
+        self.sh.recorder.start(self.phase.n, self.phase.me, self.phase.mi)
         try:
             self._initialize(x0, y0, z0, s0)
             self._iterate()
@@ -208,7 +180,7 @@ class _Iterations:
     def _iterate(self) -> None:
         """The iterations of a phase (RIPM Algorithm 1 with WB's globalization): returns only
         when a restoration phase is done."""
-        o, ph, barrier = self.o, self.phase, self.barrier
+        term, ph, barrier = self.o.termination, self.phase, self.barrier
         n_acceptable, tiny_step, first = 0, False, True
         while True:
             it = self.it
@@ -223,9 +195,9 @@ class _Iterations:
             stuck = barrier.update(res.kkt_error, error_at, tiny_step, it.s, it.z)
             self._sync_filter()
             if stuck:
-                if self.original is not None and res.kkt_error <= o.acceptable_tol:
+                ok = res.kkt_error <= term.acceptable_tol
+                if self.original is not None and ok:
                     self.restoration.converged(it)
-                ok = res.kkt_error <= o.acceptable_tol
                 raise Stop(
                     RIPMStatus.ACCEPTABLE if ok else RIPMStatus.NUMERICAL_ERROR,
                     "search direction became too small to make progress",
@@ -238,7 +210,8 @@ class _Iterations:
             step, dw = computed
             tiny_step = (
                 res.inf_pr < 1e-4
-                and max(amax(step.dx), amax(step.ds / (1 + it.s))) < o.tiny_step_tol
+                and max(amax(step.dx), amax(step.ds / (1 + it.s)))
+                < self.o.line_search.tiny_step_tol
             )
             search = self._search(step, tiny_step)
             if search.trial is None:
@@ -250,13 +223,13 @@ class _Iterations:
 
     def _check_main(self, n_acceptable: int) -> int:
         """Termination tests of the main phase; returns the count of acceptable iterates."""
-        o, error = self.o, self.res.kkt_error
-        if error <= o.tol:
+        term, error = self.o.termination, self.res.kkt_error
+        if error <= term.tol:
             raise Stop(RIPMStatus.CONVERGED)
-        n_acceptable = n_acceptable + 1 if error <= o.acceptable_tol else 0
-        if n_acceptable >= o.acceptable_iter:
+        n_acceptable = n_acceptable + 1 if error <= term.acceptable_tol else 0
+        if n_acceptable >= term.acceptable_iter:
             raise Stop(RIPMStatus.ACCEPTABLE, f"E_0 ≤ acceptable_tol for {n_acceptable} iterations")
-        if self.sh.iter >= o.max_iter:
+        if self.sh.iter >= term.max_iter:
             raise Stop(RIPMStatus.MAX_ITER)
         return n_acceptable
 
@@ -267,7 +240,7 @@ class _Iterations:
         it = self.it
         if self.restoration.done(it, self.res.kkt_error, first, main_mu, main_filter):
             return True
-        if self.sh.iter >= self.o.max_iter:
+        if self.sh.iter >= self.o.termination.max_iter:
             raise Stop(RIPMStatus.MAX_ITER)
         if not first:
             self._record(it.ev.objective, self.restoration.original_measures(it, main_mu)[2])
@@ -285,7 +258,7 @@ class _Iterations:
         it, barrier, cur = self.it, self.barrier, self.cur
         mu = barrier.mu
         probe = (lambda aff: barrier.probe(it.s, it.z, aff)) if barrier.probe_pending else None
-        corrector = self.o.corrector and not self.phase.resto
+        corrector = self.o.barrier.corrector and not self.phase.resto
         computed = self.newton.compute(it, self.res, mu, barrier.tau, probe, corrector)
         self._sync_filter()
         if computed is not None:
@@ -326,15 +299,15 @@ class _Iterations:
         inequality or equality rows, not at an almost feasible point: IPOPT's rules)."""
         o, res = self.o, self.res
         if self.original is not None:
-            if res.kkt_error <= o.acceptable_tol:  # solved to the acceptable level
+            if res.kkt_error <= o.termination.acceptable_tol:  # solved to the acceptable level
                 self.restoration.converged(self.it)
             raise Stop(RIPMStatus.LINE_SEARCH_FAILED, f"restoration phase: {why}")
-        if self.phase.m == 0 or not o.restoration:
+        if self.phase.m == 0 or not o.restoration_phase.restoration:
             status = (
                 RIPMStatus.NUMERICAL_ERROR if "inertia" in why else RIPMStatus.LINE_SEARCH_FAILED
             )
             raise Stop(status, why)
-        if res.inf_pr <= min(1e-2 * o.tol, 0.1 * o.constr_viol_tol):
+        if res.inf_pr <= min(1e-2 * o.termination.tol, 0.1 * o.termination.constr_viol_tol):
             # IPOPT's rule: the restoration phase cannot reduce an infeasibility this small
             raise Stop(
                 RIPMStatus.LINE_SEARCH_FAILED,
@@ -350,7 +323,7 @@ class _Iterations:
         self.soft.steps = 0
         phase = rest.phase()
         start, mu, theta0 = rest.start(phase, self.it, self.barrier.mu)
-        barrier = BarrierStrategy(o.barrier, o.tol, mu, adaptive=False)
+        barrier = BarrierStrategy(o.barrier, o.termination.tol, mu, adaptive=False)
         child = _Iterations(self.sh, phase, o, barrier, rest, (self.filter, self.barrier.mu))
         child.it = start
         try:
@@ -384,7 +357,7 @@ class _Iterations:
         )
         new = Iterate(trial.x, s, y, z, ev)
         if ph.resto:
-            kappa = self.o.kappa_sigma
+            kappa = self.o.line_search.kappa_sigma
             new.zp = safeguarded_duals(it.zp, step.dzp, alpha_z, trial.p, mu, kappa)
             new.zn = safeguarded_duals(it.zn, step.dzn, alpha_z, trial.n, mu, kappa)
             new.ep, new.en, new.xi = trial.p, trial.n, trial.xi
@@ -397,64 +370,18 @@ class _Iterations:
         self.it = new
         self.sh.iter += 1
         tag = "r" if ph.resto else search.tag[0]
-        self.last = _Last(alpha * amax(step.dx), dw, alpha_z, alpha, search.trials, tag)
+        self.last = StepRecord(alpha * amax(step.dx), dw, alpha_z, alpha, search.trials, tag)
 
     # ------------------------------------------------------------------ output
     def _record(self, objective: float, inf_pr: float | None = None) -> None:
-        h, last, res = self.sh.history, self.last, self.res
-        restoration = last.tag == "r"
+        res = self.res
         inf_pr = res.inf_pr if inf_pr is None else inf_pr
-        h.objective.append(float(objective))
-        h.inf_pr.append(inf_pr)
-        h.inf_du.append(res.inf_du)
-        h.kkt_error.append(res.kkt_error)
-        h.mu.append(self.barrier.mu)
-        h.step_norm.append(last.d)
-        h.delta_w.append(last.dw)
-        h.alpha_du.append(last.a_du)
-        h.alpha_pr.append(last.a_pr)
-        h.ls_trials.append(last.ls)
-        h.time_s.append(time.perf_counter() - self.sh.t0)
-        h.restoration.append(restoration)
-        if self.sh.out:
-            rg = f"{math.log10(last.dw):5.1f}" if last.dw > 0 else "    -"
-            self.sh.out(
-                f"{self.sh.iter:4d}{'r' if restoration else ' '}{objective:14.7e} {inf_pr:7.2e} "
-                f"{res.inf_du:7.2e} {math.log10(self.barrier.mu):5.1f} {last.d:7.2e} {rg} "
-                f"{last.a_du:7.2e} {last.a_pr:7.2e}{last.tag}{last.ls:3d}"
-            )
+        self.sh.recorder.record(self.sh.iter, objective, inf_pr, res, self.barrier.mu, self.last)
 
     def _result(self, status: RIPMStatus, message: str) -> RIPMResult:
         sh, it = self.sh, self.it
-        wall = time.perf_counter() - sh.t0
-        ok = it.ev is not None
-        if ok and (self.res is None or not self.res.at(it)):
+        if it.ev is not None and (self.res is None or not self.res.at(it)):
             self.res = self.phase.measures(it, self.barrier.mu)  # stopped after the iterate moved
-        res = self.res
-        result = RIPMResult(
-            status=status,
-            message=message,
-            iterations=sh.iter,
-            wall_time_s=wall,
-            x=it.x,
-            y=it.y,
-            z=it.z,
-            s=it.s,
-            objective=float(it.ev.objective) if ok else math.nan,
-            kkt_error=res.kkt_error if ok else math.inf,
-            inf_pr=res.inf_pr if ok else math.inf,
-            inf_du=res.inf_du if ok else math.inf,
-            mu=self.barrier.mu,
-            history=sh.history,
-            n_evaluations=sh.counters.n_eval,
-            n_trial_evaluations=sh.counters.n_values,
-            n_factorizations=sh.kkt.n_factorizations,
-        )
-        if sh.out:
-            sh.out(
-                f"\nRIPM {status.name}: {message}\n  iterations {sh.iter}, objective "
-                f"{result.objective:.12e}, E_0 {result.kkt_error:.2e}, time {wall:.3f} s "
-                f"({sh.counters.n_eval} evaluations, {sh.counters.n_values} trial evaluations, "
-                f"{sh.kkt.n_factorizations} factorizations)"
-            )
-        return result
+        res = self.res if it.ev is not None else None
+        counts = (sh.counters.n_eval, sh.counters.n_values, sh.kkt.n_factorizations)
+        return sh.recorder.result(status, message, sh.iter, it, res, self.barrier.mu, counts)

@@ -31,7 +31,6 @@ from mbplan.solvers.kkt.system import KKTSystem
 from mbplan.solvers.nlp import NLPEvaluation
 from mbplan.solvers.ripm.iterate import (
     Iterate,
-    Phase,
     Residuals,
     Step,
     amax,
@@ -41,6 +40,7 @@ from mbplan.solvers.ripm.iterate import (
 )
 from mbplan.solvers.ripm.kernels import corrector_shift, newton_diagonal, newton_rhs, slack_step
 from mbplan.solvers.ripm.options import InertiaOptions, LinearSolverOptions
+from mbplan.solvers.ripm.phase import Phase
 
 _NO_SHIFT = np.zeros(0)
 

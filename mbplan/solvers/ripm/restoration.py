@@ -23,10 +23,11 @@ import numpy as np
 
 from mbplan.solvers.nlp import NLPEvaluation
 from mbplan.solvers.result import RIPMStatus
-from mbplan.solvers.ripm.iterate import EPS, Iterate, Phase, Step, Stop, Trial, amax
+from mbplan.solvers.ripm.iterate import EPS, Iterate, Step, Stop, Trial, amax
 from mbplan.solvers.ripm.kernels import safeguarded_duals
 from mbplan.solvers.ripm.line_search import FilterLineSearch, Search
 from mbplan.solvers.ripm.options import RestorationOptions
+from mbplan.solvers.ripm.phase import Phase
 
 LeastSquaresY = Callable[[NLPEvaluation, np.ndarray], "np.ndarray | None"]
 
