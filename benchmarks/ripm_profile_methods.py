@@ -1,6 +1,7 @@
-"""The RIPM's own per-iteration cost, method by method: exclusive time of every driver method
-(main phase, restoration and line search), of ``KKTSystem``'s entry points and of the
-problem's ``evaluate`` / ``values`` / ``retract``, in µs per iteration.
+"""The RIPM's own per-iteration cost, method by method: exclusive time of every method of the
+driver and its components (phase, Newton step, line search, barrier, restoration), of
+``KKTSystem``'s entry points and of the problem's ``evaluate`` / ``values`` / ``retract``, in
+µs per iteration.
 
 Each method is wrapped by a timer that subtracts the time of the wrapped methods it calls
 (about 0.3-0.5 µs of timer overhead per call is included in every row). Per case the minimum
@@ -21,11 +22,21 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.speed_tasks import TASKS
-from mbplan.solvers import linear_solver, ripm
-from mbplan.transcription.problem import TrajectoryProblem
+from mbplan.solvers.kkt.system import KKTSystem
+from mbplan.solvers.ripm import barrier, driver, line_search, newton, phase, restoration
+from mbplan.tasks.speed import TASKS
+from mbplan.transcription.trajectory import TrajectoryProblem
 
-_SKIP = {"run", "kkt", "iter"}
+_SKIP = {"run", "zeta"}
+_COMPONENTS = (
+    driver._Iterations,
+    phase.Phase,
+    newton.NewtonStep,
+    line_search.FilterLineSearch,
+    barrier.BarrierStrategy,
+    restoration.SoftRestoration,
+    restoration.Restoration,
+)
 
 
 class _Clock:
@@ -66,24 +77,23 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=10)
     args = ap.parse_args()
     clock = _Clock()
-    for name in dir(ripm._RIPM):
-        attr = getattr(ripm._RIPM, name)
-        if name.startswith("_") and not name.startswith("__") and callable(attr):
-            if not isinstance(attr, property) and name not in _SKIP:
-                clock.wrap(ripm._RIPM, name)
+    for cls in _COMPONENTS:
+        for name, attr in vars(cls).items():
+            if callable(attr) and not name.startswith("__") and name not in _SKIP:
+                clock.wrap(cls, name)
     for name in ("__init__", "set_matrices", "factorize", "solve"):
-        clock.wrap(linear_solver.KKTSystem, name)
+        clock.wrap(KKTSystem, name)
     for name in ("evaluate", "values", "retract"):
         clock.wrap(TrajectoryProblem, name)
     cases = [TASKS[args.task](i) for i in range(args.cases)]
     rows, calls, iterations = [], None, []
     for problem, x0, options in cases:
-        ripm.solve_ripm(problem, x0, options)
+        driver.solve_ripm(problem, x0, options)
         best: dict[str, float] = {}
         for _ in range(args.repeats):
             clock.reset()
             t0 = time.perf_counter()
-            res = ripm.solve_ripm(problem, x0, options)
+            res = driver.solve_ripm(problem, x0, options)
             best["whole solve"] = min(best.get("whole solve", 1e9), time.perf_counter() - t0)
             for k, v in clock.time.items():
                 best[k] = min(best.get(k, 1e9), v)
