@@ -339,11 +339,20 @@ class _Iterations:
         self.barrier.kkt_refs = []
 
     def _leave(self, child: _Iterations, keep_multipliers: bool) -> None:
-        new = self.restoration.leave(
-            child.it, self.barrier.mu, keep_multipliers, self._least_squares_y
-        )
-        if new is not None:
-            self.it = new
+        """Continue from the restoration phase's iterate; with ``resto_ls_multipliers``, ``y``
+        by least squares (IPOPT's ``constr_mult_reset_threshold > 0``)."""
+        it = self.restoration.leave(child.it, self.barrier.mu, keep_multipliers)
+        if it is None:
+            return
+        self.it = it
+        if not keep_multipliers and self.o.restoration_phase.resto_ls_multipliers and self.phase.me:
+            y_ls = self._least_squares_y(it.ev, it.z)
+            if y_ls is not None and np.any(y_ls):
+                it.y = y_ls
+                ev = self.phase.evaluate(it.x, it.y, it.z)
+                if ev is None:
+                    raise Stop(RIPMStatus.NUMERICAL_ERROR, "restoration: non-finite derivatives")
+                it.ev = ev
 
     def _accept(self, search: Search, dw: float) -> None:
         """Take the step: primal with α, ``y`` with α, ``z`` with its own α_z (WB eq. 15-16)."""

@@ -17,19 +17,14 @@ with ``‖h, g + s‖∞ > constr_viol_tol`` proves local infeasibility.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
-from mbplan.solvers.nlp import NLPEvaluation
 from mbplan.solvers.result import RIPMStatus
 from mbplan.solvers.ripm.iterate import EPS, Iterate, Step, Stop, Trial, amax
 from mbplan.solvers.ripm.kernels import safeguarded_duals
 from mbplan.solvers.ripm.line_search import FilterLineSearch, Search
 from mbplan.solvers.ripm.options import RestorationOptions
 from mbplan.solvers.ripm.phase import Phase
-
-LeastSquaresY = Callable[[NLPEvaluation, np.ndarray], "np.ndarray | None"]
 
 
 def elastic_start(c: np.ndarray, mu: float, rho: float) -> tuple[np.ndarray, np.ndarray]:
@@ -160,15 +155,12 @@ class Restoration:
             self.converged(it)
         return False
 
-    def leave(
-        self, it: Iterate, mu: float, keep_multipliers: bool, least_squares_y: LeastSquaresY
-    ) -> Iterate | None:
+    def leave(self, it: Iterate, mu: float, keep_multipliers: bool) -> Iterate | None:
         """The main phase's iterate at the restoration's ``it`` (the original objective again):
-        ``y = 0`` (IPOPT's default ``constr_mult_reset_threshold = 0``; least squares with
-        ``resto_ls_multipliers``) and ``z = μ/s``, or all ``z = 1`` if that exceeds
-        ``bound_mult_reset_threshold`` (IPOPT's rule). ``keep_multipliers`` (the solve ends:
-        they certify infeasibility): the restoration's ``y, z``, and ``None`` if the evaluation
-        is not finite."""
+        ``y = 0`` (IPOPT's default ``constr_mult_reset_threshold = 0``) and ``z = μ/s``, or all
+        ``z = 1`` if that exceeds ``bound_mult_reset_threshold`` (IPOPT's rule).
+        ``keep_multipliers`` (the solve ends: they certify infeasibility): the restoration's
+        ``y, z``, and ``None`` if the evaluation is not finite."""
         main, o = self.main, self.o
         if keep_multipliers:
             y, z = it.y.copy(), it.z.copy()
@@ -182,12 +174,4 @@ class Restoration:
             if keep_multipliers:
                 return None
             raise Stop(RIPMStatus.NUMERICAL_ERROR, "restoration: non-finite derivatives")
-        new = Iterate(it.x, it.s, y, z, ev)
-        if not keep_multipliers and o.resto_ls_multipliers and main.me:
-            y_ls = least_squares_y(ev, z)
-            if y_ls is not None and np.any(y_ls):
-                new.y = y_ls
-                new.ev = main.evaluate(it.x, y_ls, z)
-                if new.ev is None:
-                    raise Stop(RIPMStatus.NUMERICAL_ERROR, "restoration: non-finite derivatives")
-        return new
+        return Iterate(it.x, it.s, y, z, ev)
