@@ -304,14 +304,14 @@ def test_lgvi_plans_start_from_zero_equality_multipliers(monkeypatch: pytest.Mon
     """``plan`` on the LGVI skips the least-squares ``y₀`` (``LGVI_RIPM_OPTIONS``): on a docking
     case that ``y₀`` exceeds ``constr_mult_init_max = 1`` and is discarded, so the plan with it
     takes the same iterates; a user's option brings it back."""
-    from mbplan.solvers.ripm import driver as ripm
+    from mbplan.solvers.ripm.newton import NewtonStep
 
     kept = []
-    original = ripm._RIPM._least_squares_y
+    original = NewtonStep.least_squares_y
     monkeypatch.setattr(
-        ripm._RIPM,
-        "_least_squares_y",
-        lambda self, ev: kept.append(original(self, ev)) or kept[-1],
+        NewtonStep,
+        "least_squares_y",
+        lambda self, ev, z, limit: kept.append(original(self, ev, z, limit)) or kept[-1],
     )
     ocp = paper.drone_docking(sample_docking_cases(1, 0)[0])
     fast = mb.plan(ocp, "ripm")

@@ -188,12 +188,13 @@ def test_least_squares_y0_through_the_newton_system_is_the_least_squares_solutio
 def test_least_squares_y0_goes_through_the_reduction():
     """With ``kkt_method="reduced"`` the start's least-squares system is factorized through the
     reduction, not by the full fallback (which would also pass the test above)."""
-    from mbplan.solvers.ripm.driver import _RIPM
+    from mbplan.solvers.ripm.driver import _main_phase
 
     problem, x0 = maximal_ripm_problem(chain_task(4, N=5), "linear")
-    ripm = _RIPM(problem, RIPMOptions(max_iter=0, constr_mult_init_max=1e12, kkt_method="reduced"))
+    opts = RIPMOptions(max_iter=0, constr_mult_init_max=1e12, kkt_method="reduced")
+    ripm = _main_phase(problem, opts)
     ripm.run(x0, None, None, None)
-    kkt = ripm.kkt
+    kkt = ripm.sh.kkt
     assert kkt.n_reduced == 1 and kkt.n_fallbacks == 0
     assert kkt.full.n_factorizations == 0
 

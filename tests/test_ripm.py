@@ -311,19 +311,19 @@ def test_least_squares_multipliers_without_inequalities_and_after_restoration():
     a = problem.evaluate(x0).eq_jacobian.toarray()
     expected = np.linalg.lstsq(a.T, -problem.evaluate(x0).gradient, rcond=None)[0]
     np.testing.assert_allclose(y0, expected, rtol=1e-10, atol=1e-12)
-    from mbplan.solvers.ripm.driver import _RIPM
+    from mbplan.solvers.ripm.newton import NewtonStep
 
     calls = []
-    least_squares = _RIPM._least_squares_y
+    least_squares = NewtonStep.least_squares_y
 
-    def counted(self, ev):
+    def counted(self, ev, z, limit):
         calls.append(ev)
-        return least_squares(self, ev)
+        return least_squares(self, ev, z, limit)
 
     for flag in (True, False):  # at the start (and on leaving each restoration phase)
         calls.clear()
         with pytest.MonkeyPatch.context() as mp:
-            mp.setattr(_RIPM, "_least_squares_y", counted)
+            mp.setattr(NewtonStep, "least_squares_y", counted)
             res = solve_ripm(
                 _wachter_biegler(), np.array([-0.4, 1.0, 1.0]), resto_ls_multipliers=flag
             )
@@ -363,19 +363,20 @@ def test_multipliers_of_a_blocked_step_follow_the_primal_step(monkeypatch):
     with ``dual_step_cap`` (default 1e-2) ``z`` steps ``α_z = α_s`` there, with 0 its own full
     ``α_z`` (WB eq. 15); steps with ``α_s`` at or above the cap keep their own ``α_z``. Both
     solve the test problems; a cap outside [0, 1] is rejected by name."""
-    from mbplan.solvers.ripm.iterate import IterateState, frac_to_boundary
+    from mbplan.solvers.ripm.iterate import frac_to_boundary
+    from mbplan.solvers.ripm.phase import Phase
 
-    multipliers_at = IterateState._multipliers_at
+    multipliers_at = Phase.multipliers_at
     steps = []
 
-    def recorded(self, step, alpha, s):
-        y, z, alpha_z = multipliers_at(self, step, alpha, s)
+    def recorded(self, it, step, alpha, s, mu, tau):
+        y, z, alpha_z = multipliers_at(self, it, step, alpha, s, mu, tau)
         if not self.resto:
-            alpha_s = frac_to_boundary(self.s, step.ds, self.tau)
-            steps.append((alpha_s, alpha_z, self._alpha_z_max(step)))
+            alpha_s = frac_to_boundary(it.s, step.ds, tau)
+            steps.append((alpha_s, alpha_z, self.alpha_z_max(it, step, tau)))
         return y, z, alpha_z
 
-    monkeypatch.setattr(IterateState, "_multipliers_at", recorded)
+    monkeypatch.setattr(Phase, "multipliers_at", recorded)
     for cap in (RIPMOptions().dual_step_cap, 0.0):
         steps.clear()
         res = solve_ripm(_outside_disc(), np.array([0.0, 1e-3]), dual_step_cap=cap)
@@ -696,16 +697,18 @@ def test_first_trials_evaluated_with_their_multipliers_take_the_same_steps(make,
     would be accepted with, and the accepted point reuses that evaluation: the iterates are
     those of the values-then-evaluate order, one ``values`` call fewer per accepted first trial
     and one evaluation more per rejected one."""
-    from mbplan.solvers.ripm.iterate import IterateState
+    from mbplan.solvers.ripm.phase import Phase
 
     problem = make()
     x0 = problem.initial_guess() if x0 is None else x0
     fast = solve_ripm(problem, x0)
-    trial_at = IterateState._trial_at
+    trial_at = Phase.trial_at
     monkeypatch.setattr(
-        IterateState,
-        "_trial_at",
-        lambda self, step, alpha, evaluate=False: trial_at(self, step, alpha),
+        Phase,
+        "trial_at",
+        lambda self, it, step, alpha, mu, tau, evaluate=False: trial_at(
+            self, it, step, alpha, mu, tau
+        ),
     )
     plain = solve_ripm(problem, x0)
     assert fast.iterations == plain.iterations and fast.status == plain.status
@@ -727,19 +730,19 @@ def test_soft_restoration_steps_where_the_line_search_fails(monkeypatch):
     solve ends at the optimum) or they reduce the primal-dual error (Wächter-Biegler from
     (-0.4, 1, 1): one or two steps, the path is sensitive to rounding); the first that does neither starts the restoration phase (which
     fails here: its line search too), as does every failure with ``max_soft_resto_iters=0``."""
-    from mbplan.solvers.ripm.iterate import IterateState
     from mbplan.solvers.ripm.line_search import FilterLineSearch, Search
+    from mbplan.solvers.ripm.phase import Phase
 
     reference = solve_ripm(hs071(), HS071_X0)
-    monkeypatch.setattr(FilterLineSearch, "_line_search", lambda self, step, cur: Search(None))
+    monkeypatch.setattr(FilterLineSearch, "search", lambda self, *args: Search(None))
     errors = []
-    pd_error = IterateState._primal_dual_error
+    pd_error = Phase.primal_dual_error
 
     def recorded(self, ev, y, z, s, mu):
         errors.append(pd_error(self, ev, y, z, s, mu))
         return errors[-1]
 
-    monkeypatch.setattr(IterateState, "_primal_dual_error", recorded)
+    monkeypatch.setattr(Phase, "primal_dual_error", recorded)
     soft = solve_ripm(hs071(), HS071_X0)
     assert soft.status is RIPMStatus.CONVERGED and not any(soft.history.restoration)
     np.testing.assert_allclose(soft.x, reference.x, atol=1e-8)
@@ -761,7 +764,7 @@ def test_no_restoration_phase_at_an_almost_feasible_point(monkeypatch):
     from mbplan.solvers.ripm.line_search import FilterLineSearch, Search
 
     opt = solve_ripm(hs071(), HS071_X0)
-    monkeypatch.setattr(FilterLineSearch, "_line_search", lambda self, step, cur: Search(None))
+    monkeypatch.setattr(FilterLineSearch, "search", lambda self, *args: Search(None))
     near = solve_ripm(hs071(), opt.x, tol=1e-6, max_soft_resto_iters=0, s0=opt.s, z0=opt.z + 1)
     assert near.status is RIPMStatus.LINE_SEARCH_FAILED and "almost feasible" in near.message
     assert near.iterations == 0 and not any(near.history.restoration)
@@ -783,7 +786,7 @@ def test_a_non_finite_predictor_step_leaves_mu_finite(monkeypatch):
     def once_nan(self):
         step = affine(self)
         if not broken:
-            broken.append(self.mu)
+            broken.append(self._mu)
             return Step(*(np.full_like(a, np.nan) for a in (step.dx, step.ds, step.dy, step.dz)))
         return step
 

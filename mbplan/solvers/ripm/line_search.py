@@ -10,12 +10,17 @@ ends the search (the driver then calls the restoration phase).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from mbplan.solvers.ripm.iterate import Step, Trial, finite, frac_to_boundary
-from mbplan.solvers.ripm.kernels import ratio_sum
+from mbplan.solvers.ripm.iterate import Step, Trial
+from mbplan.solvers.ripm.options import LineSearchOptions
+
+TrialAt = Callable[[Step, float, bool], "Trial | None"]
+"""``(step, α, evaluate) ↦`` the trial point (``None`` if not finite); ``evaluate``: with its
+evaluation at the multipliers it would be accepted with (the first trial)."""
 
 
 @dataclass
@@ -34,23 +39,36 @@ class Search:
 
 
 class FilterLineSearch:
-    """The filter (``self.filter``, bounds ``theta_max``, ``theta_min``) and the search."""
+    """The filter (``entries`` of ``(θ, φ)``, with the bounds ``theta_max``, ``theta_min`` from
+    the phase's initial ``θ_0``) and the backtracking search."""
 
-    def _filter_accepts(self, theta: float, phi: float) -> bool:
+    def __init__(self, options: LineSearchOptions, theta0: float) -> None:
+        self.o = options
+        self.theta_max = options.theta_max_fact * max(1.0, theta0)
+        self.theta_min = options.theta_min_fact * max(1.0, theta0)
+        self.entries: list[tuple[float, float]] = []
+
+    def reset(self) -> None:
+        """An empty filter (a new barrier problem)."""
+        self.entries = []
+
+    def accepts(self, theta: float, phi: float) -> bool:
+        """``(θ, φ)`` is not dominated by the filter and ``θ < θ_max``."""
         if theta >= self.theta_max:
             return False
-        return all(theta < t or phi < f for t, f in self.filter)
+        return all(theta < t or phi < f for t, f in self.entries)
 
-    def _augment_filter(self, theta: float, phi: float) -> None:
+    def augment(self, theta: float, phi: float) -> None:
         """Add the corner ``((1-γ_θ)θ, φ - γ_φ θ)`` (WB eq. 22), dropping dominated entries."""
         t, f = (1 - self.o.gamma_theta) * theta, phi - self.o.gamma_phi * theta
-        self.filter = [(ti, fi) for ti, fi in self.filter if ti < t or fi < f]
-        self.filter.append((t, f))
+        self.entries = [(ti, fi) for ti, fi in self.entries if ti < t or fi < f]
+        self.entries.append((t, f))
 
-    def _acceptable(self, cur: Trial, trial: Trial, alpha: float, gphi: float) -> str | None:
-        """``"f"`` (Armijo step), ``"h"`` (feasibility/cost progress) or ``None`` (rejected)."""
+    def acceptable(self, cur: Trial, trial: Trial, alpha: float, gphi: float) -> str | None:
+        """``"f"`` (Armijo step, WB eq. 19-20), ``"h"`` (sufficient progress, WB eq. 18) or
+        ``None`` (rejected) for ``trial`` at step ``alpha`` from ``cur`` with slope ``gphi``."""
         o = self.o
-        if not self._filter_accepts(trial.theta, trial.phi):
+        if not self.accepts(trial.theta, trial.phi):
             return None
         switching = gphi < 0 and alpha * (-gphi) ** o.s_phi > o.delta * cur.theta**o.s_theta
         if cur.theta <= self.theta_min and switching:
@@ -62,8 +80,8 @@ class FilterLineSearch:
             return "h"
         return None
 
-    def _alpha_min(self, theta: float, gphi: float) -> float:
-        """WB eq. 23."""
+    def alpha_min(self, theta: float, gphi: float) -> float:
+        """The smallest step tried (WB eq. 23)."""
         o = self.o
         if gphi < 0:
             a = min(o.gamma_theta, o.gamma_phi * theta / -gphi)
@@ -72,42 +90,38 @@ class FilterLineSearch:
             return o.gamma_alpha * a
         return o.gamma_alpha * o.gamma_theta
 
-    def _alpha_max(self, step: Step) -> float:
-        a = frac_to_boundary(self.s, step.ds, self.tau)
-        if self.resto:
-            a = min(a, frac_to_boundary(self.ep, step.dp, self.tau))
-            a = min(a, frac_to_boundary(self.en, step.dn, self.tau))
-        return a
-
-    def _slope(self, step: Step) -> float:
-        """Directional derivative of ``φ_μ`` along the step."""
-        gphi = self.sigma * float(np.dot(self.ev.gradient, step.dx))
-        gphi -= self.mu * ratio_sum(step.ds, self.s)
-        if self.resto:
-            gphi += self.rho * float(np.sum(step.dp) + np.sum(step.dn))
-            gphi -= self.mu * float(np.sum(step.dp / self.ep) + np.sum(step.dn / self.en))
-            gphi += self.zeta * float(self.xi @ step.dx)
-        return gphi
-
-    def _line_search(self, step: Step, cur: Trial) -> Search:
-        """Backtracking filter line search with second-order correction (WB)."""
+    def search(
+        self,
+        cur: Trial,
+        step: Step,
+        gphi: float,
+        alpha_max: Callable[[Step], float],
+        trial_at: TrialAt,
+        correction: Callable[[np.ndarray], Step | None],
+        r_c: np.ndarray,
+    ) -> Search:
+        """Backtracking from ``alpha_max(step)`` along ``step`` (slope ``gphi`` of ``φ_μ``) with
+        second-order corrections (WB): ``correction(c)`` is the step's system solved for the
+        constraint values ``c``, ``r_c`` the current ones."""
         o = self.o
-        alpha_max = self._alpha_max(step)
-        gphi = self._slope(step)
-        alpha_min = self._alpha_min(cur.theta, gphi)
-        alpha, n_trials, n_nan = alpha_max, 0, 0
+        alpha = alpha_max(step)
+        alpha_min = self.alpha_min(cur.theta, gphi)
+        n_trials, n_nan = 0, 0
         while n_trials < o.max_ls_trials and (n_trials == 0 or alpha >= alpha_min):
             n_trials += 1
             # the first trial is usually accepted: evaluated with its multipliers at once
-            trial = self._trial_at(step, alpha, evaluate=n_trials == 1 and not self.resto)
+            trial = trial_at(step, alpha, n_trials == 1)
             if trial is None:
                 n_nan += 1
             else:
-                tag = self._acceptable(cur, trial, alpha, gphi)
+                tag = self.acceptable(cur, trial, alpha, gphi)
                 if tag:
                     return Search(trial, step, alpha, n_trials, tag)
                 if n_trials == 1 and trial.theta >= cur.theta and o.second_order_correction:
-                    soc = self._second_order_correction(cur, trial, alpha, gphi)
+                    c_soc = alpha * r_c + trial.c
+                    soc = self._second_order_correction(
+                        cur, c_soc, alpha, gphi, alpha_max, trial_at, correction
+                    )
                     n_trials += soc.trials
                     if soc.trial is not None:
                         soc.trials = n_trials
@@ -116,24 +130,29 @@ class FilterLineSearch:
         return Search(None, trials=n_trials, all_nan=n_nan == n_trials)
 
     def _second_order_correction(
-        self, cur: Trial, trial: Trial, alpha: float, gphi: float
+        self,
+        cur: Trial,
+        c_soc: np.ndarray,
+        alpha: float,
+        gphi: float,
+        alpha_max: Callable[[Step], float],
+        trial_at: TrialAt,
+        correction: Callable[[np.ndarray], Step | None],
     ) -> Search:
-        """WB second-order correction: re-solve with ``c_soc = α c_k + c(x_trial)`` using the
-        same factorization; the step was rejected at ``alpha`` with ``trial``."""
+        """WB's second-order correction of the step rejected at ``alpha``: re-solve with
+        ``c_soc = α c_k + c(x_trial)`` using the same factorization, at most ``max_soc`` times."""
         o = self.o
-        c_soc = alpha * self.r_c + trial.c
         theta_old, count = cur.theta, 0
         for _ in range(o.max_soc):
-            sol = self._solve(self._rhs(c_soc))
-            if not finite(sol):
+            soc = correction(c_soc)
+            if soc is None:
                 break
-            soc = self._split(sol)
-            a_soc = self._alpha_max(soc)
+            a_soc = alpha_max(soc)
             count += 1
-            t = self._trial_at(soc, a_soc)
+            t = trial_at(soc, a_soc, False)
             if t is None:
                 break
-            tag = self._acceptable(cur, t, alpha, gphi)
+            tag = self.acceptable(cur, t, alpha, gphi)
             if tag:
                 return Search(t, soc, a_soc, count, tag + "S")
             if t.theta > o.kappa_soc * theta_old:
