@@ -61,6 +61,12 @@ def _setup(tmp: Path) -> None:
     save_npz(_result(), tmp / "seven.npz")
     (tmp / "text.npz").write_text("not a zip")
     np.savez(tmp / "partial.npz", q=np.zeros((2, 7)))
+    np.savez(tmp / "objects.npz", a=np.array([{"x": 1}], dtype=object))
+    whole = (tmp / "seven.npz").read_bytes()
+    (tmp / "truncated.npz").write_bytes(whole[: len(whole) // 2])
+    with np.load(tmp / "seven.npz") as data:  # a result whose q is an object (pickled) array
+        fields = {k: data[k] for k in data.files}
+    np.savez(tmp / "object_q.npz", **{**fields, "q": np.array([None], dtype=object)})
     other = tmp / "other-config"
     other.mkdir()
     (other / "results.config.json").write_text(json.dumps({"hash": "0", "config": {"seed": 5}}))
@@ -107,6 +113,9 @@ CLI_CASES = [
     (["replay", "{tmp}/missing.npz"], "no such result file"),
     (["replay", "{tmp}/text.npz"], "not a PlanResult .npz file"),
     (["replay", "{tmp}/partial.npz"], "lacks the fields"),
+    (["replay", "{tmp}/truncated.npz"], r"truncated\.npz is not a PlanResult .npz file"),
+    (["replay", "{tmp}/objects.npz"], r"objects\.npz: not a PlanResult .npz file: it lacks"),
+    (["replay", "{tmp}/object_q.npz"], r"object_q\.npz: .*field 'q' is not what save_npz writes"),
     (["replay", "{tmp}/folder.npz"], "no such result file"),
     (["replay", "{tmp}/three.npz", "--robot", "iiwa"], r"\[3\] joints\) do not fit robot 'iiwa'"),
     (["replay", "{tmp}/seven.npz", "--html", "{tmp}/page.txt"], "--html: .* must end in .html"),
@@ -176,6 +185,7 @@ def test_cli_refuses_bad_input(tmp_path, capsys, argv, message):
         lines = err.strip().splitlines()
         assert all(line.startswith(("mbplan: warning:", "mbplan")) for line in lines), err
         assert sum(": error:" in line for line in lines) == 1, err  # one error line
+        assert "pickle" not in last, err  # never the advice to unpickle an untrusted file
     else:
         assert message in out + err
     assert sorted(tmp_path.rglob("*")) == before  # no file left
