@@ -22,10 +22,12 @@ from mbplan.planning.solve import METHODS, Method, plan
 from mbplan.results import PlanResult, load_npz, save_npz
 from mbplan.robots import load
 from mbplan.solvers import RIPMOptions
+from mbplan.tasks.drone import DockingTask
 from mbplan.tasks.paper import (
     IIWA_START,
     IIWA_TARGET,
     add_obstacle_constraint,
+    drone_docking,
     iiwa_obstacle,
     iiwa_obstacle_starts,
     tracking_ocp,
@@ -39,7 +41,7 @@ def _no_solve(*args, **kwargs):
 @pytest.fixture(autouse=True)
 def no_solves(monkeypatch):
     for name, method in list(METHODS.items()):
-        monkeypatch.setitem(METHODS, name, Method(method.formulation, _no_solve))
+        monkeypatch.setitem(METHODS, name, Method(method.formulation, _no_solve, method.check))
     monkeypatch.setattr(harness, "_execute", _no_solve)
 
 
@@ -240,7 +242,13 @@ def test_run_command_exit_codes(capsys):
 
 
 TASK = iiwa_obstacle(N=5)
+DOCKING_WITH_CYLINDER = drone_docking(DockingTask(obstacles=((2.0, 2.0, 0.3),)))
 API_CASES = [
+    (
+        lambda: plan(DOCKING_WITH_CYLINDER, "ms-ilqr"),
+        r"ms-ilqr cannot impose constraint 'cylinder_0' \(ComOutsideCylinder\)",
+    ),
+    (lambda: plan(TASK, "ss-ilqr"), "ss-ilqr plans free bodies .* robot 'iiwa'"),
     (lambda: plan(TASK, "snopt"), "unknown method 'snopt'"),
     (lambda: plan(TASK, "ripm", tol=0.0), "tol: must be finite and > 0"),
     (lambda: plan(TASK, "ripm", tol=float("nan")), "tol: must be finite"),
