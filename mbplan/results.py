@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from mbplan.errors import InputError, MbplanError
+from mbplan.solvers.result import SolverResult
 from mbplan.validation import output_file
 
 _ARRAYS = ("q", "v", "tau", "kkt_history", "R", "p", "tau_knots")
@@ -21,7 +22,7 @@ _JSON = ("extra", "violations", "goal_errors")
 
 
 @dataclass(frozen=True, eq=False)
-class PlanResult:
+class PlanResult(SolverResult):
     """A planned trajectory and solver statistics (like ``scipy.optimize.OptimizeResult``).
 
     ``q (N+1, nq)``, ``v (N+1, nv)`` at the knots, ``tau (N, nv)`` held over ``[t_k, t_{k+1}]``,
@@ -103,6 +104,11 @@ class PlanResult:
             raise InputError("PlanResult: success=True with non-finite q, v or tau")
         if self.body_names is not None:
             object.__setattr__(self, "body_names", tuple(str(n) for n in self.body_names))
+
+    @property
+    def objective(self) -> float:
+        """The solver's objective at the plan (``extra["objective"]``; NaN if not reported)."""
+        return float(self.extra.get("objective", float("nan")))
 
     def save(self, path: str | os.PathLike[str]) -> Path:
         """:func:`save_npz` of this result (with its OCP); returns the path written."""

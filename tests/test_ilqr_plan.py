@@ -49,3 +49,14 @@ def test_ss_ilqr_plans_a_docking_without_a_flip():
 def test_ilqr_refuses_unknown_options_before_building():
     with pytest.raises(InputError, match=r"ms-ilqr options: unknown \['mu'\]"):
         mbplan.plan(_docking(), "ms-ilqr", options={"mu": 1.0})
+
+
+def test_results_share_scipys_optimize_result_names():
+    from mbplan.solvers.ilqr import ILQRResult
+    from mbplan.solvers.result import RIPMResult, SolverResult
+
+    assert issubclass(ILQRResult, SolverResult) and issubclass(RIPMResult, SolverResult)
+    result = mbplan.plan(_docking(seed=2), "ms-ilqr")
+    assert isinstance(result, SolverResult)
+    assert result.nit == result.iterations and result.fun == result.extra["objective"]
+    assert result.success and result.status == "CONVERGED" and result.message

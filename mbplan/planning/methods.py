@@ -91,6 +91,7 @@ def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Setting
         kkt_history=np.stack([h["inf_pr"], h["inf_du"]], axis=1),
         entered_restoration=bool(np.any(h["restoration"])),
         extra={
+            "objective": result.objective,
             "kkt_error": result.kkt_error,
             "n_variables": int(result.y.size),
             "build_time_s": build,

@@ -86,7 +86,7 @@ class _LeastSquares:
                 for n, s in shapes
             }
             blocks.append((type(items[0].residual), P, cs.SX.sym(f"{j}_sqrt_w")))
-            columns.append(_parameters(ocp, items, [n for n, _ in shapes], K, control))
+            columns.append(_parameters(ocp, items, [n for n, _ in shapes], K))
         flat = [cs.vec(a) for _, P, sw in blocks for a in (*P.values(), sw)]
 
         def residual(zs: cs.SX) -> cs.SX:
@@ -117,10 +117,10 @@ class _LeastSquares:
         return float(np.sum(l)), g, H.reshape(len(Z), self.n, self.n)
 
 
-def _parameters(ocp: OCP, items: list[Item], names: list[str], K: int, control: bool) -> np.ndarray:
+def _parameters(ocp: OCP, items: list[Item], names: list[str], K: int) -> np.ndarray:
     """``(K, n_P)``: each item's parameters (matrices column-major) and ``√w`` at its knots
     (state knots ``k``, intervals ``k``), the first item's parameters and ``√w = 0`` elsewhere."""
-    rows = np.empty((K, 0))
+    rows = np.empty(0)
     for i, item in enumerate(items):
         values = body_parameters(item.residual, ocp.scene)
         row = np.concatenate([np.ravel(values[n], order="F") for n in names])
