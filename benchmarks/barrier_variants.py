@@ -94,9 +94,10 @@ def _count_kkt_solves() -> None:
 def solve(task: str, index: int, n: int, variant: str) -> dict[str, Any]:
     """One (task, case, variant) solve, verified, as a JSON row."""
     from mbplan.benchmarks.arm_sweep import sweep_case
-    from mbplan.benchmarks.common import plan_row
-    from mbplan.benchmarks.speed_tasks import chain_task
     from mbplan.paper import drone_docking, iiwa_obstacle
+
+    from mbplan.benchmarks.common import plan_row
+    from mbplan.tasks.speed import chain_task
 
     _count_kkt_solves()
     _SOLVES[0] = 0

@@ -31,11 +31,12 @@ import scipy.sparse as sp
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.kkt_profile import warm_kkt
-from mbplan.benchmarks.speed_tasks import TASKS
-from mbplan.formulations.maximal_layout import JointEliminationPlans
 from mbplan.solvers.linear_solver import KKTSystem
 from mbplan.solvers.reduced_step import ReducedKKTSystem
+
+from mbplan.benchmarks.kkt_profile import warm_kkt
+from mbplan.formulations.maximal_layout import JointEliminationPlans
+from mbplan.tasks.speed import TASKS
 
 PIVOT = 1e-10
 VARIANTS = ("full-amd", "full-metis", "joints-amd", "joints-metis", "wrench-amd", "wrench-metis")

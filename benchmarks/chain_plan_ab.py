@@ -26,8 +26,8 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mbplan.benchmarks.kkt_profile import profile_solve
-from mbplan.benchmarks.speed_tasks import TASKS
 from mbplan.formulations.maximal_layout import JointEliminationPlans
+from mbplan.tasks.speed import TASKS
 
 ONE_SEGMENT = 10**6
 METIS = {"kkt_ordering": "auto", "kkt_pivot_threshold": 1e-10}

@@ -34,16 +34,17 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.common import write_json
-from mbplan.benchmarks.speed_tasks import TASKS
-from mbplan.engine.site_table import run_site_loops
 from mbplan.solvers.kkt_scatter import matrix_values, scatter_blocks
 from mbplan.solvers.ldl_kernels import ldl_factor
 from mbplan.solvers.ldl_solve import refined_solve
 from mbplan.solvers.linear_solver import KKTSystem
 from mbplan.solvers.options import RIPMOptions
-from mbplan.solvers.ripm import solve_ripm
 from mbplan.solvers.ripm_kernels import constraint_values, measures, newton_diagonal, newton_rhs
+
+from mbplan.benchmarks.common import write_json
+from mbplan.engine.site_table import run_site_loops
+from mbplan.solvers.ripm import solve_ripm
+from mbplan.tasks.speed import TASKS
 from mbplan.transcription.evaluation_kernels import collect_derivatives, gather_inputs
 from mbplan.transcription.packed import _retract
 

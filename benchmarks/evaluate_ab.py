@@ -31,7 +31,7 @@ import hashlib, json, sys, time
 import numpy as np
 sys.path.insert(0, ".")
 from mbplan.benchmarks.kkt_profile import profile_solve
-from mbplan.benchmarks.speed_tasks import TASKS
+from mbplan.tasks.speed import TASKS
 tasks, cases, micro = json.loads(sys.argv[1])
 
 def best(fn, k):

@@ -34,7 +34,7 @@ _CHILD = """
 import json, sys, time
 import numpy as np
 sys.path.insert(0, ".")
-from mbplan.benchmarks.speed_tasks import TASKS
+from mbplan.tasks.speed import TASKS
 from mbplan.solvers.ripm import solve_ripm
 task, cases, segments = json.loads(sys.argv[1])
 solve_ripm(*TASKS[task](0))
@@ -62,7 +62,7 @@ print(json.dumps({task: rows}))
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--baseline", required=True, help="root of the baseline checkout")
-    ap.add_argument("--task", default="drone", help="a task of mbplan.benchmarks.speed_tasks")
+    ap.add_argument("--task", default="drone", help="a task of mbplan.tasks.speed")
     ap.add_argument("--cases", type=int, default=40)
     ap.add_argument("--rounds", type=int, default=4)
     ap.add_argument("--out", default=None)

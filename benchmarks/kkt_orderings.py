@@ -28,12 +28,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.kkt_profile import profile_solve
-from mbplan.benchmarks.speed_tasks import TASKS
-from mbplan.solvers import linear_solver as ls
-from mbplan.solvers import solve_ripm
 from mbplan.solvers.ldl_symbolic import Analysis
 from mbplan.solvers.ordering import amd_order, metis_order
+
+from mbplan.benchmarks.kkt_profile import profile_solve
+from mbplan.solvers import linear_solver as ls
+from mbplan.solvers import solve_ripm
+from mbplan.tasks.speed import TASKS
 
 ORDERS = {"amd": amd_order, "metis": metis_order}
 PIVOT = 1e-10  # default threshold of the pivoted variants (--pivot)

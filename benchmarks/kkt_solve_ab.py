@@ -27,8 +27,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from mbplan.benchmarks.common import modules_at  # noqa: E402
-from mbplan.benchmarks.speed_tasks import TASKS  # noqa: E402
 from mbplan.solvers import linear_solver, ripm  # noqa: E402
+from mbplan.tasks.speed import TASKS  # noqa: E402
 
 MAX_SYSTEMS = 6  # captured KKT systems timed per case (evenly spaced over the solve)
 METHODS = {"set_matrices": "assembly", "factorize": "factorize", "solve": "solve"}

@@ -31,10 +31,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from mbplan.benchmarks.common import modules_at  # noqa: E402
-from mbplan.benchmarks.speed_tasks import TASKS  # noqa: E402
-from mbplan.solvers import linear_solver  # noqa: E402
 from mbplan.solvers.reduced_step import ReducedKKTSystem  # noqa: E402
+
+from mbplan.benchmarks.common import modules_at  # noqa: E402
+from mbplan.solvers import linear_solver  # noqa: E402
+from mbplan.tasks.speed import TASKS  # noqa: E402
 
 MODULES = (
     "ordering", "numba_borrow", "ldl_layout", "ldl_symbolic", "ldl_pivot", "ldl_dense",

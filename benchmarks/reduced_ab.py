@@ -29,7 +29,7 @@ _CHILD = """
 import json, sys
 sys.path.insert(0, ".")
 from mbplan.benchmarks.kkt_profile import profile_solve
-from mbplan.benchmarks.speed_tasks import TASKS
+from mbplan.tasks.speed import TASKS
 tasks, cases, forces = json.loads(sys.argv[1])
 if forces is not None:
     from mbplan.formulations.maximal_layout import JointEliminationPlans

@@ -17,8 +17,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path.cwd()))
 
-import mbplan as mb
 from mbplan.benchmarks.arm_sweep import sweep_robot, sweep_tasks
+
+import mbplan as mb
 from mbplan.robots import available_robots
 
 

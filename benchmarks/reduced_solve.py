@@ -28,11 +28,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.kkt_profile import warm_kkt
-from mbplan.benchmarks.speed_tasks import TASKS
-from mbplan.solvers import solve_ripm
 from mbplan.solvers.linear_solver import KKTSystem
 from mbplan.solvers.reduced_step import ReducedKKTSystem
+
+from mbplan.benchmarks.kkt_profile import warm_kkt
+from mbplan.solvers import solve_ripm
+from mbplan.tasks.speed import TASKS
 
 COMMAND = "python benchmarks/reduced_solve.py --sweep 12 --out benchmarks/results/reduced-step"
 SOLVE_TASKS = [("iiwa-com", 3), *((f"chain{n}", 1) for n in (4, 8, 16, 32))]

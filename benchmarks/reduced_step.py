@@ -25,10 +25,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.reduced_kkt import ReducedKKT
-from mbplan.benchmarks.speed_tasks import TASKS
-from mbplan.formulations.maximal_layout import maximal_layout
 from mbplan.solvers.linear_solver import KKTSystem
+
+from mbplan.benchmarks.reduced_kkt import ReducedKKT
+from mbplan.formulations.maximal_layout import maximal_layout
+from mbplan.tasks.speed import TASKS
 
 COMMAND = "python benchmarks/reduced_step.py --out benchmarks/results/reduced-step"
 TASK_NAMES = ["iiwa-com", "chain4", "chain8", "chain16", "chain32", "chain64"]

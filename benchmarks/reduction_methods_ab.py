@@ -24,7 +24,7 @@ _CHILD = r"""
 import json, sys, time
 from collections import defaultdict
 sys.path.insert(0, ".")
-from mbplan.benchmarks.speed_tasks import TASKS
+from mbplan.tasks.speed import TASKS
 from mbplan.solvers import solve_ripm
 from mbplan.solvers.reduction import Reduction
 from mbplan.solvers.reduced_step import ReducedKKTSystem

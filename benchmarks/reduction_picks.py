@@ -26,10 +26,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.common import write_json
-from mbplan.benchmarks.speed_tasks import maximal_ripm_problem
 from mbplan.paper import iiwa_obstacle, iiwa_obstacle_starts
 from mbplan.solvers.reduction import Reduction, _key
+
+from mbplan.benchmarks.common import write_json
+from mbplan.tasks.speed import maximal_ripm_problem
 
 SEEDS = 3
 

@@ -91,10 +91,11 @@ print(json.dumps({"ms": {k: 1e3 * v for k, v in best.items()}, "inertias": inert
 
 def record(task: str, case: int, path: Path) -> None:
     """Solve ``task``'s case with the default options, store its reduced-system calls."""
-    from mbplan.benchmarks.speed_tasks import TASKS
-    from mbplan.solvers import solve_ripm
     from mbplan.solvers.linear_solver import _csr
     from mbplan.solvers.reduced_step import ReducedKKTSystem
+
+    from mbplan.solvers import solve_ripm
+    from mbplan.tasks.speed import TASKS
 
     def same_pattern(a, b):
         return np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)

@@ -87,8 +87,8 @@ def main() -> None:
     ap.add_argument("--drone-cases", type=int, default=8)
     ap.add_argument("--no-large", action="store_true", help="skip iiwa-com 0 and chain4")
     args = ap.parse_args()
-    from mbplan.benchmarks.speed_tasks import TASKS
     from mbplan.solvers import solve_ripm
+    from mbplan.tasks.speed import TASKS
 
     for name, problem, x0, opts in _test_cases():
         print(name, fingerprint(solve_ripm(problem, x0, **opts)), flush=True)
@@ -107,6 +107,7 @@ def _finger_edu() -> dict[str, str]:
     solves them (tests/test_sweep.py): a kept least-squares ``y₀`` and a rank-deficient frame
     goal (a singular KKT matrix)."""
     from mbplan.benchmarks.arm_sweep import sweep_robot, sweep_tasks
+
     from mbplan.engine.jit import jit_available
     from mbplan.formulations import maximal
     from mbplan.solvers import solve_ripm

@@ -16,8 +16,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path.cwd()))  # the tree to run: the working directory
 
-from mbplan.benchmarks.speed_tasks import TASKS
 from mbplan.solvers import reduced_step, solve_ripm
+from mbplan.tasks.speed import TASKS
 
 
 def main() -> None:

@@ -23,11 +23,11 @@ import numpy as np
 import qdldl
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from mbplan.solvers.examples import BandedControlNLP
+from mbplan.solvers.linear_solver import KKTSystem
 
 from mbplan.benchmarks.common import median_time
 from mbplan.solvers import solve_ripm
-from mbplan.solvers.examples import BandedControlNLP
-from mbplan.solvers.linear_solver import KKTSystem
 
 NX, NU = 24, 7
 

@@ -23,7 +23,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mbplan.benchmarks.kkt_profile import profile_solve
-from mbplan.benchmarks.speed_tasks import TASKS
+from mbplan.tasks.speed import TASKS
 
 REDUCED = {"kkt_method": "auto"}
 PIVOTED_METIS = {"kkt_ordering": "auto", "kkt_pivot_threshold": 1e-10}

@@ -21,9 +21,10 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.benchmarks.speed_tasks import TASKS
-from mbplan.solvers import linear_solver, ripm
 from mbplan.transcription.problem import TrajectoryProblem
+
+from mbplan.solvers import linear_solver, ripm
+from mbplan.tasks.speed import TASKS
 
 _SKIP = {"run", "kkt", "iter"}
 

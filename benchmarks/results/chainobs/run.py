@@ -11,8 +11,8 @@ import time
 import numpy as np
 
 from mbplan.benchmarks.common import plan_row
-from mbplan.benchmarks.speed_tasks import chain_target, chain_task
 from mbplan.planning.solve import plan
+from mbplan.tasks.speed import chain_target, chain_task
 
 for links in map(int, sys.argv[1:]):
     for method in ("ripm", "ipopt"):

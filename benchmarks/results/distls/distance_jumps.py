@@ -12,8 +12,8 @@ import warnings
 import numpy as np
 
 sys.path.insert(0, os.getcwd())
-from mbplan.benchmarks.speed_tasks import TASKS
 from mbplan.solvers import solve_ripm
+from mbplan.tasks.speed import TASKS
 
 
 def main() -> None:

@@ -13,8 +13,8 @@ sys.path.insert(0, str(Path.cwd()))
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # benchmarks/
 import ripm_fingerprint as fp
 
-from mbplan.benchmarks.speed_tasks import TASKS
 from mbplan.solvers import solve_ripm
+from mbplan.tasks.speed import TASKS
 
 
 def main() -> None:

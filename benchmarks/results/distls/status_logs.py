@@ -13,8 +13,8 @@ import sys
 import warnings
 
 sys.path.insert(0, os.getcwd())
-from mbplan.benchmarks.speed_tasks import TASKS
 from mbplan.solvers import solve_ripm
+from mbplan.tasks.speed import TASKS
 
 
 def main() -> None:

@@ -3,7 +3,7 @@ line per solve: ``python chain_obstacle_side_by_side.py > chain-obstacle.jsonl``
 
 import json
 
-from mbplan.benchmarks.speed_tasks import chain_case
+from mbplan.tasks.speed import chain_case
 
 KEYS = ("status", "iterations", "total_time_s", "solve_time_s", "time_per_iter_s", "verified")
 

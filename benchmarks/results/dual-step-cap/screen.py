@@ -10,8 +10,8 @@ import json
 import sys
 import time
 
-from mbplan.benchmarks.speed_tasks import TASKS
 from mbplan.solvers.ripm import solve_ripm
+from mbplan.tasks.speed import TASKS
 
 task, n = sys.argv[1], int(sys.argv[2])
 start = int(sys.argv[3]) if len(sys.argv) > 3 else 0
