@@ -28,12 +28,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mbplan.solvers.ldl_symbolic import Analysis
-from mbplan.solvers.ordering import amd_order, metis_order
-
 from mbplan.benchmarks.kkt_profile import profile_solve
-from mbplan.solvers import linear_solver as ls
 from mbplan.solvers import solve_ripm
+from mbplan.solvers.kkt import system as ls
+from mbplan.solvers.kkt.ldl.symbolic import Analysis
+from mbplan.solvers.kkt.ordering import amd_order, metis_order
 from mbplan.tasks.speed import TASKS
 
 ORDERS = {"amd": amd_order, "metis": metis_order}
