@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import zipfile
+import zlib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -12,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from mbplan.errors import InputError, MbplanError
+from mbplan.solvers.result import SolverResult
 from mbplan.validation import output_file
 
 _ARRAYS = ("q", "v", "tau", "kkt_history", "R", "p", "tau_knots")
@@ -20,7 +22,7 @@ _JSON = ("extra", "violations", "goal_errors")
 
 
 @dataclass(frozen=True, eq=False)
-class PlanResult:
+class PlanResult(SolverResult):
     """A planned trajectory and solver statistics (like ``scipy.optimize.OptimizeResult``).
 
     ``q (N+1, nq)``, ``v (N+1, nv)`` at the knots, ``tau (N, nv)`` held over ``[t_k, t_{k+1}]``,
@@ -103,6 +105,11 @@ class PlanResult:
         if self.body_names is not None:
             object.__setattr__(self, "body_names", tuple(str(n) for n in self.body_names))
 
+    @property
+    def objective(self) -> float:
+        """The solver's objective at the plan (``extra["objective"]``; NaN if not reported)."""
+        return float(self.extra.get("objective", float("nan")))
+
     def save(self, path: str | os.PathLike[str]) -> Path:
         """:func:`save_npz` of this result (with its OCP); returns the path written."""
         return save_npz(self, path)
@@ -148,16 +155,20 @@ def load_npz(path: str | os.PathLike[str], robot: Any = None) -> PlanResult:
     """Read a :class:`PlanResult` written by :func:`save_npz`, with its OCP when the file has
     one (files from before the OCP API have none: ``ocp`` is then None). The OCP's robot is
     loaded from its source, or is ``robot`` (needed when it was an in-memory model).
-    :class:`InputError` naming the file if it is missing, unreadable or not such a result."""
+    :class:`InputError` naming the file if it is missing, not a ``.npz`` (zip) archive, a
+    truncated or damaged one, or holds no such result. Object arrays are never unpickled."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"load_npz: {path}: no such result file")
+    not_result = f"load_npz: {path} is not a PlanResult .npz file"
+    if not zipfile.is_zipfile(path):
+        raise InputError(f"{not_result}: not a zip archive (another kind of file, or truncated)")
     try:
         return _load(path, robot)
     except MbplanError as err:
         raise InputError(f"load_npz: {path}: {err}") from None
-    except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as err:
-        raise InputError(f"load_npz: {path} is not a PlanResult .npz file ({err})") from None
+    except (OSError, EOFError, zipfile.BadZipFile, zlib.error) as err:
+        raise InputError(f"{not_result}: damaged archive ({type(err).__name__})") from None
 
 
 def _load(path: Path, robot: Any) -> PlanResult:
@@ -165,25 +176,35 @@ def _load(path: Path, robot: Any) -> PlanResult:
         data_keys = set(data.files)
         missing = [f.name for f in fields(PlanResult) if f.name not in data and _required(f.name)]
         if missing:
-            raise InputError(f"lacks the fields {missing}")
+            raise InputError(f"not a PlanResult .npz file: it lacks the fields {missing}")
         kwargs: dict[str, Any] = {}
         for f in fields(PlanResult):
-            if f.name not in data:
-                continue
-            value = data[f.name]
-            if f.name == "ocp":
-                kwargs["ocp"], unavailable = _load_ocp(str(value), robot, path)
-            elif f.name in _JSON:
-                kwargs[f.name] = json.loads(str(value))
-            elif f.name == "body_names":
-                kwargs[f.name] = tuple(str(n) for n in value)
-            elif f.name in _ARRAYS:
-                kwargs[f.name] = np.array(value)
-            else:
-                kwargs[f.name] = value.item()
-    if "ocp" in data_keys and kwargs["ocp"] is None:
-        kwargs["extra"] = {**kwargs.get("extra", {}), "ocp_unavailable": unavailable}
+            if f.name in data:
+                try:
+                    kwargs[f.name] = _field(f.name, data[f.name])
+                except (ValueError, TypeError):  # object arrays, bad JSON, wrong kinds
+                    raise InputError(
+                        f"not a PlanResult .npz file: its field {f.name!r} is not what "
+                        "save_npz writes"
+                    ) from None
+    if "ocp" in data_keys:
+        kwargs["ocp"], unavailable = _load_ocp(kwargs["ocp"], robot, path)
+        if kwargs["ocp"] is None:
+            kwargs["extra"] = {**kwargs.get("extra", {}), "ocp_unavailable": unavailable}
     return PlanResult(**kwargs)
+
+
+def _field(name: str, value: np.ndarray) -> Any:
+    """The :class:`PlanResult` field ``name`` from its stored array (the OCP as its JSON text)."""
+    if name in _JSON:
+        return json.loads(str(value))
+    if name == "ocp":
+        return str(value)
+    if name == "body_names":
+        return tuple(str(n) for n in value)
+    if name in _ARRAYS:
+        return np.array(value, dtype=float)
+    return value.item()
 
 
 def _load_ocp(text: str, robot: Any, path: Any) -> tuple[Any, str]:
@@ -194,6 +215,8 @@ def _load_ocp(text: str, robot: Any, path: Any) -> tuple[Any, str]:
         return OCP.from_dict(json.loads(text), robot), ""
     except MbplanError as err:
         return None, f"{path}: cannot rebuild the plan's OCP: {err}"
+    except (ValueError, KeyError, TypeError):
+        return None, f"{path}: cannot rebuild the plan's OCP: its saved description is malformed"
 
 
 def _required(name: str) -> bool:

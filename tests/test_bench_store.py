@@ -85,6 +85,7 @@ def test_corrupt_middle_line_keeps_every_valid_row(tmp_path):
     assert rejected[0] == lines[2] and len(rejected) == 2
 
 
+@pytest.mark.slow
 def test_two_concurrent_writers(tmp_path):
     script, procs = _script(tmp_path), []
     for _ in range(2):  # the second starts while the first is writing
@@ -107,6 +108,7 @@ def test_two_concurrent_writers(tmp_path):
     _assert_complete(tmp_path / "out" / "results.jsonl", 30, 0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("signum", "workers"),
     [(signal.SIGINT, 1), (signal.SIGTERM, 1), (signal.SIGINT, 2), (signal.SIGTERM, 2)],

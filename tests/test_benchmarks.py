@@ -11,6 +11,7 @@ from mbplan.errors import InputError
 from mbplan.results import load_npz
 
 
+@pytest.mark.slow
 def test_drone_docking_three_cases_each_method(tmp_path):
     s = drone_docking.run(tmp_path, n=3, seed=0, scaling=False)
     for name in drone_docking.METHODS:
@@ -26,6 +27,7 @@ def test_drone_docking_three_cases_each_method(tmp_path):
     assert "| ripm |" in (tmp_path / "results.md").read_text()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("method", "warm_start", "max_iter", "at_least", "constraint"),
     [

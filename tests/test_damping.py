@@ -122,6 +122,7 @@ def test_damped_replay_integrates_the_damped_dynamics() -> None:
     assert substeps(ocp, plan) > SUBSTEPS == substeps(plain, plan)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("damping", "N", "dt"),
     [(np.array([1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0]), 40, 0.02), (DAMPING, 12, 0.1)],

@@ -22,10 +22,12 @@ from mbplan.planning.solve import METHODS, Method, plan
 from mbplan.results import PlanResult, load_npz, save_npz
 from mbplan.robots import load
 from mbplan.solvers import RIPMOptions
+from mbplan.tasks.drone import DockingTask
 from mbplan.tasks.paper import (
     IIWA_START,
     IIWA_TARGET,
     add_obstacle_constraint,
+    drone_docking,
     iiwa_obstacle,
     iiwa_obstacle_starts,
     tracking_ocp,
@@ -39,7 +41,7 @@ def _no_solve(*args, **kwargs):
 @pytest.fixture(autouse=True)
 def no_solves(monkeypatch):
     for name, method in list(METHODS.items()):
-        monkeypatch.setitem(METHODS, name, Method(method.formulation, _no_solve))
+        monkeypatch.setitem(METHODS, name, Method(method.formulation, _no_solve, method.check))
     monkeypatch.setattr(harness, "_execute", _no_solve)
 
 
@@ -61,6 +63,12 @@ def _setup(tmp: Path) -> None:
     save_npz(_result(), tmp / "seven.npz")
     (tmp / "text.npz").write_text("not a zip")
     np.savez(tmp / "partial.npz", q=np.zeros((2, 7)))
+    np.savez(tmp / "objects.npz", a=np.array([{"x": 1}], dtype=object))
+    whole = (tmp / "seven.npz").read_bytes()
+    (tmp / "truncated.npz").write_bytes(whole[: len(whole) // 2])
+    with np.load(tmp / "seven.npz") as data:  # a result whose q is an object (pickled) array
+        fields = {k: data[k] for k in data.files}
+    np.savez(tmp / "object_q.npz", **{**fields, "q": np.array([None], dtype=object)})
     other = tmp / "other-config"
     other.mkdir()
     (other / "results.config.json").write_text(json.dumps({"hash": "0", "config": {"seed": 5}}))
@@ -76,7 +84,11 @@ CLI_CASES = [
     (["plan", "--horizon", "0"], "--horizon: must be >= 2"),
     (["plan", "--horizon", "1"], "--horizon: must be >= 2"),
     (["plan", "--horizon", "2.5"], "--horizon: expected an integer"),
-    (["plan", "--horizon", "100000000"], r"N=100000000: .* needs about .* GB \(estimate\)"),
+    pytest.param(  # builds the 10⁸-knot task before the memory estimate refuses it
+        ["plan", "--horizon", "100000000"],
+        r"N=100000000: .* needs about .* GB \(estimate\)",
+        marks=pytest.mark.slow,
+    ),
     (["plan", "--method", "ipopt", "--horizon", "10000000"], r"needs about .* GB \(estimate\)"),
     (["plan", "--tol", "0"], "--tol: must be a finite number > 0"),
     (["plan", "--tol=-1e-6"], "--tol: must be a finite number > 0"),
@@ -107,6 +119,9 @@ CLI_CASES = [
     (["replay", "{tmp}/missing.npz"], "no such result file"),
     (["replay", "{tmp}/text.npz"], "not a PlanResult .npz file"),
     (["replay", "{tmp}/partial.npz"], "lacks the fields"),
+    (["replay", "{tmp}/truncated.npz"], r"truncated\.npz is not a PlanResult .npz file"),
+    (["replay", "{tmp}/objects.npz"], r"objects\.npz: not a PlanResult .npz file: it lacks"),
+    (["replay", "{tmp}/object_q.npz"], r"object_q\.npz: .*field 'q' is not what save_npz writes"),
     (["replay", "{tmp}/folder.npz"], "no such result file"),
     (["replay", "{tmp}/three.npz", "--robot", "iiwa"], r"\[3\] joints\) do not fit robot 'iiwa'"),
     (["replay", "{tmp}/seven.npz", "--html", "{tmp}/page.txt"], "--html: .* must end in .html"),
@@ -159,7 +174,9 @@ CLI_CASES = [
 
 
 @pytest.mark.parametrize(
-    ("argv", "message"), CLI_CASES, ids=[" ".join(a)[:60] or "no command" for a, _ in CLI_CASES]
+    ("argv", "message"),
+    CLI_CASES,
+    ids=[" ".join(getattr(c, "values", c)[0])[:60] or "no command" for c in CLI_CASES],
 )
 def test_cli_refuses_bad_input(tmp_path, capsys, argv, message):
     _setup(tmp_path)
@@ -176,6 +193,7 @@ def test_cli_refuses_bad_input(tmp_path, capsys, argv, message):
         lines = err.strip().splitlines()
         assert all(line.startswith(("mbplan: warning:", "mbplan")) for line in lines), err
         assert sum(": error:" in line for line in lines) == 1, err  # one error line
+        assert "pickle" not in last, err  # never the advice to unpickle an untrusted file
     else:
         assert message in out + err
     assert sorted(tmp_path.rglob("*")) == before  # no file left
@@ -230,7 +248,13 @@ def test_run_command_exit_codes(capsys):
 
 
 TASK = iiwa_obstacle(N=5)
+DOCKING_WITH_CYLINDER = drone_docking(DockingTask(obstacles=((2.0, 2.0, 0.3),)))
 API_CASES = [
+    (
+        lambda: plan(DOCKING_WITH_CYLINDER, "ms-ilqr"),
+        r"ms-ilqr cannot impose constraint 'cylinder_0' \(ComOutsideCylinder\)",
+    ),
+    (lambda: plan(TASK, "ss-ilqr"), "ss-ilqr plans free bodies .* robot 'iiwa'"),
     (lambda: plan(TASK, "snopt"), "unknown method 'snopt'"),
     (lambda: plan(TASK, "ripm", tol=0.0), "tol: must be finite and > 0"),
     (lambda: plan(TASK, "ripm", tol=float("nan")), "tol: must be finite"),

@@ -35,6 +35,7 @@ def test_available_robots_lists_iiwa_and_example_robot_data_arms() -> None:
     assert len(names) == len(set(names))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", available_robots())
 def test_every_available_robot_loads_with_geometry(name: str) -> None:
     robot = load(name)

@@ -23,6 +23,7 @@ from mbplan.viz import static_html
 KNOWN_FAILURES = {("finger_edu", "frame", "ipopt")}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", available_robots())  # continuous joints: one angle each
 def test_every_arm_plans_joint_and_frame_goals_in_both_formulations(name: str, tmp_path: Path):
     robot = sweep_robot(name)

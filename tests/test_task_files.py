@@ -60,6 +60,7 @@ CASES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("path", "method", "flags"), CASES)
 def test_task_file_plans_and_verifies(tmp_path, capsys, path, method, flags):
     out = tmp_path / "plan.npz"

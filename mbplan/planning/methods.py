@@ -11,7 +11,7 @@ import os
 import re
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import casadi as cs
@@ -26,8 +26,10 @@ from mbplan.formulations.quaternion import QuaternionNLP
 from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.problem import OCP
 from mbplan.results import PlanResult
+from mbplan.shooting.free_body import FreeBodyShooting
 from mbplan.solvers import RIPMStatus
 from mbplan.solvers.dispatch import options_for, solve_with
+from mbplan.solvers.ilqr import ALOptions, ILQROptions, solve_ilqr, solve_ilqr_bounded
 from mbplan.workspace import Workspace
 
 LGVI_RIPM_OPTIONS: dict[str, Any] = {"constr_mult_init_max": 0.0}
@@ -93,6 +95,7 @@ def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Setting
         kkt_history=np.stack([h["inf_pr"], h["inf_du"]], axis=1),
         entered_restoration=bool(np.any(h["restoration"])),
         extra={
+            "objective": result.objective,
             "kkt_error": result.kkt_error,
             "n_variables": int(result.y.size),
             "build_time_s": build,
@@ -194,3 +197,83 @@ def solve_ipopt_generalized(
 
 def solve_ipopt_no_restoration(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
     return solve_ipopt_generalized(ocp, q_guess, settings, restoration=False)
+
+
+def solve_ms_ilqr(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
+    """MS-iLQR (thesis Alg. 2) on a free body's shooting problem (success: ``CONVERGED``)."""
+    return _solve_ilqr(ocp, q_guess, settings, multiple_shooting=True)
+
+
+def solve_ss_ilqr(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
+    """SS-iLQR (thesis Alg. 1) on a free body's shooting problem (success: ``CONVERGED``)."""
+    return _solve_ilqr(ocp, q_guess, settings, multiple_shooting=False)
+
+
+def _solve_ilqr(
+    ocp: OCP, q_guess: np.ndarray, settings: Settings, multiple_shooting: bool
+) -> PlanResult:
+    """SS-/MS-iLQR on :class:`~mbplan.shooting.free_body.FreeBodyShooting`, with the input
+    limits by the AL outer loop (thesis Alg. 3) when the OCP has any. ``settings.tol`` bounds
+    the mean gradient norm, the defect norm and the bound violation; ``settings.options`` are
+    :class:`~mbplan.solvers.ilqr.ILQROptions` or :class:`~mbplan.solvers.ilqr.ALOptions` fields
+    (default: with line search). MS-iLQR starts from the warm start's states and their inverse
+    LGVI inputs, SS-iLQR from the rollout of the hover input."""
+    method = "ms-ilqr" if multiple_shooting else "ss-ilqr"
+    start = time.perf_counter()
+    known = {f.name for f in fields(ILQROptions)}, {f.name for f in fields(ALOptions)}
+    unknown = set(settings.options) - known[0] - known[1]
+    if unknown:
+        raise InputError(
+            f"{method} options: unknown {sorted(unknown)}; known: {sorted(known[0] | known[1])}"
+        )
+    tol = settings.tol
+    options = ILQROptions(
+        **{"line_search": True, "tol": tol, "defect_tol": tol, "max_iter": settings.max_iter}
+        | {k: v for k, v in settings.options.items() if k in known[0]},
+        multiple_shooting=multiple_shooting,
+    )
+    al = ALOptions(
+        **{"constraint_tol": tol} | {k: v for k, v in settings.options.items() if k in known[1]}
+    )
+    jit = jit_available() if settings.jit is None else settings.jit
+    problem = FreeBodyShooting(ocp, q_guess, method, jit)
+    x_init, u_init = problem.x_ref, problem.u_guess
+    if not multiple_shooting:  # open loop, the warm start's inputs drift off its path
+        x_init, u_init = None, np.tile(ocp.robot.hover_input, (ocp.N, 1))
+    build = time.perf_counter() - start
+    if np.all(np.isinf(problem.lower)) and np.all(np.isinf(problem.upper)):
+        result = solve_ilqr(problem, options, x_init=x_init, u_init=u_init)
+    else:
+        result = solve_ilqr_bounded(
+            problem,
+            problem.lower,
+            problem.upper,
+            options,
+            al,
+            x_init=x_init,
+            u_init=u_init,
+        )
+    h = result.history
+    return PlanResult(
+        method=method,
+        status=result.status.name,
+        success=result.success,
+        message=result.message,
+        iterations=result.iterations,
+        solve_time_s=result.wall_time_s,
+        total_time_s=result.wall_time_s + build,
+        time_per_iter_s=result.time_per_iteration_s,
+        dt=ocp.dt,
+        kkt_history=np.column_stack([h.defect_norm, h.grad_norm]).reshape(-1, 2),
+        entered_restoration=None,
+        extra={
+            "objective": result.objective,
+            "grad_norm": result.grad_norm,
+            "defect_norm": result.defect_norm,
+            "group_violation": result.group_violation,
+            "build_time_s": build,
+            "kkt_history_columns": ["defect_norm", "grad_norm"],
+        },
+        formulation="shooting",
+        **problem.trajectory(result.x, result.u),
+    )

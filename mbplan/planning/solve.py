@@ -24,6 +24,7 @@ from mbplan.planning import methods as m
 from mbplan.planning.initial_guess import initial_path
 from mbplan.resources import check_plan_memory
 from mbplan.results import PlanResult
+from mbplan.shooting.free_body import check_shooting_ocp
 from mbplan.validation import as_array, as_int, as_real
 from mbplan.workspace import Workspace
 
@@ -34,6 +35,8 @@ class Method:
 
     formulation: str
     solve: Callable[[OCP, np.ndarray, m.Settings], PlanResult]
+    check: Callable[[OCP, str], None] | None = None
+    """Refuses, before any solve, an OCP the method cannot plan (``check(ocp, method)``)."""
 
 
 METHODS: dict[str, Method] = {
@@ -41,6 +44,8 @@ METHODS: dict[str, Method] = {
     "mlgipm": Method("maximal", m.solve_mlgipm_maximal),
     "ipopt": Method("generalized", m.solve_ipopt_generalized),
     "ipopt-no-restoration": Method("generalized", m.solve_ipopt_no_restoration),
+    "ms-ilqr": Method("shooting", m.solve_ms_ilqr, check_shooting_ocp),
+    "ss-ilqr": Method("shooting", m.solve_ss_ilqr, check_shooting_ocp),
 }
 
 
@@ -140,6 +145,8 @@ def check_plan_request(
         options=dict(options or {}),
         jit=jit,
     )
+    if METHODS[method].check is not None:
+        METHODS[method].check(ocp, method)
     formulation = "maximal" if METHODS[method].formulation == "maximal" else "generalized"
     check_plan_memory(formulation, ocp.robot.nv, ocp.N)
     return settings

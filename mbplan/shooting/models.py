@@ -14,6 +14,7 @@ import casadi as cs
 import numpy as np
 
 from mbplan.lie import SO3, R
+from mbplan.ocp.free_body import FreeBody
 from mbplan.shooting.dynamics import DiscreteDynamics
 from mbplan.shooting.space import StateSpace
 
@@ -82,26 +83,36 @@ def drone_forcing(mass: float, gravity: float, down: np.ndarray) -> Forcing:
     return f
 
 
+def _rotation_step_solver(Jd: np.ndarray, newton: int) -> Callable[[cs.SX, cs.SX], cs.SX]:
+    """``(F_start, target) ↦ F`` solving ``(F J_d - J_d Fᵀ)^∨ = target`` (RIPM paper eq. 34) by
+    ``newton`` Newton steps on SO(3), ``F ← F exp(ξ)`` with ``ξ`` from the Jacobian
+    ``ξ ↦ (F ξ^ J_d + J_d ξ^ Fᵀ)^∨`` at ``ξ = 0``."""
+    J = cs.DM(Jd)
+    Fs, target_s = cs.SX.sym("F", 3, 3), cs.SX.sym("target", 3)
+    res = SO3.vee(cs.mtimes(Fs, J) - cs.mtimes(J, Fs.T)) - target_s
+    E = [cs.DM(SO3.hat(e)) for e in np.eye(3)]
+    jac = cs.horzcat(*[SO3.vee(cs.mtimes([Fs, e, J]) + cs.mtimes([J, e, Fs.T])) for e in E])
+    xi = -cs.solve(jac, res)
+    newton_step = cs.Function("lgvi_newton", [Fs, target_s], [cs.mtimes(Fs, SO3.exp(xi))])
+
+    def solve(F: cs.SX, target: cs.SX) -> cs.SX:
+        for _ in range(newton):
+            F = newton_step(F, target)
+        return F
+
+    return solve
+
+
 def _rotation_lgvi_step(inertia: np.ndarray, dt: float, newton: int):
     """``(R, ω, τ, τ⁺(R⁺)) ↦ (R⁺, ω⁺)`` of the rotational LGVI (shared by both models)."""
     Ib = np.asarray(inertia, dtype=float)
-    Jd = cs.DM(0.5 * np.trace(Ib) * np.eye(3) - Ib)
+    solve = _rotation_step_solver(0.5 * np.trace(Ib) * np.eye(3) - Ib, newton)
     Iinv = cs.DM(np.linalg.inv(Ib))
     Ib_dm = cs.DM(Ib)
-    fs, target_s = cs.SX.sym("f", 3), cs.SX.sym("target", 3)
-    Fs = SO3.exp(fs)
-    res = SO3.vee(cs.mtimes(Fs, Jd) - cs.mtimes(Jd, Fs.T)) - target_s
-    newton_step = cs.Function(
-        "lgvi_newton", [fs, target_s], [fs - cs.solve(cs.jacobian(res, fs), res)]
-    )
 
     def rotate(Rm, w, tau, tau_next: Callable):
         Pi = cs.mtimes(Ib_dm, w)
-        target = dt * Pi + 0.5 * dt**2 * tau
-        f = dt * w
-        for _ in range(newton):
-            f = newton_step(f, target)
-        F = SO3.exp(f)
+        F = solve(SO3.exp(dt * w), dt * Pi + 0.5 * dt**2 * tau)
         R_next = cs.mtimes(Rm, F)
         Pi_next = cs.mtimes(F.T, Pi) + 0.5 * dt * (cs.mtimes(F.T, tau) + tau_next(R_next))
         return R_next, cs.mtimes(Iinv, Pi_next)
@@ -161,3 +172,31 @@ def quadrotor_lgvi(
 
     space = StateSpace([SO3, R(3), R(3), R(3)])
     return DiscreteDynamics(name, space, 4, step, jit=jit)
+
+
+FREE_BODY_SPACE = StateSpace([SO3, R(3), SO3, R(3)])
+"""State ``(R, p, F, v)`` of a free body's LGVI: orientation, COM position, rotation step
+``F_k = R_kᵀ R_{k+1}`` and world velocity (RIPM paper eq. 30)."""
+
+
+def free_body_lgvi(
+    name: str, body: FreeBody, dt: float, *, newton: int = 8, jit: bool = True
+) -> DiscreteDynamics:
+    """The forced LGVI of a :class:`~mbplan.ocp.free_body.FreeBody` as an explicit step on
+    :data:`FREE_BODY_SPACE` (RIPM paper eq. 30–35, 60; the knots of its maximal formulation):
+    with the body wrench ``(f, τ) = B u``, ``R⁺ = R F``, ``p⁺ = p + Δt v``, ``F⁺`` solving
+    ``(F⁺J - JF⁺ᵀ)^∨ = (JF - FᵀJ)^∨ + Δt² τ`` (``newton`` Newton steps from ``F``) and
+    ``v⁺ = v + Δt (g + R⁺ f / m)``."""
+    J = body.nonstandard_inertia
+    solve = _rotation_step_solver(J, newton)
+    B, g, Jd = cs.DM(body.actuation), cs.DM(body.gravity), cs.DM(J)
+
+    def step(parts, u):
+        Rm, p, F, v = parts
+        wrench = cs.mtimes(B, u)
+        R_next = cs.mtimes(Rm, F)
+        target = SO3.vee(cs.mtimes(Jd, F) - cs.mtimes(F.T, Jd)) + dt**2 * wrench[3:]
+        v_next = v + dt * (g + cs.mtimes(R_next, wrench[:3]) / body.mass)
+        return [R_next, p + dt * v, solve(F, target), v_next]
+
+    return DiscreteDynamics(name, FREE_BODY_SPACE, body.nu, step, jit=jit)

@@ -13,6 +13,7 @@ import numpy as np
 from mbplan.errors import InputError
 from mbplan.shooting.cost import TrackingCost
 from mbplan.shooting.dynamics import DiscreteDynamics
+from mbplan.shooting.space import StateSpace
 
 
 def _vector(a, n: int, what: str) -> np.ndarray:
@@ -27,8 +28,41 @@ def _vector(a, n: int, what: str) -> np.ndarray:
     return v
 
 
+class ShootingBase:
+    """What SS-/MS-iLQR use of a problem (3-1): the dynamics ``x_{k+1} = F(x_k, u_k)`` from
+    ``x0``, states ``x_ref (N+1, nq)`` (MS-iLQR's default initial states), and the cost's value
+    and derivatives along a trajectory (flat states, see StateSpace)."""
+
+    dynamics: DiscreteDynamics
+    x0: np.ndarray
+    x_ref: np.ndarray
+
+    @property
+    def N(self) -> int:
+        return self.x_ref.shape[0] - 1
+
+    @property
+    def space(self) -> StateSpace:
+        return self.dynamics.space
+
+    @property
+    def nu(self) -> int:
+        return self.dynamics.nu
+
+    def cost_value(self, X: np.ndarray, U: np.ndarray) -> float:
+        """``Σ_{k<N} l_k(x_k, u_k) + l_N(x_N)``."""
+        raise NotImplementedError
+
+    def cost_derivatives(
+        self, X: np.ndarray, U: np.ndarray
+    ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Total cost and ``l_x (N+1, nx)``, ``l_xx (N+1, nx, nx)``, ``l_u``, ``l_uu`` (N rows);
+        ``l_ux = 0``."""
+        raise NotImplementedError
+
+
 @dataclass
-class ShootingProblem:
+class ShootingProblem(ShootingBase):
     """Dynamics, tracking cost, initial state and references (flat states, see StateSpace)."""
 
     dynamics: DiscreteDynamics
@@ -69,28 +103,14 @@ class ShootingProblem:
         self._wu = np.vstack([np.tile(self.input_weights, (N, 1)), np.zeros(nu)])
         self._uref = np.vstack([u_ref, np.zeros(nu)])
 
-    @property
-    def N(self) -> int:
-        return self.x_ref.shape[0] - 1
-
-    @property
-    def space(self):
-        return self.dynamics.space
-
-    @property
-    def nu(self) -> int:
-        return self.dynamics.nu
-
     def _padded(self, U: np.ndarray) -> np.ndarray:
         return np.vstack([U, np.zeros((1, self.nu))])
 
     def cost_value(self, X: np.ndarray, U: np.ndarray) -> float:
-        """``Σ_{k<N} l_k(x_k, u_k) + l_N(x_N)``."""
         values = self.cost.values(X, self._padded(U), self.x_ref, self._uref, self._wq, self._wu)
         return float(np.sum(values))
 
     def cost_derivatives(self, X: np.ndarray, U: np.ndarray):
-        """Total cost and ``l_x (N+1, nx)``, ``l_xx (N+1, nx, nx)``, ``l_u``, ``l_uu`` (N rows)."""
         l, lx, lxx, lu, luu = self.cost.derivatives(
             X, self._padded(U), self.x_ref, self._uref, self._wq, self._wu
         )

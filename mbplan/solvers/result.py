@@ -20,6 +20,27 @@ class RIPMStatus(enum.Enum):
     NUMERICAL_ERROR = "numerical error (non-finite evaluation or unsolvable KKT system)"
 
 
+class SolverResult:
+    """What every result shares, named as in ``scipy.optimize.OptimizeResult``: ``success``,
+    ``status`` (an enum member or, for a :class:`~mbplan.results.PlanResult`, its name),
+    ``message``, ``nit`` (``iterations``) and ``fun`` (``objective``, the cost at the returned
+    point). A solver's ``x`` is its returned point; a plan's is its trajectory ``q, v, tau``."""
+
+    success: bool
+    status: Any
+    message: str
+    iterations: int
+    objective: float
+
+    @property
+    def nit(self) -> int:
+        return self.iterations
+
+    @property
+    def fun(self) -> float:
+        return self.objective
+
+
 HISTORY_FIELDS = (
     "objective",
     "inf_pr",
@@ -67,7 +88,7 @@ class IterationHistory:
 
 
 @dataclass
-class RIPMResult:
+class RIPMResult(SolverResult):
     """Outcome of :func:`~mbplan.solvers.ripm.driver.solve_ripm` (like ``scipy.optimize.OptimizeResult``).
 
     ``x`` is a manifold point (the last accepted iterate); ``y``, ``z`` are the multipliers of

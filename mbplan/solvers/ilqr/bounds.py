@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mbplan.errors import InputError
-from mbplan.shooting.problem import ShootingProblem
+from mbplan.shooting.problem import ShootingBase
 from mbplan.solvers.ilqr.options import ILQROptions
 from mbplan.solvers.ilqr.result import ILQRHistory, ILQRResult, ILQRStatus
 from mbplan.solvers.ilqr.solver import solve_ilqr
@@ -34,7 +34,7 @@ class ALOptions:
 class _Penalized:
     """A :class:`ShootingProblem` whose cost carries the AL term of the input bounds."""
 
-    def __init__(self, problem: ShootingProblem, lb, ub, lam, rho) -> None:
+    def __init__(self, problem: ShootingBase, lb, ub, lam, rho) -> None:
         self._p, self.lb, self.ub, self.lam, self.rho = problem, lb, ub, lam, rho
 
     def __getattr__(self, name):
@@ -68,24 +68,31 @@ def constraint(U: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
 
 
 def solve_ilqr_bounded(
-    problem: ShootingProblem,
+    problem: ShootingBase,
     lower: np.ndarray,
     upper: np.ndarray,
     options: ILQROptions | None = None,
     al: ALOptions | None = None,
+    *,
+    x_init: np.ndarray | None = None,
+    u_init: np.ndarray | None = None,
 ) -> ILQRResult:
-    """SS-/MS-iLQR with input bounds by the AL outer loop; ``iterations`` counts inner ones."""
+    """SS-/MS-iLQR with input bounds by the AL outer loop; ``iterations`` counts inner ones.
+    ``lower``/``upper`` are ``(nu,)`` or per interval ``(N, nu)`` (``±inf``: unbounded); ``x_init``/``u_init`` start
+    the first inner solve."""
     opts, al = options or ILQROptions(), al or ALOptions()
-    nu = problem.nu
-    lb = np.broadcast_to(np.asarray(lower, dtype=float), (nu,)).copy()
-    ub = np.broadcast_to(np.asarray(upper, dtype=float), (nu,)).copy()
+    shape = (problem.N, problem.nu)
+    try:
+        lb = np.broadcast_to(np.asarray(lower, dtype=float), shape).copy()
+        ub = np.broadcast_to(np.asarray(upper, dtype=float), shape).copy()
+    except ValueError:
+        raise InputError(f"input bounds: expected shape ({shape[1]},) or {shape}") from None
     if np.any(np.isnan(lb)) or np.any(np.isnan(ub)) or np.any(lb > ub):
         raise InputError("input bounds: need lower <= upper and no NaN")
     lb_f, ub_f = np.where(np.isfinite(lb), lb, -1e300), np.where(np.isfinite(ub), ub, 1e300)
     start = time.perf_counter()
-    lam = np.zeros((problem.N, 2 * nu))
+    lam = np.zeros((problem.N, 2 * problem.nu))
     rho = al.rho_init
-    x_init = u_init = None
     history = ILQRHistory()
     iterations, violation_prev = 0, np.inf
     timings = {"derivatives": 0.0, "backward": 0.0, "rollout": 0.0}

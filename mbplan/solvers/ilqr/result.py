@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mbplan.solvers.result import SolverResult
+
 
 class ILQRStatus(enum.Enum):
     """Why the solver stopped. Only CONVERGED counts as success."""
@@ -44,7 +46,7 @@ class ILQRHistory:
 
 
 @dataclass
-class ILQRResult:
+class ILQRResult(SolverResult):
     """Outcome of :func:`~mbplan.solvers.ilqr.solve_ilqr` (fields as in ``RIPMResult``).
 
     ``x``/``u`` are the last accepted iterate (finite whatever the status); ``K``/``k`` the gains

@@ -16,7 +16,7 @@ from collections.abc import Callable
 import numpy as np
 
 from mbplan.errors import InputError
-from mbplan.shooting.problem import ShootingProblem
+from mbplan.shooting.problem import ShootingBase
 from mbplan.solvers.ilqr.options import ILQROptions
 from mbplan.solvers.ilqr.result import ILQRHistory, ILQRResult, ILQRStatus
 from mbplan.solvers.ilqr.riccati import (
@@ -33,7 +33,7 @@ class _Nominal:
     """A trajectory with its cost, derivatives, linearisation and stationarity measures."""
 
     def __init__(
-        self, problem: ShootingProblem, X, U, single_shooting: bool, clock: dict, second_order
+        self, problem: ShootingBase, X, U, single_shooting: bool, clock: dict, second_order
     ):
         t = time.perf_counter()
         self.X, self.U = X, U
@@ -86,7 +86,7 @@ def _initial_guess(problem, opts, x_init, u_init):
 
 
 def solve_ilqr(
-    problem: ShootingProblem,
+    problem: ShootingBase,
     options: ILQROptions | None = None,
     *,
     x_init: np.ndarray | None = None,
@@ -94,7 +94,7 @@ def solve_ilqr(
     callback: Callable[[int, ILQRHistory], None] | None = None,
     verbose: bool = False,
 ) -> ILQRResult:
-    """Solve a :class:`~mbplan.shooting.ShootingProblem` by SS- or MS-iLQR (or DDP).
+    """Solve a :class:`~mbplan.shooting.problem.ShootingBase` by SS- or MS-iLQR (or DDP).
 
     ``verbose`` prints one line per iterate (IPOPT-style, like ``solve_ripm``); ``callback``
     is called with the iteration number and the history after each iterate.
