@@ -4,9 +4,9 @@ The state is the LGVI knot ``x_k = (R_k, p_k, F_k, v_k)`` of the RIPM's maximal 
 (:func:`~mbplan.shooting.models.free_body_lgvi`, RIPM paper eq. 30–35, 60), the input ``u_k``
 is held over ``[t_k, t_{k+1}]``. The cost is the OCP's: ``Σ ½ w ‖r(x_k)‖²`` of every state cost
 at its knots plus ``Σ ½ w ‖r(u_k)‖²`` of every input cost on its intervals, each residual
-:func:`~mbplan.ocp.body_residuals.body_expression`, with Gauss–Newton derivatives along
+its :meth:`~mbplan.residuals.base.Residual.body_rows`, with Gauss–Newton derivatives along
 ``x ⊕ δx`` (thesis §3-1: ``l_x = J̃ᵀr̃``, ``l_xx ≈ J̃ᵀJ̃`` for the stacked ``r̃ = √w r``;
-``l_ux = 0``). Input limits (:class:`~mbplan.ocp.body_residuals.BodyInputLimits`) become the
+``l_ux = 0``). Input limits (:class:`~mbplan.residuals.body.BodyInputLimits`) become the
 bounds of the augmented-Lagrangian outer loop (thesis Alg. 3); a shooting method cannot impose
 any other hard constraint, so :func:`check_shooting_ocp` refuses those before any solve.
 """
@@ -17,14 +17,8 @@ import casadi as cs
 import numpy as np
 
 from mbplan.errors import InputError
-from mbplan.formulations.free_body import warm_start_inputs
+from mbplan.formulations.free_body import parameter_shapes, warm_start_inputs
 from mbplan.lie import R
-from mbplan.ocp.body_residuals import (
-    BodyInputLimits,
-    body_expression,
-    body_parameters,
-    parameter_shapes,
-)
 from mbplan.ocp.free_body import FreeBody, body_state, free_flyer_state, path_state
 from mbplan.ocp.problem import OCP, Item
 from mbplan.shooting.compiled import BufferedFunction
@@ -44,7 +38,7 @@ def check_shooting_ocp(ocp: OCP, method: str) -> None:
             "multi-body robot: use ripm, ipopt, fddp or csqp"
         )
     for item in ocp.constraints:
-        if not isinstance(item.residual, BodyInputLimits):
+        if not item.residual.input_limits:
             raise InputError(
                 f"{method} cannot impose constraint {item.name!r} "
                 f"({type(item.residual).__name__}): a shooting method keeps only input limits "
@@ -92,7 +86,7 @@ class _LeastSquares:
         def residual(zs: cs.SX) -> cs.SX:
             parts = space.sym_unpack(zs)
             x = {"u": parts[0]} if control else dict(zip(STATE_NAMES, parts, strict=True))
-            return cs.vertcat(cs.SX(0, 1), *[sw * body_expression(k, x, P) for k, P, sw in blocks])
+            return cs.vertcat(cs.SX(0, 1), *[sw * k.body_rows(x, P) for k, P, sw in blocks])
 
         r = residual(z)
         Jr = cs.jacobian(residual(space.sym_retract(z, dz, second_order=True)), dz)
@@ -122,7 +116,7 @@ def _parameters(ocp: OCP, items: list[Item], names: list[str], K: int) -> np.nda
     (state knots ``k``, intervals ``k``), the first item's parameters and ``√w = 0`` elsewhere."""
     rows = np.empty(0)
     for i, item in enumerate(items):
-        values = body_parameters(item.residual, ocp.scene)
+        values = item.residual.body_parameters(ocp.scene)
         row = np.concatenate([np.ravel(values[n], order="F") for n in names])
         if i == 0:
             rows = np.tile(np.r_[row, 0.0], (K, 1))
