@@ -432,3 +432,12 @@ def test_each_system_picks_rows_and_columns_on_its_own_first_matrix():
     assert choice(system(), 0.0) == again  # a new system picks on its own first values
     assert choice(system(), 1e6) == first  # whatever the workspace's systems picked before
     assert ws.count("reduction") == 2
+
+    def referenced() -> ReducedKKTSystem:  # picks on the values of A_E scaled by 1e6
+        n, me, mi = problem.n, problem.n_eq, problem.n_ineq
+        ref = lambda _: scaled(1e6).data  # noqa: E731
+        return ReducedKKTSystem(n, me, mi, lambda _: plan, reference_of=ref, workspace=ws)
+
+    assert choice(referenced(), 1.0) == first  # the reference's pick, kept in the workspace
+    assert choice(referenced(), 0.0) == again  # it breaks down: picked on the system's values
+    assert ws.count("reduction") == 2

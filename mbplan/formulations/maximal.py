@@ -13,6 +13,7 @@ from functools import lru_cache
 
 import numpy as np
 import pinocchio as pin
+import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.formulations.maximal_joints import joint_terms
@@ -51,8 +52,27 @@ class MaximalNLP:
                 raise InputError(f"maximal formulation, {item.role} {item.name!r}: {err}") from None
         variables = trajectory_variables(layout.blocks, workspace)
         self.problem = TrajectoryProblem(variables, terms, workspace)
-        # the RIPM's kkt_method="reduced" eliminates the joints through this plan
+        # the RIPM's kkt_method="reduced" eliminates the joints through this plan, its pivots
+        # picked on the reference values
         self.problem.elimination_plan = JointEliminationPlans(self.problem, workspace=workspace)
+        self.problem.pick_reference = self.pick_reference
+
+    def pick_reference(self, eq_jacobian: sp.spmatrix) -> np.ndarray | None:
+        """The values of ``eq_jacobian``'s entries that the joint reduction picks its pivots on:
+        the equality Jacobian with every knot at rest in the robot's neutral configuration
+        (inverse dynamics for the forces). The rows the pick reads (the LGVI's kinematics,
+        dynamics and joint constraints) are a function of the robot model, ``N`` and ``dt``
+        alone, so every problem of a family picks alike and shares one symbolic phase
+        (``None``: another pattern than the problem's). Neutral rather than a generic
+        configuration: its groups have full rank, its tied columns are broken alike in every
+        process, and its pick stays well conditioned on tasks that move around it (a seeded
+        generic configuration's did not on the 4-link chain's reach)."""
+        q = pin.neutral(self.ocp.robot.model)
+        point = self.initial_point(np.tile(q, (self.ocp.N + 1, 1)))
+        ref = sp.csr_matrix(self.problem.evaluate(point, hessian=False).eq_jacobian)
+        jac = sp.csr_matrix(eq_jacobian)
+        same = np.array_equal(ref.indptr, jac.indptr) and np.array_equal(ref.indices, jac.indices)
+        return ref.data.copy() if same else None
 
     # -- item translations ---------------------------------------------------------------------
     def bodies(self, item: Item) -> np.ndarray:

@@ -47,10 +47,9 @@ def reduction(
 ) -> Reduction:
     """A :class:`Reduction` of its own for ``plan`` and the blocks' patterns, with the replaced
     rows and dependent columns picked on the values of ``ae`` (QR with column pivoting): a
-    function of the plan, the patterns and these values, so the symbolic phase is kept in
-    ``workspace`` by all of them (a problem solved again builds it once; another problem
-    of the family picks on its own values). Raises one of ``PLAN_ERRORS`` for a plan or
-    values it cannot use."""
+    function of the plan, the patterns and the values of the rows the pick reads, so the
+    symbolic phase is kept in ``workspace`` by all of them (the problems that pick on the same
+    values share it). Raises one of ``PLAN_ERRORS`` for a plan or values it cannot use."""
 
     def key() -> tuple:
         return (
@@ -58,7 +57,7 @@ def reduction(
             pivot_threshold,
             *(getattr(plan, f.name).tobytes() for f in dataclasses.fields(plan)),
             *(a.tobytes() for m in (hess, ae, ai) for a in (m.indptr, m.indices)),
-            ae.data.tobytes(),
+            ae.data[picked_entries(plan, ae)].tobytes(),
         )
 
     def build() -> Reduction:
@@ -66,6 +65,16 @@ def reduction(
         return Reduction(plan, hess, ae, ai, ordering, pivot_threshold, workspace)
 
     return shared(workspace, "reduction", key, build).fresh()
+
+
+def picked_entries(plan: EliminationPlan, ae: sp.csr_matrix) -> np.ndarray:
+    """Which entries of ``ae.data`` the pick reads: those of the groups' source and subtracted
+    rows and of the blocks' rows (the symbolic phase reads no other value)."""
+    rows = np.concatenate([plan.group_sources.ravel(), plan.group_subtract.ravel(),
+                           plan.block_rows.ravel()])  # fmt: skip
+    read = np.zeros(ae.shape[0], bool)
+    read[rows[rows >= 0]] = True
+    return np.repeat(read, np.diff(ae.indptr))
 
 
 class Reduction(ReductionSymbolic, ReductionLayout):

@@ -14,7 +14,9 @@ inequality rows folded in (``D_I < 0``, ``Σ = -D_I⁻¹``: inertia ``(0, m_I, 0
 residual ratio, then against the full ``K`` (IPOPT's ratio).
 
 The symbolic phase (once per pattern of a system) picks the replaced rows and dependent
-columns by QR with column pivoting on the values of the system's first matrix of the pattern
+columns by QR with column pivoting on the problem's reference values of ``A_E`` if it supplies
+them (``pick_reference``: values of a canonical state, the same for every problem of a family,
+which then share the phase), else on the values of the system's first matrix of the pattern
 (once more on those of a matrix they break down on) and builds every index array
 (:func:`~mbplan.solvers.kkt.reduced.reduction.reduction`);
 the numeric phase is compiled (:mod:`mbplan.solvers.kkt.reduced.kernels`,
@@ -46,8 +48,10 @@ ratio: one pass then usually meets the ratio against ``K``."""
 class ReducedKKTSystem:
     """:class:`KKTSystem`'s interface, factorizing through the plan ``plan_of(A_E)`` returns
     for each new pattern (module docstring); the full factorization when the plan is ``None``
-    or the reduction does not apply (``strict``: an invalid plan raises instead); ``workspace``:
-    where the patterns, analyses and reductions are kept (``None``: this system's own).
+    or the reduction does not apply (``strict``: an invalid plan raises instead);
+    ``reference_of(A_E)``: the values of ``A_E``'s entries to pick on (``None``, or none
+    returned: the first matrix's); ``workspace``: where the patterns, analyses and reductions
+    are kept (``None``: this system's own).
     ``n_reduced``: factorizations through the reduction;
     ``n_fallbacks``: refined solves that missed ``ratio_max`` and were redone in full."""
 
@@ -58,6 +62,7 @@ class ReducedKKTSystem:
         n_ineq: int,
         plan_of: Callable[[sp.csr_matrix], EliminationPlan | None],
         *,
+        reference_of: Callable[[sp.csr_matrix], np.ndarray | None] | None = None,
         ordering: str = "amd",
         pivot_threshold: float = 0.0,
         strict: bool = False,
@@ -74,7 +79,7 @@ class ReducedKKTSystem:
         )
         self.n, self.n_eq, self.n_ineq, self.dim = n, n_eq, n_ineq, self.full.dim
         self.ordering, self.pivot_threshold = ordering, pivot_threshold
-        self.plan_of, self.strict = plan_of, strict
+        self.plan_of, self.reference_of, self.strict = plan_of, reference_of, strict
         self._red: Reduction | None = None
         self._plan: EliminationPlan | None = None
         self._patterns: tuple[_BlockPattern, ...] = ()
@@ -124,7 +129,7 @@ class ReducedKKTSystem:
         try:
             self._plan = self.plan_of(ae)
             if self._plan is not None:
-                self._red = reduction(
+                self._red = self._reference(hess, ae, ai) or reduction(
                     self._plan, hess, ae, ai, self.ordering, self.pivot_threshold, self.workspace
                 )
         except InputError:
@@ -134,9 +139,26 @@ class ReducedKKTSystem:
             if self.strict:
                 raise InputError(f"kkt_method='reduced': unusable elimination plan: {err}") from err
 
+    def _reference(
+        self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix
+    ) -> Reduction | None:
+        """The reduction picked on the reference values of ``A_E`` (``None``: there are none,
+        or they admit no reduction)."""
+        values = None if self.reference_of is None else self.reference_of(ae)
+        if values is None:
+            return None
+        ref = sp.csr_matrix((values, ae.indices, ae.indptr), shape=ae.shape)
+        try:
+            return reduction(
+                self._plan, hess, ref, ai, self.ordering, self.pivot_threshold, self.workspace
+            )
+        except PLAN_ERRORS:
+            return None
+
     def _set_values(self, hess: sp.csr_matrix, ae: sp.csr_matrix, ai: sp.csr_matrix) -> bool:
         """The reduction's values; on a breakdown (its replaced rows and dependent columns were
-        picked on an earlier matrix), once per pattern, a reduction picked on these values
+        picked on the reference or an earlier matrix), once per pattern, a reduction picked on
+        these values
         (none if they admit none: rank deficient rows, or a breakdown on the very values it was
         picked on)."""
         if self._red.set_values(hess, ae, ai):
@@ -234,8 +256,9 @@ def kkt_system(
 ) -> KKTSystem | ReducedKKTSystem:
     """The RIPM's KKT system for ``problem``: ``"full"``, ``"reduced"`` (through the problem's
     ``elimination_plan(A_E)``, an :class:`InputError` if it has none or it is invalid) or
-    ``"auto"`` (reduced when the problem has a valid plan, the full factorization otherwise);
-    its patterns, analyses and reductions kept in ``workspace``."""
+    ``"auto"`` (reduced when the problem has a valid plan, the full factorization otherwise),
+    picked on the problem's ``pick_reference(A_E)`` if it has one; its patterns, analyses and
+    reductions kept in ``workspace``."""
     if method not in KKT_METHODS:
         raise InputError(f"kkt_method: expected one of {KKT_METHODS}, got {method!r}")
     n, me, mi = int(problem.n), int(problem.n_eq), int(problem.n_ineq)
@@ -251,6 +274,7 @@ def kkt_system(
         me,
         mi,
         plan_of,
+        reference_of=getattr(problem, "pick_reference", None),
         ordering=ordering,
         pivot_threshold=pivot_threshold,
         strict=method == "reduced",
