@@ -27,6 +27,14 @@ class Workspace:
         self._entries: dict[str, OrderedDict[Hashable, Any]] = {}
         self._lock = threading.Lock()
 
+    def __getstate__(self) -> dict[str, Any]:
+        """A workspace sent to another process (a benchmark job) arrives empty: its entries are
+        rebuilt there, with the same values."""
+        return {"kept": self.kept}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(state["kept"])
+
     def count(self, kind: str) -> int:
         """Entries of ``kind`` kept."""
         return len(self._entries.get(kind, ()))

@@ -1,5 +1,6 @@
 """The caller's workspace: what the solves of one problem family share, built once per key."""
 
+import pickle
 import threading
 
 import numpy as np
@@ -87,3 +88,14 @@ def test_a_reused_workspace_builds_nothing_again_and_changes_no_result(monkeypat
     for result in (first, again):
         assert result.iterations == alone.iterations and result.objective == alone.objective
         np.testing.assert_array_equal(result.y, alone.y)
+
+
+def test_a_workspace_sent_to_another_process_arrives_empty_and_usable():
+    """Benchmark jobs carry their family's workspace; a worker process gets an empty one with
+    the same capacity, which builds its entries again (the same values)."""
+    ws = Workspace(kept=3)
+    ws.get_or_build("kind", "key", lambda: 1)
+    copy = pickle.loads(pickle.dumps(ws))
+    assert copy.kept == 3 and copy.count("kind") == 0
+    assert copy.get_or_build("kind", "key", lambda: 1) == 1 and copy.count("kind") == 1
+    assert ws.count("kind") == 1

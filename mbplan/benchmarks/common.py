@@ -165,7 +165,8 @@ def save_plot(fig: Figure, path: Path, dpi: int) -> None:
 def plan_row(ocp: Any, method: str, **plan_options: Any) -> tuple[dict[str, Any], Any, Any]:
     """``mbplan.plan(ocp, method, **plan_options)`` verified, as the JSON row every benchmark
     shares (status, iterations, times — ``total_time_s`` the wall time of ``plan`` — and the
-    verification), with the result and the :class:`~mbplan.verification.report.Verification`."""
+    verification), with the result and the :class:`~mbplan.verification.report.Verification`.
+    A benchmark passes one ``workspace`` to the cases of a family (:mod:`mbplan.workspace`)."""
     from mbplan.planning.solve import plan
     from mbplan.verification import verify
 

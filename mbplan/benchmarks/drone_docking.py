@@ -32,6 +32,7 @@ from mbplan.planning.solve import plan
 from mbplan.tasks.drone import DockingTask, rotation_angles, sample_docking_cases
 from mbplan.tasks.paper import drone_docking
 from mbplan.validation import as_int, as_real
+from mbplan.workspace import Workspace
 
 METHODS = ("ripm", "ripm-input-limits", "ipopt-quaternion")  # the default run
 ALL_METHODS = (*METHODS, "mlgipm", "mlgipm-input-limits")
@@ -46,16 +47,24 @@ def _case(n: int, seed: int, index: int, limits: bool) -> DockingTask:
     return sample_docking_cases(n, seed, with_input_limits=limits)[index]
 
 
-def solve_case(method: str, n: int, seed: int, index: int, tol: float) -> dict:
+def solve_case(
+    method: str, n: int, seed: int, index: int, tol: float, workspace: Workspace | None = None
+) -> dict:
     """One (case, method) solve through :func:`mbplan.plan` of
-    :func:`mbplan.tasks.paper.drone_docking`, verified, as a JSON-serialisable row."""
+    :func:`mbplan.tasks.paper.drone_docking`, verified, as a JSON-serialisable row
+    (``workspace``: the one the method's cases share)."""
     if method not in ALL_METHODS:
         raise InputError(f"unknown method {method!r}; choose from {', '.join(ALL_METHODS)}")
     task = _case(n, seed, index, limits=method.endswith("-input-limits"))
     angle = float(rotation_angles(task.R0[None])[0])
     api = _API_METHOD[method.removesuffix("-input-limits")]
     row, r, check = plan_row(
-        drone_docking(task), api, warm_start="linear", tol=tol, max_iter=MAX_ITER[method]
+        drone_docking(task),
+        api,
+        warm_start="linear",
+        tol=tol,
+        max_iter=MAX_ITER[method],
+        workspace=workspace,
     )
     kkt = np.max(r.kkt_history, axis=1) if len(r.kkt_history) else np.empty(0)
     row |= {
@@ -106,7 +115,10 @@ def run(
     as_int(n, "n", minimum=1, what="number of cases")
     as_int(seed, "seed", minimum=0, what="random seed")
     as_real(tol, "tol", positive=True)
-    jobs = [Job(i, m, solve_case, (m, n, seed, i, tol)) for m in methods for i in range(n)]
+    shared = {m: Workspace() for m in methods}
+    jobs = [
+        Job(i, m, solve_case, (m, n, seed, i, tol, shared[m])) for m in methods for i in range(n)
+    ]
     t0 = time.perf_counter()
     config = {"benchmark": "drone-docking", "seed": seed, "tol": tol, "max_iter": MAX_ITER}
     config["through"] = "mbplan.plan(mbplan.tasks.paper.drone_docking(case))"

@@ -23,6 +23,7 @@ from mbplan.benchmarks.harness import Job, run_jobs, summarize
 from mbplan.errors import InputError
 from mbplan.planning.solve import METHODS, check_plan_request
 from mbplan.tasks.paper import iiwa_obstacle, iiwa_obstacle_starts
+from mbplan.workspace import Workspace
 
 
 def solve_case(
@@ -35,13 +36,15 @@ def solve_case(
     max_iter: int,
     warm_start: str,
     constraint: str = "com",
+    workspace: Workspace | None = None,
 ) -> dict:
     """One (case, method) solve and its verification as a JSON-serialisable row: the case's
-    OCP (:func:`mbplan.tasks.paper.iiwa_obstacle`) planned with :func:`mbplan.plan`."""
+    OCP (:func:`mbplan.tasks.paper.iiwa_obstacle`) planned with :func:`mbplan.plan`
+    (``workspace``: the one the method's cases share)."""
     q0 = iiwa_obstacle_starts(n, seed, constraint)[index]
     problem = iiwa_obstacle(q0, N=N, constraint=constraint)
     row, result, check = plan_row(
-        problem, method, warm_start=warm_start, tol=tol, max_iter=max_iter
+        problem, method, warm_start=warm_start, tol=tol, max_iter=max_iter, workspace=workspace
     )
     return {
         **row,
@@ -79,9 +82,9 @@ def run(
     first = iiwa_obstacle(q0, N=N, constraint=constraint)
     for m in methods:
         check_plan_request(first, m, tol, max_iter)  # tolerances, memory of the horizon
-    args = (n, seed)
+    shared = {m: Workspace() for m in methods}
     jobs = [
-        Job(i, m, solve_case, (m, *args, i, N, tol, max_iter, warm_start, constraint))
+        Job(i, m, solve_case, (m, n, seed, i, N, tol, max_iter, warm_start, constraint, shared[m]))
         for i in range(n)
         for m in methods
     ]

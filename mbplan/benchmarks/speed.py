@@ -7,6 +7,7 @@ Tasks: :mod:`mbplan.tasks.speed`; profile and orderings:
 from __future__ import annotations
 
 import time
+from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +25,7 @@ from mbplan.tasks.speed import (
     iiwa_task,
     maximal_ripm_problem,
 )
+from mbplan.workspace import Workspace
 
 # ------------------------------------------------------------------------------- benchmark
 
@@ -126,12 +128,18 @@ def run(
     n_dist = n_iiwa if n_iiwa_distance is None else n_iiwa_distance
     pool = {"workers": workers, "scheduler": scheduler}
     summary: dict[str, Any] = {"tasks": {}, "intervals": {}, "interval_method": INTERVALS}
+    shared = defaultdict(Workspace)  # one per task family and method: its cases share it
     sections = (
         (
             "iiwa-com",
             n_iiwa,
             [
-                Job(i, m, iiwa_obstacle.solve_case, (m, n_iiwa, seed, i, 40, 1e-6, 500, "via"))
+                Job(
+                    i,
+                    m,
+                    iiwa_obstacle.solve_case,
+                    (m, n_iiwa, seed, i, 40, 1e-6, 500, "via", "com", shared[("iiwa-com", m)]),
+                )
                 for i in range(n_iiwa)
                 for m in IIWA_METHODS
             ],
@@ -144,7 +152,7 @@ def run(
                     i,
                     m,
                     iiwa_obstacle.solve_case,
-                    (m, n_dist, seed, i, 40, 1e-6, 500, "via", "distance"),
+                    (m, n_dist, seed, i, 40, 1e-6, 500, "via", "distance", shared[("dist", m)]),
                 )
                 for i in range(n_dist)
                 for m in IIWA_DISTANCE_METHODS
@@ -154,7 +162,12 @@ def run(
             "drone",
             n_drone,
             [
-                Job(i, m, drone_docking.solve_case, (m, n_drone, seed, i, 1e-6))
+                Job(
+                    i,
+                    m,
+                    drone_docking.solve_case,
+                    (m, n_drone, seed, i, 1e-6, shared[("drone", m)]),
+                )
                 for i in range(n_drone)
                 for m in DRONE_METHODS
             ],
@@ -447,8 +460,11 @@ def chain_case(method: str, links: int, obstacle: bool = False) -> dict:
     linear warm start, with its verification, as a JSON row. The linear start crosses the
     obstacle; the via warm start's random via points are poor starts for long chains."""
     ocp = chain_task(links, obstacle=obstacle)
+    workspace = Workspace()
     t0 = time.perf_counter()
-    plan(ocp, method, warm_start="linear")  # cold: compilation, symbolic analysis
+    plan(ocp, method, warm_start="linear", workspace=workspace)  # cold: compilation, symbolic
     cold = time.perf_counter() - t0
-    row, _, _ = plan_row(ocp, method, warm_start="linear", tol=1e-6, max_iter=500)
+    row, _, _ = plan_row(
+        ocp, method, warm_start="linear", tol=1e-6, max_iter=500, workspace=workspace
+    )
     return {"cold_total_time_s": cold, **row}
