@@ -7,9 +7,10 @@ or write it as a task file (:func:`load_task`, ``mbplan plan TASK.toml``).
 
 from mbplan import residuals
 from mbplan.errors import InfeasibleRequestError, InputError, MbplanError, RobotModelError
-from mbplan.ocp import OCP, FreeBody, Robot, Scene, load_robot
+from mbplan.ocp import OCP, Scene
 from mbplan.planning.solve import METHODS, plan
 from mbplan.results import PlanResult, load_npz, save_npz
+from mbplan.robots import FreeBody, Robot, load_robot
 from mbplan.taskfile import Task, load_task
 from mbplan.verification import Verification, verify
 from mbplan.workspace import Workspace

@@ -1,5 +1,5 @@
 """Continuous joints through the OCP API: one unbounded angle per joint
-(:mod:`mbplan.ocp.continuous`), planned in maximal (RIPM) and generalized (IPOPT) coordinates."""
+(:mod:`mbplan.robots.continuous`), planned in maximal (RIPM) and generalized (IPOPT) coordinates."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from mbplan import residuals as res
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.joint_space import evaluate
 from mbplan.formulations.maximal import MaximalNLP
-from mbplan.ocp.continuous import from_angles, to_angles
 from mbplan.robots import load
+from mbplan.robots.continuous import from_angles, to_angles
 from mbplan.tasks.paper import tracking_ocp
 
 LIMITS = {"torque_limit": [20.0, 20.0], "velocity_limit": [10.0, 10.0]}  # the URDF's are 0

@@ -12,8 +12,8 @@ from fd import central, check_generalized_derivatives
 import mbplan as mb
 from mbplan import residuals as res
 from mbplan.formulations.generalized import GeneralizedNLP
-from mbplan.ocp import load_robot
-from mbplan.ocp.robot import robot_from_source
+from mbplan.robots import load_robot
+from mbplan.robots.robot import robot_from_source
 from mbplan.simulation.reference import (
     damped_aba,
     damped_euler_velocity,

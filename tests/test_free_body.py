@@ -19,8 +19,8 @@ from mbplan.engine.checks import check_derivatives
 from mbplan.formulations.free_body import FreeBodyNLP, input_bounds, lgvi_inputs
 from mbplan.formulations.quaternion import QuaternionNLP
 from mbplan.lie import SO3
-from mbplan.ocp.free_body import FreeBody, body_state, free_flyer_state, quaternions
 from mbplan.planning.initial_guess import initial_path
+from mbplan.robots.free_body import FreeBody, body_state, free_flyer_state, quaternions
 from mbplan.tasks import paper
 from mbplan.tasks.drone import cluttered_task, sample_docking_cases, simulate, trajectory_cost
 from mbplan.viz.drone import free_body_scene

@@ -10,7 +10,7 @@ import mbplan as mb
 from mbplan import residuals as res
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.joint_space import evaluate
-from mbplan.ocp.robot import robot_from_source
+from mbplan.robots.robot import robot_from_source
 from mbplan.tasks.paper import IIWA_START
 
 ARM = """<mujoco model="tiny_arm">

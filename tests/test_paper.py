@@ -9,9 +9,9 @@ import pytest
 
 import mbplan as mb
 from mbplan.formulations.joint_space import evaluate
-from mbplan.ocp.continuous import joint_ranges
 from mbplan.planning.initial_guess import VIA_CANDIDATES, initial_path, path_clearance
 from mbplan.planning.solve import check_start
+from mbplan.robots.continuous import joint_ranges
 from mbplan.tasks.paper import (
     IIWA_CYLINDER,
     IIWA_START,

@@ -8,7 +8,7 @@ import pytest
 
 import mbplan as mb
 from mbplan.errors import InputError
-from mbplan.ocp.free_body import body_state
+from mbplan.robots.free_body import body_state
 from mbplan.tasks import paper
 from mbplan.tasks.drone import sample_docking_cases, simulate, trajectory_cost
 

@@ -10,8 +10,9 @@ import pinocchio as pin
 import pytest
 
 from mbplan.errors import InputError
-from mbplan.ocp import OCP, Scene, load_robot
+from mbplan.ocp import OCP, Scene
 from mbplan.results import PlanResult, load_npz, save_npz
+from mbplan.robots import load_robot
 from mbplan.simulation.reference import integrate_aba
 from mbplan.tasks.paper import (
     IIWA_GOAL_TOLERANCE,

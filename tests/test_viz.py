@@ -17,9 +17,10 @@ import umsgpack
 
 from mbplan.errors import InputError
 from mbplan.multibody import body_poses, maximal_model
-from mbplan.ocp import OCP, Scene, load_robot
+from mbplan.ocp import OCP, Scene
 from mbplan.planning.initial_guess import initial_path
 from mbplan.results import PlanResult, save_npz
+from mbplan.robots import load_robot
 from mbplan.tasks.paper import iiwa_obstacle
 from mbplan.viz import (
     MeshcatServer,

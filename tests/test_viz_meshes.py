@@ -17,8 +17,9 @@ from test_viz import page_commands  # tests/ is on sys.path (pytest's rootdir im
 
 from mbplan.errors import InputError, RobotModelError
 from mbplan.multibody import body_poses, maximal_model
-from mbplan.ocp import OCP, Scene, load_robot
+from mbplan.ocp import OCP, Scene
 from mbplan.results import PlanResult
+from mbplan.robots import load_robot
 from mbplan.viz import bounding_box, camera_offset, static_html
 from mbplan.viz.camera import direction
 from mbplan.viz.shapes import capsule_mesh, shape_of, vertex_normals

@@ -1,5 +1,5 @@
-"""Solver adapters of the shooting formulation: Crocoddyl's box-FDDP and mim-solvers' CSQP
-(the ``baselines`` extra), ``solve(ocp, q_guess, settings) -> PlanResult``.
+"""Crocoddyl's box-FDDP and mim-solvers' CSQP on the shooting formulation of an OCP (the
+``baselines`` extra), ``solve(ocp, q_guess, max_iter, options) -> PlanResult``.
 
 Tolerances are solver-native: FDDP's ``th_stop`` (:data:`FDDP_TOL`) on its expected cost
 decrease, CSQP's KKT ``termination_tolerance`` (:data:`CSQP_TOL`) — CSQP's KKT residual stalls
@@ -11,6 +11,8 @@ constraint_norm, KKT)``, at iterate ``i``.
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
+from typing import Any
 
 import crocoddyl
 import mim_solvers
@@ -18,7 +20,6 @@ import numpy as np
 
 from mbplan.formulations.crocoddyl import LIMIT_WEIGHT, OBSTACLE_WEIGHT, ShootingBuilder
 from mbplan.ocp.problem import OCP
-from mbplan.planning.methods import Settings
 from mbplan.results import PlanResult
 
 FDDP_TOL = 1e-9
@@ -102,17 +103,17 @@ def _fddp_final_row(solver: crocoddyl.SolverBoxFDDP) -> tuple[float, float]:
     return solver.ffeas, solver.stoppingCriteria()
 
 
-def solve_fddp(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
+def solve_fddp(
+    ocp: OCP, q_guess: np.ndarray, max_iter: int, options: Mapping[str, Any]
+) -> PlanResult:
     """Crocoddyl's ``SolverBoxFDDP`` (constraints as penalties, torque limits as control
-    bounds; :mod:`mbplan.formulations.crocoddyl`)."""
+    bounds; :mod:`mbplan.formulations.crocoddyl`); ``options``: ``th_stop``."""
     start = time.perf_counter()
     builder = ShootingBuilder(ocp, hard=False, method="fddp")
     solver = crocoddyl.SolverBoxFDDP(builder.problem())
-    solver.th_stop = float(settings.options.get("th_stop", FDDP_TOL))
+    solver.th_stop = float(options.get("th_stop", FDDP_TOL))
     history = _History()
-    converged, build, solve_time = _solve(
-        solver, builder, history, q_guess, settings.max_iter, start
-    )
+    converged, build, solve_time = _solve(solver, builder, history, q_guess, max_iter, start)
     rows = [*history.rows, _fddp_final_row(solver)]
     extra = {
         "build_time_s": build,
@@ -127,7 +128,7 @@ def solve_fddp(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
         converged,
         solver,
         iterations,
-        settings.max_iter,
+        max_iter,
         rows,
         solve_time,
         start,
@@ -135,17 +136,18 @@ def solve_fddp(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
     )
 
 
-def solve_csqp(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
-    """mim-solvers' ``SolverCSQP`` (every constraint hard; ADMM QP with mim-solvers' defaults)."""
+def solve_csqp(
+    ocp: OCP, q_guess: np.ndarray, max_iter: int, options: Mapping[str, Any]
+) -> PlanResult:
+    """mim-solvers' ``SolverCSQP`` (every constraint hard; ADMM QP with mim-solvers' defaults);
+    ``options``: ``termination_tolerance``."""
     start = time.perf_counter()
     builder = ShootingBuilder(ocp, hard=True, method="csqp")
     solver = mim_solvers.SolverCSQP(builder.problem())
-    solver.termination_tolerance = float(settings.options.get("termination_tolerance", CSQP_TOL))
+    solver.termination_tolerance = float(options.get("termination_tolerance", CSQP_TOL))
     solver.extra_iteration_for_last_kkt = True  # the KKT row of the last iterate
     history = _CsqpHistory()
-    converged, build, solve_time = _solve(
-        solver, builder, history, q_guess, settings.max_iter, start
-    )
+    converged, build, solve_time = _solve(solver, builder, history, q_guess, max_iter, start)
     iterations = int(solver.iter)
     extra = {
         "build_time_s": build,
@@ -159,7 +161,7 @@ def solve_csqp(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
         converged,
         solver,
         iterations,
-        settings.max_iter,
+        max_iter,
         rows,
         solve_time,
         start,

@@ -37,7 +37,7 @@ def _builtin_task(args: argparse.Namespace) -> tuple[Any, Callable[[], Any]]:
     if args.method not in METHODS:
         raise InputError(f"unknown method {args.method!r}; choose from {', '.join(METHODS)}")
     if args.robot != "iiwa":
-        from mbplan.ocp.robot import load_robot
+        from mbplan.robots.robot import load_robot
 
         load_robot(args.robot)  # an unknown robot is named as such
         raise InputError(

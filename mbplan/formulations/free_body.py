@@ -23,10 +23,10 @@ from mbplan.dynamics import free_body_step
 from mbplan.engine import RiemannianFunction
 from mbplan.errors import InputError
 from mbplan.lie import SO3, R
-from mbplan.ocp.free_body import FreeBody, body_state, free_flyer_state, path_state
 from mbplan.ocp.problem import OCP, Item
 from mbplan.ocp.scene import Scene
 from mbplan.residuals.base import Residual
+from mbplan.robots.free_body import FreeBody, body_state, free_flyer_state, path_state
 from mbplan.transcription.terms import Term
 from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import Block, Point, TrajectoryVariables

@@ -19,10 +19,10 @@ import pinocchio as pin
 
 from mbplan.formulations.free_body import evaluate_body
 from mbplan.lie import SO3
-from mbplan.ocp.free_body import FreeBody
-from mbplan.ocp.robot import Robot
 from mbplan.ocp.scene import Scene
 from mbplan.residuals.base import Residual, SymbolicContext, SymbolicRows
+from mbplan.robots.free_body import FreeBody
+from mbplan.robots.robot import Robot
 
 
 def joint_axes(model: pin.Model) -> list[tuple[str, np.ndarray]]:

@@ -24,8 +24,8 @@ from scipy.spatial.transform import Rotation
 
 from mbplan.formulations.free_body import warm_start_inputs
 from mbplan.lie import SO3
-from mbplan.ocp.free_body import body_state, free_flyer_state, path_state
 from mbplan.ocp.problem import OCP
+from mbplan.robots.free_body import body_state, free_flyer_state, path_state
 
 
 def quat_mul(a: cs.SX, b: cs.SX) -> cs.SX:

@@ -1,7 +1,7 @@
 """The optimal control problem, described once for every formulation.
 
-An :class:`OCP` holds a robot (a fixed-base :class:`~mbplan.ocp.robot.Robot` or a
-:class:`~mbplan.ocp.free_body.FreeBody`, whose ``q0, v0`` follow Pinocchio's free flyer), a scene, a horizon of ``N`` steps of ``dt`` from the initial state
+An :class:`OCP` holds a robot (a fixed-base :class:`~mbplan.robots.robot.Robot` or a
+:class:`~mbplan.robots.free_body.FreeBody`, whose ``q0, v0`` follow Pinocchio's free flyer), a scene, a horizon of ``N`` steps of ``dt`` from the initial state
 ``(q0, v0)`` (knot 0, fixed), and named costs and constraints built from
 :mod:`mbplan.residuals`. Knots: ``"all"`` (state knots ``1..N``, intervals ``0..N-1``),
 ``"running"`` (state knots ``1..N-1``, intervals ``0..N-1``), ``"terminal"`` (knot ``N``) or a
@@ -20,10 +20,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mbplan.errors import InputError
-from mbplan.ocp.free_body import FreeBody
-from mbplan.ocp.robot import Robot, load_robot, robot_from_source
 from mbplan.ocp.scene import Scene
 from mbplan.residuals.base import RESIDUALS, Residual
+from mbplan.robots.free_body import FreeBody
+from mbplan.robots.robot import Robot, load_robot, robot_from_source
 from mbplan.validation import as_array, as_int, as_real
 
 Knots = str | Sequence[int]
@@ -48,7 +48,7 @@ class Item:
 class OCP:
     """A trajectory optimization problem; ``add_cost``/``add_constraint`` return the OCP.
 
-    ``robot``: anything :func:`mbplan.ocp.robot.load_robot` takes. ``q0`` defaults to the
+    ``robot``: anything :func:`mbplan.robots.robot.load_robot` takes. ``q0`` defaults to the
     robot's ``default`` reference configuration (SRDF) or neutral; ``v0`` to zero.
     """
 

@@ -24,10 +24,7 @@ import pinocchio as pin
 from mbplan.errors import InfeasibleRequestError, InputError, WarmStartWarning
 from mbplan.formulations.joint_space import evaluate
 from mbplan.lie import SO3
-from mbplan.ocp.continuous import joint_ranges
-from mbplan.ocp.free_body import FreeBody, quaternions, rotations
 from mbplan.ocp.problem import OCP
-from mbplan.ocp.robot import Robot
 from mbplan.residuals import (
     BodyOrientation,
     BodyPosition,
@@ -37,6 +34,9 @@ from mbplan.residuals import (
     FrameTranslation,
     JointPosition,
 )
+from mbplan.robots.continuous import joint_ranges
+from mbplan.robots.free_body import FreeBody, quaternions, rotations
+from mbplan.robots.robot import Robot
 
 VIA_CANDIDATES = 256  # random via points tried by the "via" warm start
 IK_STARTS = 32  # random restarts of the inverse kinematics

@@ -21,12 +21,12 @@ from mbplan.baselines.ipopt import IpoptStats, base_options
 from mbplan.engine.jit import jit_available
 from mbplan.errors import InputError
 from mbplan.formulations import free_body, maximal
+from mbplan.formulations.free_body_shooting import FreeBodyShooting
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.quaternion import QuaternionNLP
-from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.problem import OCP
 from mbplan.results import PlanResult
-from mbplan.shooting.free_body import FreeBodyShooting
+from mbplan.robots.free_body import FreeBody
 from mbplan.solvers import RIPMStatus
 from mbplan.solvers.dispatch import options_for, solve_with
 from mbplan.solvers.ilqr import ALOptions, ILQROptions, solve_ilqr, solve_ilqr_bounded
@@ -212,7 +212,7 @@ def solve_ss_ilqr(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResu
 def _solve_ilqr(
     ocp: OCP, q_guess: np.ndarray, settings: Settings, multiple_shooting: bool
 ) -> PlanResult:
-    """SS-/MS-iLQR on :class:`~mbplan.shooting.free_body.FreeBodyShooting`, with the input
+    """SS-/MS-iLQR on :class:`~mbplan.formulations.free_body_shooting.FreeBodyShooting`, with the input
     limits by the AL outer loop (thesis Alg. 3) when the OCP has any. ``settings.tol`` bounds
     the mean gradient norm, the defect norm and the bound violation; ``settings.options`` are
     :class:`~mbplan.solvers.ilqr.ILQROptions` or :class:`~mbplan.solvers.ilqr.ALOptions` fields

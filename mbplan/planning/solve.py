@@ -17,14 +17,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mbplan.errors import InfeasibleRequestError, InputError
+from mbplan.formulations.free_body_shooting import check_shooting_ocp
 from mbplan.formulations.joint_space import evaluate
-from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.problem import OCP
 from mbplan.planning import methods as m
 from mbplan.planning.initial_guess import initial_path
 from mbplan.resources import check_plan_memory
 from mbplan.results import PlanResult
-from mbplan.shooting.free_body import check_shooting_ocp
+from mbplan.robots.free_body import FreeBody
 from mbplan.validation import as_array, as_int, as_real
 from mbplan.workspace import Workspace
 
@@ -49,20 +49,20 @@ METHODS: dict[str, Method] = {
 }
 
 
-def _shooting(name: str) -> Callable[[OCP, np.ndarray, m.Settings], PlanResult]:
-    """The adapter ``name`` of :mod:`mbplan.baselines.crocoddyl`, imported when called
+def _crocoddyl(name: str) -> Callable[[OCP, np.ndarray, m.Settings], PlanResult]:
+    """The solver ``name`` of :mod:`mbplan.baselines.crocoddyl`, imported when called
     (Crocoddyl and mim-solvers are the optional ``baselines`` extra)."""
 
     def solve(ocp: OCP, q_guess: np.ndarray, settings: m.Settings) -> PlanResult:
-        from mbplan.baselines import crocoddyl as shooting_methods
+        from mbplan.baselines import crocoddyl
 
-        return getattr(shooting_methods, name)(ocp, q_guess, settings)
+        return getattr(crocoddyl, name)(ocp, q_guess, settings.max_iter, settings.options)
 
     return solve
 
 
-METHODS["fddp"] = Method("shooting", _shooting("solve_fddp"))
-METHODS["csqp"] = Method("shooting", _shooting("solve_csqp"))
+METHODS["fddp"] = Method("shooting", _crocoddyl("solve_fddp"))
+METHODS["csqp"] = Method("shooting", _crocoddyl("solve_csqp"))
 
 
 def plan(

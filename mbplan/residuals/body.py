@@ -1,4 +1,4 @@
-"""Residuals of a free body's state and input (:class:`~mbplan.ocp.free_body.FreeBody`).
+"""Residuals of a free body's state and input (:class:`~mbplan.robots.free_body.FreeBody`).
 
 Each residual is written once, as a CasADi expression of the body state ``x = (R, p, F, v)``
 (orientation, COM position, rotation step ``F_k = R_kᵀ R_{k+1}``, linear velocity, eq. 30) or of
@@ -18,8 +18,8 @@ import casadi as cs
 import numpy as np
 
 from mbplan.errors import InputError
-from mbplan.ocp.free_body import FreeBody
 from mbplan.residuals.base import Residual
+from mbplan.robots.free_body import FreeBody
 from mbplan.validation import as_array, as_rotation
 
 

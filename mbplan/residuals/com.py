@@ -11,8 +11,8 @@ import casadi as cs
 import numpy as np
 
 from mbplan.errors import InputError
-from mbplan.ocp.free_body import FreeBody
 from mbplan.residuals.base import Residual, ShootingResidual, SymbolicContext, SymbolicRows
+from mbplan.robots.free_body import FreeBody
 from mbplan.transcription.constraints import cylinder_clearance, cylinder_clearance_function
 from mbplan.transcription.terms import Term
 from mbplan.validation import as_real

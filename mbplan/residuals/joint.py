@@ -105,7 +105,7 @@ class _JointResidual(Residual):
 @dataclass(frozen=True, eq=False)
 class JointPosition(_JointResidual):
     """``q[joints] - target`` (rad or m); ``2 sin((θ - θ_t)/2)`` for a continuous joint (a goal
-    modulo 2π, :mod:`mbplan.ocp.continuous`)."""
+    modulo 2π, :mod:`mbplan.robots.continuous`)."""
 
     def _rows(self, ctx: SymbolicContext) -> cs.SX:
         error = super()._rows(ctx)

@@ -1,5 +1,9 @@
-"""Robot descriptions: the bundled KUKA iiwa 14, example-robot-data arms, URDF files."""
+"""Robots: descriptions (the bundled KUKA iiwa 14, example-robot-data arms, URDF and MJCF files;
+:mod:`.loader`), the planning model of a robot (:class:`Robot`, :func:`load_robot`;
+:mod:`.robot`), continuous joints as unbounded angles (:mod:`.continuous`) and the free rigid
+body (:class:`FreeBody`; :mod:`.free_body`)."""
 
+from mbplan.robots.free_body import FreeBody
 from mbplan.robots.loader import (
     IIWA_URDF,
     RobotDescription,
@@ -8,12 +12,16 @@ from mbplan.robots.loader import (
     load,
     validate_urdf,
 )
+from mbplan.robots.robot import Robot, load_robot
 
 __all__ = [
     "IIWA_URDF",
+    "FreeBody",
+    "Robot",
     "RobotDescription",
     "RobotSpec",
     "available_robots",
     "load",
+    "load_robot",
     "validate_urdf",
 ]

@@ -14,7 +14,7 @@ import casadi as cs
 import numpy as np
 
 from mbplan.lie import SO3, R
-from mbplan.ocp.free_body import FreeBody
+from mbplan.robots.free_body import FreeBody
 from mbplan.shooting.dynamics import DiscreteDynamics
 from mbplan.shooting.space import StateSpace
 
@@ -182,7 +182,7 @@ FREE_BODY_SPACE = StateSpace([SO3, R(3), SO3, R(3)])
 def free_body_lgvi(
     name: str, body: FreeBody, dt: float, *, newton: int = 8, jit: bool = True
 ) -> DiscreteDynamics:
-    """The forced LGVI of a :class:`~mbplan.ocp.free_body.FreeBody` as an explicit step on
+    """The forced LGVI of a :class:`~mbplan.robots.free_body.FreeBody` as an explicit step on
     :data:`FREE_BODY_SPACE` (RIPM paper eq. 30–35, 60; the knots of its maximal formulation):
     with the body wrench ``(f, τ) = B u``, ``R⁺ = R F``, ``p⁺ = p + Δt v``, ``F⁺`` solving
     ``(F⁺J - JF⁺ᵀ)^∨ = (JF - FᵀJ)^∨ + Δt² τ`` (``newton`` Newton steps from ``F``) and

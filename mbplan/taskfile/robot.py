@@ -11,8 +11,8 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import InputError, RobotModelError
-from mbplan.ocp.robot import Robot, load_robot
 from mbplan.robots import available_robots, load
+from mbplan.robots.robot import Robot, load_robot
 from mbplan.taskfile.toml_table import Document, Table
 
 ROBOT_KEYS = ("urdf", "name", "mjcf", "package_dirs", "lock", "mimic")

@@ -21,7 +21,6 @@ import pinocchio as pin
 
 from mbplan.errors import InfeasibleRequestError, InputError
 from mbplan.ocp.problem import OCP
-from mbplan.ocp.robot import Robot
 from mbplan.ocp.scene import Scene
 from mbplan.planning.solve import METHODS, plan
 from mbplan.residuals import (
@@ -36,6 +35,7 @@ from mbplan.residuals import (
     Residual,
 )
 from mbplan.results import PlanResult
+from mbplan.robots.robot import Robot
 from mbplan.taskfile.robot import read_robot
 from mbplan.taskfile.toml_table import Document, Table, read_toml
 from mbplan.tasks.paper import add_obstacle_constraint

@@ -23,7 +23,7 @@ reaches further, so :data:`IIWA_DISTANCE_CYLINDER` is moved 7 cm (57 of 100 bloc
 
 Drone docking (RIPM paper §VIII.B, Table II): :func:`drone_docking` turns a
 :class:`~mbplan.tasks.drone.DockingTask` (its sampler: :func:`drone_docking_cases`) into an OCP of
-a :class:`~mbplan.ocp.free_body.FreeBody` quadrotor: the costs of Problem 1 (eq. 18, 57, 59) as
+a :class:`~mbplan.robots.free_body.FreeBody` quadrotor: the costs of Problem 1 (eq. 18, 57, 59) as
 one item per state residual on the running knots and one on the terminal knot (weighted by
 ``terminal_factor``), the input cost about hover, optional input limits and its cylinders.
 """
@@ -37,9 +37,7 @@ import numpy as np
 
 from mbplan.errors import InfeasibleRequestError, InputError
 from mbplan.formulations.joint_space import evaluate
-from mbplan.ocp.free_body import FreeBody, free_flyer_state
 from mbplan.ocp.problem import OCP
-from mbplan.ocp.robot import load_robot
 from mbplan.ocp.scene import Scene
 from mbplan.residuals import (
     BodyInput,
@@ -57,6 +55,8 @@ from mbplan.residuals import (
     JointVelocity,
     JointVelocityLimits,
 )
+from mbplan.robots.free_body import FreeBody, free_flyer_state
+from mbplan.robots.robot import load_robot
 from mbplan.tasks.drone import DockingTask, sample_docking_cases
 from mbplan.validation import as_int
 

@@ -29,12 +29,12 @@ def maximal_ripm_problem(
     ocp, warm_start: str = "via", workspace: Workspace | None = None
 ) -> tuple[Any, Any]:
     """The RIPM's problem and warm start for an OCP, as ``plan(ocp, "ripm")`` builds them (the
-    free-body formulation for a :class:`~mbplan.ocp.free_body.FreeBody`; its structures kept
+    free-body formulation for a :class:`~mbplan.robots.free_body.FreeBody`; its structures kept
     in ``workspace``)."""
     from mbplan.engine.jit import jit_available
     from mbplan.formulations import free_body, maximal
-    from mbplan.ocp.free_body import FreeBody
     from mbplan.planning.initial_guess import initial_path
+    from mbplan.robots.free_body import FreeBody
 
     formulation = free_body if isinstance(ocp.robot, FreeBody) else maximal
     nlp, _ = formulation.build(ocp, jit_available(), workspace)

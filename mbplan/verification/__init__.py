@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 from mbplan.errors import InputError
-from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.problem import OCP
 from mbplan.results import PlanResult
+from mbplan.robots.free_body import FreeBody
 from mbplan.verification.free_body import verify_free_body
 from mbplan.verification.multibody import check_shapes, verify_multibody
 from mbplan.verification.report import Verification

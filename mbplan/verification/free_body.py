@@ -1,5 +1,5 @@
 """Independent check of a free body's plan (:func:`mbplan.verify` of a
-:class:`~mbplan.ocp.free_body.FreeBody` OCP).
+:class:`~mbplan.robots.free_body.FreeBody` OCP).
 
 Each interval is replayed from the planned knot ``(R_k, p_k, F_k, v_k)`` under the planned input
 ``u_k`` by the NumPy LGVI of :mod:`mbplan.simulation.free_body` (eq. 30–35, 60, Newton's method
@@ -18,9 +18,9 @@ import numpy as np
 
 from mbplan.errors import InputError
 from mbplan.lie import SO3
-from mbplan.ocp.free_body import body_state, free_flyer_state
 from mbplan.ocp.problem import OCP
 from mbplan.results import PlanResult
+from mbplan.robots.free_body import body_state, free_flyer_state
 from mbplan.simulation.free_body import lgvi_step
 from mbplan.verification.report import (
     Verification,

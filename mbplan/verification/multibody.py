@@ -73,9 +73,9 @@ import pinocchio as pin
 
 from mbplan.errors import InputError
 from mbplan.formulations.joint_space import evaluate
-from mbplan.ocp.free_body import FreeBody
 from mbplan.ocp.problem import OCP, Item
 from mbplan.results import PlanResult
+from mbplan.robots.free_body import FreeBody
 from mbplan.simulation.reference import damped_euler_velocity, damping_rate, integrate_aba
 from mbplan.verification.report import (
     Verification,

@@ -67,8 +67,8 @@ def free_body_scene(results: Sequence, ocp, frame: int | None = None) -> Scene:
     """The :func:`drone_replay` scene of a free-body plan (a :class:`~mbplan.PlanResult` whose
     OCP's robot is a :class:`~mbplan.FreeBody`): its flight, the terminal orientation and
     position targets of the OCP as the goal, the OCP's scene cylinders as obstacles."""
-    from mbplan.ocp.free_body import rotations
     from mbplan.residuals import BodyOrientation, BodyPosition
+    from mbplan.robots.free_body import rotations
 
     if len(results) != 1:
         raise InputError(f"replay: free-body plans are drawn one at a time, got {len(results)}")

@@ -20,10 +20,10 @@ import pinocchio as pin
 
 from mbplan.errors import InputError, MbplanError, RobotModelError
 from mbplan.multibody import MaximalModel, maximal_model
-from mbplan.ocp.free_body import FreeBody
-from mbplan.ocp.robot import load_robot
 from mbplan.results import PlanResult, load_npz
 from mbplan.robots import available_robots
+from mbplan.robots.free_body import FreeBody
+from mbplan.robots.robot import load_robot
 from mbplan.viz.drone import free_body_scene
 from mbplan.viz.page import write_page
 from mbplan.viz.placements import generalized_geometry_placements, maximal_geometry_placements

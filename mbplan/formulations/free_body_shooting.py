@@ -19,8 +19,8 @@ import numpy as np
 from mbplan.errors import InputError
 from mbplan.formulations.free_body import parameter_shapes, warm_start_inputs
 from mbplan.lie import R
-from mbplan.ocp.free_body import FreeBody, body_state, free_flyer_state, path_state
 from mbplan.ocp.problem import OCP, Item
+from mbplan.robots.free_body import FreeBody, body_state, free_flyer_state, path_state
 from mbplan.shooting.compiled import BufferedFunction
 from mbplan.shooting.models import FREE_BODY_SPACE, free_body_lgvi
 from mbplan.shooting.problem import ShootingBase
@@ -127,7 +127,7 @@ def _parameters(ocp: OCP, items: list[Item], names: list[str], K: int) -> np.nda
 class FreeBodyShooting(ShootingBase):
     """The shooting problem of a free-body ``ocp`` (module docstring) from ``x0`` (the OCP's
     initial state); ``x_ref`` holds the states of the warm start ``q_guess (N+1, 7)``
-    (:func:`~mbplan.ocp.free_body.path_state`), ``lower``/``upper`` ``(N, nu)`` the input limits
+    (:func:`~mbplan.robots.free_body.path_state`), ``lower``/``upper`` ``(N, nu)`` the input limits
     (``±inf`` where none)."""
 
     def __init__(self, ocp: OCP, q_guess: np.ndarray, method: str, jit: bool) -> None:

@@ -1,7 +1,7 @@
 """Continuous joints in an OCP: an unbounded angle ``θ`` instead of Pinocchio's ``(cos θ, sin θ)``.
 
 A continuous joint (Pinocchio's ``JointModelRUBX/Y/Z``, ``RevoluteUnboundedUnaligned``: nq = 2,
-nv = 1) becomes, when a :class:`~mbplan.ocp.robot.Robot` is loaded, a revolute joint about the
+nv = 1) becomes, when a :class:`~mbplan.robots.robot.Robot` is loaded, a revolute joint about the
 same axis without position limits (``JointModelRX/Y/Z``, ``RevoluteUnaligned``, limits ±inf), so
 every OCP configuration has one coordinate per joint (nq = nv) and the dynamics are unchanged.
 :func:`to_angles` and :func:`from_angles` convert configurations of the original model.
@@ -17,7 +17,7 @@ import pinocchio as pin
 from mbplan.errors import InputError
 
 if TYPE_CHECKING:
-    from mbplan.ocp.robot import Robot
+    from mbplan.robots.robot import Robot
 
 _ALIGNED = {
     "JointModelRUBX": pin.JointModelRX,

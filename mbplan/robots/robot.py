@@ -23,9 +23,9 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import InputError, RobotModelError
-from mbplan.ocp.continuous import to_angles, unbounded_revolute_model
-from mbplan.ocp.free_body import FreeBody
 from mbplan.robots import RobotDescription, load
+from mbplan.robots.continuous import to_angles, unbounded_revolute_model
+from mbplan.robots.free_body import FreeBody
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,7 +33,7 @@ class Robot:
     """A fixed-base robot: ``model`` (1-dof joints only; ``model.damping`` the viscous joint
     damping every formulation applies), collision and visual geometry (may be None), its
     ``source`` (JSON-serialisable, see :func:`load_robot`), the locked joints and the continuous
-    joints (revolute without limits in ``model``: :mod:`mbplan.ocp.continuous`)."""
+    joints (revolute without limits in ``model``: :mod:`mbplan.robots.continuous`)."""
 
     name: str
     model: pin.Model
@@ -99,9 +99,9 @@ def load_robot(
     """Load ``robot`` (name, ``.urdf`` or ``.xml`` MJCF path, ``pinocchio.Model``) and lock the
     joints ``lock`` (names at their reference value: the SRDF ``default`` configuration if any,
     else neutral; or a mapping name → value). Continuous joints become unbounded revolute joints
-    (one angle each, :mod:`mbplan.ocp.continuous`); every other joint must be 1-dof (nq = nv).
+    (one angle each, :mod:`mbplan.robots.continuous`); every other joint must be 1-dof (nq = nv).
     ``damping=False``: the robot's ``model.damping`` is zeroed (on a copy of the model).
-    A :class:`~mbplan.ocp.free_body.FreeBody` is returned as is."""
+    A :class:`~mbplan.robots.free_body.FreeBody` is returned as is."""
     if isinstance(robot, FreeBody):
         return robot
     if isinstance(robot, str | os.PathLike) and collision_model is None and visual_model is None:
