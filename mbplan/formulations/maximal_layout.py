@@ -1,6 +1,6 @@
 """Where a maximal-coordinate RIPM problem keeps each knot's and body's state, joint forces and
 multibody rows in its KKT matrix, and the joint elimination plan built from it
-(:mod:`mbplan.solvers.kkt.elimination`; the study :mod:`mbplan.benchmarks.reduced_kkt`)."""
+(:mod:`mbplan.solvers.kkt.elimination`, factorized by :mod:`mbplan.solvers.kkt.reduced`)."""
 
 from __future__ import annotations
 
@@ -157,7 +157,7 @@ def joint_elimination_plan(
     segment: int | None = None,
     workspace: Workspace | None = None,
 ) -> EliminationPlan:
-    """The joints eliminated knot by knot (:mod:`mbplan.benchmarks.reduced_kkt`, stage 1): for
+    """The joints eliminated knot by knot (:mod:`mbplan.solvers.kkt.reduced`): for
     steps ``k = 1…N-1`` five of each body's kinematics rows become ``M g - h`` (``h`` its joint
     constraint on ``s_k``, cancelling ``s_k`` of the body and its parent); at knots ``1…N`` the
     block of a body is its state ``s_k`` with those rows of step ``k-1`` (step 0: its six
