@@ -26,7 +26,7 @@ from mbplan.verification.report import (
     Verification,
     constraint_violations,
     goal_errors,
-    hard_constraints_met,
+    replay_reasons,
 )
 
 DEVIATION_TOLERANCE = 1e-5
@@ -97,19 +97,8 @@ def verify_free_body(ocp: OCP, result: PlanResult) -> Verification:
     ]
     violations = constraint_violations(ocp, result.q, result.v, result.tau)
     gap = clearance(ocp, result)
-    if gap < 0.0:
-        reasons.append(f"the replayed motion enters an obstacle ({gap:.3g} m)")
-    reasons += hard_constraints_met(
-        ocp,
-        {n: (0.0 if ocp[n].residual.is_obstacle else x) for n, x in violations.items()},
-    )
     goals = goal_errors(ocp, *final_state(ocp, result, replayed))
-    for item in ocp.costs:
-        if item.name in goals and goals[item.name] > item.tolerance:
-            reasons.append(
-                f"goal {item.name!r}: final error {goals[item.name]:.3g} exceeds the tolerance "
-                f"{item.tolerance:g}"
-            )
+    reasons += replay_reasons(ocp, violations, gap, goals)
     limits = [i for i in ocp.constraints if i.residual.input_limits]
     return Verification(
         max_joint_deviation_rad=dev_pose,

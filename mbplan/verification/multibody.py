@@ -81,7 +81,7 @@ from mbplan.verification.report import (
     Verification,
     constraint_violations,
     goal_errors,
-    hard_constraints_met,
+    replay_reasons,
 )
 
 SUBSTEPS = 20  # RK4 steps per interval: at Δt = 0.075 s, 20 and 40 agree to < 1e-8 rad
@@ -208,20 +208,10 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
     obstacles = [i for i in ocp.constraints if i.residual.is_obstacle]
     substeps = path.reshape(-1, path.shape[-1])
     clearance = min((_clearance(ocp, i, substeps) for i in obstacles), default=np.inf)
-    if clearance < 0.0:
-        reasons.append(f"the replayed motion enters an obstacle ({clearance:.3g} m)")
-    reasons += hard_constraints_met(
-        ocp, {n: (0.0 if ocp[n].residual.is_obstacle else x) for n, x in violations.items()}
-    )
     q_final = np.vstack([result.q[:-1], q_end[-1:]])
     v_final = np.vstack([result.v[:-1], v_end[-1:]])
     goals = goal_errors(ocp, q_final, v_final)
-    for item in ocp.costs:
-        if item.name in goals and goals[item.name] > item.tolerance:
-            reasons.append(
-                f"goal {item.name!r}: final error {goals[item.name]:.3g} exceeds the tolerance "
-                f"{item.tolerance:g}"
-            )
+    reasons += replay_reasons(ocp, violations, clearance, goals)
     torque = [i for i in ocp.constraints if i.residual.input_limits]
     violation = max((violations[i.name] for i in torque), default=0.0)
     return Verification(

@@ -81,3 +81,25 @@ def hard_constraints_met(ocp: OCP, violations: dict[str, float]) -> list[str]:
         if violations[item.name] > tol:
             reasons.append(item.residual.violation_reason(item.name, violations[item.name], tol))
     return reasons
+
+
+def replay_reasons(
+    ocp: OCP, violations: dict[str, float], clearance: float, goals: dict[str, float]
+) -> list[str]:
+    """Reasons a replayed plan fails besides its dynamics: the replay entering an obstacle
+    (``clearance`` < 0, without the margins), a hard constraint violated at the planned knots
+    (obstacle constraints are judged by the replay's clearance instead: their margin absorbs
+    the motion between knots), a soft goal missed at the end of the replay (``goals``)."""
+    reasons = []
+    if clearance < 0.0:
+        reasons.append(f"the replayed motion enters an obstacle ({clearance:.3g} m)")
+    reasons += hard_constraints_met(
+        ocp, {n: (0.0 if ocp[n].residual.is_obstacle else x) for n, x in violations.items()}
+    )
+    for item in ocp.costs:
+        if item.name in goals and goals[item.name] > item.tolerance:
+            reasons.append(
+                f"goal {item.name!r}: final error {goals[item.name]:.3g} exceeds the tolerance "
+                f"{item.tolerance:g}"
+            )
+    return reasons
