@@ -104,9 +104,11 @@ class Distance(Residual):
     moving link and every scene object in ``objects`` (all if None). Constraint only.
 
     ``geometry="convex"``: meshes (robot and scene) as their convex hulls, which contain them (a
-    conservative distance, exact for convex meshes); ``"mesh"``: the exact meshes, ~10x slower.
+    conservative distance, exact for convex meshes); ``"mesh"``: the exact meshes, ~7x slower.
     Pairs farther apart than ``margin + activation`` (m) are rows at ``-activation`` with zero
-    derivatives (module docstring)."""
+    derivatives (module docstring). The activation must exceed what one Newton step moves a
+    link, or a pair crosses from the flat part into the margin unseen: on the UR5 shelf at
+    ``N = 12`` the RIPM failed at 0.2 m and converged at 0.3 m."""
 
     sense: ClassVar[str] = "ineq"
     cost: ClassVar[bool] = False
