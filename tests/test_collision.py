@@ -248,3 +248,83 @@ def test_a_wrong_tight_gjk_distance_is_caught_by_the_default_request():
         assert wrong[0, 3] > value[0, 3] + 0.05
     finally:
         collision._CROSS_CHECK = saved
+
+
+def test_lower_bounds_and_the_cap_leave_distances_below_it_exact() -> None:
+    """Bounding-volume lower bounds never exceed coal's distance; with a cap, distances above it
+    are the cap with a zero normal (zero derivatives), and those below it are unchanged."""
+    from mbplan.multibody.collision import lower_bounds
+
+    rng = np.random.default_rng(2)
+    q = Q + 0.5 * rng.standard_normal((6, MODEL.nv))
+    kin = chain_kinematics(MODEL, MODEL.createData(), q)
+    exact, _ = joint_space_contacts(PAIRS, kin)
+    capped, _ = joint_space_contacts(PAIRS, kin, 0.2)
+    R = kin.rotation[:, PAIRS.joint] @ PAIRS.placement[:, :3, :3]
+    t = kin.translation[:, PAIRS.joint] + np.einsum(
+        "kpij,pj->kpi", kin.rotation[:, PAIRS.joint], PAIRS.placement[:, :3, 3]
+    )
+    pair = np.tile(np.arange(PAIRS.size), len(q))
+    bound = lower_bounds(PAIRS, pair, R.reshape(-1, 3, 3), t.reshape(-1, 3))
+    assert np.all(bound <= exact.distance.ravel() + 1e-12)
+    assert np.any(bound > 0.2)  # some pairs are pruned
+    np.testing.assert_array_equal(capped.distance, np.minimum(exact.distance, 0.2))
+    far = exact.distance > 0.2
+    assert far.any() and (~far).any()
+    assert np.all(capped.normal[far] == 0.0)
+    np.testing.assert_array_equal(capped.normal[~far], exact.normal[~far])
+
+
+def test_meshes_become_cached_convex_hulls_with_one_request_per_pair(tmp_path, monkeypatch):
+    """A UR5 mesh's hull contains it (its distances are lower bounds), is written to the hull
+    cache and read back identical; polytope pairs skip the cross-check, curved ones keep it."""
+    from mbplan.multibody import convex
+
+    monkeypatch.setenv("MBPLAN_CACHE_DIR", str(tmp_path / "jit"))
+    ur5 = load("ur5")
+    box = (coal.Box(0.3, 0.02, 0.5), _pose((0.5, 0.1, 0.3), (0.1, 0.2, 0.3)))
+    hulls = collision_pairs(ur5.collision_model, [box, OBSTACLES[0]])
+    meshes = collision_pairs(ur5.collision_model, [box, OBSTACLES[0]], geometry="mesh")
+    assert len(list((tmp_path / "hulls").iterdir())) == 6  # the moving links' 6 meshes
+    again = collision_pairs(ur5.collision_model, [box, OBSTACLES[0]])
+    assert all(s.getNodeType() == coal.NODE_TYPE.GEOM_CONVEX for s in hulls.robot_shapes[:-2])
+    np.testing.assert_array_equal(hulls.checked, hulls.obstacle == 1)  # the sphere is curved
+    assert meshes.checked[:-2].all()  # but ee_link's box with the box: two polytopes
+    model = ur5.model
+    q = np.array([-1.0, -1.2, 1.7, -2.1, -1.6, -2.6])
+    kin = chain_kinematics(model, model.createData(), q[None])
+    d_hull, d_again, d_mesh = (
+        joint_space_contacts(p, kin)[0].distance for p in (hulls, again, meshes)
+    )
+    np.testing.assert_array_equal(d_hull, d_again)
+    assert np.all(d_hull <= d_mesh + 1e-9)
+    assert convex.hull_cache_dir() == tmp_path / "hulls"
+
+
+@pytest.mark.parametrize(
+    ("vertices", "problem"),
+    [
+        (np.zeros((0, 3)), "empty"),
+        (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]]), "flat"),
+    ],
+)
+def test_empty_or_flat_meshes_are_named_before_a_solve(vertices, problem) -> None:
+    import mbplan as mb
+    from mbplan.errors import RobotModelError
+    from mbplan.residuals import Distance
+
+    mesh = coal.BVHModelOBBRSS()
+    mesh.beginModel(2, len(vertices))
+    if len(vertices):
+        mesh.addVertices(vertices)
+        mesh.addTriangles(np.array([[0, 1, 2], [1, 3, 2]]))
+    mesh.endModel()
+    gm = DESC.collision_model.copy()
+    gm.geometryObjects[3].geometry = mesh
+    gm.geometryObjects[3].meshPath = "/meshes/link3.stl"
+    robot = mb.load_robot(MODEL, collision_model=gm)
+    ocp = mb.OCP(robot, mb.Scene().add_box("crate", (0.2, 0.2, 0.2), (0.5, 0.0, 0.5)), q0=Q)
+    with pytest.raises(RobotModelError, match=rf"iiwa_link_3_0.*link3\.stl.*{problem}"):
+        ocp.add_constraint("clearance", Distance(0.02))
+    with pytest.raises(InputError, match="geometry must be one of"):
+        mb.OCP("iiwa", ocp.scene, q0=Q).add_constraint("c", Distance(0.02, geometry="hull"))

@@ -25,6 +25,12 @@ joint space and, in maximal coordinates, from ``p₁(ω) = p + R(I + ω^ + ½ω^
 ``ω``-block ``½(m aᵀ + a mᵀ) - (mᵀa) I`` with ``m = Rᵀn`` (no ``δp`` terms). This is exact for
 the first derivative everywhere smooth and for the Hessian when both surfaces are flat at the
 contact; the solvers' globalisation handles the rest (a Gauss–Newton-like treatment).
+
+Far pairs. With a ``cap`` the distance is ``min(d, cap)``: continuous, and constant with zero
+derivatives (a zero normal) above the cap, so the constraint ``margin - min(d, cap) ≤ 0`` has the
+feasible set of the uncapped one for ``cap > margin``. A pair whose lower bound (bounding sphere
+of one shape against the box of the other, vectorized over all pairs) exceeds the cap is not
+sent to coal.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import InputError
+from mbplan.multibody.convex import collision_geometry, is_polytope
 
 # witness points are accurate to about sqrt(tolerance) (gradient errors 3e-6 at 1e-10, 1.5e-7 at
 # 1e-14 against finite differences; coal's default 1e-6 is far too loose for derivatives);
@@ -44,14 +51,29 @@ from mbplan.errors import InputError
 GJK_TOLERANCE = 1e-13
 EPA_TOLERANCE = 1e-8
 _FAILED = 1e100  # coal reports a failed GJK/EPA as ±DBL_MAX
-# At the tight tolerance GJK occasionally fails or stops at a wrong, finite distance (seen on
-# the iiwa's link cylinders: 0.021 m where 1e-9 rad away it is 0.085 m, and errors of 1e-7 to
-# 1e-5 m near solutions); a request at CHECK_TOLERANCE is the cross-check, and where the two
-# differ by more than _CROSS_CHECK its result is used. (Coal's default request, 1e-6, as the
-# check let value jumps of up to 6.5e-6 through, above the RIPM's tol, and
-# line searches failed on them.)
+# At the tight tolerance GJK occasionally fails or stops at a wrong, finite distance on curved
+# shapes (seen on the iiwa's link cylinders: 0.021 m where 1e-9 rad away it is 0.085 m, and
+# errors of 1e-7 to 1e-5 m near solutions); a request at CHECK_TOLERANCE is the cross-check, and
+# where the two differ by more than _CROSS_CHECK its result is used. (Coal's default request,
+# 1e-6, as the check let value jumps of up to 6.5e-6 through, above the RIPM's tol, and line
+# searches failed on them.)
 CHECK_TOLERANCE = 1e-11
 _CROSS_CHECK = 1e-8
+# Between two convex polytopes GJK ends on the exact closest simplex: at 1e-10 it matched the
+# tight request to the last bit on 6,000 random UR5 hull/box placements (1e-8 left errors of
+# 3e-9, the duality-gap criterion 2e-9 at 1e-9), so one request, no cross-check.
+POLYTOPE_TOLERANCE = 1e-10
+
+
+def _request(gjk_tolerance: float) -> coal.DistanceRequest:
+    request = coal.DistanceRequest()
+    request.gjk_tolerance, request.epa_tolerance = gjk_tolerance, EPA_TOLERANCE
+    return request
+
+
+_POLYTOPE, _TIGHT, _CHECK = (
+    _request(t) for t in (POLYTOPE_TOLERANCE, GJK_TOLERANCE, CHECK_TOLERANCE)
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,7 +81,11 @@ class CollisionPairs:
     """Every (robot collision geometry, obstacle) pair, for geometries on moving links.
 
     Pair ``i`` couples geometry ``geometry[i]`` of the ``pin.GeometryModel``, attached to joint
-    ``joint[i]`` at ``placement[i]`` (4x4, joint frame), with obstacle ``obstacle[i]``.
+    ``joint[i]`` at ``placement[i]`` (4x4, joint frame), with obstacle ``obstacle[i]`` at
+    ``obstacle_rotation[i]``, ``obstacle_translation[i]`` (world). ``*_center``, ``*_half``
+    ``(P, 3)``: each shape's local axis-aligned bounding box (in its own frame), for
+    :func:`lower_bounds`; ``checked (P,)``: the pair has a curved or mesh shape, whose GJK result
+    is cross-checked (two polytopes are not).
     """
 
     joint: np.ndarray  # (P,) int
@@ -70,6 +96,13 @@ class CollisionPairs:
     robot_shapes: tuple[coal.CollisionGeometry, ...]
     obstacle_shapes: tuple[coal.CollisionGeometry, ...]
     obstacle_transforms: tuple[coal.Transform3s, ...]
+    obstacle_rotation: np.ndarray  # (P, 3, 3)
+    obstacle_translation: np.ndarray  # (P, 3)
+    robot_center: np.ndarray
+    robot_half: np.ndarray
+    obstacle_center: np.ndarray
+    obstacle_half: np.ndarray
+    checked: np.ndarray  # (P,) bool
 
     @property
     def size(self) -> int:
@@ -79,33 +112,84 @@ class CollisionPairs:
 def collision_pairs(
     geometry_model: pin.GeometryModel,
     obstacles: Sequence[tuple[coal.CollisionGeometry, np.ndarray]],
+    geometry: str = "convex",
 ) -> CollisionPairs:
     """Pairs of every geometry attached to a moving joint (``parentJoint > 0``; the base's
-    distance cannot change) with every obstacle ``(coal shape, 4x4 world pose)``."""
+    distance cannot change) with every obstacle ``(coal shape, 4x4 world pose)``; meshes as
+    their convex hulls or as they are (``geometry``, see :mod:`mbplan.multibody.convex`)."""
     geoms = [
         (g, obj) for g, obj in enumerate(geometry_model.geometryObjects) if obj.parentJoint > 0
     ]
     if not geoms:
         raise InputError("the robot has no collision geometry on a moving link")
+    shapes = {
+        g: collision_geometry(
+            obj.geometry, geometry, f"collision geometry {obj.name!r} (mesh {obj.meshPath!r})"
+        )
+        for g, obj in geoms
+    }
+    solids = [
+        collision_geometry(shape, geometry, f"obstacle {o}", InputError)
+        for o, (shape, _) in enumerate(obstacles)
+    ]
     rows = [(g, obj, o) for g, obj in geoms for o in range(len(obstacles))]
+    robot, obstacle = [shapes[g] for g, _, _ in rows], [solids[o] for _, _, o in rows]
+    pose = np.array([obstacles[o][1] for _, _, o in rows]).reshape(-1, 4, 4)
+    (robot_center, robot_half), (obstacle_center, obstacle_half) = map(_boxes, (robot, obstacle))
     return CollisionPairs(
         joint=np.array([obj.parentJoint for _, obj, _ in rows], dtype=np.int64),
         geometry=np.array([g for g, _, _ in rows], dtype=np.int64),
         obstacle=np.array([o for _, _, o in rows], dtype=np.int64),
         placement=np.array([obj.placement.homogeneous for _, obj, _ in rows]).reshape(-1, 4, 4),
         names=tuple(f"{obj.name}/obstacle {o}" for _, obj, o in rows),
-        robot_shapes=tuple(obj.geometry for _, obj, _ in rows),
-        obstacle_shapes=tuple(obstacles[o][0] for _, _, o in rows),
-        obstacle_transforms=tuple(
-            coal.Transform3s(obstacles[o][1][:3, :3], obstacles[o][1][:3, 3]) for _, _, o in rows
+        robot_shapes=tuple(robot),
+        obstacle_shapes=tuple(obstacle),
+        obstacle_transforms=tuple(coal.Transform3s(T[:3, :3], T[:3, 3]) for T in pose),
+        obstacle_rotation=pose[:, :3, :3],
+        obstacle_translation=pose[:, :3, 3],
+        robot_center=robot_center,
+        robot_half=robot_half,
+        obstacle_center=obstacle_center,
+        obstacle_half=obstacle_half,
+        checked=np.array(
+            [not (is_polytope(a) and is_polytope(b)) for a, b in zip(robot, obstacle, strict=True)]
         ),
     )
+
+
+def _boxes(shapes: Sequence[coal.CollisionGeometry]) -> tuple[np.ndarray, np.ndarray]:
+    """Centers and half extents ``(n, 3)`` of the shapes' local AABBs."""
+    lo = np.array([s.aabb_local.min_ for s in shapes]).reshape(-1, 3)
+    hi = np.array([s.aabb_local.max_ for s in shapes]).reshape(-1, 3)
+    return 0.5 * (lo + hi), 0.5 * (hi - lo)
+
+
+def lower_bounds(
+    pairs: CollisionPairs, pair: np.ndarray, rotation: np.ndarray, translation: np.ndarray
+) -> np.ndarray:
+    """Lower bounds ``(S,)`` of the distances of pairs ``pair (S,)`` (robot geometries at
+    ``rotation (S, 3, 3)``, ``translation (S, 3)``): the larger of the gaps between one shape's
+    bounding sphere (around its AABB) and the other's AABB, each box in its shape's frame."""
+    R_o, t_o = pairs.obstacle_rotation[pair], pairs.obstacle_translation[pair]
+    c_r, h_r = pairs.robot_center[pair], pairs.robot_half[pair]
+    c_o, h_o = pairs.obstacle_center[pair], pairs.obstacle_half[pair]
+    robot_center = translation + np.einsum("sij,sj->si", rotation, c_r)
+    obstacle_center = t_o + np.einsum("sij,sj->si", R_o, c_o)
+    gap_r = _box_gap(np.einsum("sji,sj->si", R_o, robot_center - t_o) - c_o, h_o)
+    gap_o = _box_gap(np.einsum("sji,sj->si", rotation, obstacle_center - translation) - c_r, h_r)
+    return np.maximum(gap_r - np.linalg.norm(h_r, axis=1), gap_o - np.linalg.norm(h_o, axis=1))
+
+
+def _box_gap(x: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Distances ``(S,)`` of points ``x (S, 3)`` to the boxes ``|y| ≤ half`` (0 inside)."""
+    return np.linalg.norm(np.maximum(np.abs(x) - half, 0.0), axis=1)
 
 
 @dataclass(frozen=True)
 class Contacts:
     """Coal's answer per evaluated pair: ``distance (S,)``, unit ``normal (S, 3)`` from the robot
-    geometry to the obstacle and the robot's witness point ``robot_point (S, 3)`` (world)."""
+    geometry to the obstacle and the robot's witness point ``robot_point (S, 3)`` (world).
+    A distance capped at ``cap`` (:func:`signed_distances`) has a zero normal."""
 
     distance: np.ndarray
     normal: np.ndarray
@@ -113,31 +197,44 @@ class Contacts:
 
 
 def signed_distances(
-    pairs: CollisionPairs, pair: np.ndarray, rotation: np.ndarray, translation: np.ndarray
+    pairs: CollisionPairs,
+    pair: np.ndarray,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    cap: float | np.ndarray = np.inf,
 ) -> Contacts:
     """Coal distances of pairs ``pair (S,)`` with the robot geometries at world placements
-    ``rotation (S, 3, 3)``, ``translation (S, 3)``: the tight request's, unless the check
-    request's differs by more than ``_CROSS_CHECK`` or the tight one fails; coal's defaults if
-    both fail; :class:`InputError` if that fails too."""
-    tight, check = coal.DistanceRequest(), coal.DistanceRequest()
-    tight.gjk_tolerance, tight.epa_tolerance = GJK_TOLERANCE, EPA_TOLERANCE
-    check.gjk_tolerance, check.epa_tolerance = CHECK_TOLERANCE, EPA_TOLERANCE
+    ``rotation (S, 3, 3)``, ``translation (S, 3)``, capped at ``cap`` (scalar or ``(S,)``).
+
+    ``min(d, cap)`` is continuous, and constant (zero normal: zero derivatives) where
+    ``d > cap``; a pair whose :func:`lower_bounds` exceeds ``cap`` is not sent to coal. One
+    request per polytope pair; a curved or mesh pair's tight request is cross-checked
+    (``_CROSS_CHECK``), coal's defaults if both fail, :class:`InputError` if that fails too."""
     S = len(pair)
-    distance, normal, point = np.empty(S), np.empty((S, 3)), np.empty((S, 3))
-    for s, i in enumerate(pair.tolist()):
-        placement = coal.Transform3s(rotation[s], translation[s])
-        found = [r for r in (_distance(pairs, i, placement, q) for q in (tight, check)) if r]
-        if not found:
-            found = [r for r in [_distance(pairs, i, placement, coal.DistanceRequest())] if r]
-        if not found:
-            raise InputError(f"coal failed to compute the distance of {pairs.names[i]}")
-        d, result = found[0]
-        if len(found) == 2 and abs(d - found[1][0]) > _CROSS_CHECK:
-            d, result = found[1]  # the tight GJK stopped at a wrong distance
-        distance[s] = d
-        normal[s] = result.normal
-        point[s] = result.getNearestPoint1()
+    cap = np.broadcast_to(np.asarray(cap, dtype=float), (S,))
+    distance, normal, point = cap.copy(), np.zeros((S, 3)), np.array(translation, dtype=float)
+    near = np.flatnonzero(lower_bounds(pairs, pair, rotation, translation) <= cap)
+    for s, i in zip(near.tolist(), pair[near].tolist(), strict=True):
+        d, result = _pair_distance(pairs, i, coal.Transform3s(rotation[s], translation[s]))
+        if d < cap[s]:
+            distance[s], normal[s], point[s] = d, result.normal, result.getNearestPoint1()
     return Contacts(distance, normal, point)
+
+
+def _pair_distance(
+    pairs: CollisionPairs, i: int, placement: coal.Transform3s
+) -> tuple[float, coal.DistanceResult]:
+    """Coal's distance of pair ``i`` with its result (the request policy of
+    :func:`signed_distances`)."""
+    requests = (_TIGHT, _CHECK) if pairs.checked[i] else (_POLYTOPE,)
+    found = [r for r in (_distance(pairs, i, placement, q) for q in requests) if r]
+    if not found:
+        found = [r for r in [_distance(pairs, i, placement, coal.DistanceRequest())] if r]
+    if not found:
+        raise InputError(f"coal failed to compute the distance of {pairs.names[i]}")
+    if len(found) == 2 and abs(found[0][0] - found[1][0]) > _CROSS_CHECK:
+        return found[1]  # the tight GJK stopped at a wrong distance
+    return found[0]
 
 
 def _distance(
@@ -222,10 +319,11 @@ def point_hessians(kin: ChainKinematics, joint: np.ndarray, jacobians: np.ndarra
 
 
 def joint_space_contacts(
-    pairs: CollisionPairs, kin: ChainKinematics
+    pairs: CollisionPairs, kin: ChainKinematics, cap: float = np.inf
 ) -> tuple[Contacts, np.ndarray]:
-    """Contacts of every pair at every knot of ``kin`` (fields shaped ``(K, P, …)``) and the
-    world Jacobians ``(K, P, nv, 3)`` of the robot witness points."""
+    """Contacts of every pair at every knot of ``kin`` (fields shaped ``(K, P, …)``; distances
+    capped at ``cap`` as by :func:`signed_distances`) and the world Jacobians ``(K, P, nv, 3)``
+    of the robot witness points."""
     K, P = kin.rotation.shape[0], pairs.size
     R_joint = kin.rotation[:, pairs.joint]  # (K, P, 3, 3)
     rotation = R_joint @ pairs.placement[:, :3, :3]
@@ -233,7 +331,11 @@ def joint_space_contacts(
         "kpij,pj->kpi", R_joint, pairs.placement[:, :3, 3]
     )
     flat = signed_distances(
-        pairs, np.tile(np.arange(P), K), rotation.reshape(-1, 3, 3), translation.reshape(-1, 3)
+        pairs,
+        np.tile(np.arange(P), K),
+        rotation.reshape(-1, 3, 3),
+        translation.reshape(-1, 3),
+        cap,
     )
     contacts = Contacts(
         flat.distance.reshape(K, P), flat.normal.reshape(K, P, 3), flat.robot_point.reshape(K, P, 3)

@@ -30,9 +30,11 @@ def pair_bodies(mm: MaximalModel, pairs: CollisionPairs) -> np.ndarray:
     return np.array([body_of_joint[int(j)] for j in pairs.joint], dtype=np.int64)
 
 
-def distance_constraint_function(mm: MaximalModel, pairs: CollisionPairs) -> CallbackFunction:
-    """``margin - d`` of pair ``pair`` with its link's body at ``(R, p)``; parameters ``pair``
-    (index into ``pairs``) and ``margin`` (m)."""
+def distance_constraint_function(
+    mm: MaximalModel, pairs: CollisionPairs, activation: float = np.inf
+) -> CallbackFunction:
+    """``margin - min(d, margin + activation)`` of pair ``pair`` with its link's body at
+    ``(R, p)``; parameters ``pair`` (index into ``pairs``) and ``margin`` (m)."""
     body = pair_bodies(mm, pairs)
     rotation = pairs.placement[:, :3, :3]  # geometry in the body frame: the joint's orientation
     offset = pairs.placement[:, :3, 3] - mm.com_in_joint[body]  # and the COM as origin
@@ -41,7 +43,11 @@ def distance_constraint_function(mm: MaximalModel, pairs: CollisionPairs) -> Cal
         Rb, pb = variables["R"], variables["p"]
         pair = parameters[:, 0].astype(np.int64)
         contacts = signed_distances(
-            pairs, pair, Rb @ rotation[pair], pb + np.einsum("kij,kj->ki", Rb, offset[pair])
+            pairs,
+            pair,
+            Rb @ rotation[pair],
+            pb + np.einsum("kij,kj->ki", Rb, offset[pair]),
+            parameters[:, 1] + activation,
         )
         outs = [(parameters[:, 1] - contacts.distance)[:, None]]
         if order == 0:
