@@ -178,4 +178,5 @@ class Distance(Residual):
     def clearance(
         self, robot: Any, scene: Any, path: np.ndarray, evaluate: Callable | None
     ) -> float:
-        return float(np.min(self.margin - evaluate(self, path)))
+        """The smallest distance along ``path``, uncapped (no activation distance)."""
+        return float(np.min(self.margin - evaluate(replace(self, activation=np.inf), path)))
