@@ -148,7 +148,7 @@ def maximal_model(robot: RobotSpec) -> MaximalModel:
     cols: dict[str, list] = {k: [] for k in _ARRAY_FIELDS}
     joint_types: list[str] = []
     for j in range(1, model.njoints):
-        jtype, axis, continuous = _joint_kind(model, j)
+        jtype, axis, continuous = joint_kind(model, j)
         inertia = model.inertias[j]
         _check_body(body_names[j - 1], model.names[j], inertia)
         parent = model.parents[j]
@@ -201,7 +201,7 @@ def maximal_model(robot: RobotSpec) -> MaximalModel:
     )
 
 
-def _joint_kind(model: pin.Model, j: int) -> tuple[str, np.ndarray, bool]:
+def joint_kind(model: pin.Model, j: int) -> tuple[str, np.ndarray, bool]:
     """(type, unit axis in the joint frame, continuous) of Pinocchio joint ``j``."""
     shortname = model.joints[j].shortname()
     if shortname not in _SUPPORTED:
