@@ -97,3 +97,20 @@ def test_mimic_fingers_plan_coupled_and_the_uncoupled_plan_differs_only_by_it(me
     assert np.max(gap["coupled"]) <= 1e-8
     assert gap["free"][-1] > 5e-3  # each finger toward its own target
     assert abs(np.mean(plans["coupled"].q[-1, 7:]) - 0.02) < 2e-3
+
+
+def test_crocoddyl_plans_the_coupling_with_csqp_and_fddp_refuses_it() -> None:
+    """CSQP: the coupling an equality of every node (the panda undamped: Crocoddyl's explicit
+    Euler step); FDDP has no constraints: refused, naming the constraint and its residual."""
+    ocp = mb.OCP(mb.load_robot("panda", damping=False), N=8, dt=0.06, q0=PANDA_START)
+    ocp.add_cost("v", res.JointVelocity(), 1e-2)
+    ocp.add_cost("tau", res.JointTorque(), 1e-4)
+    ocp.add_cost("fingers", res.JointPosition([0.03, 0.01], joints=FINGERS), 100.0)
+    ocp.add_terminal_cost("hand", res.FrameTranslation("panda_hand", [0.35, 0.1, 0.45]), 100.0)
+    plan = mb.plan(ocp, "csqp")
+    assert plan.success, plan.message
+    assert mb.verify(ocp, plan).passed
+    assert np.max(np.abs(plan.q[:, 7] - plan.q[:, 8])) <= 1e-8
+    message = r"fddp cannot express .* 'mimic_panda_finger_joint2' \(JointCoupling; .*\): use csqp"
+    with pytest.raises(mb.InputError, match=message):
+        mb.plan(ocp, "fddp")
