@@ -187,8 +187,9 @@ def _load(
         desc = RobotDescription(
             desc.name, model, desc.collision_model, desc.visual_model, desc.urdf_path
         )
-    couplings = _couplings(desc, locked) if mimic == "couple" else ()
-    source = {**source, "damping": bool(damping), "mimic": mimic}
+    tags = _mimic_tags(desc)
+    couplings = _couplings(desc, tags, locked) if mimic == "couple" else ()
+    source = {**source, "damping": bool(damping)} | ({"mimic": mimic} if tags else {})
     continuous = tuple(n for n in continuous if n not in locked)
     return Robot(
         desc.name,
@@ -202,12 +203,18 @@ def _load(
     )
 
 
-def _couplings(desc: RobotDescription, locked: dict[str, float]) -> tuple[Mimic, ...]:
-    """The :class:`Mimic` couplings of ``desc``'s URDF among its (unlocked) joints."""
+def _mimic_tags(desc: RobotDescription) -> dict[str, tuple[str, float, float]]:
+    """:func:`~mbplan.robots.loader.mimic_tags` of ``desc``'s URDF (none without one)."""
     path = desc.urdf_path
     if path is None or Path(path).suffix.lower() != ".urdf":
-        return ()
-    tags = mimic_tags(path)
+        return {}
+    return mimic_tags(path)
+
+
+def _couplings(
+    desc: RobotDescription, tags: dict[str, tuple[str, float, float]], locked: dict[str, float]
+) -> tuple[Mimic, ...]:
+    """The :class:`Mimic` couplings of the URDF ``tags`` among ``desc``'s (unlocked) joints."""
     model, out = desc.model, []
     for follower, (leader, m, o) in tags.items():
         if follower in locked:
