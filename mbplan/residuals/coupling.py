@@ -130,16 +130,18 @@ def _coupling_function(jtype: str, slots: tuple[int, ...], n: int, jit: bool) ->
             return cs.DM.eye(3), cs.DM.zeros(3)
         return x[f"R{s}"], x.get(f"p{s}", cs.DM.zeros(3))
 
-    def rows(**x: Any) -> cs.SX:
-        (Rpl, ppl), (Rl, pl), (Rpf, ppf), (Rf, pf) = (pose(x, s) for s in slots)
+    def coordinate(x: dict, parent: int, child: int, tag: str) -> cs.SX:
+        pose_p, pose_c = pose(x, parent), pose(x, child)
+        now = (*pose_p, *pose_c)
         if prismatic:
-            ql = prismatic_displacement((Rpl, ppl, Rl, pl), x["r_pl"], x["r_cl"], x["axis_l"])
-            qf = prismatic_displacement((Rpf, ppf, Rf, pf), x["r_pf"], x["r_cf"], x["axis_f"])
-        else:
-            zero, eye = cs.DM.zeros(3), cs.DM.eye(3)
-            ql = revolute_increment((eye, zero, x["R_l"], zero), (Rpl, ppl, Rl, pl), x["a_l"])
-            qf = revolute_increment((eye, zero, x["R_f"], zero), (Rpf, ppf, Rf, pf), x["a_f"])
-        return qf - x["m"] * ql - x["c"]
+            return prismatic_displacement(now, x[f"r_p{tag}"], x[f"r_c{tag}"], x[f"axis_{tag}"])
+        middle = (cs.DM.eye(3), cs.DM.zeros(3), x[f"R_{tag}"], cs.DM.zeros(3))
+        return revolute_increment(middle, now, x[f"a_{tag}"])
+
+    def rows(**x: Any) -> cs.SX:
+        parent_l, lead, parent_f, follow = slots
+        ql = coordinate(x, parent_l, lead, "l")
+        return coordinate(x, parent_f, follow, "f") - x["m"] * ql - x["c"]
 
     params = _GEOMETRY[jtype] + [("m", 1), ("c", 1)]
     return RiemannianFunction(f"{jtype}_coupling", variables, rows, params, jit=jit)
