@@ -37,6 +37,7 @@ def factory_ocp(distance: bool) -> mb.OCP:
     ocp.add_terminal_constraint("pose_eq", res.FramePlacement("iiwa_link_ee", GOAL))
     ocp.add_constraint("point_eq", res.FrameTranslation("iiwa_link_4", [0.1, 0.0, 0.7]), [2])
     ocp.add_constraint("com", res.ComOutsideCylinder("post", 0.02))
+    ocp.add_constraint("coupling", res.JointCoupling("iiwa_joint_6", "iiwa_joint_5", -0.5, 0.1))
     ocp.add_constraint("q_limits", res.JointPositionLimits())
     ocp.add_constraint("v_limits", res.JointVelocityLimits())
     ocp.add_constraint("tau_limits", res.JointTorqueLimits())
@@ -77,7 +78,7 @@ def test_generalized_derivatives_match_finite_differences(distance: bool) -> Non
     for _item, row0 in nlp.distances:  # fixed-witness-point Hessian: tested in test_collision
         lam[row0:] = 0.0
     check_generalized_derivatives(nlp, z, lam)
-    assert nlp.m == 2 * 3 * 7 + 1 + 2 + 1 + 6 + 3 + 3 * 7 + (3 * 7 * 2 if distance else 0)
+    assert nlp.m == 2 * 3 * 7 + 1 + 2 + 1 + 6 + 3 + 3 + 3 * 7 + (3 * 7 * 2 if distance else 0)
 
 
 @pytest.mark.parametrize("case", ["iiwa", "iiwa-distance", "panda"])

@@ -129,10 +129,10 @@ def _factories() -> dict[str, mb.OCP]:
 
 
 def _only(ocp: mb.OCP, kind: str) -> mb.OCP:
-    """``ocp`` with only its items of residual ``kind``."""
+    """``ocp`` with only its items of residual ``kind`` (and the robot's mimic couplings)."""
     out = mb.OCP(ocp.robot, ocp.scene, N=ocp.N, dt=ocp.dt, q0=ocp.q0, v0=ocp.v0)
     for i in ocp.items:
-        if type(i.residual).__name__ == kind:
+        if type(i.residual).__name__ == kind and i.name not in out.names:
             if i.role == "cost":
                 out.add_cost(i.name, i.residual, i.weight, i.knots)
             else:

@@ -103,7 +103,7 @@ CASES = [
     (_edit('name = "iiwa"', 'name = "iiwa"\nlock = { iiwa_joint_9 = 0.0 }'), r"\[robot\].lock: robot 'iiwa' has no joint 'iiwa_joint_9'", None),
     (_edit('name = "iiwa"', 'name = "iiwa"\nlock = { iiwa_joint_7 = nan }'), r"task.toml:3: \[robot\].lock.iiwa_joint_7: must be a finite number, got nan", None),
     (_edit('name = "iiwa"', 'name = "iiwa"\nlock = "iiwa_joint_7"'), r"\[robot\].lock: expected a table \{ joint = value \} or a list", None),
-    (_edit('name = "iiwa"', 'name = "iiwa"\nmimic = "follow"'), r"\[robot\].mimic: 'follow' is not one of refuse, independent", None),
+    (_edit('name = "iiwa"', 'name = "iiwa"\nmimic = "follow"'), r"\[robot\].mimic: 'follow' is not one of couple, independent", None),
     # [horizon]
     (_edit("[horizon]\nN = 10\ndt = 0.1\n", ""), r"task.toml: missing table \[horizon\]", None),
     (_edit("N = 10\n", ""), r"task.toml:4: \[horizon\]: missing key 'N'", None),
@@ -155,7 +155,10 @@ CASES = [
     (_edit('method = "ripm"', 'method = "ripm"\nmax_iter = -1'), r"\[solver\].max_iter: must be an integer >= 0, got -1", None),
     (_edit('method = "ripm"', 'method = "ripm"\ntol = 0'), r"\[solver\].tol: must be > 0, got 0", None),
     # URDFs named by the task file
-    (URDF_TASK, r"\[robot\].urdf: .*joint 'j2' mimics 'j1': mimic joints are not supported yet; lock it", _urdf(extra='<mimic joint="j1"/>')),
+    (URDF_TASK, r"\[robot\].urdf: .*joint 'j2' <mimic> follows joint 'j9', which is not defined", _urdf(extra='<mimic joint="j9"/>')),
+    (URDF_TASK.replace('urdf"', 'urdf"\nlock = ["j1"]'), r"\[robot\].lock: r: joint 'j2' mimics 'j1', which is locked: lock 'j2' too \(at 0\)", _urdf(extra='<mimic joint="j1"/>')),
+    (URDF_TASK, r"\[robot\].urdf: r: joint 'j2' mimics 'j1': a prismatic joint cannot follow a revolute one", _urdf("prismatic", '<mimic joint="j1"/>')),
+    (URDF_TASK + "[start]\nq = [0.1, 0.3]\n", r"\[start\].q: joint 'j2' is at 0.3, but it mimics 'j1', which puts it at 0.15", _urdf(extra='<mimic joint="j1" multiplier="0.5" offset="0.1"/>')),
     (URDF_TASK, r"\[robot\].urdf: .*joint 'j2' \(JointModelPlanar\) is not a revolute, continuous or prismatic joint", _urdf("planar")),
     (URDF_TASK, r"\[robot\].urdf: .*joint 'j2' \(JointModelFreeFlyer\) is not a revolute, continuous or prismatic joint", _urdf("floating")),
     (URDF_TASK.replace('urdf"', 'urdf"\nlock = ["j2"]'), r"\[robot\].lock: joint 'j2' has 7 coordinates; only 1-dof joints", _urdf("floating")),

@@ -17,6 +17,7 @@ EXAMPLES_TASKS = Path(__file__).resolve().parents[1] / "examples" / "tasks"
 PANDA = str(EXAMPLES_TASKS / "panda_boxes.toml")
 IIWA = str(EXAMPLES_TASKS / "iiwa_obstacle.toml")
 UR5 = str(EXAMPLES_TASKS / "ur5_shelf.toml")
+MIMIC = str(EXAMPLES_TASKS / "panda_mimic.toml")
 FINGERS_LOCKED = '--set=robot.lock=["panda_finger_joint1", "panda_finger_joint2"]'
 
 
@@ -34,6 +35,15 @@ def test_iiwa_task_file_is_the_paper_task():
     assert task.ocp.scene.to_dict() == paper.scene.to_dict()
     assert _signature(task.ocp) == _signature(paper)
     assert (task.method, task.warm_start, task.tol, task.max_iter) == ("ripm", "via", 1e-6, 500)
+
+
+def test_mimic_joints_are_coupled_unless_independent():
+    coupled = load_task(MIMIC)
+    assert coupled.ocp.robot.source["mimic"] == "couple"
+    assert type(coupled.ocp["mimic_panda_finger_joint2"].residual).__name__ == "JointCoupling"
+    independent = load_task(MIMIC, {"robot.mimic": "independent"})
+    assert independent.ocp.names == [n for n in coupled.ocp.names if not n.startswith("mimic_")]
+    assert load_task(PANDA).ocp.robot.mimic == ()  # panda_boxes.toml: mimic = "independent"
 
 
 def test_overrides_replace_keys_and_keep_the_duration():
@@ -55,6 +65,8 @@ CASES = [
     pytest.param(
         PANDA, "ripm", ["--horizon", "12", "--dt", "0.125", FINGERS_LOCKED], id="panda-locked-ripm"
     ),
+    pytest.param(MIMIC, "ripm", ["--horizon", "12", "--dt", "0.125"], id="panda-mimic-ripm"),
+    pytest.param(MIMIC, "ipopt", ["--horizon", "12", "--dt", "0.125"], id="panda-mimic-ipopt"),
     pytest.param(UR5, "ripm", ["--horizon", "12"], id="ur5-ripm"),
     pytest.param(UR5, "ipopt", ["--horizon", "12"], id="ur5-ipopt"),
 ]
@@ -73,6 +85,8 @@ def test_task_file_plans_and_verifies(tmp_path, capsys, path, method, flags):
     assert mb.verify(result).passed  # from the file alone: the OCP travels with the result
     assert result.extra["task_file"]["path"] == path
     assert "[robot]" in result.extra["task_file"]["toml"]
+    if "mimic_panda_finger_joint2" in result.ocp.names:  # the fingers coupled at every knot
+        assert np.max(np.abs(result.q[:, 7] - result.q[:, 8])) <= 1e-8
     goal = result.ocp["goal"]
     if goal.role == "constraint":
         assert result.violations["goal"] <= goal.tolerance

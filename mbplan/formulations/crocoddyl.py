@@ -124,7 +124,8 @@ class ResidualModelJointSpace(crocoddyl.ResidualModelAbstract):
         data.r[:] = np.asarray(self._fn(x)[0]).ravel()
 
     def calcDiff(self, data: _Data, x: np.ndarray, u: np.ndarray | None = None) -> None:
-        data.Rx[:, :] = np.asarray(self._fn(x)[1])
+        Rx = data.Rx  # one row: a 1-D view
+        Rx[...] = np.asarray(self._fn(x)[1]).reshape(Rx.shape)
 
     def createData(self, collector: Any) -> _Data:
         return _Data(self, collector)
@@ -234,9 +235,11 @@ class ShootingBuilder:
                 self.u_lb = np.maximum(self.u_lb, bounds[1])
                 self.u_ub = np.minimum(self.u_ub, bounds[2])
             elif item.residual.sense == "eq" and not hard:
+                kind = type(item.residual).__name__
+                hint = "make it a cost or use csqp" if item.residual.cost else "use csqp"
                 raise InputError(
-                    f"{method} cannot express the equality constraint {item.name!r} (FDDP has "
-                    "no constraints): make it a cost or use csqp"
+                    f"{method} cannot express the equality constraint {item.name!r} ({kind}; "
+                    f"FDDP has no constraints): {hint}"
                 )
         self._nodes: dict[tuple, crocoddyl.IntegratedActionModelEuler] = {}
         stiffness = damping_rate(self.model, ocp.q0) * ocp.dt

@@ -22,24 +22,7 @@ import pinocchio as pin
 
 from mbplan.errors import RobotModelError
 from mbplan.robots import RobotSpec, load
-
-# Pinocchio joint model -> (maximal-coordinate joint type, fixed axis in the joint frame or None
-# when the joint carries its own axis, continuous i.e. configuration (cos, sin)).
-_E = np.eye(3)
-_SUPPORTED: dict[str, tuple[str, np.ndarray | None, bool]] = {
-    "JointModelRX": ("revolute", _E[0], False),
-    "JointModelRY": ("revolute", _E[1], False),
-    "JointModelRZ": ("revolute", _E[2], False),
-    "JointModelRevoluteUnaligned": ("revolute", None, False),
-    "JointModelRUBX": ("revolute", _E[0], True),
-    "JointModelRUBY": ("revolute", _E[1], True),
-    "JointModelRUBZ": ("revolute", _E[2], True),
-    "JointModelRevoluteUnboundedUnaligned": ("revolute", None, True),
-    "JointModelPX": ("prismatic", _E[0], False),
-    "JointModelPY": ("prismatic", _E[1], False),
-    "JointModelPZ": ("prismatic", _E[2], False),
-    "JointModelPrismaticUnaligned": ("prismatic", None, False),
-}
+from mbplan.robots.joints import joint_kind
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,7 +131,7 @@ def maximal_model(robot: RobotSpec) -> MaximalModel:
     cols: dict[str, list] = {k: [] for k in _ARRAY_FIELDS}
     joint_types: list[str] = []
     for j in range(1, model.njoints):
-        jtype, axis, continuous = _joint_kind(model, j)
+        jtype, axis, continuous = joint_kind(model, j)
         inertia = model.inertias[j]
         _check_body(body_names[j - 1], model.names[j], inertia)
         parent = model.parents[j]
@@ -201,21 +184,6 @@ def maximal_model(robot: RobotSpec) -> MaximalModel:
     )
 
 
-def _joint_kind(model: pin.Model, j: int) -> tuple[str, np.ndarray, bool]:
-    """(type, unit axis in the joint frame, continuous) of Pinocchio joint ``j``."""
-    shortname = model.joints[j].shortname()
-    if shortname not in _SUPPORTED:
-        raise RobotModelError(
-            f"joint {model.names[j]!r} is a {shortname}, which the maximal-coordinate model does "
-            "not support (only revolute, continuous and prismatic joints)"
-        )
-    jtype, axis, continuous = _SUPPORTED[shortname]
-    if axis is None:
-        axis = np.array(model.joints[j].extract().axis, dtype=float)
-        axis = axis / np.linalg.norm(axis)
-    return jtype, axis, continuous
-
-
 def _check_body(body: str, joint: str, inertia: pin.Inertia) -> None:
     moments = np.linalg.eigvalsh(inertia.inertia)
     if not inertia.mass > 0.0 or not moments[0] > 0.0:
@@ -240,7 +208,7 @@ def _body_names(model: pin.Model) -> list[str]:
 
 def _orthonormal_complement(axis: np.ndarray) -> np.ndarray:
     """(2, 3) orthonormal vectors orthogonal to the unit vector ``axis``."""
-    helper = _E[np.argmin(np.abs(axis))]
+    helper = np.eye(3)[np.argmin(np.abs(axis))]
     u = np.cross(axis, helper)
     u /= np.linalg.norm(u)
     return np.stack([u, np.cross(axis, u)])

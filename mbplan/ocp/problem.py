@@ -7,7 +7,10 @@ An :class:`OCP` holds a robot (a fixed-base :class:`~mbplan.robots.robot.Robot` 
 ``"running"`` (state knots ``1..N-1``, intervals ``0..N-1``), ``"terminal"`` (knot ``N``) or a
 list of indices. A cost is ``weight · ½‖r‖²`` summed over its knots; ``tolerance`` marks a soft
 goal whose error :func:`mbplan.verify` checks at the last knot. A constraint's ``tolerance``
-replaces the verifier's default acceptance of its violation at the planned knots.
+replaces the verifier's default acceptance of its violation at the planned knots. Each mimic
+coupling of the robot (:class:`~mbplan.robots.robot.Mimic`) is a
+:class:`~mbplan.residuals.coupling.JointCoupling` constraint ``mimic_<follower>`` on every state
+knot, added by the constructor; ``q0`` must satisfy it.
 """
 
 from __future__ import annotations
@@ -22,11 +25,13 @@ from numpy.typing import ArrayLike
 from mbplan.errors import InputError
 from mbplan.ocp.scene import Scene
 from mbplan.residuals.base import RESIDUALS, Residual
+from mbplan.residuals.coupling import JointCoupling
 from mbplan.robots.free_body import FreeBody
-from mbplan.robots.robot import Robot, load_robot, robot_from_source
+from mbplan.robots.robot import Mimic, Robot, load_robot, robot_from_source
 from mbplan.validation import as_array, as_int, as_real
 
 Knots = str | Sequence[int]
+MIMIC_START_TOLERANCE = 1e-9  # rad or m: how far q0 may be off a mimic coupling
 
 
 @dataclass(frozen=True, eq=False)
@@ -82,6 +87,8 @@ class OCP:
                 self.q0 = np.r_[self.q0[:3], -self.q0[3:]]
         self.v0 = as_array(np.zeros(nv) if v0 is None else v0, (nv,), "v0")
         self.items: list[Item] = []
+        for c in getattr(self.robot, "mimic", ()):
+            self._couple(c)
 
     # -- building ------------------------------------------------------------------------------
     def add_cost(
@@ -118,6 +125,19 @@ class OCP:
 
     def add_terminal_constraint(self, name: str, residual: Residual) -> OCP:
         return self.add_constraint(name, residual, knots="terminal")
+
+    def _couple(self, c: Mimic) -> None:
+        """The constraint of mimic coupling ``c`` on every state knot (q0 must satisfy it)."""
+        follow = int(self.robot.joint_indices([c.follower])[0])
+        expected = self.robot.coupled(self.q0)[follow]
+        if abs(self.q0[follow] - expected) > MIMIC_START_TOLERANCE:
+            raise InputError(
+                f"q0: joint {c.follower!r} is at {self.q0[follow]:.6g}, but it mimics "
+                f"{c.leader!r}, which puts it at {expected:.6g}; set it there, or load the robot "
+                "with mimic='independent'"
+            )
+        residual = JointCoupling(c.follower, c.leader, c.multiplier, c.offset)
+        self.add_constraint(f"mimic_{c.follower}", residual)
 
     def _add(self, item: Item) -> OCP:
         if not isinstance(item.name, str) or not item.name:
@@ -219,7 +239,10 @@ class OCP:
             q0=data["q0"],
             v0=data["v0"],
         )
+        implied = {i.name: i.residual.to_dict() for i in ocp.items}  # the robot's couplings
         for d in data["items"]:
+            if implied.get(d["name"]) == d["residual"]:
+                continue
             residual = Residual.from_dict(d["residual"])
             if d["role"] == "cost":
                 ocp.add_cost(d["name"], residual, d["weight"], d["knots"], d.get("tolerance"))

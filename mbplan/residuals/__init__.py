@@ -1,9 +1,9 @@
 """The residual library of :class:`mbplan.OCP`: what a cost or constraint measures.
 
 One class per residual kind, each owning its translations (:mod:`mbplan.residuals.base`):
-joint residuals (:mod:`.joint`), joint limits (:mod:`.limits`), frame goals (:mod:`.frame`),
-coal distances (:mod:`.distance`), eq. (62) (:mod:`.com`) and a free body's residuals
-(:mod:`.body`). A new kind is a subclass of :class:`Residual` implementing the translations it
+joint residuals (:mod:`.joint`), joint limits (:mod:`.limits`), mimic couplings
+(:mod:`.coupling`), frame goals (:mod:`.frame`), coal distances (:mod:`.distance`), eq. (62)
+(:mod:`.com`) and a free body's residuals (:mod:`.body`). A new kind is a subclass of :class:`Residual` implementing the translations it
 supports; :data:`RESIDUALS` lists every kind.
 """
 
@@ -17,6 +17,7 @@ from mbplan.residuals.body import (
     BodyVelocity,
 )
 from mbplan.residuals.com import ComOutsideCylinder
+from mbplan.residuals.coupling import JointCoupling
 from mbplan.residuals.distance import Distance
 from mbplan.residuals.frame import FramePlacement, FrameTranslation
 from mbplan.residuals.joint import JointPosition, JointTorque, JointVelocity
@@ -34,6 +35,7 @@ __all__ = [
     "Distance",
     "FramePlacement",
     "FrameTranslation",
+    "JointCoupling",
     "JointPosition",
     "JointPositionLimits",
     "JointTorque",

@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 import os
 import sys
-import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -93,9 +92,9 @@ def load(
 
     ``collision_model``/``visual_model`` accompany a ``pinocchio.Model``; ``geometry=False``
     skips loading geometry (and meshes) from a URDF.  A :class:`RobotDescription` is returned
-    unchanged.  URDF ``<mimic>`` tags are ignored, as by Pinocchio's default: the mimicking joint
-    becomes an independent joint.  SRDF reference configurations of example-robot-data arms are
-    stored in ``model.referenceConfigurations``.
+    unchanged.  URDF ``<mimic>`` tags are left out of the model, as by Pinocchio's default: the
+    mimicking joint is a joint of its own (:func:`mimic_tags` reads them).  SRDF reference
+    configurations of example-robot-data arms are stored in ``model.referenceConfigurations``.
     """
     if isinstance(robot, pin.Model):
         return RobotDescription(robot.name, robot, collision_model, visual_model, None)
@@ -164,8 +163,8 @@ def validate_urdf(path: str | os.PathLike[str]) -> None:
     child of exactly one joint, no loop; masses finite and non-negative; inertia matrices
     positive semi-definite with principal moments obeying the triangle inequality; finite
     ``<origin>`` s; ``<limit>`` s with lower <= upper and non-negative effort and velocity; a
-    ``<mimic>`` naming a defined joint (warned about: it is planned as independent); the child link of a non-fixed joint has an ``<inertial>`` with
-    positive mass.  (Positive definiteness of each moving body's inertia, after Pinocchio merges
+    ``<mimic>`` naming a defined joint with finite numbers; the child link of a non-fixed joint
+    has an ``<inertial>`` with positive mass.  (Positive definiteness of each moving body's inertia, after Pinocchio merges
     the links fixed to it, is checked by :func:`mbplan.multibody.maximal_model`.)
     """
     path = Path(path)
@@ -275,11 +274,18 @@ def validate_urdf(path: str | os.PathLike[str]) -> None:
         for attr in ("multiplier", "offset"):
             if mimic.get(attr) is not None:
                 _number(mimic, attr, where)
-        warnings.warn(
-            f"{where}: mbplan plans mimic joints as independent joints (Pinocchio's default); "
-            f"{jname!r} will not follow {leader!r}",
-            stacklevel=4,
-        )
+
+
+def mimic_tags(path: str | os.PathLike[str]) -> dict[str, tuple[str, float, float]]:
+    """``{follower: (leader, multiplier, offset)}`` of a URDF's ``<mimic>`` tags (defaults 1
+    and 0), for a file :func:`validate_urdf` has checked."""
+    out = {}
+    for joint in ET.parse(path).getroot().findall("joint"):
+        mimic = joint.find("mimic")
+        if mimic is not None:
+            m, o = (float(mimic.get(a, d)) for a, d in (("multiplier", 1.0), ("offset", 0.0)))
+            out[str(joint.get("name"))] = (str(mimic.get("joint")), m, o)
+    return out
 
 
 def _check_origin(element: ET.Element, where: str) -> None:

@@ -6,7 +6,9 @@ meshes), an MJCF path, or a ``pinocchio.Model`` (with optional geometry models) 
 joints at given values (``pinocchio.buildReducedModel``). URDF viscous joint damping
 (``<dynamics damping>``, the generalized force ``-D q̇``) is read into ``model.damping``, which
 every formulation and the verifier apply; ``damping=False`` zeroes it (the paper tasks: the
-papers' dynamics have none). The :class:`Robot` remembers how it was made
+papers' dynamics have none). URDF ``<mimic>`` joints are couplings ``q_f = m q_l + o``
+(:class:`Mimic`) that every :class:`~mbplan.OCP` of the robot imposes (``mimic="couple"``) or
+joints of their own (``"independent"``). The :class:`Robot` remembers how it was made
 (:attr:`Robot.source`), so a saved plan can load it again.
 """
 
@@ -26,14 +28,29 @@ from mbplan.errors import InputError, RobotModelError
 from mbplan.robots import RobotDescription, load
 from mbplan.robots.continuous import to_angles, unbounded_revolute_model
 from mbplan.robots.free_body import FreeBody
+from mbplan.robots.joints import joint_kind
+from mbplan.robots.loader import mimic_tags
+
+MIMIC_MODES = ("couple", "independent")
+
+
+@dataclass(frozen=True)
+class Mimic:
+    """A coupling ``q[follower] = multiplier · q[leader] + offset`` (a URDF ``<mimic>``)."""
+
+    follower: str
+    leader: str
+    multiplier: float = 1.0
+    offset: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
 class Robot:
     """A fixed-base robot: ``model`` (1-dof joints only; ``model.damping`` the viscous joint
     damping every formulation applies), collision and visual geometry (may be None), its
-    ``source`` (JSON-serialisable, see :func:`load_robot`), the locked joints and the continuous
-    joints (revolute without limits in ``model``: :mod:`mbplan.robots.continuous`)."""
+    ``source`` (JSON-serialisable, see :func:`load_robot`), the locked joints, the continuous
+    joints (revolute without limits in ``model``: :mod:`mbplan.robots.continuous`) and the mimic
+    couplings its OCPs impose."""
 
     name: str
     model: pin.Model
@@ -42,6 +59,7 @@ class Robot:
     source: dict[str, Any]
     locked: dict[str, float] = field(default_factory=dict)
     continuous: tuple[str, ...] = ()
+    mimic: tuple[Mimic, ...] = ()
 
     @property
     def nq(self) -> int:
@@ -52,12 +70,13 @@ class Robot:
         return self.model.nv
 
     def configuration(self, name: str) -> np.ndarray:
-        """A named reference configuration (SRDF), ``"neutral"`` or ``"default"``."""
+        """A named reference configuration (SRDF), ``"neutral"`` or ``"default"``, with the
+        mimic followers where their leaders put them (:meth:`coupled`)."""
         refs = self.model.referenceConfigurations
         if name in refs:
-            return np.array(refs[name], dtype=float)
+            return self.coupled(np.array(refs[name], dtype=float))
         if name == "neutral":
-            return pin.neutral(self.model)
+            return self.coupled(pin.neutral(self.model))
         raise InputError(
             f"robot {self.name!r} has no configuration {name!r}; known: "
             f"{', '.join(['neutral', *_ref_names(refs)])}"
@@ -70,6 +89,14 @@ class Robot:
             hint = [n for n in names if frame.split("_")[-1] in n][:8] or names[-8:]
             raise InputError(f"robot {self.name!r} has no frame {frame!r} (e.g. {hint})")
         return self.model.getFrameId(frame)
+
+    def coupled(self, q: np.ndarray) -> np.ndarray:
+        """``q`` with every mimic follower at ``multiplier · q[leader] + offset``."""
+        out = np.array(q, dtype=float)
+        for c in self.mimic:
+            lead, follow = self.joint_indices((c.leader, c.follower))
+            out[follow] = c.multiplier * out[lead] + c.offset
+        return out
 
     def joint_indices(self, joints: Sequence[str] | None) -> np.ndarray:
         """Velocity indices of ``joints`` (all if None); :class:`InputError` on an unknown name."""
@@ -95,24 +122,33 @@ def load_robot(
     collision_model: pin.GeometryModel | None = None,
     visual_model: pin.GeometryModel | None = None,
     damping: bool = True,
+    mimic: str = "couple",
 ) -> Robot | FreeBody:
     """Load ``robot`` (name, ``.urdf`` or ``.xml`` MJCF path, ``pinocchio.Model``) and lock the
     joints ``lock`` (names at their reference value: the SRDF ``default`` configuration if any,
     else neutral; or a mapping name → value). Continuous joints become unbounded revolute joints
     (one angle each, :mod:`mbplan.robots.continuous`); every other joint must be 1-dof (nq = nv).
     ``damping=False``: the robot's ``model.damping`` is zeroed (on a copy of the model).
-    A :class:`~mbplan.robots.free_body.FreeBody` is returned as is."""
+    ``mimic``: ``"couple"`` records a URDF's ``<mimic>`` joints as :class:`Mimic` couplings
+    (:class:`RobotModelError` for a pair of different kinds or a chain; :class:`InputError` for
+    a locked leader of a free follower; a locked follower needs none), ``"independent"`` plans
+    them as joints of their own. A :class:`~mbplan.robots.free_body.FreeBody` or a :class:`Robot`
+    is returned as is."""
+    if mimic not in MIMIC_MODES:
+        raise InputError(f"mimic: expected one of {', '.join(MIMIC_MODES)}, got {mimic!r}")
     if isinstance(robot, FreeBody):
         return robot
     if isinstance(robot, str | os.PathLike) and collision_model is None and visual_model is None:
         names = dict(lock) if isinstance(lock, Mapping) else dict.fromkeys(lock or ())
         frozen = tuple(sorted(names.items(), key=lambda kv: kv[0])) or None
         dirs = tuple(os.fspath(d) for d in package_dirs)
-        return _cached(os.fspath(robot), dirs, frozen, bool(damping))
-    return _load(robot, package_dirs, lock, collision_model, visual_model, damping)
+        return _cached(os.fspath(robot), dirs, frozen, bool(damping), mimic)
+    return _load(robot, package_dirs, lock, collision_model, visual_model, damping, mimic)
 
 
-def _load(robot, package_dirs, lock, collision_model, visual_model, damping=True) -> Robot:
+def _load(
+    robot, package_dirs, lock, collision_model, visual_model, damping=True, mimic="couple"
+) -> Robot:
     if isinstance(robot, Robot):
         if lock or package_dirs or collision_model is not None or visual_model is not None:
             raise InputError("load_robot: a Robot is returned as is; pass no other argument")
@@ -151,11 +187,58 @@ def _load(robot, package_dirs, lock, collision_model, visual_model, damping=True
         desc = RobotDescription(
             desc.name, model, desc.collision_model, desc.visual_model, desc.urdf_path
         )
-    source = {**source, "damping": bool(damping)}
+    tags = _mimic_tags(desc)
+    couplings = _couplings(desc, tags, locked) if mimic == "couple" else ()
+    source = {**source, "damping": bool(damping)} | ({"mimic": mimic} if tags else {})
     continuous = tuple(n for n in continuous if n not in locked)
     return Robot(
-        desc.name, desc.model, desc.collision_model, desc.visual_model, source, locked, continuous
+        desc.name,
+        desc.model,
+        desc.collision_model,
+        desc.visual_model,
+        source,
+        locked,
+        continuous,
+        couplings,
     )
+
+
+def _mimic_tags(desc: RobotDescription) -> dict[str, tuple[str, float, float]]:
+    """:func:`~mbplan.robots.loader.mimic_tags` of ``desc``'s URDF (none without one)."""
+    path = desc.urdf_path
+    if path is None or Path(path).suffix.lower() != ".urdf":
+        return {}
+    return mimic_tags(path)
+
+
+def _couplings(
+    desc: RobotDescription, tags: dict[str, tuple[str, float, float]], locked: dict[str, float]
+) -> tuple[Mimic, ...]:
+    """The :class:`Mimic` couplings of the URDF ``tags`` among ``desc``'s (unlocked) joints."""
+    model, out = desc.model, []
+    for follower, (leader, m, o) in tags.items():
+        if follower in locked:
+            continue
+        where = f"{desc.name}: joint {follower!r} mimics {leader!r}"
+        if leader in locked:
+            raise InputError(
+                f"{where}, which is locked: lock {follower!r} too (at {m * locked[leader] + o:g}) "
+                "or plan it as an independent joint (mimic='independent')"
+            )
+        if leader in tags:
+            raise RobotModelError(f"{where}, which mimics {tags[leader][0]!r}: not supported")
+        kinds = []
+        for name in (leader, follower):
+            if not model.existJointName(name):
+                raise RobotModelError(f"{where}: {name!r} is not a 1-dof joint of the model")
+            kinds.append(joint_kind(model, model.getJointId(name))[0])
+        if kinds[0] != kinds[1]:
+            raise RobotModelError(
+                f"{where}: a {kinds[1]} joint cannot follow a {kinds[0]} one (plan it as an "
+                "independent joint: mimic='independent')"
+            )
+        out.append(Mimic(follower, leader, m, o))
+    return tuple(out)
 
 
 def _unbounded(desc: RobotDescription) -> tuple[RobotDescription, tuple[str, ...]]:
@@ -174,17 +257,20 @@ def _unbounded(desc: RobotDescription) -> tuple[RobotDescription, tuple[str, ...
 
 def robot_from_source(source: Mapping[str, Any]) -> Robot | FreeBody:
     """Load the robot again from :attr:`Robot.source` (what a saved plan stores). A source
-    without ``damping`` is from before mbplan applied joint damping: loaded without it."""
+    without ``damping`` is from before mbplan applied joint damping: loaded without it; one
+    without ``mimic``, from before mimic couplings: its mimic joints independent."""
     kind = source.get("kind")
     if kind == "free_body":
         return FreeBody.from_source(source)
-    lock = source.get("lock") or None
-    damping = bool(source.get("damping", False))
+    options = {
+        "lock": source.get("lock") or None,
+        "damping": bool(source.get("damping", False)),
+        "mimic": source.get("mimic", "independent"),
+    }
     if kind == "name":
-        return load_robot(source["name"], lock=lock, damping=damping)
+        return load_robot(source["name"], **options)
     if kind in ("urdf", "mjcf"):
-        dirs = source.get("package_dirs", ())
-        return load_robot(source["path"], package_dirs=dirs, lock=lock, damping=damping)
+        return load_robot(source["path"], package_dirs=source.get("package_dirs", ()), **options)
     raise InputError(
         f"the robot was an in-memory pinocchio.Model ({source.get('name')!r}) and cannot be "
         "loaded from the file: pass the OCP (or the robot) explicitly"
@@ -193,10 +279,12 @@ def robot_from_source(source: Mapping[str, Any]) -> Robot | FreeBody:
 
 # process-wide cache, result-neutral: robot loading by name: the model of the file alone
 @cache
-def _cached(spec: str, package_dirs: tuple[str, ...], lock: tuple | None, damping: bool) -> Robot:
-    """One :class:`Robot` per (path or name, package_dirs, lock, damping): shared, do not
+def _cached(
+    spec: str, package_dirs: tuple[str, ...], lock: tuple | None, damping: bool, mimic: str
+) -> Robot:
+    """One :class:`Robot` per (path or name, package_dirs, lock, damping, mimic): shared, do not
     modify."""
-    return _load(spec, package_dirs, dict(lock) if lock else None, None, None, damping)
+    return _load(spec, package_dirs, dict(lock) if lock else None, None, None, damping, mimic)
 
 
 def _load_path(

@@ -1,10 +1,9 @@
-"""The ``[robot]`` table of a task file: which robot, its package folders, locked joints and what
-to do with URDF ``<mimic>`` joints."""
+"""The ``[robot]`` table of a task file: which robot, its package folders, locked joints and
+whether URDF ``<mimic>`` joints follow their leaders (``mimic = "couple"``, the default) or are
+planned as joints of their own (``"independent"``)."""
 
 from __future__ import annotations
 
-import warnings
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +11,7 @@ import pinocchio as pin
 
 from mbplan.errors import InputError, RobotModelError
 from mbplan.robots import available_robots, load
-from mbplan.robots.robot import Robot, load_robot
+from mbplan.robots.robot import MIMIC_MODES, Robot, load_robot
 from mbplan.taskfile.toml_table import Document, Table
 
 ROBOT_KEYS = ("urdf", "name", "mjcf", "package_dirs", "lock", "mimic")
@@ -43,24 +42,14 @@ def read_robot(doc: Document) -> tuple[Robot, list[str] | None]:
         if not d.is_dir():
             raise t.error("package_dirs", f"not a folder: {d}")
     lock = _lock(t)
-    mimic = t.string("mimic", choices=("refuse", "independent")) or "refuse"
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=r".*<mimic>")  # refused or accepted below
-        try:
-            robot = load_robot(spec, package_dirs=dirs, lock=lock)
-        except (InputError, RobotModelError) as err:
-            text = str(err)
-            key = "lock" if text.startswith("lock:") else kind
-            raise type(err)(f"{doc.where(('robot', key))}: {text.removeprefix('lock: ')}") from None
-        model, urdf = _unreduced(spec, kind)
-    if mimic == "refuse" and urdf is not None:
-        for joint, leader in _mimic_joints(urdf).items():
-            if robot.model.existJointName(joint):
-                raise RobotModelError(
-                    f"{doc.where(('robot', kind))}: joint {joint!r} mimics {leader!r}: mimic "
-                    "joints are not supported yet; lock it (lock = "
-                    f'["{joint}"]) or plan it as an independent joint (mimic = "independent")'
-                )
+    mimic = t.string("mimic", choices=MIMIC_MODES) or "couple"
+    try:
+        robot = load_robot(spec, package_dirs=dirs, lock=lock, mimic=mimic)
+    except (InputError, RobotModelError) as err:
+        text = str(err)
+        key = "lock" if text.startswith("lock:") or "is locked" in text else kind
+        raise type(err)(f"{doc.where(('robot', key))}: {text.removeprefix('lock: ')}") from None
+    model = _unreduced(spec, kind)
     one_dof = all(model.joints[j].nq == 1 for j in range(1, model.njoints))
     return robot, list(model.names[1:]) if one_dof else None
 
@@ -78,19 +67,8 @@ def _lock(t: Table) -> dict[str, float | None] | None:
     return {name: sub.number(name, minimum=-np.inf) for name in value}
 
 
-def _unreduced(spec: str | Path, kind: str) -> tuple[pin.Model, Path | None]:
-    """The model without locked joints and its URDF (None for MJCF)."""
+def _unreduced(spec: str | Path, kind: str) -> pin.Model:
+    """The model without locked joints."""
     if kind == "mjcf":
-        return pin.buildModelFromMJCF(str(spec)), None
-    desc = load(spec, geometry=False)
-    return desc.model, desc.urdf_path
-
-
-def _mimic_joints(path: Path) -> dict[str, str]:
-    """``{joint: leader}`` of the URDF's ``<mimic>`` tags (the loader has checked the file)."""
-    out = {}
-    for joint in ET.parse(path).getroot().iter("joint"):
-        mimic = joint.find("mimic")
-        if mimic is not None:
-            out[str(joint.get("name"))] = str(mimic.get("joint"))
-    return out
+        return pin.buildModelFromMJCF(str(spec))
+    return load(spec, geometry=False).model

@@ -88,7 +88,10 @@ def load_task(
     N, dt = _horizon(doc.table("horizon", required=True, what=" (with N and dt)"))
     q0 = _start(doc.table("start"), robot, full_names, limits)
     scene = _scene(doc)
-    ocp = OCP(robot, scene, N=N, dt=dt, q0=q0)
+    try:
+        ocp = OCP(robot, scene, N=N, dt=dt, q0=q0)
+    except InputError as err:  # the start off a mimic coupling
+        raise InputError(f"{doc.where(('start', 'q'))}: {str(err).removeprefix('q0: ')}") from None
     goal = doc.table("goal", required=True, what=" (with q, or frame and xyz)")
     residual = _goal(goal, robot, full_names, limits)
     _costs(doc.table("cost"), ocp, residual, goal)
