@@ -27,6 +27,8 @@ def test_the_robot_records_its_couplings(tmp_path) -> None:
     assert robot.mimic == (Mimic("j2", "j1", -0.5, 0.2),)
     assert robot.configuration("neutral").tolist() == [0.0, 0.2]  # the follower coupled
     assert mb.load_robot(path, lock=["j2"]).mimic == ()  # a locked follower needs no coupling
+    talos = mb.load_robot("talos_arm")  # <mimic> on its fixed gripper joints: no coordinate
+    assert talos.mimic == () and "gripper_left_inner_double_joint" not in talos.model.names
 
 
 def test_the_ocp_imposes_each_coupling_at_every_state_knot() -> None:

@@ -278,11 +278,13 @@ def validate_urdf(path: str | os.PathLike[str]) -> None:
 
 def mimic_tags(path: str | os.PathLike[str]) -> dict[str, tuple[str, float, float]]:
     """``{follower: (leader, multiplier, offset)}`` of a URDF's ``<mimic>`` tags (defaults 1
-    and 0), for a file :func:`validate_urdf` has checked."""
+    and 0), for a file :func:`validate_urdf` has checked. A tag on a fixed joint (some
+    descriptions, e.g. Talos' grippers, keep one for a simulator plugin) couples no coordinate
+    and is not listed."""
     out = {}
     for joint in ET.parse(path).getroot().findall("joint"):
         mimic = joint.find("mimic")
-        if mimic is not None:
+        if mimic is not None and joint.get("type") != "fixed":
             m, o = (float(mimic.get(a, d)) for a, d in (("multiplier", 1.0), ("offset", 0.0)))
             out[str(joint.get("name"))] = (str(mimic.get("joint")), m, o)
     return out
