@@ -127,3 +127,15 @@ def test_fddp_refuses_equality_constraints() -> None:
         mb.plan(ocp, "fddp")
     result = mb.plan(ocp, "csqp", max_iter=3)
     assert result.method == "csqp" and "hold" in result.violations
+
+
+def test_csqp_keeps_the_coal_distance_margin() -> None:
+    """The Crocoddyl row of a Distance constraint is the signed distance, bounded below by the
+    margin: a hard-constrained plan past a sphere keeps its clearance at every knot."""
+    scene = mb.Scene().add_sphere("ball", 0.08, (0.45, 0.0, 0.75))
+    ocp = mb.OCP(mb.load_robot("iiwa", damping=False), scene, N=8, dt=0.1)
+    ocp.add_cost("velocity", res.JointVelocity(), 1e-2)
+    ocp.add_cost("goal", res.JointPosition(IIWA_TARGET), 1.0, "terminal")
+    ocp.add_constraint("clearance", res.Distance(0.03))
+    result = mb.plan(ocp, "csqp", max_iter=100, warm_start="linear")
+    assert result.violations["clearance"] <= CONSTRAINT_TOLERANCE, result.violations

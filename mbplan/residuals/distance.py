@@ -171,8 +171,8 @@ class Distance(Residual):
 
     def shooting(self, ctx: Any, item: Any) -> ShootingResidual:
         model = ctx.coal_distance(self)
-        return ShootingResidual(
-            model, np.full(model.nr, -np.inf), np.zeros(model.nr), ctx.obstacle_weight
+        return ShootingResidual(  # r = d (the signed distance) ≥ margin
+            model, np.full(model.nr, self.margin), np.full(model.nr, np.inf), ctx.obstacle_weight
         )
 
     def clearance(
