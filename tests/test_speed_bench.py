@@ -125,7 +125,9 @@ def test_median_ratio_interval_is_a_paired_bootstrap_of_the_medians():
 
 
 def test_speed_tables_show_each_ratio_with_its_interval():
-    from mbplan.benchmarks.speed import INTERVALS, _intervals, _markdown, _method_stats
+    from mbplan.benchmarks.speed import _intervals, _method_stats
+    from mbplan.benchmarks.speed_report import INTERVALS
+    from mbplan.benchmarks.speed_report import markdown as _markdown
 
     rng = np.random.default_rng(0)
     rows = []
