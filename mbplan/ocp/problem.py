@@ -10,7 +10,11 @@ goal whose error :func:`mbplan.verify` checks at the last knot. A constraint's `
 replaces the verifier's default acceptance of its violation at the planned knots. Each mimic
 coupling of the robot (:class:`~mbplan.robots.robot.Mimic`) is a
 :class:`~mbplan.residuals.coupling.JointCoupling` constraint ``mimic_<follower>`` on every state
-knot, added by the constructor; ``q0`` must satisfy it.
+knot, added by the constructor; ``q0`` must satisfy it. The robot's passive joints get a
+:class:`~mbplan.residuals.joint.JointTorque` constraint ``passive`` (zero torque on every
+interval) and no other torque goal; ``q0`` must close the robot's loops
+(:mod:`mbplan.robots.loops`), whose constraints and forces are part of every formulation's
+dynamics.
 """
 
 from __future__ import annotations
@@ -26,12 +30,15 @@ from mbplan.errors import InputError
 from mbplan.ocp.scene import Scene
 from mbplan.residuals.base import RESIDUALS, Residual
 from mbplan.residuals.coupling import JointCoupling
+from mbplan.residuals.joint import JointTorque
 from mbplan.robots.free_body import FreeBody
+from mbplan.robots.loops import close_loops, closure_residual
 from mbplan.robots.robot import Mimic, Robot, load_robot, robot_from_source
 from mbplan.validation import as_array, as_int, as_real
 
 Knots = str | Sequence[int]
 MIMIC_START_TOLERANCE = 1e-9  # rad or m: how far q0 may be off a mimic coupling
+LOOP_START_TOLERANCE = 1e-8  # m or rad: how far q0 may be off a loop closure
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,6 +96,10 @@ class OCP:
         self.items: list[Item] = []
         for c in getattr(self.robot, "mimic", ()):
             self._couple(c)
+        self._check_loops()
+        passive = getattr(self.robot, "passive", ())
+        if passive:
+            self.add_constraint("passive", JointTorque(joints=passive))
 
     # -- building ------------------------------------------------------------------------------
     def add_cost(
@@ -139,6 +150,31 @@ class OCP:
         residual = JointCoupling(c.follower, c.leader, c.multiplier, c.offset)
         self.add_constraint(f"mimic_{c.follower}", residual)
 
+    def _check_loops(self) -> None:
+        """``q0`` closes every loop of the robot (else: the residual and where it would close)."""
+        loops = getattr(self.robot, "loops", ())
+        if not loops:
+            return
+        model = self.robot.model
+        gap = np.abs(closure_residual(model, loops, self.q0))
+        if gap.max() > LOOP_START_TOLERANCE:
+            actuated = np.setdiff1d(
+                np.arange(self.robot.nv), self.robot.joint_indices(self.robot.passive)
+            )
+            closed, left = close_loops(model, loops, self.q0, fixed=actuated)
+            if left > LOOP_START_TOLERANCE:  # the actuated joints cannot stay: move them too
+                closed, left = close_loops(model, loops, self.q0)
+            where = (
+                f"it would close at q0 = {np.array2string(closed, precision=6, separator=', ')}"
+                if left <= LOOP_START_TOLERANCE
+                else "no configuration near it closes them"
+            )
+            names = ", ".join(loop.name for loop in loops)
+            raise InputError(
+                f"q0 does not close the loops ({names}): residual {gap.max():.3g}; {where} "
+                "(mbplan.robots.loops.close_loops)"
+            )
+
     def _add(self, item: Item) -> OCP:
         if not isinstance(item.name, str) or not item.name:
             raise InputError(f"name: expected a non-empty string, got {item.name!r}")
@@ -149,6 +185,14 @@ class OCP:
             raise InputError(
                 f"{item.role} {item.name!r}: {type(item.residual).__name__} is not a residual "
                 f"of a free body; use {kinds}"
+            )
+        passive = set(getattr(self.robot, "passive", ())) & set(
+            getattr(item.residual, "joints", None) or ()
+        )
+        if passive and isinstance(item.residual, JointTorque) and item.name != "passive":
+            raise InputError(
+                f"{item.role} {item.name!r}: joints {sorted(passive)} are passive (no actuator): "
+                "their torque is zero and takes no goal"
             )
         try:
             resolved = item.residual.resolve(self.robot, self.scene)

@@ -8,7 +8,10 @@ joints at given values (``pinocchio.buildReducedModel``). URDF viscous joint dam
 every formulation and the verifier apply; ``damping=False`` zeroes it (the paper tasks: the
 papers' dynamics have none). URDF ``<mimic>`` joints are couplings ``q_f = m q_l + o``
 (:class:`Mimic`) that every :class:`~mbplan.OCP` of the robot imposes (``mimic="couple"``) or
-joints of their own (``"independent"``). The :class:`Robot` remembers how it was made
+joints of their own (``"independent"``). A robot with closed kinematic loops is its spanning tree
+plus :class:`~mbplan.robots.loops.Loop` closures (MJCF ``<equality>`` ``<connect>``/``<weld>``, or
+``loops=``); joints without an actuator (MJCF ``<actuator>``, or ``actuated=``) are passive: every
+OCP of the robot keeps their torque at zero. The :class:`Robot` remembers how it was made
 (:attr:`Robot.source`), so a saved plan can load it again.
 """
 
@@ -16,7 +19,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -30,6 +33,14 @@ from mbplan.robots.continuous import to_angles, unbounded_revolute_model
 from mbplan.robots.free_body import FreeBody
 from mbplan.robots.joints import joint_kind
 from mbplan.robots.loader import mimic_tags
+from mbplan.robots.loops import (
+    Loop,
+    close_loops,
+    loop_from_spec,
+    loops_from_constraints,
+    resolve_loops,
+)
+from mbplan.robots.mjcf import mjcf_actuated
 
 MIMIC_MODES = ("couple", "independent")
 
@@ -49,8 +60,8 @@ class Robot:
     """A fixed-base robot: ``model`` (1-dof joints only; ``model.damping`` the viscous joint
     damping every formulation applies), collision and visual geometry (may be None), its
     ``source`` (JSON-serialisable, see :func:`load_robot`), the locked joints, the continuous
-    joints (revolute without limits in ``model``: :mod:`mbplan.robots.continuous`) and the mimic
-    couplings its OCPs impose."""
+    joints (revolute without limits in ``model``: :mod:`mbplan.robots.continuous`), the mimic
+    couplings its OCPs impose, its loop closures and its passive (unactuated) joints."""
 
     name: str
     model: pin.Model
@@ -60,6 +71,8 @@ class Robot:
     locked: dict[str, float] = field(default_factory=dict)
     continuous: tuple[str, ...] = ()
     mimic: tuple[Mimic, ...] = ()
+    loops: tuple[Loop, ...] = ()
+    passive: tuple[str, ...] = ()
 
     @property
     def nq(self) -> int:
@@ -71,12 +84,13 @@ class Robot:
 
     def configuration(self, name: str) -> np.ndarray:
         """A named reference configuration (SRDF), ``"neutral"`` or ``"default"``, with the
-        mimic followers where their leaders put them (:meth:`coupled`)."""
+        mimic followers where their leaders put them (:meth:`coupled`) and the loops closed
+        nearby (:func:`~mbplan.robots.loops.close_loops`)."""
         refs = self.model.referenceConfigurations
         if name in refs:
-            return self.coupled(np.array(refs[name], dtype=float))
+            return self.closed(self.coupled(np.array(refs[name], dtype=float)))
         if name == "neutral":
-            return self.coupled(pin.neutral(self.model))
+            return self.closed(self.coupled(pin.neutral(self.model)))
         raise InputError(
             f"robot {self.name!r} has no configuration {name!r}; known: "
             f"{', '.join(['neutral', *_ref_names(refs)])}"
@@ -89,6 +103,10 @@ class Robot:
             hint = [n for n in names if frame.split("_")[-1] in n][:8] or names[-8:]
             raise InputError(f"robot {self.name!r} has no frame {frame!r} (e.g. {hint})")
         return self.model.getFrameId(frame)
+
+    def closed(self, q: np.ndarray) -> np.ndarray:
+        """The configuration nearest ``q`` that closes the loops (``q`` if there are none)."""
+        return close_loops(self.model, self.loops, q)[0] if self.loops else np.asarray(q)
 
     def coupled(self, q: np.ndarray) -> np.ndarray:
         """``q`` with every mimic follower at ``multiplier · q[leader] + offset``."""
@@ -123,6 +141,8 @@ def load_robot(
     visual_model: pin.GeometryModel | None = None,
     damping: bool = True,
     mimic: str = "couple",
+    loops: Sequence[Loop | Mapping[str, Any]] = (),
+    actuated: Sequence[str] | None = None,
 ) -> Robot | FreeBody:
     """Load ``robot`` (name, ``.urdf`` or ``.xml`` MJCF path, ``pinocchio.Model``) and lock the
     joints ``lock`` (names at their reference value: the SRDF ``default`` configuration if any,
@@ -132,25 +152,42 @@ def load_robot(
     ``mimic``: ``"couple"`` records a URDF's ``<mimic>`` joints as :class:`Mimic` couplings
     (:class:`RobotModelError` for a pair of different kinds or a chain; :class:`InputError` for
     a locked leader of a free follower; a locked follower needs none), ``"independent"`` plans
-    them as joints of their own. A :class:`~mbplan.robots.free_body.FreeBody` or a :class:`Robot`
-    is returned as is."""
+    them as joints of their own. ``loops``: closures besides an MJCF file's ``<equality>``
+    ones, :class:`~mbplan.robots.loops.Loop` or mappings (:func:`~mbplan.robots.loops.loop_from_spec`:
+    two frames by name, the kind, placements); their redundant rows are dropped and reported
+    (:func:`~mbplan.robots.loops.resolve_loops`). ``actuated``: the joints with an actuator (default:
+    an MJCF file's ``<actuator>`` joints if it has any, else every joint); the others are
+    passive. A :class:`~mbplan.robots.free_body.FreeBody` or a :class:`Robot` is returned as
+    is."""
     if mimic not in MIMIC_MODES:
         raise InputError(f"mimic: expected one of {', '.join(MIMIC_MODES)}, got {mimic!r}")
     if isinstance(robot, FreeBody):
         return robot
+    plain = not loops and actuated is None
     if isinstance(robot, str | os.PathLike) and collision_model is None and visual_model is None:
         names = dict(lock) if isinstance(lock, Mapping) else dict.fromkeys(lock or ())
         frozen = tuple(sorted(names.items(), key=lambda kv: kv[0])) or None
         dirs = tuple(os.fspath(d) for d in package_dirs)
-        return _cached(os.fspath(robot), dirs, frozen, bool(damping), mimic)
-    return _load(robot, package_dirs, lock, collision_model, visual_model, damping, mimic)
+        if plain:
+            return _cached(os.fspath(robot), dirs, frozen, bool(damping), mimic)
+    extra = (tuple(loops), None if actuated is None else tuple(actuated))
+    return _load(robot, package_dirs, lock, collision_model, visual_model, damping, mimic, *extra)
 
 
 def _load(
-    robot, package_dirs, lock, collision_model, visual_model, damping=True, mimic="couple"
+    robot,
+    package_dirs,
+    lock,
+    collision_model,
+    visual_model,
+    damping=True,
+    mimic="couple",
+    loops: tuple = (),
+    actuated: tuple[str, ...] | None = None,
 ) -> Robot:
     if isinstance(robot, Robot):
-        if lock or package_dirs or collision_model is not None or visual_model is not None:
+        given = lock or package_dirs or loops or actuated is not None
+        if given or collision_model is not None or visual_model is not None:
             raise InputError("load_robot: a Robot is returned as is; pass no other argument")
         if not damping and np.any(robot.model.damping):
             raise InputError(
@@ -158,6 +195,8 @@ def _load(
                 "again with damping=False"
             )
         return robot
+    file_loops: list[Loop] = []
+    file_actuated: tuple[str, ...] | None = None
     if isinstance(robot, pin.Model):
         desc = load(robot, collision_model=collision_model, visual_model=visual_model)
         source: dict[str, Any] = {"kind": "model", "name": robot.name}
@@ -169,7 +208,7 @@ def _load(
             else {"kind": "model", "name": robot.name}
         )
     elif isinstance(robot, str | os.PathLike):
-        desc, source = _load_path(robot, package_dirs)
+        desc, source, file_loops, file_actuated = _load_path(robot, package_dirs)
     else:
         raise InputError(
             f"cannot load a robot from a {type(robot).__name__}: expected a robot name, a URDF or "
@@ -177,10 +216,20 @@ def _load(
         )
     desc, continuous = _unbounded(desc)
     locked = _lock_values(desc, lock)
+    for loop in file_loops:
+        carried = [j for j in (loop.joint1, loop.joint2) if j in locked]
+        if carried:
+            raise InputError(f"lock: joint {carried[0]!r} carries the loop {loop.name!r}")
     if locked:
         source = {**source, "lock": locked}
         desc = _reduced(desc, locked)
     _check_joints(desc)
+    given_loops = [loop_from_spec(desc.model, s, i) for i, s in enumerate(loops)]
+    if given_loops:
+        source = {**source, "loops": [loop.to_dict() for loop in given_loops]}
+    if actuated is not None:
+        source = {**source, "actuated": list(actuated)}
+    passive = _passive(desc.model, actuated if actuated is not None else file_actuated, locked)
     if not damping:
         model = pin.Model(desc.model)  # a copy: the caller's (or the cached) model is untouched
         model.damping[:] = 0.0
@@ -191,7 +240,7 @@ def _load(
     couplings = _couplings(desc, tags, locked) if mimic == "couple" else ()
     source = {**source, "damping": bool(damping)} | ({"mimic": mimic} if tags else {})
     continuous = tuple(n for n in continuous if n not in locked)
-    return Robot(
+    robot = Robot(
         desc.name,
         desc.model,
         desc.collision_model,
@@ -200,7 +249,27 @@ def _load(
         locked,
         continuous,
         couplings,
+        passive=passive,
     )
+    all_loops = [*file_loops, *given_loops]
+    if not all_loops:
+        return robot
+    refs = desc.model.referenceConfigurations
+    q_ref = robot.configuration("default" if "default" in refs else "neutral")
+    return replace(robot, loops=resolve_loops(desc.model, all_loops, q_ref))
+
+
+def _passive(
+    model: pin.Model, actuated: Sequence[str] | None, locked: Mapping[str, float]
+) -> tuple[str, ...]:
+    """The unlocked joints not in ``actuated`` (none if ``actuated`` is None)."""
+    if actuated is None:
+        return ()
+    names = list(model.names[1:])
+    for name in actuated:
+        if name not in names and name not in locked:
+            raise InputError(f"actuated: {name!r} is not a joint of the robot; joints: {names}")
+    return tuple(n for n in names if n not in actuated)
 
 
 def _mimic_tags(desc: RobotDescription) -> dict[str, tuple[str, float, float]]:
@@ -266,6 +335,8 @@ def robot_from_source(source: Mapping[str, Any]) -> Robot | FreeBody:
         "lock": source.get("lock") or None,
         "damping": bool(source.get("damping", False)),
         "mimic": source.get("mimic", "independent"),
+        "loops": source.get("loops", ()),
+        "actuated": source.get("actuated"),
     }
     if kind == "name":
         return load_robot(source["name"], **options)
@@ -289,14 +360,16 @@ def _cached(
 
 def _load_path(
     robot: str | os.PathLike[str], package_dirs: Sequence[str | os.PathLike[str]]
-) -> tuple[RobotDescription, dict[str, Any]]:
+) -> tuple[RobotDescription, dict[str, Any], list[Loop], tuple[str, ...] | None]:
+    """The description and source of a name or path, an MJCF file's loops and actuated joints
+    (None: the file has no ``<actuator>``)."""
     path = Path(robot)
     dirs = [str(Path(d).resolve()) for d in package_dirs]
     if path.suffix.lower() in (".xml", ".mjcf"):
         if not path.is_file():
             raise InputError(f"MJCF file not found: {path}")
         try:
-            model = pin.buildModelFromMJCF(str(path))
+            model, constraints = pin.buildModelsFromMJCF(str(path), contacts=True)[:2]
             collision = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.COLLISION)
             visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
         except (RuntimeError, ValueError) as err:
@@ -304,11 +377,12 @@ def _load_path(
                 f"Pinocchio cannot build a model from MJCF {path}: {err}"
             ) from None
         desc = RobotDescription(model.name, model, collision, visual, path)
-        return desc, {"kind": "mjcf", "path": str(path.resolve())}
+        loops = loops_from_constraints(model, constraints)
+        return desc, {"kind": "mjcf", "path": str(path.resolve())}, loops, mjcf_actuated(path)
     if isinstance(robot, str) and path.suffix.lower() != ".urdf":
-        return load(robot), {"kind": "name", "name": robot}
+        return load(robot), {"kind": "name", "name": robot}, [], None
     if not dirs:
-        return load(path), {"kind": "urdf", "path": str(path.resolve())}
+        return load(path), {"kind": "urdf", "path": str(path.resolve())}, [], None
     if not path.is_file():
         raise InputError(f"URDF file not found: {path}")
     try:
@@ -316,7 +390,7 @@ def _load_path(
     except (RuntimeError, ValueError) as err:
         raise RobotModelError(f"Pinocchio cannot build a model from {path}: {err}") from None
     desc = RobotDescription(model.name, model, collision, visual, path)
-    return desc, {"kind": "urdf", "path": str(path.resolve()), "package_dirs": dirs}
+    return desc, {"kind": "urdf", "path": str(path.resolve()), "package_dirs": dirs}, [], None
 
 
 def _lock_values(
