@@ -1,4 +1,5 @@
-"""What an MJCF file says beyond Pinocchio's model: which joints have an actuator."""
+"""What an MJCF file says beyond Pinocchio's model: which joints have an actuator, and the names
+of its ``<equality>`` closures (Pinocchio reads the closures but not their names)."""
 
 from __future__ import annotations
 
@@ -10,15 +11,32 @@ from mbplan.errors import RobotModelError
 ACTUATOR_TAGS = ("motor", "position", "velocity", "general", "intvelocity", "damper", "cylinder")
 
 
+EQUALITY_TAGS = ("connect", "weld")
+
+
+def _root(path: str | os.PathLike[str]) -> ET.Element:
+    try:
+        return ET.parse(os.fspath(path)).getroot()
+    except (ET.ParseError, OSError) as err:
+        raise RobotModelError(f"MJCF {path}: {err}") from None
+
+
+def mjcf_closure_names(path: str | os.PathLike[str]) -> list[str | None]:
+    """The ``name`` of each ``<equality>`` ``<connect>``/``<weld>`` in file order (None where
+    unnamed)."""
+    return [
+        element.get("name")
+        for section in _root(path).findall("equality")
+        for element in section
+        if element.tag in EQUALITY_TAGS
+    ]
+
+
 def mjcf_actuated(path: str | os.PathLike[str]) -> tuple[str, ...] | None:
     """The joints named by the ``<actuator>`` elements of an MJCF file (None without any
     ``<actuator>`` section: every joint is then actuated). An actuator on a tendon or a site
     cannot be represented: :class:`RobotModelError` naming it."""
-    try:
-        root = ET.parse(os.fspath(path)).getroot()
-    except (ET.ParseError, OSError) as err:
-        raise RobotModelError(f"MJCF {path}: {err}") from None
-    sections = root.findall("actuator")
+    sections = _root(path).findall("actuator")
     if not sections:
         return None
     out: list[str] = []

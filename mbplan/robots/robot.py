@@ -40,7 +40,7 @@ from mbplan.robots.loops import (
     loops_from_constraints,
     resolve_loops,
 )
-from mbplan.robots.mjcf import mjcf_actuated
+from mbplan.robots.mjcf import mjcf_actuated, mjcf_closure_names
 
 MIMIC_MODES = ("couple", "independent")
 
@@ -377,7 +377,7 @@ def _load_path(
                 f"Pinocchio cannot build a model from MJCF {path}: {err}"
             ) from None
         desc = RobotDescription(model.name, model, collision, visual, path)
-        loops = loops_from_constraints(model, constraints)
+        loops = loops_from_constraints(model, constraints, mjcf_closure_names(path))
         return desc, {"kind": "mjcf", "path": str(path.resolve())}, loops, mjcf_actuated(path)
     if isinstance(robot, str) and path.suffix.lower() != ".urdf":
         return load(robot), {"kind": "name", "name": robot}, [], None
