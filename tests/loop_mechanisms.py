@@ -71,24 +71,40 @@ def spatial_chain(kind: str = "point", joints: int = 4) -> Robot:
     """A serial chain of ``joints`` revolute joints with skew axes (:data:`AXES`), its last link
     closed to the world by a ``kind`` closure that holds at neutral; the first joint actuated:
     an RRRRS linkage with the defaults (one degree of freedom)."""
+    return spatial_branches(((kind, joints),))
+
+
+def spatial_branches(branches: tuple[tuple[str, int], ...]) -> Robot:
+    """One :func:`spatial_chain` per ``(kind, joints)`` of ``branches``, each from the world
+    (joints ``b{i}j{k}``, each branch's first one actuated; loops ``tip{i}``)."""
     model = pin.Model()
-    model.name = f"spatial_{kind}_{joints}"
-    parent = 0
-    for i in range(joints):
-        placement = pin.SE3(
-            pin.exp3(0.3 * np.array(AXES[(i + 1) % 7], float)), np.array(OFFSETS[i])
+    model.name = "spatial_" + "_".join(f"{k}{n}" for k, n in branches)
+    data, loops = None, []
+    for b, (kind, joints) in enumerate(branches):
+        parent = 0
+        for i in range(joints):
+            rotation = pin.exp3(0.3 * np.array(AXES[(i + 1) % 7], float))
+            placement = pin.SE3(rotation, np.array(OFFSETS[i]) + 0.3 * b * (i == 0))
+            axis = pin.JointModelRevoluteUnaligned(np.array(AXES[i % 7], float))
+            jid = model.addJoint(parent, axis, placement, f"b{b}j{i}")
+            model.lowerPositionLimit[jid - 1], model.upperPositionLimit[jid - 1] = -3.0, 3.0
+            lever = np.array([0.04, 0.02, 0.03]) * (1 + 0.2 * i)
+            inertia = pin.Inertia(0.5 + 0.1 * i, lever, np.diag([2e-3, 3e-3, 4e-3]))
+            model.appendBodyToJoint(jid, inertia, pin.SE3.Identity())
+            parent = jid
+        data = model.createData()
+        pin.forwardKinematics(model, data, pin.neutral(model))
+        tip = pin.SE3(pin.exp3(np.array([0.2, -0.1, 0.3])), TIP)
+        world = data.oMi[parent] * tip
+        loops.append(
+            Loop(
+                f"tip{b}",
+                kind,
+                f"b{b}j{joints - 1}",
+                tip.homogeneous,
+                "universe",
+                world.homogeneous,
+            )
         )
-        axis = pin.JointModelRevoluteUnaligned(np.array(AXES[i], float))
-        jid = model.addJoint(parent, axis, placement, f"j{i}")
-        model.lowerPositionLimit[jid - 1], model.upperPositionLimit[jid - 1] = -3.0, 3.0
-        lever = np.array([0.04, 0.02, 0.03]) * (1 + 0.2 * i)
-        inertia = pin.Inertia(0.5 + 0.1 * i, lever, np.diag([2e-3, 3e-3, 4e-3]))
-        model.appendBodyToJoint(jid, inertia, pin.SE3.Identity())
-        model.addBodyFrame(f"link{i}", jid, pin.SE3.Identity(), 0)
-        parent = jid
-    data = model.createData()
-    pin.forwardKinematics(model, data, pin.neutral(model))
-    tip = pin.SE3(pin.exp3(np.array([0.2, -0.1, 0.3])), TIP)
-    world = data.oMi[parent] * tip
-    loop = Loop("tip", kind, f"j{joints - 1}", tip.homogeneous, "universe", world.homogeneous)
-    return load_robot(model, loops=[loop], actuated=["j0"])
+    actuated = [f"b{b}j0" for b in range(len(branches))]
+    return load_robot(model, loops=loops, actuated=actuated)

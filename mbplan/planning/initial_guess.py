@@ -130,7 +130,14 @@ def goal_configuration(ocp: OCP) -> np.ndarray:
             q = np.array(ocp.q0, dtype=float)
             q[idx] = r.target
             closed, gap = close_loops(ocp.robot.model, loops, q, fixed=idx)
-            return closed if gap <= CLOSE_TOLERANCE else np.array(ocp.q0)
+            if gap <= CLOSE_TOLERANCE:
+                return closed
+            message = (
+                f"warm start: the loops do not close with the joints of {item.name!r} at their "
+                f"targets near q0 (residual {gap:.3g}); the warm start stays at q0"
+            )
+            warnings.warn(WarmStartWarning(message), stacklevel=2)
+            return np.array(ocp.q0)
     for item in terminal:
         r = item.residual
         if isinstance(r, (FramePlacement, FrameTranslation)):

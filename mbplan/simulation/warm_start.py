@@ -94,7 +94,12 @@ def maximal_warm_start(
     tau[:, active] = x[:, nl : nl + len(active)]
     point["lam"] = x[:, :nl].reshape(blocks["lam"].shape)
     point["tau"] = tau.reshape(blocks["tau"].shape)
-    return point | multiplier_blocks(mm, x[:, nl + len(active) :])
+    at = nl + len(active)
+    for block in loop_blocks(mm, N):  # the unknowns' order (_DynamicsRows)
+        size = block.count * block.group.dim
+        point[block.name] = x[:, at : at + size].reshape(block.shape)
+        at += size
+    return point
 
 
 # largest knot block (6 nb) solved densely: one batched LAPACK solve beats SuperLU up to here
