@@ -1,12 +1,15 @@
 """``mbplan validate-dynamics``: the maximal-coordinate LGVI (RIPM paper §V.A–B, eq. 27–35, 60)
 against Pinocchio on a smooth motion (:mod:`mbplan.benchmarks.dynamics_scenario`).
 
-For every robot (names of ``mbplan robots`` and URDF paths), without and with viscous joint
+For every robot (names of ``mbplan robots``, URDF and MJCF paths), without and with viscous joint
 damping (the URDF's ``<dynamics damping>``, or :data:`SYNTHETIC_DAMPING` on every joint where the
 URDF has none), the LGVI runs for ``T`` seconds at each ``Δt`` from the configurations of the
 reference at ``t = 0`` and ``t = Δt``. Reported per case: the worst joint error at the knots
 (rad, m for prismatic joints) at each ``Δt``, the observed order ``p`` and error constant ``C``
 of the least-squares fit ``error ≈ C Δt^p``, and the worst joint constraint residual at any knot.
+A mechanism with loop closures (:func:`mechanism`) moves as in
+:mod:`mbplan.benchmarks.loop_scenario` against Pinocchio's constrained dynamics, and its closure
+residuals count among the constraint residuals.
 Targets: ``p = 2 ± 0.2``, error ≤ 1e-3 at Δt = 1 ms, residual ≤ 1e-10.
 """
 
@@ -22,9 +25,12 @@ from tqdm import tqdm
 
 from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, write_json
 from mbplan.benchmarks.dynamics_scenario import joint_errors, smooth_scenario
+from mbplan.benchmarks.loop_scenario import loop_scenario
 from mbplan.errors import InputError, MbplanError
 from mbplan.multibody import joint_constraint_residuals, joint_positions, maximal_model
-from mbplan.robots import available_robots, load
+from mbplan.multibody.loops import loop_residuals
+from mbplan.robots import Robot, available_robots, load, load_robot
+from mbplan.robots.loops import Loop
 from mbplan.simulation import simulate_maximal
 
 DTS = (0.008, 0.004, 0.002, 0.001)
@@ -33,10 +39,22 @@ SYNTHETIC_DAMPING = 0.1  # N m s/rad (N s/m) on every joint of a robot whose URD
 TARGETS = {"order": (1.8, 2.2), "error_at_1ms": 1e-3, "constraint_residual": 1e-10}
 
 
+def mechanism(robot: str | Path) -> tuple[pin.Model, tuple[Loop, ...], tuple[str, ...]]:
+    """The model of ``robot`` with its loop closures and passive joints: for an MJCF file or a
+    mechanism with closures (an MJCF file's ``<equality>``, a named mechanism) those of
+    :func:`~mbplan.robots.load_robot`, else the model of :func:`~mbplan.robots.load` alone."""
+    suffix = Path(robot).suffix.lower()
+    if suffix != ".urdf":  # URDF has no closures: its meshes are not needed
+        loaded = load_robot(robot)
+        if isinstance(loaded, Robot) and (loaded.loops or suffix in (".xml", ".mjcf")):
+            return loaded.model, loaded.loops, loaded.passive
+    return load(robot, geometry=False).model, (), ()
+
+
 def damping_variants(robot: str | Path) -> dict[str, tuple[pin.Model, str]]:
-    """``{"undamped": …, "damped": …}``: the model of ``robot`` with zero and with joint damping,
-    and how the damping was chosen."""
-    model = load(robot, geometry=False).model
+    """``{"undamped": …, "damped": …}``: the model of ``robot`` (:func:`mechanism`) with zero and
+    with joint damping, and how the damping was chosen."""
+    model = mechanism(robot)[0]
     undamped = model.copy()
     undamped.damping[:] = 0.0
     damped = model.copy()
@@ -62,11 +80,18 @@ def _check(dts: tuple[float, ...], T: float) -> tuple[float, ...]:
 
 
 def validate_case(
-    model: pin.Model, seed: int, dts: tuple[float, ...], T: float, bar: tqdm | None = None
+    model: pin.Model,
+    seed: int,
+    dts: tuple[float, ...],
+    T: float,
+    bar: tqdm | None = None,
+    loops: tuple[Loop, ...] = (),
+    passive: tuple[str, ...] = (),
 ) -> dict[str, Any]:
-    """One robot with one damping: errors per ``Δt``, the fitted order and constant."""
-    mm = maximal_model(model)
-    scenario = smooth_scenario(mm, seed)
+    """One robot with one damping (and its loop closures and passive joints): errors per
+    ``Δt``, the fitted order and constant."""
+    mm = maximal_model(model, loops)
+    scenario = loop_scenario(model, loops, passive, seed) if loops else smooth_scenario(mm, seed)
     h = dts[-1]
     substeps = scenario.reference_step(h)
     q_ref, v_ref = scenario.reference(h, round(T / h), substeps)
@@ -85,21 +110,23 @@ def validate_case(
         q = joint_positions(mm, traj.R, traj.p, q_ref=scenario.q0)
         err = np.abs(joint_errors(mm, q, q_ref[::stride]))
         euler = np.abs(joint_errors(mm, scenario.euler(dt, N), q_ref[::stride]))
+        joints = float(joint_constraint_residuals(mm, traj.R, traj.p).max())
+        closures = float(np.abs(loop_residuals(mm.loops, traj.R, traj.p)).max(initial=0.0))
         runs.append(
             {
                 "dt": dt,
                 "max_joint_error": float(err.max()),
                 "euler_max_joint_error": float(euler.max()),
-                "max_constraint_residual": float(
-                    joint_constraint_residuals(mm, traj.R, traj.p).max()
-                ),
+                "max_constraint_residual": max(joints, closures),
                 "max_newton_iterations": int(traj.newton_iterations.max()),
             }
+            | ({"max_closure_residual": closures} if loops else {})
         )
     ok = [r for r in runs if "failed" not in r]
     order, constant = _fit(ok, "max_joint_error")
     return {
         "joints": _joint_counts(mm),
+        **({"loops": [lp.describe() for lp in loops]} if loops else {}),
         "max_damping_rate_per_s": float(
             np.max(
                 np.asarray(model.damping)
@@ -159,15 +186,16 @@ def run(
     dts = _check(dts, T)
     names = tuple(robots) if robots else tuple(available_robots())
     variants = {name: damping_variants(name) for name in names}  # bad robots fail here, first
-    for v in variants.values():
-        maximal_model(v["undamped"][0])  # unsupported joints named before any run
+    closures = {name: mechanism(name)[1:] for name in names}
+    for name, v in variants.items():
+        maximal_model(v["undamped"][0], closures[name][0])  # unsupported joints: before any run
     cases = []
     total = 2 * len(names) * sum(round(T / dt) for dt in dts)
     with tqdm(total=total, desc="validate-dynamics (LGVI steps)", unit="step") as bar:
         for name, v in variants.items():
             for label, (model, how) in v.items():
                 bar.set_postfix_str(f"{name}, {label}")
-                case = validate_case(model, seed, dts, T, bar)
+                case = validate_case(model, seed, dts, T, bar, *closures[name])
                 case |= {"robot": name, "damping": label, "damping_source": how}
                 case["missed"] = _verdict(case, dts)
                 cases.append(case)
@@ -232,7 +260,14 @@ def _markdown(s: dict[str, Any]) -> str:
         "Errors are the worst joint error over the knots (rad; m for prismatic joints). "
         "`c/M max` is the largest damping rate c_i/M_ii(q₀) (stiffness of the damped motion). "
         "`Euler order`: the fitted order of semi-implicit Euler on the damped ABA in the same "
-        "scenario, a first-order method the check tells apart.",
+        "scenario, a first-order method the check tells apart. Mechanisms with loop closures "
+        "(their names listed below) run the scenario of `mbplan.benchmarks.loop_scenario` against "
+        "Pinocchio's constrained dynamics; their constraint residual includes the closures'.",
+        *(
+            f"- {c['robot']}: {'; '.join(c['loops'])}"
+            for c in s["cases"]
+            if c.get("loops") and c["damping"] == "undamped"
+        ),
     ]
     return "\n".join(lines) + "\n"
 

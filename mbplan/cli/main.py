@@ -88,7 +88,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--robot",
         type=names,
         default=None,
-        help="comma-separated robot names (see `mbplan robots`) or URDF paths (default: all robots)",
+        help="comma-separated robot names (see `mbplan robots`), URDF or MJCF paths (MJCF "
+        "<equality> closures: against Pinocchio's constrained dynamics; default: all robots)",
     )
     validate.add_argument(
         "--seed", type=integer(0), default=0, help="seed of the start, motion and torques"

@@ -1,6 +1,7 @@
 """Maximal coordinates: an :class:`~mbplan.OCP` on SO(3)×R³ bodies with the LGVI, for the RIPM.
 
-The multi-body LGVI of :mod:`mbplan.transcription.multibody` plus one group of terms per OCP
+The multi-body LGVI of :mod:`mbplan.transcription.multibody` (with the robot's loop closures as
+constraints between bodies, :mod:`mbplan.transcription.loops`) plus one group of terms per OCP
 item, which its residual writes on the bodies' poses
 (:meth:`mbplan.residuals.Residual.maximal_terms`, with this NLP as the context: the maximal
 model ``mm``, the OCP, the joints' bodies and :meth:`MaximalNLP.joint_terms`).
@@ -21,6 +22,8 @@ from mbplan.formulations.maximal_layout import JointEliminationPlans
 from mbplan.lie import SO3
 from mbplan.multibody import MaximalModel, joint_positions, maximal_model
 from mbplan.ocp.problem import OCP, Item
+from mbplan.robots.loops import Loop
+from mbplan.simulation.closed_loop import closed_loop_actuation
 from mbplan.simulation.warm_start import maximal_warm_start
 from mbplan.transcription.multibody import multibody_layout
 from mbplan.transcription.terms import Term
@@ -29,10 +32,11 @@ from mbplan.transcription.variables import Point, trajectory_variables
 from mbplan.workspace import Workspace
 
 
-# process-wide cache, result-neutral: maximal-coordinate data of the (unmodified) model alone
+# process-wide cache, result-neutral: maximal-coordinate data of the (unmodified) model and its
+# loop closures alone
 @lru_cache(maxsize=16)
-def _maximal(model: pin.Model) -> MaximalModel:
-    return maximal_model(model)
+def _maximal(model: pin.Model, loops: tuple[Loop, ...]) -> MaximalModel:
+    return maximal_model(model, loops)
 
 
 class MaximalNLP:
@@ -41,8 +45,10 @@ class MaximalNLP:
 
     def __init__(self, ocp: OCP, jit: bool, workspace: Workspace | None = None):
         self.ocp, self.jit, self.workspace = ocp, jit, workspace
-        self.mm = mm = _maximal(ocp.robot.model)
+        robot = ocp.robot
+        self.mm = mm = _maximal(robot.model, tuple(getattr(robot, "loops", ())))
         self.body_of_joint = {int(j): b for b, j in enumerate(mm.pin_joint)}
+        self.passive = tuple(mm.joint_names.index(name) for name in getattr(robot, "passive", ()))
         layout = multibody_layout(mm, ocp.N, ocp.dt, jit=jit, workspace=workspace)
         terms = list(layout.terms)
         for item in ocp.items:
@@ -60,14 +66,14 @@ class MaximalNLP:
     def pick_reference(self, eq_jacobian: sp.spmatrix) -> np.ndarray | None:
         """The values of ``eq_jacobian``'s entries that the joint reduction picks its pivots on:
         the equality Jacobian with every knot at rest in the robot's neutral configuration
-        (inverse dynamics for the forces). The rows the pick reads (the LGVI's kinematics,
-        dynamics and joint constraints) are a function of the robot model, ``N`` and ``dt``
-        alone, so every problem of a family picks alike and shares one symbolic phase
+        (its loops closed nearby; inverse dynamics for the forces). The rows the pick reads (the
+        LGVI's kinematics, dynamics and joint constraints) are a function of the robot model
+        (with its loops), ``N`` and ``dt`` alone, so every problem of a family picks alike and shares one symbolic phase
         (``None``: another pattern than the problem's). Neutral rather than a generic
         configuration: its groups have full rank, its tied columns are broken alike in every
         process, and its pick stays well conditioned on tasks that move around it (a seeded
         generic configuration's did not on the 4-link chain's reach)."""
-        q = pin.neutral(self.ocp.robot.model)
+        q = self.ocp.robot.closed(pin.neutral(self.ocp.robot.model))
         point = self.initial_point(np.tile(q, (self.ocp.N + 1, 1)))
         ref = sp.csr_matrix(self.problem.evaluate(point, hessian=False).eq_jacobian)
         jac = sp.csr_matrix(eq_jacobian)
@@ -104,8 +110,11 @@ class MaximalNLP:
 
     # -- points and results --------------------------------------------------------------------
     def initial_point(self, q: np.ndarray) -> Point:
-        """The LGVI point of a joint path ``q (N+1, nq)`` (inverse dynamics for λ, τ)."""
-        point = maximal_warm_start(self.mm, q, self.ocp.dt, jit=self.jit, workspace=self.workspace)
+        """The LGVI point of a joint path ``q (N+1, nq)`` (inverse dynamics for λ, τ; the
+        passive joints' torques zero)."""
+        point = maximal_warm_start(
+            self.mm, q, self.ocp.dt, jit=self.jit, workspace=self.workspace, passive=self.passive
+        )
         return self.problem.check_point(point)
 
     def trajectory(self, x: Point) -> dict:
@@ -120,7 +129,9 @@ class MaximalNLP:
         ``q_k`` from the relative poses and ``v_k = (q_{k+1} - q_{k-1})/(2Δt)`` (with
         ``q_{N+1}`` from ``R_N F_N``). Knot 0's torque does not enter the LGVI, where the arm
         rests over the first step as in eq. (61): ``tau_knots[0]`` makes the mean over
-        ``[t_0, t_1]`` the torque for which eq. (61)'s first step reaches the planned ``v_1``.
+        ``[t_0, t_1]`` the torque for which eq. (61)'s first step reaches the planned ``v_1``
+        (with loop closures: the actuated joints' torques and closure forces that do, least
+        squares; the passive joints' zero).
         """
         mm, N, dt = self.mm, self.ocp.N, self.ocp.dt
         Rk = np.concatenate([x["R"], (x["R"][-1] @ x["F"][-1])[None]])
@@ -132,9 +143,18 @@ class MaximalNLP:
         tau_knots = np.array(x["tau"][:, :, 0])[:, np.argsort(mm.idx_v)]
         tau_0 = pin.rnea(mm.model, mm.model.createData(), q[0], v[0], (v[1] - v[0]) / dt)
         tau_0 = tau_0 + np.asarray(mm.model.damping) * v[0]  # the LGVI's viscous damping
-        tau_knots[0] = 2.0 * tau_0 - tau_knots[1]
+        tau_knots[0] = 2.0 * self._actuation(q[0], tau_0) - tau_knots[1]
         tau = 0.5 * (tau_knots[:-1] + tau_knots[1:])
         return {"q": q[: N + 1], "v": v, "tau": tau, "tau_knots": tau_knots}
+
+    def _actuation(self, q: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """The joint torques ``u`` (zero on passive joints) with ``u + Jᵀf = tau`` for some
+        closure forces ``f`` (least squares; ``tau`` itself without loops)."""
+        robot = self.ocp.robot
+        if not robot.loops:
+            return tau
+        active = np.setdiff1d(np.arange(robot.nv), robot.joint_indices(robot.passive))
+        return closed_loop_actuation(robot.model, robot.loops, active, q, tau)
 
 
 def build(ocp: OCP, jit: bool, workspace: Workspace | None = None) -> tuple[MaximalNLP, float]:

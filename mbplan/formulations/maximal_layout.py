@@ -1,6 +1,10 @@
 """Where a maximal-coordinate RIPM problem keeps each knot's and body's state, joint forces and
 multibody rows in its KKT matrix, and the joint elimination plan built from it
-(:mod:`mbplan.solvers.kkt.elimination`, factorized by :mod:`mbplan.solvers.kkt.reduced`)."""
+(:mod:`mbplan.solvers.kkt.elimination`, factorized by :mod:`mbplan.solvers.kkt.reduced`).
+
+Loop closures are extra rows and columns of the plan: their constraint rows are never local
+rows (they stay in the reduced matrix), their multipliers are candidate columns of the first
+wrench block of their knot (the dynamics rows of any body may then read them)."""
 
 from __future__ import annotations
 
@@ -11,6 +15,7 @@ import scipy.sparse as sp
 
 from mbplan.errors import InputError
 from mbplan.solvers.kkt.elimination import EliminationPlan
+from mbplan.transcription.loops import LOOP_BLOCK
 from mbplan.workspace import Workspace, shared
 
 
@@ -29,6 +34,7 @@ class MaximalLayout:
     kin_rows: np.ndarray  # (N, nb, 6) equality rows of step k
     dyn_rows: np.ndarray  # (N, nb, 6)
     con_rows: np.ndarray  # (N+1, nb, 5) joint constraint h(X_{k+1}) of the body's joint, on s_k
+    loop_cols: np.ndarray  # (N+1, m) the loop closures' multipliers
 
     @property
     def N(self) -> int:
@@ -109,6 +115,11 @@ def _layout(problem, jac: sp.csr_matrix) -> MaximalLayout:
     lam_cols = cols("lam")
     tau = v.blocks.get("tau")
     tau_cols = cols("tau") if tau is not None and tau.count == nb else -np.ones((knots, nb, 1), int)
+    loops = [n for n in v.blocks if n.startswith(LOOP_BLOCK.format(""))]
+    loop_cols = np.concatenate(
+        [np.zeros((knots, 0), np.int64), *(v.tangent_index(n).reshape(knots, -1) for n in loops)],
+        axis=1,
+    )
     body_of_col = np.full(problem.n, -1, np.int64)
     knot_of_col = np.full(problem.n, -1, np.int64)
     kk, bb = np.meshgrid(np.arange(knots), np.arange(nb), indexing="ij")
@@ -146,7 +157,7 @@ def _layout(problem, jac: sp.csr_matrix) -> MaximalLayout:
         raise InputError("maximal_layout: bodies must be numbered parents first")
     return MaximalLayout(
         problem.n, problem.n_eq, problem.n_ineq, parent, s_cols, lam_cols, tau_cols, kin_rows,
-        dyn_rows, con_rows,
+        dyn_rows, con_rows, loop_cols,
     )  # fmt: skip
 
 
@@ -167,7 +178,8 @@ def joint_elimination_plan(
     states, which are blocks before, and the wrenches of its children; the reduced matrix shrinks
     ~5×, the reduction's products grow). ``None``: the wrench
     blocks when every joint has a torque and the tree is at most :data:`WRENCH_MAX_DEPTH`
-    deep. ``segment`` (``None``: :data:`SEGMENT_DEPTH`): the bodies at depths ``segment + 1,
+    deep; the loop closures' multipliers of knot ``k`` are candidates of its first wrench
+    block. ``segment`` (``None``: :data:`SEGMENT_DEPTH`): the bodies at depths ``segment + 1,
     2 segment + 1, …`` keep their maximal coordinates (state and wrench blocks without local
     rows: their columns stay in the reduced matrix, with their joint constraints, kinematics
     and dynamics rows), so that an eliminated state depends on the free coordinates of at most
@@ -197,6 +209,8 @@ def _plan_of_layout(lay: MaximalLayout, forces: bool, segment: int) -> Eliminati
     N, nb, parent = lay.N, lay.nb, lay.parent
     depths = lay.depths
     cut = (depths > 1) & ((depths - 1) % segment == 0)
+    m = lay.loop_cols.shape[1]
+    width = max(12, 6 + m)  # a wrench block's candidates: λ (5), τ (1), the loops' (first one)
     pad6 = -np.ones(6, np.int64)
     pad11 = -np.ones(11, np.int64)
     pad12 = -np.ones(12, np.int64)
@@ -222,21 +236,23 @@ def _plan_of_layout(lay: MaximalLayout, forces: bool, segment: int) -> Eliminati
                 rows.append(
                     np.concatenate([lay.kin_rows[0, c] if k == 1 else pad6, lay.con_rows[k, c]])
                 )
-            cols.append(lay.s_cols[k, c])
+            cols.append(np.concatenate([lay.s_cols[k, c], -np.ones(width - 12, np.int64)]))
     if forces:
         for k in range(1, N + 1):
             for c in range(nb - 1, -1, -1):
                 groups.append(-1)
                 dyn = pad6 if cut[c] else lay.dyn_rows[k - 1, c]
                 rows.append(np.concatenate([dyn, -np.ones(5, np.int64)]))
-                cols.append(np.concatenate([lay.lam_cols[k, c], lay.tau_cols[k, c], pad6]))
+                extra = lay.loop_cols[k] if c == nb - 1 else np.zeros(0, np.int64)
+                wrench = [lay.lam_cols[k, c], lay.tau_cols[k, c], extra]
+                cols.append(np.concatenate([*wrench, -np.ones(width - 6 - len(extra), np.int64)]))
 
     def stack(a: list, width: int) -> np.ndarray:
         return np.asarray(a, np.int64).reshape(len(a), width)
 
     return EliminationPlan(
         stack(targets, 6), stack(sources, 12), stack(subtract, 5), stack(cancel, 24),
-        np.asarray(groups, np.int64), stack(rows, 11), stack(cols, 12),
+        np.asarray(groups, np.int64), stack(rows, 11), stack(cols, width),
     )  # fmt: skip
 
 

@@ -11,18 +11,22 @@ pose ``R = I, p = 0``) and the child body (paper §VI.B):
 * axis:  ``(R_p perp_parent[i])^T (R_c axis_child) = 0`` for ``i = 0, 1``.
 
 A prismatic joint keeps ``R_p^T R_c = R_rel0`` and lets the pivot points separate along the axis.
+A robot's loop closures are constraints between two bodies (:mod:`mbplan.multibody.loops`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import RobotModelError
-from mbplan.robots import RobotSpec, load
+from mbplan.multibody.loops import MaximalLoop, maximal_loops
+from mbplan.robots import Robot, RobotSpec, load
 from mbplan.robots.joints import joint_kind
+from mbplan.robots.loops import Loop
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,6 +67,7 @@ class MaximalModel:
     velocity_limit: np.ndarray  # (nb,)
     effort_limit: np.ndarray  # (nb,)
     damping: np.ndarray  # (nb,)
+    loops: tuple[MaximalLoop, ...] = ()  # closures between bodies
 
     @property
     def nb(self) -> int:
@@ -116,14 +121,19 @@ _ARRAY_FIELDS: dict[str, type] = {
 }
 
 
-def maximal_model(robot: RobotSpec) -> MaximalModel:
-    """Maximal-coordinate model of ``robot`` (anything :func:`mbplan.robots.load` accepts).
+def maximal_model(robot: RobotSpec | Robot, loops: Sequence[Loop] | None = None) -> MaximalModel:
+    """Maximal-coordinate model of ``robot`` (a :class:`~mbplan.robots.Robot`, whose loops it
+    takes, or anything :func:`mbplan.robots.load` accepts) with the loop closures ``loops``
+    (default: the robot's; resolved ones, :func:`mbplan.multibody.loops.maximal_loops`).
 
     Raises :class:`RobotModelError` for a joint that is not revolute, continuous or prismatic
     (spherical, planar, free-flyer, mimic, helical, universal, composite, ...) and for a body whose
     mass or inertia (after merging fixed links) is not positive.
     """
-    model = load(robot, geometry=False).model
+    if isinstance(robot, Robot):
+        model, loops = robot.model, robot.loops if loops is None else loops
+    else:
+        model = load(robot, geometry=False).model
     if model.njoints == 1:
         raise RobotModelError(f"robot {model.name!r} has no moving joint")
     body_names = _body_names(model)
@@ -172,6 +182,7 @@ def maximal_model(robot: RobotSpec) -> MaximalModel:
             cols[key].append(value)
 
     arrays = {k: _readonly(np.array(v, dtype=_ARRAY_FIELDS[k])) for k, v in cols.items()}
+    closures = maximal_loops(model, loops or (), arrays["pin_joint"], arrays["com_in_joint"])
     return MaximalModel(
         name=model.name,
         model=model,
@@ -180,6 +191,7 @@ def maximal_model(robot: RobotSpec) -> MaximalModel:
         inertia_nonstandard=_readonly(nonstandard_inertia(arrays["inertia"])),
         joint_names=tuple(model.names[1:]),
         joint_types=tuple(joint_types),
+        loops=closures,
         **arrays,
     )
 

@@ -9,6 +9,10 @@
 The goal configuration is the target of a terminal :class:`~mbplan.residuals.JointPosition`
 (constraint or cost), else the inverse kinematics of a terminal frame goal
 (:func:`inverse_kinematics`, which reports an unreachable goal before any solve), else ``q0``.
+A robot with loop closures heads for ``q0`` with the joints of a terminal partial joint goal at
+their targets, the loops closed around them, and every knot of its path closes the loops
+(:func:`closed_path`: the actuated joints kept where possible, the passive ones continued from
+the previous knot, so the path stays on one assembly branch).
 A free body's warm start is the geodesic of :func:`geodesic_path`.
 Continuous joints interpolate in angle (to the target as given, not modulo 2π); via points and
 IK starts sample them within ``± π`` of the midpoint / the IK's start.
@@ -36,6 +40,7 @@ from mbplan.residuals import (
 )
 from mbplan.robots.continuous import joint_ranges
 from mbplan.robots.free_body import FreeBody, quaternions, rotations
+from mbplan.robots.loops import CLOSE_TOLERANCE, close_loops
 from mbplan.robots.robot import Robot
 
 VIA_CANDIDATES = 256  # random via points tried by the "via" warm start
@@ -117,6 +122,22 @@ def goal_configuration(ocp: OCP) -> np.ndarray:
         r = item.residual
         if isinstance(r, JointPosition) and r.joints is None:
             return np.array(r.target)
+    loops = getattr(ocp.robot, "loops", ())
+    for item in terminal:
+        r = item.residual
+        if loops and isinstance(r, JointPosition):
+            idx = ocp.robot.joint_indices(r.joints)
+            q = np.array(ocp.q0, dtype=float)
+            q[idx] = r.target
+            closed, gap = close_loops(ocp.robot.model, loops, q, fixed=idx)
+            if gap <= CLOSE_TOLERANCE:
+                return closed
+            message = (
+                f"warm start: the loops do not close with the joints of {item.name!r} at their "
+                f"targets near q0 (residual {gap:.3g}); the warm start stays at q0"
+            )
+            warnings.warn(WarmStartWarning(message), stacklevel=2)
+            return np.array(ocp.q0)
     for item in terminal:
         r = item.residual
         if isinstance(r, (FramePlacement, FrameTranslation)):
@@ -132,6 +153,33 @@ def initial_path(ocp: OCP, kind: str = "linear") -> np.ndarray:
         raise InputError(f"warm_start: expected 'linear', 'via' or an array, got {kind!r}")
     if isinstance(ocp.robot, FreeBody):
         return geodesic_path(ocp)
+    path = _open_path(ocp, kind)
+    return closed_path(ocp.robot, path) if ocp.robot.loops else path
+
+
+def closed_path(robot: Robot, path: np.ndarray) -> np.ndarray:
+    """``path (K, nq)`` with every knot projected onto the robot's loop closures
+    (:func:`~mbplan.robots.loops.close_loops`): the actuated joints kept, the passive ones
+    started from the previous knot's (else every joint free). Knots that cannot be closed are
+    left as they are (the planner's closure constraints then pull them)."""
+    model, loops = robot.model, robot.loops
+    passive = robot.joint_indices(robot.passive)
+    actuated = np.setdiff1d(np.arange(robot.nq), passive)
+    out = np.array(path, dtype=float)
+    for k in range(len(out)):
+        start = out[k].copy()
+        if k:
+            start[passive] = out[k - 1, passive]
+        q, gap = close_loops(model, loops, start, fixed=actuated)
+        if gap > CLOSE_TOLERANCE:
+            q, gap = close_loops(model, loops, start)
+        if gap <= CLOSE_TOLERANCE:
+            out[k] = q
+    return out
+
+
+def _open_path(ocp: OCP, kind: str) -> np.ndarray:
+    """:func:`initial_path` before the loops are closed."""
     q0, q_goal = ocp.q0, goal_configuration(ocp)
     s = np.concatenate([[0.0], np.linspace(0.0, 1.0, ocp.N)])
     linear = q0 + s[:, None] * (q_goal - q0)

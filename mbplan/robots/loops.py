@@ -142,15 +142,17 @@ def close_loops(
     *,
     fixed: Sequence[int] = (),
     iterations: int = 50,
+    tolerance: float = CLOSE_TOLERANCE,
 ) -> tuple[np.ndarray, float]:
     """The configuration nearest ``q`` (Gauss–Newton, minimum-norm steps) that closes every
-    loop, keeping the coordinates ``fixed``; returns it and its largest residual."""
+    loop to ``tolerance``, keeping the coordinates ``fixed``; returns it and its largest
+    residual."""
     q = np.array(q, dtype=float)
     free = np.setdiff1d(np.arange(q.size), np.asarray(fixed, dtype=np.int64))
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
     for _ in range(iterations):
         r = closure_residual(model, loops, q)
-        if r.size == 0 or np.max(np.abs(r)) < CLOSE_TOLERANCE:
+        if r.size == 0 or np.max(np.abs(r)) < tolerance:
             break
         J = closure_jacobian(model, loops, q)[:, free]
         q[free] -= np.linalg.lstsq(J, r, rcond=None)[0]
@@ -317,3 +319,32 @@ def _align_z(axis: np.ndarray, what: str) -> np.ndarray:
     out = np.eye(4)
     out[:3, :3] = np.column_stack([x, np.cross(a, x), a])
     return out
+
+
+def loop_jacobian(model: pin.Model, loops: Sequence[Loop], q: np.ndarray) -> np.ndarray:
+    """``∂r/∂q`` ``(m, nv)`` of :func:`closure_residual`, exact (Pinocchio's joint Jacobians).
+
+    With each frame's world velocity ``(v_i, ω_i)`` and ``w = R₁ᵀ(ω₂ - ω₁)``, ``M = R₁ᵀR₂``:
+    point rows ``R₁ᵀ(v₂ - v₁ + (p₂ - p₁) × ω₁)``, axis rows the ``x, y`` of ``-(M e_z) × w``,
+    rotation rows ``(tr(M) I - M) w / 2``."""
+    data = model.createData()
+    pin.computeJointJacobians(model, data, np.asarray(q, dtype=float))
+    parts = [np.zeros((0, model.nv))]
+    for loop in loops:
+        frames = []
+        for joint, placement in ((loop.joint1, loop.placement1), (loop.joint2, loop.placement2)):
+            jid = model.getJointId(joint)
+            M = data.oMi[jid] * pin.SE3(placement)
+            J = pin.getJointJacobian(model, data, jid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            lever = M.translation - data.oMi[jid].translation
+            v = J[:3] - pin.skew(lever) @ J[3:]  # the frame origin's velocity
+            frames.append((M.rotation, M.translation, v, J[3:]))
+        (R1, p1, v1, w1), (R2, p2, v2, w2) = frames
+        rows = [R1.T @ (v2 - v1 + pin.skew(p2 - p1) @ w1)]
+        w, Mrel = R1.T @ (w2 - w1), R1.T @ R2
+        if loop.kind == "revolute":
+            rows.append((-pin.skew(Mrel[:, 2]) @ w)[:2])
+        elif loop.kind == "weld":
+            rows.append(0.5 * (np.trace(Mrel) * np.eye(3) - Mrel) @ w)
+        parts.append(np.vstack(rows)[loop.rows])
+    return np.vstack(parts)

@@ -1,8 +1,9 @@
 """Forward simulation of the maximal-coordinate LGVI: one Newton solve per step (§V.A).
 
 Given ``x_k``, ``x_{k+1} = (R_k F_k, p_k + v_k Δt)`` is explicit; the unknowns of a step are
-``F_{k+1}, v_{k+1}`` of every body and ``λ_{k+1}`` of every joint, solved from the body LGVI rows
-and the joint constraints on ``x_{k+2}`` with the engine's exact Riemannian Jacobian.
+``F_{k+1}, v_{k+1}`` of every body and ``λ_{k+1}`` of every joint and loop closure, solved from
+the body LGVI rows and the joint and closure constraints on ``x_{k+2}`` with the engine's exact
+Riemannian Jacobian.
 """
 
 from __future__ import annotations
@@ -16,9 +17,13 @@ from mbplan.engine.jit import jit_available
 from mbplan.errors import InputError, MbplanError
 from mbplan.lie import SO3
 from mbplan.multibody import MaximalModel, body_poses
+from mbplan.multibody.loops import loop_residuals
+from mbplan.transcription.loops import multiplier_blocks, stack_multipliers
 from mbplan.transcription.multibody import LAMBDA_DIM, multibody_layout
 from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import TrajectoryVariables
+
+CLOSURE_TOLERANCE = 1e-8  # m or rad: how far the start configurations may be off a loop closure
 
 
 @dataclass(frozen=True)
@@ -32,15 +37,26 @@ class MaximalTrajectory:
     lam: np.ndarray  # (N+1, nb, 5)
     newton_iterations: np.ndarray  # (N,)
     max_residual: float  # worst ‖step residual‖∞ at convergence
+    loop_lam: np.ndarray  # (N+1, m) multipliers of the loop closures (mm.loops order)
 
 
 def initial_state(mm: MaximalModel, q0: np.ndarray, q1: np.ndarray, dt: float) -> tuple:
     """``(R₀, p₀, F₀, v₀)`` from the configurations at ``t = 0`` and ``t = Δt``.
 
     Both knots satisfy the joint constraints exactly; ``F₀ = R₀ᵀR₁``, ``v₀ = (p₁ - p₀)/Δt``.
+    :class:`InputError` if either does not close the loop closures (within
+    :data:`CLOSURE_TOLERANCE`).
     """
     R0, p0 = body_poses(mm, q0)
     R1, p1 = body_poses(mm, q1)
+    for name, (R, p) in (("q0", (R0, p0)), ("q1", (R1, p1))):
+        gap = float(np.max(np.abs(loop_residuals(mm.loops, R, p)), initial=0.0))
+        if gap > CLOSURE_TOLERANCE:
+            names = ", ".join(lp.name for lp in mm.loops)
+            raise InputError(
+                f"{name} does not close the loops ({names}): residual {gap:.3g} > "
+                f"{CLOSURE_TOLERANCE:g} (mbplan.robots.loops.close_loops)"
+            )
     return R0, p0, np.swapaxes(R0, -1, -2) @ R1, (p1 - p0) / dt
 
 
@@ -60,7 +76,8 @@ def simulate_maximal(
 
     ``tau``: joint torques (forces for prismatic joints), ``(nb,)`` constant or ``(N+1, nb)``
     per knot (knot 0 unused; knot ``k`` acts at ``t = kΔt``). Joints with ``mm.damping > 0``
-    are damped (:mod:`mbplan.dynamics.damping`).
+    are damped (:mod:`mbplan.dynamics.damping`). Both configurations must close ``mm.loops``
+    (:func:`initial_state`).
     """
     jit = jit_available() if jit is None else jit
     if N < 1 or dt <= 0:
@@ -79,6 +96,7 @@ def simulate_maximal(
     nb = mm.nb
     R, p, F, v = (np.empty((N + 1, nb, *s)) for s in ((3, 3), (3,), (3, 3), (3,)))
     lam = np.zeros((N + 1, nb, LAMBDA_DIM))
+    loop_lam = np.zeros((N + 1, sum(lp.dim for lp in mm.loops)))
     R[0], p[0], F[0], v[0] = initial_state(mm, q0, q1, dt)
     iterations = np.zeros(N, dtype=int)
     worst = 0.0
@@ -95,12 +113,13 @@ def simulate_maximal(
             "v": np.stack([v[k], v_guess]),
             "lam": np.stack([lam[k], lam[k]]),
             "tau": tau[k : k + 2, :, None],
-        }
+        } | multiplier_blocks(mm, loop_lam[[k, k]])
         point, it, res = _newton(problem, point, tol, max_newton, k)
         iterations[k] = it
         worst = max(worst, res)
         F[k + 1], v[k + 1], lam[k + 1] = point["F"][1], point["v"][1], point["lam"][1]
-    return MaximalTrajectory(R, p, F, v, lam, iterations, worst)
+        loop_lam[k + 1] = stack_multipliers(mm, point, 2)[1]
+    return MaximalTrajectory(R, p, F, v, lam, iterations, worst, loop_lam)
 
 
 def discrete_energy(

@@ -53,12 +53,15 @@ def integrate_aba(
     tau_end: np.ndarray | None = None,
     *,
     damping: bool = False,
+    acceleration: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(q(T), v(T))`` by RK4 on the configuration manifold for constant ``tau``, or, with
     ``tau_end``, the torque ramping linearly from ``tau`` at 0 to ``tau_end`` at ``T``
     (first-order hold; RK4 samples it at each stage's time, so it stays fourth order), or a
     callable ``tau(t)``, ``t`` from 0 to ``T``. With ``damping``, the model's viscous
-    joint damping applies (:func:`damped_aba`)."""
+    joint damping applies (:func:`damped_aba`). ``acceleration(q, v, τ)``: the forward dynamics
+    to integrate instead of ABA (e.g. :class:`~mbplan.simulation.closed_loop.ClosedLoopDynamics`;
+    ``damping`` is then its own)."""
     data = model.createData()
     h = T / substeps
     q, v = np.array(q0, dtype=float), np.array(v0, dtype=float)
@@ -74,6 +77,8 @@ def integrate_aba(
     forward = damped_aba if damping else pin.aba
 
     def acc(qq: np.ndarray, vv: np.ndarray, t: float) -> np.ndarray:
+        if acceleration is not None:
+            return acceleration(qq, vv, torque(t))
         return forward(model, data, qq, vv, torque(t))
 
     for i in range(substeps):

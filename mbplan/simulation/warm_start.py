@@ -8,7 +8,10 @@ system in the exact Jacobian columns of the ``lam`` and ``tau`` blocks, block di
 ``6nb × 6nb`` block per knot. For a tree of revolute and prismatic joints (every joint actuated)
 each block is square and regular, since a joint's 5 multipliers and its torque or force apply a
 full 6-D wrench to its child, so the solution is exact and the dynamics rows (with any joint
-damping, evaluated on the given motion) vanish up to round-off.
+damping, evaluated on the given motion) vanish up to round-off. Loop closures add their
+multipliers as unknowns and passive joints take no torque: a mechanism with as many actuators as
+degrees of freedom has square blocks again; otherwise each block is solved in the least-squares
+sense (minimum norm: the forces distributed between the joints and the closures).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import scipy.sparse.linalg as spla
 from mbplan.engine.jit import jit_available
 from mbplan.errors import InputError, MbplanError
 from mbplan.multibody import MaximalModel, body_poses
+from mbplan.transcription.loops import loop_blocks, multiplier_blocks
 from mbplan.transcription.multibody import LAMBDA_DIM, multibody_layout
 from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import Point, TrajectoryVariables
@@ -37,16 +41,19 @@ def maximal_warm_start(
     N: int | None = None,
     jit: bool | None = None,
     workspace: Workspace | None = None,
+    passive: tuple[int, ...] = (),
 ) -> Point:
     """A point of ``multibody_layout(mm, N, dt)`` from joint configurations at the knots.
 
     ``q_traj`` holds the configurations of knots ``0 … N`` (``N`` defaults to ``len(q_traj) - 1``)
     and optionally one more, at ``t = (N+1)Δt``, that defines ``F_N`` and ``v_N``; without it
-    the motion stops after knot ``N`` (``F_N = I``, ``v_N = 0``). ``λ_k`` and ``τ_k``
-    (``k = 1 … N``) solve the dynamics rows of step ``k-1`` (one block per knot);
-    knot 0, which no equation uses, repeats knot 1. Raises :class:`MbplanError` if the joint
-    forces cannot balance the dynamics (singular system). ``workspace``: where the dynamics
-    rows' problem is kept (shared by the warm starts of a problem family).
+    the motion stops after knot ``N`` (``F_N = I``, ``v_N = 0``). ``λ_k``, ``τ_k`` and the loop
+    closures' multipliers (``k = 1 … N``) solve the dynamics rows of step ``k-1`` (one block per
+    knot; least squares if it is not square, module docstring) with zero torque on the
+    ``passive`` bodies' joints; knot 0, which no equation uses, repeats knot 1. Raises
+    :class:`MbplanError` if the joint forces cannot balance the dynamics (singular system).
+    ``workspace``: where the dynamics rows' problem is kept (shared by the warm starts of a
+    problem family).
     """
     q = np.asarray(q_traj, dtype=float)
     N = len(q) - 1 if N is None else N
@@ -65,8 +72,12 @@ def maximal_warm_start(
     F = np.swapaxes(R[:-1], -1, -2) @ R[1:]
     v = (p[1:] - p[:-1]) / dt
     nb = mm.nb
-    dynamics = _dynamics_rows(mm, N, float(dt), bool(jit), workspace)
+    passive = tuple(sorted({int(b) for b in passive}))
+    if any(not 0 <= b < nb for b in passive):
+        raise InputError(f"passive: bodies {passive} outside 0..{nb - 1}")
+    dynamics = _dynamics_rows(mm, N, float(dt), bool(jit), workspace, passive)
     blocks = dynamics.variables.blocks
+    m = sum(lp.dim for lp in mm.loops)
     point = {
         "R": R[: N + 1],
         "p": p[: N + 1],
@@ -74,13 +85,20 @@ def maximal_warm_start(
         "v": v,
         "lam": np.zeros((N + 1, nb, LAMBDA_DIM)),
         "tau": np.zeros((N + 1, nb, 1)),
-    }
+    } | multiplier_blocks(mm, np.zeros((N + 1, m)))
     point = {k: a.reshape(blocks[k].shape) for k, a in point.items()}
-    x = dynamics.solve(point).reshape(N, nb * (LAMBDA_DIM + 1))
-    lam = np.concatenate([x[:1, : nb * LAMBDA_DIM], x[:, : nb * LAMBDA_DIM]])
-    tau = np.concatenate([x[:1, nb * LAMBDA_DIM :], x[:, nb * LAMBDA_DIM :]])
-    point["lam"] = lam.reshape(blocks["lam"].shape)
+    x = dynamics.solve(point).reshape(N, -1)
+    x = np.concatenate([x[:1], x])  # knot 0 repeats knot 1
+    nl, active = nb * LAMBDA_DIM, dynamics.active
+    tau = np.zeros((N + 1, nb))
+    tau[:, active] = x[:, nl : nl + len(active)]
+    point["lam"] = x[:, :nl].reshape(blocks["lam"].shape)
     point["tau"] = tau.reshape(blocks["tau"].shape)
+    at = nl + len(active)
+    for block in loop_blocks(mm, N):  # the unknowns' order (_DynamicsRows)
+        size = block.count * block.group.dim
+        point[block.name] = x[:, at : at + size].reshape(block.shape)
+        at += size
     return point
 
 
@@ -91,11 +109,18 @@ DENSE_BLOCK_MAX = 64
 
 class _DynamicsRows:
     """The dynamics rows of ``multibody_layout(mm, N, dt)`` as the warm start solves them for
-    ``λ_k, τ_k`` (knots 1 … N): one ``6nb × 6nb`` block per knot, gathered from the Jacobian's
-    fixed pattern. Shared by every warm start of its key (evaluated under a lock)."""
+    ``λ_k``, the torques ``τ_k`` of the joints not ``passive`` and the loops' multipliers (knots
+    1 … N): one ``6nb × d`` block per knot, gathered from the Jacobian's fixed pattern. Shared by
+    every warm start of its key (evaluated under a lock)."""
 
     def __init__(
-        self, mm: MaximalModel, N: int, dt: float, jit: bool, workspace: Workspace | None = None
+        self,
+        mm: MaximalModel,
+        N: int,
+        dt: float,
+        jit: bool,
+        workspace: Workspace | None = None,
+        passive: tuple[int, ...] = (),
     ) -> None:
         layout = multibody_layout(mm, N, dt, jit=jit, workspace=workspace)
         self.name = mm.name
@@ -104,29 +129,36 @@ class _DynamicsRows:
         self.lock = threading.Lock()
         nb = mm.nb
         self.rows = np.arange(layout.n_dynamics_rows - 6 * N * nb, layout.n_dynamics_rows)
-        lam_idx = self.variables.tangent_index("lam").reshape(N + 1, nb * LAMBDA_DIM)[1:]
-        tau_idx = self.variables.tangent_index("tau").reshape(N + 1, nb)[1:]
+        self.active = np.setdiff1d(np.arange(nb), np.asarray(passive, dtype=np.int64))
+        index = self.variables.tangent_index
+        parts = [
+            index("lam").reshape(N + 1, nb * LAMBDA_DIM)[1:],
+            index("tau").reshape(N + 1, nb)[1:, self.active],
+            *(index(b.name).reshape(N + 1, -1)[1:] for b in loop_blocks(mm, N)),
+        ]
         # knot-major, like the rows: step k-1's rows and knot k's columns form block k-1
-        self.cols = np.concatenate([lam_idx, tau_idx], axis=1).ravel()
-        self.N, self.d = N, 6 * nb
+        self.cols = np.concatenate(parts, axis=1).ravel()
+        self.N, self.d, self.c = N, 6 * nb, len(self.cols) // N
         self._entries: tuple[np.ndarray, ...] | None = None
 
     def solve(self, point: Point) -> np.ndarray:
-        """``(λ_k, τ_k)`` of knots 1 … N, knot-major, that zero the dynamics rows at ``point``
-        (whose ``lam`` and ``tau`` are 0); :class:`MbplanError` if a block is singular."""
+        """The unknowns (class docstring) of knots 1 … N, knot-major, that zero the dynamics rows
+        at ``point`` (whose forces are 0; least squares, minimum norm, for blocks that are not
+        square); :class:`MbplanError` if a square block is singular."""
         with self.lock:
             ev = self.problem.evaluate(point, hessian=False)
             if self._entries is None:
                 self._entries = self._block_entries(ev.eq_jacobian)
         src, row, col, flat = self._entries
         values, b = ev.eq_jacobian.data[src], -ev.eq[self.rows]
-        N, d = self.N, self.d
+        N, d, c = self.N, self.d, self.c
         try:
-            if d <= DENSE_BLOCK_MAX:
-                A = np.zeros((N, d, d))
+            if d <= DENSE_BLOCK_MAX or c != d:
+                A = np.zeros((N, d, c))
                 A.ravel()[flat] = values
-                return np.linalg.solve(A, b.reshape(N, d, 1)).ravel()
-            A = sp.csc_matrix((values, (row, col)), shape=(N * d, N * d))
+                solve = np.linalg.solve if c == d else lambda a, r: np.linalg.pinv(a) @ r
+                return solve(A, b.reshape(N, d, 1)).ravel()
+            A = sp.csc_matrix((values, (row, col)), shape=(N * d, N * c))
             return spla.splu(A).solve(b)
         except (np.linalg.LinAlgError, RuntimeError) as err:  # RuntimeError: SuperLU's singular
             raise MbplanError(
@@ -144,18 +176,23 @@ class _DynamicsRows:
         col = col_of[jac.indices]
         src = np.flatnonzero((row >= 0) & (col >= 0))
         row, col = row[src], col[src]
-        if np.any(row // self.d != col // self.d):  # the layout ties step k-1 to knot k only
+        d, c = self.d, self.c
+        if np.any(row // d != col // c):  # the layout ties step k-1 to knot k only
             raise MbplanError("the warm start's dynamics rows are not block diagonal")
-        d = self.d
-        return src, row, col, (row // d) * d * d + (row % d) * d + col % d
+        return src, row, col, (row // d) * d * c + (row % d) * c + col % c
 
 
 def _dynamics_rows(
-    mm: MaximalModel, N: int, dt: float, jit: bool, workspace: Workspace | None = None
+    mm: MaximalModel,
+    N: int,
+    dt: float,
+    jit: bool,
+    workspace: Workspace | None = None,
+    passive: tuple[int, ...] = (),
 ) -> _DynamicsRows:
     return shared(
         workspace,
         "dynamics_rows",
-        lambda: (mm, N, dt, jit),
-        lambda: _DynamicsRows(mm, N, dt, jit, workspace),
+        lambda: (mm, N, dt, jit, passive),
+        lambda: _DynamicsRows(mm, N, dt, jit, workspace, passive),
     )

@@ -11,7 +11,9 @@ Equations (eq. 27–28 with 34–35 per body), per step ``k = 0 … N-1``:
 * body LGVI ``(F_k, v_k) → (F_{k+1}, v_{k+1})`` with gravity and, added into the same rows by
   joint terms, the constraint forces ``J(x_{k+1})ᵀλ_{k+1}``, actuation ``τ_{k+1}`` and viscous
   damping ``-c q̇_{k+1}`` (:mod:`mbplan.dynamics.damping`; joints with ``c > 0`` only);
-* joint constraints on the next configuration ``h(R_{k+1} F_{k+1}, p_{k+1} + v_{k+1} Δt) = 0``.
+* joint constraints on the next configuration ``h(R_{k+1} F_{k+1}, p_{k+1} + v_{k+1} Δt) = 0``;
+* loop closures alike, with a block of multipliers per closure size
+  (:mod:`mbplan.transcription.loops`).
 
 Each term is one engine function vectorised over (knot, body) or (knot, joint) sites, per joint
 kind (revolute, prismatic) and parent (a body or the world), so the Jacobian has the graph
@@ -41,6 +43,7 @@ from mbplan.dynamics.joints import (
 from mbplan.engine import RiemannianFunction
 from mbplan.lie import SO3, R
 from mbplan.multibody import MaximalModel
+from mbplan.transcription.loops import loop_blocks, loop_terms
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Block
 from mbplan.workspace import Workspace, shared
@@ -248,6 +251,7 @@ def _multibody_layout(
         Block("v", R(3), N + 1, (0,), nb),
         Block("lam", R(LAMBDA_DIM), N + 1, (0,), nb),
         Block("tau", R(1), N + 1, fixed_tau_knots, nb),
+        *loop_blocks(mm, N),
     ]
     k, b = (a.ravel() for a in np.meshgrid(np.arange(N), np.arange(nb), indexing="ij"))
     site0, site1 = k * nb + b, (k + 1) * nb + b  # body b at knots k and k+1
@@ -308,6 +312,7 @@ def _multibody_layout(
                 terms.append(
                     _damping_term(mm, kind, world, jit, now, nxt, j, damped, params, rows, dt)
                 )
+    terms += loop_terms(mm, N, dt, jit, dyn_rows)
     return MultibodyLayout(tuple(blocks), tuple(terms), dyn_offset + 6 * N * nb)
 
 

@@ -264,7 +264,7 @@ def _robot_scene(
 def _maximal_of(model: pin.Model) -> MaximalModel:
     from mbplan.formulations.maximal import _maximal as cached
 
-    return cached(model)
+    return cached(model, ())
 
 
 def _goal_configuration(ocp: Any) -> np.ndarray | None:
