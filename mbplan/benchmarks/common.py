@@ -184,4 +184,6 @@ def plan_row(ocp: Any, method: str, **plan_options: Any) -> tuple[dict[str, Any]
         "verified": bool(check.passed),
         "verification_reasons": check.reasons,
     }
+    if getattr(ocp.robot, "loops", ()):
+        row["closure_residual"] = float(check.closure_residual)
     return row, result, check

@@ -110,6 +110,8 @@ def _plan(args: argparse.Namespace) -> int:
     )
     goals = ", ".join(f"{k} {v:.3g}" for k, v in {**check.violations, **check.goal_errors}.items())
     soft = f", final goal error {check.final_goal_error_rad:.3f} rad" if check.goal_errors else ""
+    if getattr(problem.robot, "loops", ()):
+        soft += f", loop closure residual {check.closure_residual:.2g}"
     print(
         f"verification: {'passed' if check.passed else 'FAILED'}; min obstacle clearance "
         f"{check.min_obstacle_distance_m:.3f} m{soft}"

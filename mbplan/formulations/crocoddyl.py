@@ -27,6 +27,9 @@ small violations a finite penalty leaves (up to 3e-3 rad/s on the iiwa's velocit
 ``W = 1e3``) stay inside the true bounds; an equality constraint is not expressible (an
 :class:`~mbplan.errors.InputError` naming it; make it a cost or use CSQP).
 
+A robot with closed kinematic loops is refused (:func:`~mbplan.robots.loops.refuse_loops`):
+Crocoddyl's free forward dynamics have no loop closures.
+
 Importing needs the ``baselines`` extra (``crocoddyl==3.2.1``, ``mim-solvers==0.3.0``); the
 first build checks that Crocoddyl's forward dynamics equal Pinocchio's ABA
 (:func:`check_forward_dynamics`): a mismatched ``pin`` silently computes wrong dynamics.
@@ -46,6 +49,7 @@ from mbplan.formulations.joint_space import knot_function
 from mbplan.multibody.collision import chain_kinematics, point_jacobians
 from mbplan.ocp.problem import OCP, Item
 from mbplan.residuals.base import ShootingResidual
+from mbplan.robots.loops import refuse_loops
 from mbplan.simulation.reference import damping_rate
 
 try:
@@ -217,6 +221,7 @@ class ShootingBuilder:
     obstacle_weight = OBSTACLE_WEIGHT
 
     def __init__(self, ocp: OCP, hard: bool, method: str):
+        refuse_loops(ocp.robot, method)
         check_forward_dynamics()
         self.ocp, self.hard, self.method = ocp, hard, method
         self.model = ocp.robot.model

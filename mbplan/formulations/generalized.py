@@ -1,6 +1,8 @@
 """Generalized coordinates: an :class:`~mbplan.OCP` as eq. (61) with Pinocchio, for IPOPT.
 
-Decision vector ``z = (q_1..q_N, v_1..v_N, τ_0..τ_{N-1})``; knot 0 is fixed at ``(q0, v0)``.
+Decision vector ``z = (q_1..q_N, v_1..v_N, τ_0..τ_{N-1}, λ_0..λ_{N-1})``; knot 0 is fixed at
+``(q0, v0)``; the loop forces ``λ_k`` and closure rows exist for a robot with closed loops
+(:mod:`mbplan.formulations.generalized_loops`).
 For ``k = 0..N-1`` (eq. 61, explicit Euler as the paper writes it)::
 
     (q_{k+1} - q_k)/Δt - v_k = 0                          kinematics (divided by Δt: rad/s)
@@ -26,7 +28,6 @@ Lagrangian Hessian are ``casadi.Callback`` functions given to ``casadi.nlpsol`` 
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,6 +37,14 @@ import pinocchio as pin
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
+from mbplan.formulations.casadi_nlp import NumpyCallback, SparsePattern, block
+from mbplan.formulations.generalized_loops import (
+    check_first_step,
+    guess_forces,
+    loop_blocks,
+    loop_functions,
+    loop_rows,
+)
 from mbplan.formulations.joint_space import knot_function
 from mbplan.ocp.problem import OCP, Item
 from mbplan.residuals.base import SymbolicRows
@@ -43,38 +52,12 @@ from mbplan.residuals.base import SymbolicRows
 FD_STEP_Q = 1e-5  # rad: central differences of the analytic RNEA derivatives in q
 
 
-def _block(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Triplet indices of dense blocks ``rows (..., a) × cols (..., b)`` in C order."""
-    shape = (*rows.shape, cols.shape[-1])
-    return (
-        np.broadcast_to(rows[..., None], shape).ravel(),
-        np.broadcast_to(cols[..., None, :], shape).ravel(),
-    )
-
-
-class SparsePattern:
-    """A fixed sparsity given by triplets (duplicates are summed), kept where ``keep``."""
-
-    def __init__(self, shape: tuple[int, int], rows: np.ndarray, cols: np.ndarray, keep):
-        self.shape, self.keep = shape, keep
-        linear = cols[keep] * shape[0] + rows[keep]
-        unique, self.inverse = np.unique(linear, return_inverse=True)
-        self.row, self.col = unique % shape[0], unique // shape[0]
-        self.sparsity = cs.Sparsity.triplet(*shape, self.row.tolist(), self.col.tolist())
-
-    def nonzeros(self, values: np.ndarray) -> np.ndarray:
-        """Nonzeros in column-major (CCS) order from values listed like the triplets."""
-        return np.bincount(self.inverse, weights=values[self.keep], minlength=self.row.size)
-
-    def csc(self, values: np.ndarray) -> sp.csc_matrix:
-        return sp.csc_matrix((self.nonzeros(values), (self.row, self.col)), shape=self.shape)
-
-
 @dataclass
 class _Rows:
-    """One item's per-knot CasADi functions, its columns ``(K, nx)`` in ``z`` and first row."""
+    """Per-knot CasADi functions of an item (None: the loops' rows), their columns ``(K, nx)``
+    in ``z`` and first row; rows that share their rows with others add to them."""
 
-    item: Item
+    item: Item | None
     value: cs.Function
     jac: cs.Function | None
     hess: cs.Function
@@ -85,6 +68,24 @@ class _Rows:
     @property
     def K(self) -> int:
         return len(self.cols)
+
+    @property
+    def sense(self) -> str:
+        return "eq" if self.item is None else self.item.sense
+
+    @classmethod
+    def of(cls, item: Item | None, x: cs.SX, out: cs.SX, cols: np.ndarray, row0: int) -> _Rows:
+        """The rows ``out(x)`` with their exact Jacobian and Hessian by CasADi."""
+        lam = cs.SX.sym("lam", out.numel())
+        return cls(
+            item,
+            cs.Function("r", [x], [out]),
+            cs.Function("j", [x], [cs.jacobian(out, x)]),
+            cs.Function("h", [x, lam], [cs.hessian(cs.dot(lam, out), x)[0]]),
+            cols,
+            row0,
+            out.numel(),
+        )
 
 
 class GeneralizedNLP:
@@ -97,7 +98,11 @@ class GeneralizedNLP:
         self.damping = np.array(robot.model.damping, dtype=float)
         N, nv = ocp.N, robot.nv
         self.N, self.nv, self.dt = N, nv, ocp.dt
-        self.n = 3 * N * nv
+        self.loops = loop_functions(robot) if robot.loops else None
+        if self.loops:
+            check_first_step(robot, ocp.q0, ocp.v0, ocp.dt)
+        self.nc = self.loops.size if self.loops else 0
+        self.n = 3 * N * nv + N * self.nc
         a_of_x = np.zeros((3 * nv, 3 * nv))  # (q, v, a) from (q_k, v_k, v_{k+1})
         a_of_x[: 2 * nv, : 2 * nv] = np.eye(2 * nv)
         a_of_x[2 * nv :, nv : 2 * nv] = -np.eye(nv) / self.dt
@@ -128,16 +133,17 @@ class GeneralizedNLP:
                 hess = cs.Function("h", [x], [cs.hessian(c, x)[0]])
                 self.costs.append(_Rows(item, fn, None, hess, cols, 0, 1))
                 continue
-            lam = cs.SX.sym("lam", out.numel())
-            jac = cs.Function("j", [x], [cs.jacobian(out, x)])
-            hess = cs.Function("h", [x, lam], [cs.hessian(cs.dot(lam, out), x)[0]])
-            self.rows.append(_Rows(item, fn, jac, hess, cols, row, out.numel()))
+            self.rows.append(_Rows.of(item, x, out, cols, row))
             row += out.numel() * len(cols)
+        if self.loops:
+            for x, out, cols, row0 in loop_blocks(self, self.loops, row):
+                self.rows.append(_Rows.of(None, x, out, cols, row0))
+            row += loop_rows(N, self.loops)
         self.m = row
         self.lbg = np.zeros(self.m)
         self.ubg = np.zeros(self.m)
         for r in self.rows:
-            if r.item.sense == "ineq":
+            if r.sense == "ineq":
                 self.lbg[r.row0 : r.row0 + r.m * r.K] = -np.inf
         for (item, row0), form in zip(self.distances, self._own, strict=True):
             size = form.size * len(item.knots)
@@ -157,18 +163,32 @@ class GeneralizedNLP:
         """Indices of ``τ_k`` (``k = 0..N-1``)."""
         return self.iq(np.asarray(k) + 1) + 2 * self.N * self.nv
 
+    def ilam(self, k: ArrayLike) -> np.ndarray:
+        """Indices of the loop forces ``λ_k`` (``k = 0..N-1``), shape ``(*k.shape, nc)``."""
+        return 3 * self.N * self.nv + np.asarray(k)[..., None] * self.nc + np.arange(self.nc)
+
     def _columns(self, item: Item) -> np.ndarray:
         k = item.knots
         if item.residual.space == "control":
             return self.itau(k)
         return np.concatenate([self.iq(k), self.iv(k)], axis=1)
 
-    def pack(self, q: np.ndarray, v: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        return np.concatenate([q[1:].ravel(), v[1:].ravel(), tau.ravel()])
+    def pack(
+        self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, lam: np.ndarray | None = None
+    ) -> np.ndarray:
+        """``z`` of knots ``q, v (N+1, nv)``, ``tau (N, nv)`` and loop forces ``lam (N, nc)``
+        (zero if None)."""
+        lam = np.zeros((self.N, self.nc)) if lam is None else lam
+        return np.concatenate([q[1:].ravel(), v[1:].ravel(), tau.ravel(), lam.ravel()])
 
     def unpack(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        Q, V, T = np.reshape(z, (3, self.N, self.nv))
+        """Knots ``q, v (N+1, nv)`` and torques ``tau (N, nv)`` (:meth:`loop_forces`: ``λ``)."""
+        Q, V, T = np.reshape(z[: 3 * self.N * self.nv], (3, self.N, self.nv))
         return np.vstack([self.ocp.q0, Q]), np.vstack([self.ocp.v0, V]), T
+
+    def loop_forces(self, z: np.ndarray) -> np.ndarray:
+        """The loop forces ``λ (N, nc)`` of the imposed closure rows, per interval."""
+        return np.reshape(z[3 * self.N * self.nv :], (self.N, self.nc))
 
     def _bounds(self) -> None:
         self.lbz, self.ubz = np.full(self.n, -np.inf), np.full(self.n, np.inf)
@@ -184,12 +204,20 @@ class GeneralizedNLP:
 
     def initial_guess(self, q: np.ndarray) -> np.ndarray:
         """``z`` from a joint path ``q (N+1, nq)`` with eq. (61) met: ``v_k = (q_{k+1} -
-        q_k)/Δt``, ``v_N = 0``, ``τ_k`` by inverse dynamics (§VIII.C)."""
+        q_k)/Δt``, ``v_N = 0``, ``τ_k`` by inverse dynamics (§VIII.C). With loops, knots
+        ``1..N`` are first closed (:meth:`~mbplan.robots.robot.Robot.closed`) and the inverse
+        dynamics shared between ``τ`` and ``λ`` by
+        :func:`~mbplan.formulations.generalized_loops.guess_forces`."""
+        if self.loops:
+            q = np.vstack([q[:1], [self.ocp.robot.closed(qk) for qk in q[1:]]])
         v = np.zeros_like(q)
         v[:-1] = np.diff(q, axis=0) / self.dt
         a = np.diff(v, axis=0) / self.dt
         tau = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
-        return self.pack(q, v, tau + self.damping * v[1:])
+        tau, lam = tau + self.damping * v[1:], None
+        if self.loops:
+            lam, tau = guess_forces(self.ocp.robot, self.loops, q[:-1], tau)
+        return self.pack(q, v, tau, lam)
 
     # -- per-item evaluation -------------------------------------------------------------------
     @staticmethod
@@ -224,12 +252,15 @@ class GeneralizedNLP:
         a = np.diff(v, axis=0) / self.dt
         kin = np.diff(q, axis=0) / self.dt - v[:-1]
         dyn = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
-        parts = [kin.ravel(), (dyn + self.damping * v[1:] - tau).ravel()]
+        g = np.zeros(self.m)
+        g[: 2 * self.N * self.nv] = np.concatenate(
+            [kin.ravel(), (dyn + self.damping * v[1:] - tau).ravel()]
+        )
         for r in self.rows:
-            parts.append(np.asarray(r.value.map(r.K)(self._x(r, z))).T.ravel())
-        for (item, _), form in zip(self.distances, self._own, strict=True):
-            parts.append(form.values(q[item.knots]).ravel())
-        return np.concatenate(parts)
+            g[r.row0 : r.row0 + r.m * r.K] += np.asarray(r.value.map(r.K)(self._x(r, z))).T.ravel()
+        for (item, row0), form in zip(self.distances, self._own, strict=True):
+            g[row0 : row0 + form.size * len(item.knots)] = form.values(q[item.knots]).ravel()
+        return g
 
     def _jacobian_pattern(self) -> None:
         N, nv = self.N, self.nv
@@ -240,9 +271,9 @@ class GeneralizedNLP:
             (kin.ravel(), self.iq(steps + 1).ravel()),
             (kin[inner].ravel(), self.iq(inner).ravel()),
             (kin[inner].ravel(), self.iv(inner).ravel()),
-            _block(dyn[inner], self.iq(inner)),
-            _block(dyn[inner], self.iv(inner)),
-            _block(dyn, self.iv(steps + 1)),
+            block(dyn[inner], self.iq(inner)),
+            block(dyn[inner], self.iv(inner)),
+            block(dyn, self.iv(steps + 1)),
             (dyn.ravel(), self.itau(steps).ravel()),
         ]
         for r in self.rows:
@@ -299,13 +330,13 @@ class GeneralizedNLP:
         N = self.N
         inner = np.arange(1, N)
         local = np.concatenate([self.iq(inner), self.iv(inner), self.iv(inner + 1)], axis=1)
-        triplets = [_block(local, local)]
+        triplets = [block(local, local)]
         self._hess_sizes = []
         for r in (*self.rows, *self.costs):
             lr, lc = (np.array(a, dtype=np.int64) for a in r.hess.sparsity_out(0).get_triplet())
             triplets.append((r.cols[:, lr].ravel(), r.cols[:, lc].ravel()))
         for item, _ in self.distances:
-            triplets.append(_block(self.iq(item.knots), self.iq(item.knots)))
+            triplets.append(block(self.iq(item.knots), self.iq(item.knots)))
         rows = np.concatenate([r for r, _ in triplets])
         cols = np.concatenate([c for _, c in triplets])
         self.hess_pattern = SparsePattern((self.n, self.n), rows, cols, rows <= cols)
@@ -356,7 +387,7 @@ class GeneralizedNLP:
         """Upper triangle of ``∇²(σ f + λᵀ g)``."""
         return self.hess_pattern.csc(self._hessian_values(z, sigma, lam))
 
-    def callbacks(self) -> tuple[_Callback, _Callback, _Callback]:
+    def callbacks(self) -> tuple[NumpyCallback, NumpyCallback, NumpyCallback]:
         """``g(z)``, ``jac_g(z, p) -> (g, ∂g/∂z)`` and ``hess_lag(z, p, σ, λ) -> triu ∇²L``."""
         dense_z, dense_g = cs.Sparsity.dense(self.n, 1), cs.Sparsity.dense(self.m, 1)
         no_p, scalar = cs.Sparsity(0, 1), cs.Sparsity.dense(1, 1)
@@ -374,33 +405,9 @@ class GeneralizedNLP:
             return [cs.DM(hess.sparsity, values)]
 
         return (
-            _Callback("generalized_g", [dense_z], [dense_g], g),
-            _Callback("generalized_jac_g", [dense_z, no_p], [dense_g, jac.sparsity], jac_g),
-            _Callback(
+            NumpyCallback("generalized_g", [dense_z], [dense_g], g),
+            NumpyCallback("generalized_jac_g", [dense_z, no_p], [dense_g, jac.sparsity], jac_g),
+            NumpyCallback(
                 "generalized_hess_lag", [dense_z, no_p, scalar, dense_g], [hess.sparsity], hess_lag
             ),
         )
-
-
-class _Callback(cs.Callback):
-    """A CasADi function evaluated by ``fn`` on NumPy vectors."""
-
-    def __init__(self, name: str, sp_in, sp_out, fn: Callable[..., list[cs.DM]]):
-        cs.Callback.__init__(self)
-        self._sp_in, self._sp_out, self._fn = sp_in, sp_out, fn
-        self.construct(name, {})
-
-    def get_n_in(self) -> int:
-        return len(self._sp_in)
-
-    def get_n_out(self) -> int:
-        return len(self._sp_out)
-
-    def get_sparsity_in(self, i: int) -> cs.Sparsity:
-        return self._sp_in[i]
-
-    def get_sparsity_out(self, i: int) -> cs.Sparsity:
-        return self._sp_out[i]
-
-    def eval(self, arg: list[cs.DM]) -> list[cs.DM]:
-        return self._fn(*(a.full().ravel() for a in arg))

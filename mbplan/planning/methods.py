@@ -118,7 +118,8 @@ def solve_ipopt_generalized(
     ``Solve_Succeeded``). IPOPT also writes its log to a temporary file to count the
     restoration iterations (marked ``r``); ``restoration=False`` sets ``max_resto_iter = 0``:
     IPOPT then stops at the first restoration iteration (the "w/o restoration" column of
-    Table III)."""
+    Table III). A robot with loops adds the loop forces ``λ (N, nc)`` per interval,
+    ``extra["loop_forces"]``."""
     start = time.perf_counter()
     options = base_options(settings.max_iter, settings.tol)
     reserved = {"output_file", "file_print_level"} & set(settings.options)
@@ -162,10 +163,13 @@ def solve_ipopt_generalized(
     finally:
         os.unlink(log_path)
     z_opt = np.asarray(sol["x"]).ravel()
+    loops = {}
     if isinstance(nlp, QuaternionNLP):
         traj = nlp.trajectory(z_opt)
     else:
         traj = dict(zip(("q", "v", "tau"), nlp.unpack(z_opt), strict=True))
+        if nlp.nc:
+            loops = {"loop_forces": nlp.loop_forces(z_opt).tolist()}
     message = stats.status.replace("_", " ")
     if not restoration and resto:
         message = "stopped on entering the restoration phase, which is disabled (max_resto_iter=0)"
@@ -189,6 +193,7 @@ def solve_ipopt_generalized(
             "solver_time_per_iter_s": stats.solver_time_per_iteration,
             "n_variables": nlp.n,
             "n_constraints": nlp.m,
+            **loops,
         },
         formulation="generalized",
         **traj,

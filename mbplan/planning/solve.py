@@ -25,6 +25,7 @@ from mbplan.planning.initial_guess import initial_path
 from mbplan.resources import check_plan_memory
 from mbplan.results import PlanResult
 from mbplan.robots.free_body import FreeBody
+from mbplan.robots.loops import refuse_loops
 from mbplan.validation import as_array, as_int, as_real
 from mbplan.workspace import Workspace
 
@@ -49,6 +50,11 @@ METHODS: dict[str, Method] = {
 }
 
 
+def _open_chain(ocp: OCP, method: str) -> None:
+    """:class:`InputError` if the robot of ``ocp`` has loops (Crocoddyl's dynamics have none)."""
+    refuse_loops(ocp.robot, method)
+
+
 def _crocoddyl(name: str) -> Callable[[OCP, np.ndarray, m.Settings], PlanResult]:
     """The solver ``name`` of :mod:`mbplan.baselines.crocoddyl`, imported when called
     (Crocoddyl and mim-solvers are the optional ``baselines`` extra)."""
@@ -61,8 +67,8 @@ def _crocoddyl(name: str) -> Callable[[OCP, np.ndarray, m.Settings], PlanResult]
     return solve
 
 
-METHODS["fddp"] = Method("shooting", _crocoddyl("solve_fddp"))
-METHODS["csqp"] = Method("shooting", _crocoddyl("solve_csqp"))
+METHODS["fddp"] = Method("shooting", _crocoddyl("solve_fddp"), _open_chain)
+METHODS["csqp"] = Method("shooting", _crocoddyl("solve_csqp"), _open_chain)
 
 
 def plan(
@@ -153,22 +159,27 @@ def check_plan_request(
 
 
 def finish(ocp: OCP, result: PlanResult, guess_time: float = 0.0) -> PlanResult:
-    """Attach ``ocp``, the constraint violations and goal errors; set ``success`` (one meaning)."""
+    """Attach ``ocp``, the constraint violations and goal errors (and the loops' closure
+    residual, ``extra["closure_residual"]``); set ``success`` (one meaning)."""
+    from mbplan.verification.loops import closure_error, closure_reasons
     from mbplan.verification.report import constraint_violations, goal_errors, hard_constraints_met
 
     finite = all(np.all(np.isfinite(a)) for a in (result.q, result.v, result.tau))
     violations = goal = {}
     unmet: list[str] = []
+    extra = {**result.extra, "warm_start_time_s": guess_time}
     if finite:
         violations = constraint_violations(ocp, result.q, result.v, result.tau, result.tau_knots)
         goal = goal_errors(ocp, result.q, result.v)
         unmet = hard_constraints_met(ocp, violations)
+        if getattr(ocp.robot, "loops", ()):
+            extra["closure_residual"] = closure_error(ocp.robot, result.q)
+            unmet += closure_reasons(ocp.robot, extra["closure_residual"])
     message = result.message
     if not finite:
         message = f"{message}; the solution contains NaN or inf"
     elif result.success and unmet:
         message = f"{message}, but {unmet[0]}"
-    extra = {**result.extra, "warm_start_time_s": guess_time}
     return dataclasses.replace(
         result,
         success=bool(result.success and finite and not unmet),

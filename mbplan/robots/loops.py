@@ -161,6 +161,17 @@ def close_loops(
     return q, float(np.max(np.abs(r), initial=0.0))
 
 
+def refuse_loops(robot: Any, method: str) -> None:
+    """:class:`InputError` naming the loops of ``robot`` (a method for open chains only)."""
+    loops = getattr(robot, "loops", ())
+    if loops:
+        described = "; ".join(loop.describe() for loop in loops)
+        raise InputError(
+            f"{method} cannot plan {robot.name!r}: its dynamics have no loop closures, and the "
+            f"robot has closed kinematic loops ({described}); plan it with ipopt"
+        )
+
+
 def loop_from_spec(model: pin.Model, spec: Loop | Mapping[str, Any], index: int) -> Loop:
     """A :class:`Loop` from a mapping ``{frame1, frame2, kind, name?, placement1?,
     placement2?, axis?}`` (frames by name, their placements ``[x, y, z]`` or ``(4, 4)`` relative

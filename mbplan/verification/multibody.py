@@ -58,6 +58,9 @@ Thresholds (all documented values are checked by ``tests/test_verification.py``)
   :meth:`~mbplan.residuals.Residual.violation_tolerance`); torque limits on the applied torques
   (``tau_knots`` when given) within :data:`~mbplan.residuals.base.TORQUE_TOLERANCE`
   ``· max(1, limit)``.
+* a robot with closed loops or passive joints (:mod:`mbplan.verification.loops`): the replay
+  and the reference step use the loops' constraint dynamics, the planned knots must close the
+  loops (``closure_residual``) and the passive joints' torques vanish (``passive_torque_nm``).
 * a replay that diverges (a non-finite state in any interval, e.g. an open-loop unstable
   configuration held over ``Δt``) fails: its NaN metrics would pass every comparison.
 * soft goals (costs with a ``tolerance``): the residual's ∞-norm at the end of the replayed
@@ -69,7 +72,6 @@ Thresholds (all documented values are checked by ``tests/test_verification.py``)
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 
 from mbplan.errors import InputError
 from mbplan.formulations.joint_space import evaluate
@@ -77,6 +79,15 @@ from mbplan.ocp.problem import OCP, Item
 from mbplan.results import PlanResult
 from mbplan.robots.free_body import FreeBody
 from mbplan.simulation.reference import damped_euler_velocity, damping_rate, integrate_aba
+from mbplan.verification.loops import (
+    baumgarte_rate,
+    closure_error,
+    closure_reasons,
+    euler_velocity,
+    passive_reasons,
+    passive_torque,
+    rk4_step,
+)
 from mbplan.verification.report import (
     Verification,
     constraint_violations,
@@ -101,7 +112,7 @@ def _interval_replays(ocp: OCP, result: PlanResult) -> tuple[np.ndarray, np.ndar
         q, v = result.q[k], result.v[k]
         path[k, 0] = q
         for s in range(steps):
-            q, v = _replay_step(model, q, v, result, k, s * h, h)
+            q, v = _replay_step(ocp, q, v, result, k, s * h, h)
             path[k, s + 1] = q
         v_end[k] = v
     return path, path[:, -1], v_end
@@ -116,17 +127,19 @@ def substeps(ocp: OCP, result: PlanResult) -> int:
 
 
 def _replay_step(
-    model: pin.Model, q: np.ndarray, v: np.ndarray, result: PlanResult, k: int, t: float, h: float
+    ocp: OCP, q: np.ndarray, v: np.ndarray, result: PlanResult, k: int, t: float, h: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """RK4 over ``[t_k + t, t_k + t + h]`` under the plan's torque: ``τ_k`` held, or the linear
-    ramp between ``tau_knots[k]`` and ``tau_knots[k+1]`` when the plan has knot torques."""
-    if result.tau_knots is None:
-        return integrate_aba(model, q, v, result.tau[k], h, 1, damping=True)
-    a, b = result.tau_knots[k], result.tau_knots[k + 1]
-    s0, s1 = t / result.dt, (t + h) / result.dt
-    return integrate_aba(
-        model, q, v, a + s0 * (b - a), h, 1, tau_end=a + s1 * (b - a), damping=True
-    )
+    ramp between ``tau_knots[k]`` and ``tau_knots[k+1]`` when the plan has knot torques; with
+    the loops' constraint dynamics (:mod:`mbplan.verification.loops`) if the robot has loops."""
+    tau, tau_end = result.tau[k], None
+    if result.tau_knots is not None:
+        a, b = result.tau_knots[k], result.tau_knots[k + 1]
+        s0, s1 = t / result.dt, (t + h) / result.dt
+        tau, tau_end = a + s0 * (b - a), a + s1 * (b - a)
+    if ocp.robot.loops:
+        return rk4_step(ocp.robot, q, v, tau, h, baumgarte_rate(ocp.N, ocp.dt), tau_end)
+    return integrate_aba(ocp.robot.model, q, v, tau, h, 1, tau_end=tau_end, damping=True)
 
 
 def _euler_steps(ocp: OCP, result: PlanResult) -> tuple[np.ndarray, np.ndarray]:
@@ -135,19 +148,21 @@ def _euler_steps(ocp: OCP, result: PlanResult) -> tuple[np.ndarray, np.ndarray]:
     model = ocp.robot.model
     data = model.createData()
     q, v, tau, dt = result.q[:-1], result.v[:-1], result.tau, ocp.dt
+    if ocp.robot.loops:
+        v_next = [euler_velocity(ocp.robot, q[k], v[k], tau[k], dt) for k in range(ocp.N)]
+        return q + dt * v, np.array(v_next)
     v_next = [damped_euler_velocity(model, data, q[k], v[k], tau[k], dt) for k in range(ocp.N)]
     return q + dt * v, np.array(v_next)
 
 
 def _open_loop_deviation(ocp: OCP, result: PlanResult) -> float:
-    model = ocp.robot.model
     q, v = ocp.q0, ocp.v0
     deviation = 0.0
     steps = substeps(ocp, result)
     h = ocp.dt / steps
     for k in range(ocp.N):
         for s in range(steps):
-            q, v = _replay_step(model, q, v, result, k, s * h, h)
+            q, v = _replay_step(ocp, q, v, result, k, s * h, h)
         deviation = max(deviation, float(np.max(np.abs(q - result.q[k + 1]))))
     return deviation
 
@@ -212,6 +227,9 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
     v_final = np.vstack([result.v[:-1], v_end[-1:]])
     goals = goal_errors(ocp, q_final, v_final)
     reasons += replay_reasons(ocp, violations, clearance, goals)
+    closure = closure_error(ocp.robot, result.q)
+    passive = passive_torque(ocp.robot, result.tau, result.tau_knots)
+    reasons += closure_reasons(ocp.robot, closure) + passive_reasons(ocp.robot, passive, result.tau)
     torque = [i for i in ocp.constraints if i.residual.input_limits]
     violation = max((violations[i.name] for i in torque), default=0.0)
     return Verification(
@@ -227,4 +245,6 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
         open_loop_deviation_rad=_open_loop_deviation(ocp, result),
         violations=violations,
         goal_errors=goals,
+        closure_residual=closure,
+        passive_torque_nm=passive,
     )

@@ -19,7 +19,9 @@ __all__ = ["CONSTRAINT_TOLERANCE", "TORQUE_TOLERANCE", "Verification"]
 @dataclass(frozen=True)
 class Verification:
     """Outcome of :func:`mbplan.verify` (:mod:`mbplan.verification.multibody` for the metrics and
-    thresholds)."""
+    thresholds; :mod:`mbplan.verification.loops` for ``closure_residual``, the largest loop
+    closure residual at the planned knots, and ``passive_torque_nm``, the largest torque of a
+    passive joint)."""
 
     max_joint_deviation_rad: float
     min_obstacle_distance_m: float
@@ -33,6 +35,8 @@ class Verification:
     open_loop_deviation_rad: float = float("nan")
     violations: dict[str, float] = field(default_factory=dict)
     goal_errors: dict[str, float] = field(default_factory=dict)
+    closure_residual: float = float("nan")
+    passive_torque_nm: float = float("nan")
 
 
 def at_knots(ocp: OCP, item: Item, q, v, tau) -> np.ndarray:
