@@ -24,7 +24,7 @@ from mbplan.benchmarks.common import machine_info, save_plot, write_atomic, writ
 from mbplan.benchmarks.dynamics_scenario import joint_errors, smooth_scenario
 from mbplan.errors import InputError, MbplanError
 from mbplan.multibody import joint_constraint_residuals, joint_positions, maximal_model
-from mbplan.robots import available_robots, load
+from mbplan.robots import available_arms, load
 from mbplan.simulation import simulate_maximal
 
 DTS = (0.008, 0.004, 0.002, 0.001)
@@ -154,10 +154,11 @@ def run(
     dts: tuple[float, ...] = DTS,
     T: float = DURATION,
 ) -> dict[str, Any]:
-    """Validate every robot of ``robots`` (default: ``mbplan robots``) without and with damping;
-    write results.json, results.md and validate_dynamics.png into ``out``."""
+    """Validate every robot of ``robots`` (default: the serial arms of ``mbplan robots``)
+    without and with damping; write results.json, results.md and validate_dynamics.png into
+    ``out``."""
     dts = _check(dts, T)
-    names = tuple(robots) if robots else tuple(available_robots())
+    names = tuple(robots) if robots else tuple(available_arms())
     variants = {name: damping_variants(name) for name in names}  # bad robots fail here, first
     for v in variants.values():
         maximal_model(v["undamped"][0])  # unsupported joints named before any run

@@ -162,11 +162,14 @@ def close_loops(
 def loop_from_spec(model: pin.Model, spec: Loop | Mapping[str, Any], index: int) -> Loop:
     """A :class:`Loop` from a mapping ``{frame1, frame2, kind, name?, placement1?,
     placement2?, axis?}`` (frames by name, their placements ``[x, y, z]`` or ``(4, 4)`` relative
-    to the frames; ``axis``: a revolute closure's axis in frame 1, default ``z``), or checked."""
+    to the frames; ``axis``: a revolute closure's axis in frame 1, default ``z``) or of
+    :meth:`Loop.to_dict` (what :attr:`Robot.source` stores), or checked."""
     if isinstance(spec, Loop):
         return _checked(model, spec)
     if not isinstance(spec, Mapping):
         raise InputError(f"loop {index}: expected a mapping or a Loop, got {type(spec).__name__}")
+    if "joint1" in spec:  # Loop.to_dict(): joints and (4, 4) placements
+        return _from_dict(model, spec, index)
     known = {"name", "kind", "frame1", "frame2", "placement1", "placement2", "axis"}
     unknown = sorted(set(spec) - known)
     if unknown:
@@ -189,6 +192,16 @@ def loop_from_spec(model: pin.Model, spec: Loop | Mapping[str, Any], index: int)
         frames = [(j, M @ align) for j, M in frames]
     loop = Loop(name, kind, frames[0][0], frames[0][1], frames[1][0], frames[1][1])
     return _checked(model, loop)
+
+
+def _from_dict(model: pin.Model, spec: Mapping[str, Any], index: int) -> Loop:
+    """The :class:`Loop` of :meth:`Loop.to_dict`, checked."""
+    known = {"name", "kind", "joint1", "placement1", "joint2", "placement2"}
+    if set(spec) != known:
+        raise InputError(f"loop {index}: expected the keys {sorted(known)}, got {sorted(spec)}")
+    parts = {k: spec[k] for k in ("name", "kind", "joint1", "joint2")}
+    placements = {k: np.asarray(spec[k], dtype=float) for k in ("placement1", "placement2")}
+    return _checked(model, Loop(**parts, **placements))
 
 
 def loops_from_constraints(model: pin.Model, constraints: Sequence[Any]) -> list[Loop]:
