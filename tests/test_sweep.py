@@ -1,4 +1,4 @@
-"""Every arm of ``mbplan robots`` plans a sampled joint-goal task and a frame-goal task in both
+"""Every serial arm of ``mbplan robots`` plans a sampled joint-goal task and a frame-goal task in both
 formulations (small N), and the results replay to a static HTML page."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 import mbplan as mb
 from mbplan.engine.jit import jit_available
 from mbplan.formulations import maximal
-from mbplan.robots import available_robots
+from mbplan.robots import available_arms
 from mbplan.solvers import RIPMStatus, solve_ripm
 from mbplan.tasks.arm_sweep import sweep_robot, sweep_tasks
 from mbplan.viz import static_html
@@ -24,7 +24,7 @@ KNOWN_FAILURES = {("finger_edu", "frame", "ipopt")}
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", available_robots())  # continuous joints: one angle each
+@pytest.mark.parametrize("name", available_arms())  # continuous joints: one angle each
 def test_every_arm_plans_joint_and_frame_goals_in_both_formulations(name: str, tmp_path: Path):
     robot = sweep_robot(name)
     for kind, ocp in sweep_tasks(robot, seed=len(name)).items():

@@ -181,8 +181,9 @@ def run(
     dts: tuple[float, ...] = DTS,
     T: float = DURATION,
 ) -> dict[str, Any]:
-    """Validate every robot of ``robots`` (default: ``mbplan robots``) without and with damping;
-    write results.json, results.md and validate_dynamics.png into ``out``."""
+    """Validate every robot of ``robots`` (default: every robot of ``mbplan robots``)
+    without and with damping; write results.json, results.md and validate_dynamics.png into
+    ``out``."""
     dts = _check(dts, T)
     names = tuple(robots) if robots else tuple(available_robots())
     variants = {name: damping_variants(name) for name in names}  # bad robots fail here, first

@@ -41,10 +41,21 @@ def _plot(args: argparse.Namespace) -> int:
 
 
 def _robots(args: argparse.Namespace) -> int:
-    from mbplan.robots import available_robots
+    from mbplan.robots import MECHANISMS, available_robots, load_robot
 
     for name in available_robots():
-        print(name)
+        if name not in MECHANISMS:
+            print(name)
+            continue
+        robot = load_robot(name)
+        rows = sum(loop.dim for loop in robot.loops)
+        actuated = [n for n in robot.model.names[1:] if n not in robot.passive]
+        print(
+            f"{name}  ({robot.nv} joints, {rows} closure rows: {robot.nv - rows} dof; actuated: "
+            f"{', '.join(actuated)})"
+        )
+        for loop in robot.loops:
+            print(f"    {loop.describe()}")
     return 0
 
 

@@ -1,4 +1,4 @@
-"""Load a robot description (Pinocchio model + geometry) by name, URDF path or model.
+"""Load a robot description (Pinocchio model + geometry) by name, URDF or MJCF path or model.
 
 Every URDF is checked with :mod:`xml.etree` before Pinocchio sees it, so that a
 broken file fails with a :class:`~mbplan.errors.RobotModelError` naming the
@@ -19,7 +19,16 @@ import pinocchio as pin
 
 from mbplan.errors import InputError, RobotModelError
 
-IIWA_URDF = Path(__file__).resolve().parent / "data" / "iiwa14.urdf"
+DATA = Path(__file__).resolve().parent / "data"
+IIWA_URDF = DATA / "iiwa14.urdf"
+
+# Mechanisms with closed kinematic loops, bundled as MJCF files (their closures are
+# <equality> constraints, their actuated joints the <actuator> ones; see docs/loops.md).
+MECHANISMS: dict[str, Path] = {
+    "fourbar": DATA / "fourbar.xml",
+    "delta": DATA / "delta.xml",
+    "two_arm_carry": DATA / "two_arm_carry.xml",
+}
 
 # Fixed-base arms of example-robot-data: name -> (description folder, URDF path in it, SRDF).
 # The table mirrors the upstream `example_robot_data` loaders, which are no longer part of the
@@ -59,6 +68,7 @@ _ERD_ARMS: dict[str, tuple[str, str, str | None]] = {
     ),
 }
 
+MJCF_SUFFIXES = (".xml", ".mjcf")
 _URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 
 
@@ -77,7 +87,13 @@ RobotSpec = str | os.PathLike[str] | pin.Model | RobotDescription
 
 
 def available_robots() -> list[str]:
-    """Names accepted by :func:`load`: ``"iiwa"`` and the example-robot-data fixed-base arms."""
+    """Names accepted by :func:`load`: the serial arms (:func:`available_arms`) and the
+    mechanisms with closed loops (:data:`MECHANISMS`)."""
+    return [*available_arms(), *MECHANISMS]
+
+
+def available_arms() -> list[str]:
+    """The serial (loop-free) arms: ``"iiwa"`` and the example-robot-data fixed-base arms."""
     return ["iiwa", *_ERD_ARMS]
 
 
@@ -88,13 +104,16 @@ def load(
     visual_model: pin.GeometryModel | None = None,
     geometry: bool = True,
 ) -> RobotDescription:
-    """Load ``robot``: a name from :func:`available_robots`, a URDF path, or a ``pinocchio.Model``.
+    """Load ``robot``: a name from :func:`available_robots`, a URDF or MJCF (``.xml``) path, or a
+    ``pinocchio.Model``.
 
     ``collision_model``/``visual_model`` accompany a ``pinocchio.Model``; ``geometry=False``
     skips loading geometry (and meshes) from a URDF.  A :class:`RobotDescription` is returned
     unchanged.  URDF ``<mimic>`` tags are left out of the model, as by Pinocchio's default: the
     mimicking joint is a joint of its own (:func:`mimic_tags` reads them).  SRDF reference
     configurations of example-robot-data arms are stored in ``model.referenceConfigurations``.
+    An MJCF file's loop closures and actuators are not part of the description
+    (:func:`mbplan.robots.load_robot` reads them).
     """
     if isinstance(robot, pin.Model):
         return RobotDescription(robot.name, robot, collision_model, visual_model, None)
@@ -112,12 +131,16 @@ def load(
             return _load_urdf(IIWA_URDF, "iiwa", [], geometry)
         if robot in _ERD_ARMS:
             return _load_erd(robot, geometry)
-        if Path(robot).suffix.lower() != ".urdf" and not Path(robot).exists():
+        if robot in MECHANISMS:
+            return load_mjcf(MECHANISMS[robot], robot, geometry)[0]
+        if Path(robot).suffix.lower() not in (".urdf", *MJCF_SUFFIXES) and not Path(robot).exists():
             raise InputError(
-                f"unknown robot {robot!r}: not a URDF path and not one of "
+                f"unknown robot {robot!r}: not a URDF or MJCF path and not one of "
                 f"{', '.join(available_robots())}"
             )
     path = Path(robot)
+    if path.suffix.lower() in MJCF_SUFFIXES:
+        return load_mjcf(path, None, geometry)[0]
     return _load_urdf(path, None, [path.resolve().parent], geometry)
 
 
@@ -152,6 +175,28 @@ def _load_urdf(
         raise RobotModelError(f"Pinocchio cannot build a model from {path}: {err}") from err
     collision, visual = geoms if geometry else (None, None)
     return RobotDescription(name or model.name, model, collision, visual, path)
+
+
+def load_mjcf(
+    path: str | os.PathLike[str], name: str | None = None, geometry: bool = True
+) -> tuple[RobotDescription, list]:
+    """The description of an MJCF file (named ``name``, else the file's model name) and its
+    ``<equality>`` closures as Pinocchio's constraint models (``<connect>`` ones first, then
+    ``<weld>`` ones)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"MJCF file not found: {path}")
+    try:
+        model, constraints = pin.buildModelsFromMJCF(str(path), contacts=True)[:2]
+        geoms = [
+            pin.buildGeomFromMJCF(model, str(path), kind)
+            for kind in (pin.GeometryType.COLLISION, pin.GeometryType.VISUAL)
+            if geometry
+        ]
+    except (RuntimeError, ValueError) as err:
+        raise RobotModelError(f"Pinocchio cannot build a model from MJCF {path}: {err}") from None
+    collision, visual = geoms if geometry else (None, None)
+    return RobotDescription(name or model.name, model, collision, visual, path), list(constraints)
 
 
 def validate_urdf(path: str | os.PathLike[str]) -> None:

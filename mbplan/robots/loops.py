@@ -175,19 +175,14 @@ def refuse_loops(robot: Any, method: str) -> None:
 def loop_from_spec(model: pin.Model, spec: Loop | Mapping[str, Any], index: int) -> Loop:
     """A :class:`Loop` from a mapping ``{frame1, frame2, kind, name?, placement1?,
     placement2?, axis?}`` (frames by name, their placements ``[x, y, z]`` or ``(4, 4)`` relative
-    to the frames; ``axis``: a revolute closure's axis in frame 1, default ``z``) or
-    :meth:`Loop.to_dict`'s ``{name, kind, joint1, placement1, joint2, placement2}``; a
-    :class:`Loop` is checked."""
+    to the frames; ``axis``: a revolute closure's axis in frame 1, default ``z``) or of
+    :meth:`Loop.to_dict` (what :attr:`Robot.source` stores), or checked."""
     if isinstance(spec, Loop):
         return _checked(model, spec)
     if not isinstance(spec, Mapping):
         raise InputError(f"loop {index}: expected a mapping or a Loop, got {type(spec).__name__}")
-    if "joint1" in spec:
-        keys = ("name", "kind", "joint1", "placement1", "joint2", "placement2")
-        missing = [k for k in keys if k not in spec]
-        if missing or len(spec) != len(keys):
-            raise InputError(f"loop {index}: a loop by joints has exactly the keys {keys}")
-        return _checked(model, Loop(*(spec[k] for k in keys)))
+    if "joint1" in spec:  # Loop.to_dict(): joints and (4, 4) placements
+        return _from_dict(model, spec, index)
     known = {"name", "kind", "frame1", "frame2", "placement1", "placement2", "axis"}
     unknown = sorted(set(spec) - known)
     if unknown:
@@ -212,9 +207,17 @@ def loop_from_spec(model: pin.Model, spec: Loop | Mapping[str, Any], index: int)
     return _checked(model, loop)
 
 
-def loops_from_constraints(
-    model: pin.Model, constraints: Sequence[Any], names: Sequence[str | None] = ()
-) -> list[Loop]:
+def _from_dict(model: pin.Model, spec: Mapping[str, Any], index: int) -> Loop:
+    """The :class:`Loop` of :meth:`Loop.to_dict`, checked."""
+    known = {"name", "kind", "joint1", "placement1", "joint2", "placement2"}
+    if set(spec) != known:
+        raise InputError(f"loop {index}: expected the keys {sorted(known)}, got {sorted(spec)}")
+    parts = {k: spec[k] for k in ("name", "kind", "joint1", "joint2")}
+    placements = {k: np.asarray(spec[k], dtype=float) for k in ("placement1", "placement2")}
+    return _checked(model, Loop(**parts, **placements))
+
+
+def loops_from_constraints(model: pin.Model, constraints: Sequence[Any]) -> list[Loop]:
     """Loops of Pinocchio's ``RigidConstraintModel`` list (MJCF ``<connect>``: 3D, ``<weld>``:
     6D), named by ``names`` where given."""
     if names and len(names) != len(constraints):
@@ -227,7 +230,7 @@ def loops_from_constraints(
         kind = {"CONTACT_3D": "point", "CONTACT_6D": "weld"}.get(str(c.type).split(".")[-1])
         if kind is None:
             raise RobotModelError(f"constraint {c.name!r}: unsupported type {c.type}")
-        name = (names[i] if names else None) or c.name or f"loop{i}"
+        name = c.name or f"loop{i}"
         loop = Loop(
             name,
             kind,

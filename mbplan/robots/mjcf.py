@@ -1,5 +1,5 @@
-"""What an MJCF file says beyond Pinocchio's model: which joints have an actuator, and the names
-of its ``<equality>`` closures (Pinocchio reads the closures but not their names)."""
+"""What an MJCF file says beyond Pinocchio's model: which joints have an actuator and the names
+of its loop closures (``<equality>``)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,8 @@ import xml.etree.ElementTree as ET
 from mbplan.errors import RobotModelError
 
 ACTUATOR_TAGS = ("motor", "position", "velocity", "general", "intvelocity", "damper", "cylinder")
-
-
-EQUALITY_TAGS = ("connect", "weld")
+CLOSURE_TAGS = ("connect", "weld")
+"""The ``<equality>`` elements that are loop closures, in the order Pinocchio lists them."""
 
 
 def _root(path: str | os.PathLike[str]) -> ET.Element:
@@ -19,17 +18,6 @@ def _root(path: str | os.PathLike[str]) -> ET.Element:
         return ET.parse(os.fspath(path)).getroot()
     except (ET.ParseError, OSError) as err:
         raise RobotModelError(f"MJCF {path}: {err}") from None
-
-
-def mjcf_closure_names(path: str | os.PathLike[str]) -> list[str | None]:
-    """The ``name`` of each ``<equality>`` ``<connect>``/``<weld>`` in file order (None where
-    unnamed)."""
-    return [
-        element.get("name")
-        for section in _root(path).findall("equality")
-        for element in section
-        if element.tag in EQUALITY_TAGS
-    ]
 
 
 def mjcf_actuated(path: str | os.PathLike[str]) -> tuple[str, ...] | None:
@@ -54,3 +42,22 @@ def mjcf_actuated(path: str | os.PathLike[str]) -> tuple[str, ...] | None:
             if joint not in out:
                 out.append(joint)
     return tuple(out)
+
+
+def mjcf_equality_names(path: str | os.PathLike[str]) -> list[str | None]:
+    """The names (None: unnamed) of an MJCF file's ``<connect>`` elements, then of its
+    ``<weld>`` ones: the order of Pinocchio's constraint models. Another equality (``joint``,
+    ``tendon``, ``distance``, ``flex``) is no loop closure mbplan represents:
+    :class:`RobotModelError` naming it."""
+    found: dict[str, list[str | None]] = {tag: [] for tag in CLOSURE_TAGS}
+    for section in _root(path).findall("equality"):
+        for element in section:
+            if element.tag in CLOSURE_TAGS:
+                found[element.tag].append(element.get("name"))
+            elif isinstance(element.tag, str):
+                what = element.get("name") or element.tag
+                raise RobotModelError(
+                    f"MJCF {path}: equality {what!r} (<{element.tag}>) is not supported; loop "
+                    f"closures are {' and '.join(f'<{t}>' for t in CLOSURE_TAGS)}"
+                )
+    return [name for tag in CLOSURE_TAGS for name in found[tag]]

@@ -32,7 +32,7 @@ from mbplan.robots import RobotDescription, load
 from mbplan.robots.continuous import to_angles, unbounded_revolute_model
 from mbplan.robots.free_body import FreeBody
 from mbplan.robots.joints import joint_kind
-from mbplan.robots.loader import mimic_tags
+from mbplan.robots.loader import MECHANISMS, MJCF_SUFFIXES, load_mjcf, mimic_tags
 from mbplan.robots.loops import (
     Loop,
     close_loops,
@@ -40,7 +40,7 @@ from mbplan.robots.loops import (
     loops_from_constraints,
     resolve_loops,
 )
-from mbplan.robots.mjcf import mjcf_actuated, mjcf_closure_names
+from mbplan.robots.mjcf import mjcf_actuated, mjcf_equality_names
 
 MIMIC_MODES = ("couple", "independent")
 
@@ -365,20 +365,12 @@ def _load_path(
     (None: the file has no ``<actuator>``)."""
     path = Path(robot)
     dirs = [str(Path(d).resolve()) for d in package_dirs]
-    if path.suffix.lower() in (".xml", ".mjcf"):
-        if not path.is_file():
-            raise InputError(f"MJCF file not found: {path}")
-        try:
-            model, constraints = pin.buildModelsFromMJCF(str(path), contacts=True)[:2]
-            collision = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.COLLISION)
-            visual = pin.buildGeomFromMJCF(model, str(path), pin.GeometryType.VISUAL)
-        except (RuntimeError, ValueError) as err:
-            raise RobotModelError(
-                f"Pinocchio cannot build a model from MJCF {path}: {err}"
-            ) from None
-        desc = RobotDescription(model.name, model, collision, visual, path)
-        loops = loops_from_constraints(model, constraints, mjcf_closure_names(path))
-        return desc, {"kind": "mjcf", "path": str(path.resolve())}, loops, mjcf_actuated(path)
+    if isinstance(robot, str) and robot in MECHANISMS:
+        desc, loops, actuated = _mjcf(MECHANISMS[robot], robot)
+        return desc, {"kind": "name", "name": robot}, loops, actuated
+    if path.suffix.lower() in MJCF_SUFFIXES:
+        desc, loops, actuated = _mjcf(path, None)
+        return desc, {"kind": "mjcf", "path": str(path.resolve())}, loops, actuated
     if isinstance(robot, str) and path.suffix.lower() != ".urdf":
         return load(robot), {"kind": "name", "name": robot}, [], None
     if not dirs:
@@ -391,6 +383,19 @@ def _load_path(
         raise RobotModelError(f"Pinocchio cannot build a model from {path}: {err}") from None
     desc = RobotDescription(model.name, model, collision, visual, path)
     return desc, {"kind": "urdf", "path": str(path.resolve()), "package_dirs": dirs}, [], None
+
+
+def _mjcf(
+    path: Path, name: str | None
+) -> tuple[RobotDescription, list[Loop], tuple[str, ...] | None]:
+    """An MJCF file's description, its ``<equality>`` loops (named as in the file) and its
+    actuated joints (None: no ``<actuator>``)."""
+    desc, constraints = load_mjcf(path, name)
+    loops = loops_from_constraints(desc.model, constraints)
+    names = mjcf_equality_names(path)
+    if len(names) == len(loops):
+        loops = [replace(loop, name=n or loop.name) for loop, n in zip(loops, names, strict=True)]
+    return desc, loops, mjcf_actuated(path)
 
 
 def _lock_values(

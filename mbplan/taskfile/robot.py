@@ -1,6 +1,7 @@
-"""The ``[robot]`` table of a task file: which robot, its package folders, locked joints and
+"""The ``[robot]`` table of a task file: which robot, its package folders, locked joints,
 whether URDF ``<mimic>`` joints follow their leaders (``mimic = "couple"``, the default) or are
-planned as joints of their own (``"independent"``)."""
+planned as joints of their own (``"independent"``), which joints are actuated; and the loop
+closures of the ``[[loop]]`` tables (:mod:`.loops`)."""
 
 from __future__ import annotations
 
@@ -12,9 +13,10 @@ import pinocchio as pin
 from mbplan.errors import InputError, RobotModelError
 from mbplan.robots import available_robots, load
 from mbplan.robots.robot import MIMIC_MODES, Robot, load_robot
+from mbplan.taskfile.loops import loop_key, read_actuated, read_loops
 from mbplan.taskfile.toml_table import Document, Table
 
-ROBOT_KEYS = ("urdf", "name", "mjcf", "package_dirs", "lock", "mimic")
+ROBOT_KEYS = ("urdf", "name", "mjcf", "package_dirs", "lock", "mimic", "actuated")
 _SUFFIXES = {"urdf": (".urdf",), "mjcf": (".xml", ".mjcf")}
 
 
@@ -50,6 +52,15 @@ def read_robot(doc: Document) -> tuple[Robot, list[str] | None]:
         key = "lock" if text.startswith("lock:") or "is locked" in text else kind
         raise type(err)(f"{doc.where(('robot', key))}: {text.removeprefix('lock: ')}") from None
     model = _unreduced(spec, kind)
+    actuated = read_actuated(t, list(model.names[1:]))
+    loops = read_loops(doc.tables("loop"), robot)
+    if loops or actuated is not None:
+        try:
+            robot = load_robot(
+                spec, package_dirs=dirs, lock=lock, mimic=mimic, loops=loops, actuated=actuated
+            )
+        except (InputError, RobotModelError) as err:  # the closures cannot close, or are void
+            raise type(err)(f"{doc.where(loop_key(loops, str(err)))}: {err}") from None
     one_dof = all(model.joints[j].nq == 1 for j in range(1, model.njoints))
     return robot, list(model.names[1:]) if one_dof else None
 

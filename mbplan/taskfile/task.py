@@ -1,8 +1,9 @@
 """A task file (TOML) as an :class:`~mbplan.OCP` plus solver settings: :func:`load_task`.
 
-Every key is documented in README ("Task files"). Tables: ``[robot]`` (:mod:`.robot`),
-``[horizon]``, ``[start]``, ``[goal]``, ``[[obstacle]]``, ``[cost]``, ``[constraints]``,
-``[solver]``. Item names of the OCP: ``goal`` (terminal), ``goal_tracking`` (running),
+Every key is documented in docs/task-files.md. Tables: ``[robot]`` and ``[[loop]]``
+(:mod:`.robot`, :mod:`.loops`), ``[horizon]``, ``[start]``, ``[goal]``, ``[[obstacle]]``,
+``[cost]``, ``[constraints]``, ``[solver]``. Item names of the OCP: ``goal`` (terminal),
+``rest`` (terminal, ``[goal].rest``), ``goal_tracking`` (running),
 ``velocity``, ``velocity_terminal``, ``torque``, ``position_limits``, ``velocity_limits``,
 ``torque_limits``, and the obstacle constraints of :func:`mbplan.tasks.paper.add_obstacle_constraint`
 (``clearance``, or ``com_outside_<name>`` per cylinder).
@@ -40,7 +41,7 @@ from mbplan.taskfile.robot import read_robot
 from mbplan.taskfile.toml_table import Document, Table, read_toml
 from mbplan.tasks.paper import add_obstacle_constraint
 
-TABLES = ("robot", "horizon", "start", "goal", "obstacle", "cost", "constraints", "solver")
+TABLES = ("robot", "loop", "horizon", "start", "goal", "obstacle", "cost", "constraints", "solver")
 SHAPES = {"box": 3, "cylinder": 2, "sphere": 1, "capsule": 2, "mesh": 3}
 COST_DEFAULTS = {"velocity": 1e-2, "terminal_velocity": 0.0, "torque": 1e-4, "tracking": 0.0}
 MARGIN = 0.02  # m, default [constraints].margin
@@ -95,6 +96,8 @@ def load_task(
     goal = doc.table("goal", required=True, what=" (with q, or frame and xyz)")
     residual = _goal(goal, robot, full_names, limits)
     _costs(doc.table("cost"), ocp, residual, goal)
+    if goal.boolean("rest", False):
+        ocp.add_constraint("rest", JointVelocity(), knots="terminal")
     _constraints(doc.table("constraints"), ocp, limits)
     method, warm_start, tol, max_iter = _solver(doc.table("solver"))
     return Task(
@@ -205,12 +208,16 @@ def _pose(xyz: list[float], R: np.ndarray) -> np.ndarray:
 
 
 def _goal(t: Table, robot: Robot, full_names: list[str] | None, limits: bool) -> Residual:
-    t.check_keys(("q", "frame", "xyz", "rpy", "tolerance", "weight"))
+    t.check_keys(("q", "joints", "frame", "xyz", "rpy", "tolerance", "weight", "rest"))
     if "q" in t:
         for key in ("frame", "xyz", "rpy"):
             if key in t:
                 raise t.error(key, "a joint goal (q) takes no frame, xyz or rpy")
+        if "joints" in t:
+            return _joint_goal(t, robot, limits)
         return JointPosition(_configuration(t, "q", robot, full_names, limits))
+    if "joints" in t:
+        raise t.error("joints", "a goal on some joints needs their values: q = [...]")
     frame = t.string("frame", required=True, hint=" (give q = [...], or frame and xyz)")
     try:
         fid = robot.frame_id(str(frame))
@@ -224,6 +231,27 @@ def _goal(t: Table, robot: Robot, full_names: list[str] | None, limits: bool) ->
         return FrameTranslation(str(frame), xyz)
     M = _pose(list(xyz), pin.rpy.rpyToMatrix(*t.vector("rpy", 3)))  # type: ignore[misc]
     return FramePlacement(str(frame), M)
+
+
+def _joint_goal(t: Table, robot: Robot, limits: bool) -> Residual:
+    """``[goal]`` ``joints`` and ``q``: a goal on those joints only."""
+    names = t.strings("joints") or []
+    joints = list(robot.model.names[1:])
+    for name in names:
+        if name not in joints:
+            raise t.error("joints", f"{name!r} is not a joint of the planned robot: {joints}")
+    if not names or len(set(names)) != len(names):
+        raise t.error("joints", "expected distinct joint names")
+    q = np.array(t.vector("q", len(names), required=True, hint=f" (one per joint of {names})"))
+    idx = robot.joint_indices(names)
+    lo, hi = robot.model.lowerPositionLimit[idx], robot.model.upperPositionLimit[idx]
+    outside = np.flatnonzero((q < lo - 1e-12) | (q > hi + 1e-12)) if limits else []
+    if len(outside):
+        j = int(outside[0])
+        raise t.error(
+            "q", f"joint {names[j]!r} = {q[j]:g} is outside its limits [{lo[j]:g}, {hi[j]:g}]"
+        )
+    return JointPosition(q, joints=tuple(names))
 
 
 def _check_reach(t: Table, robot: Robot, fid: int, xyz: np.ndarray) -> None:

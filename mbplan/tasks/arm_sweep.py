@@ -1,4 +1,4 @@
-"""The arm sweep's tasks (``tests/test_sweep.py``): every arm
+"""The arm sweep's tasks (``tests/test_sweep.py``): every serial arm
 of ``mbplan robots`` (prismatic joints locked) with a sampled joint goal and a frame goal, N = 6,
 planned from rest."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 
 import mbplan as mb
-from mbplan.robots import available_robots, load
+from mbplan.robots import available_arms, load
 
 KINDS = ("joint", "frame")
 
@@ -55,9 +55,9 @@ def sweep_tasks(robot: mb.Robot, seed: int) -> dict[str, mb.OCP]:
 
 
 def sweep_case(index: int) -> tuple[str, str, mb.OCP, np.ndarray]:
-    """Case ``index`` of ``2 · len(available_robots())``: robot name, kind, task and the rest
+    """Case ``index`` of ``2 · len(available_arms())``: robot name, kind, task and the rest
     path it starts from (the seed is the length of the robot's name, as in the test)."""
-    name = available_robots()[index // len(KINDS)]
+    name = available_arms()[index // len(KINDS)]
     kind = KINDS[index % len(KINDS)]
     ocp = sweep_tasks(sweep_robot(name), seed=len(name))[kind]
     return name, kind, ocp, np.repeat(ocp.q0[None], ocp.N + 1, axis=0)
