@@ -219,12 +219,7 @@ def _from_dict(model: pin.Model, spec: Mapping[str, Any], index: int) -> Loop:
 
 def loops_from_constraints(model: pin.Model, constraints: Sequence[Any]) -> list[Loop]:
     """Loops of Pinocchio's ``RigidConstraintModel`` list (MJCF ``<connect>``: 3D, ``<weld>``:
-    6D), named by ``names`` where given."""
-    if names and len(names) != len(constraints):
-        raise RobotModelError(
-            f"{len(names)} closures in the MJCF <equality> sections, {len(constraints)} read by "
-            "Pinocchio"
-        )
+    6D)."""
     out = []
     for i, c in enumerate(constraints):
         kind = {"CONTACT_3D": "point", "CONTACT_6D": "weld"}.get(str(c.type).split(".")[-1])
