@@ -114,7 +114,7 @@ def test_knots_that_do_not_close_fail_with_a_reason() -> None:
     check = mb.verify(ocp, bad)
     assert not check.passed
     assert check.closure_residual > CLOSURE_TOLERANCE
-    assert any("do not close the loops (loop0)" in r for r in check.reasons), check.reasons
+    assert any("do not close the loops (close)" in r for r in check.reasons), check.reasons
     finished = finish(ocp, bad)
     assert not finished.success and "do not close the loops" in finished.message
 
@@ -130,9 +130,9 @@ def test_torque_on_a_passive_joint_fails_with_a_reason() -> None:
 
 
 def test_wrong_torques_fail_the_replay() -> None:
-    """10 % more crank torque than planned: the replay's velocities leave the plan's."""
+    """30 % more crank torque than planned: the replay's velocities leave the plan's."""
     ocp, result = fourbar_ocp(), fourbar_plan()
-    tau = result.tau * np.array([1.1, 1.0, 1.0])
+    tau = result.tau * np.array([1.3, 1.0, 1.0])
     check = mb.verify(ocp, dataclasses.replace(result, tau=tau))
     assert not check.passed and check.velocity_deviation_ratio > 1.0
     assert any("velocity deviation" in r for r in check.reasons)

@@ -168,7 +168,7 @@ def refuse_loops(robot: Any, method: str) -> None:
         described = "; ".join(loop.describe() for loop in loops)
         raise InputError(
             f"{method} cannot plan {robot.name!r}: its dynamics have no loop closures, and the "
-            f"robot has closed kinematic loops ({described}); plan it with ipopt"
+            f"robot has closed kinematic loops ({described}); plan it with ripm or ipopt"
         )
 
 
