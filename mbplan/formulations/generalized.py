@@ -14,7 +14,9 @@ and knot by knot (equalities ``r = 0``, inequalities
 ``Σ w ½‖r(x_k)‖²`` (a CasADi expression of ``z``). Residuals are their joint-space rows
 (:mod:`mbplan.formulations.joint_space`): exact first and second derivatives by CasADi, or the
 rows' own derivatives in ``q`` (coal distances: witness-point gradient, fixed-witness-point
-Hessian, :mod:`mbplan.residuals.distance`).
+Hessian, :mod:`mbplan.residuals.distance`); an obstacle residual with ``between_knots`` adds its
+rows at configurations of the motion between knots ``k`` and ``k+1``
+(:mod:`mbplan.formulations.interval_rows`).
 
 Pinocchio's pip wheel has no CasADi bindings, so the constraint function, its Jacobian and the
 Lagrangian Hessian are ``casadi.Callback`` functions given to ``casadi.nlpsol`` (``g`` and the
@@ -28,7 +30,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import casadi as cs
 import numpy as np
@@ -36,7 +37,8 @@ import pinocchio as pin
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
-from mbplan.formulations.joint_space import knot_function
+from mbplan.formulations.interval_rows import ConfigurationRows, interval_rows, knot_rows
+from mbplan.formulations.joint_space import configuration_rows, knot_function
 from mbplan.ocp.problem import OCP, Item
 from mbplan.residuals.base import SymbolicRows
 
@@ -106,18 +108,19 @@ class GeneralizedNLP:
         self._bounds()
         row = 2 * N * nv
         self.rows: list[_Rows] = []
-        self.distances: list[tuple[Item, int]] = []
-        self._own: list[Any] = []  # the rows with their own derivatives of self.distances
         self.costs: list[_Rows] = []
+        own = []  # rows with their own derivatives in q, placed after the CasADi rows
         for item in ocp.items:
             r = item.residual
             if item.role == "constraint" and r.variable_bounds(robot) is not None:
                 continue
             form = r.joint_space(robot, ocp.scene)
-            if not isinstance(form, SymbolicRows):  # rows with their own derivatives in q
-                self.distances.append((item, row))
-                self._own.append(form)
-                row += form.size * len(item.knots)
+            if not isinstance(form, SymbolicRows):
+                own.append((knot_rows, item, form))
+            if item.role == "constraint" and r.between_knots:
+                between = configuration_rows(robot, ocp.scene, r.between_knots_form())
+                own.append((interval_rows, item, between))
+            if not isinstance(form, SymbolicRows):
                 continue
             fn = knot_function(robot, ocp.scene, r)
             x = cs.SX.sym("x", fn.size1_in(0))
@@ -133,15 +136,19 @@ class GeneralizedNLP:
             hess = cs.Function("h", [x, lam], [cs.hessian(cs.dot(lam, out), x)[0]])
             self.rows.append(_Rows(item, fn, jac, hess, cols, row, out.numel()))
             row += out.numel() * len(cols)
+        self.own: list[ConfigurationRows] = []
+        for place, item, form in own:
+            self.own.append(place(self, item, form, row))
+            row += self.own[-1].size
         self.m = row
         self.lbg = np.zeros(self.m)
         self.ubg = np.zeros(self.m)
         for r in self.rows:
             if r.item.sense == "ineq":
                 self.lbg[r.row0 : r.row0 + r.m * r.K] = -np.inf
-        for (item, row0), form in zip(self.distances, self._own, strict=True):
-            size = form.size * len(item.knots)
-            self.lbg[row0 : row0 + size] = -np.inf
+        for block in self.own:
+            if block.item.sense == "ineq":
+                self.lbg[block.row0 : block.row0 + block.size] = -np.inf
         self._jacobian_pattern()
         self._hessian_pattern()
 
@@ -227,8 +234,7 @@ class GeneralizedNLP:
         parts = [kin.ravel(), (dyn + self.damping * v[1:] - tau).ravel()]
         for r in self.rows:
             parts.append(np.asarray(r.value.map(r.K)(self._x(r, z))).T.ravel())
-        for (item, _), form in zip(self.distances, self._own, strict=True):
-            parts.append(form.values(q[item.knots]).ravel())
+        parts += [block.values(q, v) for block in self.own]
         return np.concatenate(parts)
 
     def _jacobian_pattern(self) -> None:
@@ -249,19 +255,7 @@ class GeneralizedNLP:
             lr, lc = (np.array(a, dtype=np.int64) for a in r.jac.sparsity_out(0).get_triplet())
             k = np.arange(r.K)[:, None]
             triplets.append(((r.row0 + k * r.m + lr).ravel(), r.cols[:, lc].ravel()))
-        self._dist_masks = []
-        for (item, row0), form in zip(self.distances, self._own, strict=True):
-            K, P = len(item.knots), form.size
-            mask = np.broadcast_to(form.jacobian_support()[None], (K, P, nv))
-            rows = row0 + np.arange(K * P).reshape(K, P)
-            cols = self.iq(item.knots)[:, None, :]
-            self._dist_masks.append(mask)
-            triplets.append(
-                (
-                    np.broadcast_to(rows[..., None], mask.shape)[mask],
-                    np.broadcast_to(cols, mask.shape)[mask],
-                )
-            )
+        triplets += [(block.jac_rows, block.jac_cols) for block in self.own]
         rows = np.concatenate([r for r, _ in triplets])
         cols = np.concatenate([c for _, c in triplets])
         self.jac_pattern = SparsePattern((self.m, self.n), rows, cols, np.ones(rows.size, bool))
@@ -288,8 +282,7 @@ class GeneralizedNLP:
         ]
         for r in self.rows:
             parts.append(np.asarray(r.jac.map(r.K)(self._x(r, z)).nonzeros()))
-        for (item, _), form, mask in zip(self.distances, self._own, self._dist_masks, strict=True):
-            parts.append(form.jacobian(q[item.knots])[mask])
+        parts += [block.jacobian_values(q, v) for block in self.own]
         return np.concatenate(parts)
 
     def jacobian(self, z: np.ndarray) -> sp.csc_matrix:
@@ -304,8 +297,7 @@ class GeneralizedNLP:
         for r in (*self.rows, *self.costs):
             lr, lc = (np.array(a, dtype=np.int64) for a in r.hess.sparsity_out(0).get_triplet())
             triplets.append((r.cols[:, lr].ravel(), r.cols[:, lc].ravel()))
-        for item, _ in self.distances:
-            triplets.append(_block(self.iq(item.knots), self.iq(item.knots)))
+        triplets += [(block.hess_rows, block.hess_cols) for block in self.own]
         rows = np.concatenate([r for r, _ in triplets])
         cols = np.concatenate([c for _, c in triplets])
         self.hess_pattern = SparsePattern((self.n, self.n), rows, cols, rows <= cols)
@@ -346,10 +338,7 @@ class GeneralizedNLP:
             parts.append(np.asarray(r.hess.map(r.K)(self._x(r, z), L).nonzeros()))
         for r in self.costs:
             parts.append(sigma * np.asarray(r.hess.map(r.K)(self._x(r, z)).nonzeros()))
-        for (item, row0), form in zip(self.distances, self._own, strict=True):
-            K = len(item.knots)
-            mu = lam[row0 : row0 + K * form.size].reshape(K, form.size)
-            parts.append(form.hessian(q[item.knots], mu).ravel())
+        parts += [block.hessian_values(q, v, lam) for block in self.own]
         return np.concatenate(parts)
 
     def lagrangian_hessian(self, z: np.ndarray, sigma: float, lam: np.ndarray) -> sp.csc_matrix:

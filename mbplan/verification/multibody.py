@@ -81,6 +81,7 @@ from mbplan.verification.report import (
     Verification,
     constraint_violations,
     goal_errors,
+    margin_kept,
     replay_reasons,
 )
 
@@ -205,18 +206,19 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
                 "(twice the explicit-Euler error at that knot)"
             )
     violations = constraint_violations(ocp, result.q, result.v, result.tau, result.tau_knots)
-    obstacles = [i for i in ocp.constraints if i.residual.is_obstacle]
     substeps = path.reshape(-1, path.shape[-1])
-    clearance = min((_clearance(ocp, i, substeps) for i in obstacles), default=np.inf)
+    clearances = {
+        i.name: _clearance(ocp, i, substeps) for i in ocp.constraints if i.residual.is_obstacle
+    }
     q_final = np.vstack([result.q[:-1], q_end[-1:]])
     v_final = np.vstack([result.v[:-1], v_end[-1:]])
     goals = goal_errors(ocp, q_final, v_final)
-    reasons += replay_reasons(ocp, violations, clearance, goals)
+    reasons += replay_reasons(ocp, violations, clearances, goals)
     torque = [i for i in ocp.constraints if i.residual.input_limits]
     violation = max((violations[i.name] for i in torque), default=0.0)
     return Verification(
         max_joint_deviation_rad=float(dev_q.max()),
-        min_obstacle_distance_m=float(clearance),
+        min_obstacle_distance_m=float(min(clearances.values(), default=np.inf)),
         final_goal_error_rad=max(goals.values(), default=float("nan")),
         torque_limit_violation=violation,
         passed=not reasons,
@@ -227,4 +229,6 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
         open_loop_deviation_rad=_open_loop_deviation(ocp, result),
         violations=violations,
         goal_errors=goals,
+        clearances=clearances,
+        margin_kept=margin_kept(ocp, clearances),
     )
