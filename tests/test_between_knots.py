@@ -24,7 +24,7 @@ from mbplan.formulations.maximal import MaximalNLP
 from mbplan.multibody import body_poses, maximal_model
 from mbplan.multibody.collision import chain_kinematics, collision_pairs, signed_distances
 from mbplan.planning.initial_guess import initial_path
-from mbplan.residuals import ComOutsideCylinder, Distance
+from mbplan.residuals import ComOutsideCylinder, Distance, Residual
 from mbplan.residuals.distance import distance_values
 from mbplan.robots import load
 from mbplan.taskfile import load_task
@@ -298,3 +298,10 @@ def test_bad_between_knots_input_is_named_before_any_solve() -> None:
             mb.plan(ocp, method)
     with pytest.raises(mb.InputError, match=r"between_knots.*expected true or false"):
         load_task(PANDA_TASK, {"constraints.between_knots": 1})
+
+
+def test_a_saved_obstacle_without_the_option_is_knot_only() -> None:
+    data = Distance(0.02).to_dict()
+    assert Residual.from_dict(data).between_knots
+    del data["between_knots"]
+    assert not Residual.from_dict(data).between_knots

@@ -154,6 +154,8 @@ class Residual:
         if cls is None:
             raise InputError(f"unknown residual kind {kind!r}; known: {sorted(RESIDUALS)}")
         kwargs = {k: v for k, v in data.items() if k != "kind"}
+        if "between_knots" in {f.name for f in fields(cls)}:  # no key: a knot-only constraint
+            kwargs.setdefault("between_knots", False)
         for k, v in kwargs.items():
             if isinstance(v, list):
                 kwargs[k] = tuple(v) if k in ("joints", "objects") else np.array(v, dtype=float)

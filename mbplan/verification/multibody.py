@@ -51,9 +51,12 @@ Thresholds (all documented values are checked by ``tests/test_verification.py``)
   involve ``τ``).
 * every constraint of the OCP, by name (:attr:`Verification.violations`): obstacle constraints
   (:attr:`~mbplan.residuals.Residual.is_obstacle`: :class:`~mbplan.residuals.Distance`,
-  :class:`~mbplan.residuals.ComOutsideCylinder`) on every RK4 substep of the replayed intervals without their margin (which exists to absorb
-  the inter-knot motion): ``min_obstacle_distance_m`` ≥ 0, coal through the planner's own path
-  (:mod:`mbplan.multibody.collision`); the others at the planned knots within
+  :class:`~mbplan.residuals.ComOutsideCylinder`) on every RK4 substep of the replayed intervals
+  (:data:`SUBSTEPS` or more per interval), by name (``clearances``), coal through the planner's
+  own path (:mod:`mbplan.multibody.collision`): without their margin ``min_obstacle_distance_m``
+  ≥ 0, and a constraint with ``between_knots`` must keep
+  :data:`~mbplan.verification.report.MARGIN_KEPT` of its margin (``margin_kept``); the others at
+  the planned knots within
   :data:`~mbplan.residuals.base.CONSTRAINT_TOLERANCE` (or the constraint's own ``tolerance``;
   :meth:`~mbplan.residuals.Residual.violation_tolerance`); torque limits on the applied torques
   (``tau_knots`` when given) within :data:`~mbplan.residuals.base.TORQUE_TOLERANCE`
