@@ -51,6 +51,13 @@ def as_real(value: object, name: str, *, positive: bool = False) -> float:
     return value
 
 
+def as_bool(value: object, name: str) -> bool:
+    """``value`` as a bool; anything but ``True``/``False`` (numpy's included) is rejected."""
+    if not isinstance(value, bool | np.bool_):
+        raise InputError(f"{name}: expected true or false, got {value!r}")
+    return bool(value)
+
+
 def as_int(value: object, name: str, *, minimum: int, what: str) -> int:
     """``value`` (``what`` it counts) as an int ``>= minimum``; bools are rejected."""
     if not isinstance(value, int | np.integer) or isinstance(value, bool) or value < minimum:

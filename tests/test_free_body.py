@@ -45,7 +45,7 @@ def factory_ocp() -> mb.OCP:
     ocp.add_constraint("v_eq", br.BodyVelocity([0.0, 0.1, 0.0]), knots=[1])
     ocp.add_constraint("u_eq", br.BodyInput(np.ones(5)), knots=[1])
     ocp.add_constraint("u_limits", br.BodyInputLimits(-20 * np.ones(5), 20 * np.ones(5)))
-    ocp.add_constraint("post", res.ComOutsideCylinder("post", 0.05))
+    ocp.add_constraint("post", res.ComOutsideCylinder("post", 0.05, between_knots=False))
     return ocp
 
 
@@ -214,7 +214,7 @@ def test_bad_input_is_named_before_any_solve() -> None:
     with pytest.raises(mb.InputError, match="JointPosition is not a residual of a free body"):
         ocp.add_cost("q", res.JointPosition([0.0]))
     blocked = mb.OCP(body, mb.Scene().add_cylinder("c", 0.3, 1.0, (0.1, 0, 0)), N=4)
-    blocked.add_constraint("c", res.ComOutsideCylinder("c"))
+    blocked.add_constraint("c", res.ComOutsideCylinder("c", between_knots=False))
     with pytest.raises(mb.InfeasibleRequestError, match="'c'"):
         mb.plan(blocked, "ripm")
     ocp.add_cost("p", br.BodyPosition([1.0, 0.0, 0.0]))

@@ -16,7 +16,9 @@ from mbplan.residuals.distance import distance_values
 from mbplan.tasks.paper import IIWA_TARGET, add_obstacle_constraint, tracking_ocp
 
 
-def small_cases(n: int = 3, constraint: str = "com", radius: float = 0.08) -> list[mb.OCP]:
+def small_cases(
+    n: int = 3, constraint: str = "com", radius: float = 0.08, between_knots: bool = False
+) -> list[mb.OCP]:
     """N = 10 tasks whose straight path brushes a cylinder in the way of the wrist (links 6, 7
     pass at 0.60-0.62 m from the base axis; the cylinder's near side is at 0.60 m)."""
     rng = np.random.default_rng(0)
@@ -27,7 +29,7 @@ def small_cases(n: int = 3, constraint: str = "com", radius: float = 0.08) -> li
         q0 = target + np.concatenate([[-0.8], 0.1 * rng.uniform(-1.0, 1.0, 6)])
         scene = mb.Scene().add_cylinder("cylinder", radius, 1.5, (*c, 0.75))
         ocp = tracking_ocp("iiwa", q0, target, scene, N=10, dt=0.1)
-        out.append(add_obstacle_constraint(ocp, constraint))
+        out.append(add_obstacle_constraint(ocp, constraint, between_knots=between_knots))
     return out
 
 
@@ -182,7 +184,8 @@ def test_distance_rows_hessian_is_the_fixed_witness_point_model() -> None:
     (mbplan.multibody.collision), against central differences of that model's gradient."""
     ocp = _distance_ocp()
     nlp = GeneralizedNLP(ocp)
-    ((item, row0),) = nlp.distances
+    (block,) = nlp.own
+    item, row0 = block.item, block.row0
     z = nlp.initial_guess(initial_path(ocp, "linear"))
     z = z + 0.1 * np.random.default_rng(6).standard_normal(nlp.n)
     _, _, kin, contacts, _ = distance_values(

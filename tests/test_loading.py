@@ -129,7 +129,7 @@ def test_scene_mesh_in_a_distance_constraint_equals_the_box(tmp_path, kind: str)
     ocp.add_constraint("clearance", res.Distance(0.02))
     nlp = GeneralizedNLP(ocp)
     z = nlp.initial_guess(np.vstack([IIWA_START, q[:2]]))
-    (_, row0), = nlp.distances  # fmt: skip
+    row0 = nlp.own[0].row0  # the knot rows (the rows between knots follow)
     rows = nlp.constraints(z)[row0 : row0 + 2 * d_box.shape[1]]
     np.testing.assert_allclose(rows, d_box[:2].ravel(), atol=1e-6)
     with pytest.raises(mb.InputError, match="mesh file not found"):

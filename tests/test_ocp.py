@@ -11,6 +11,7 @@ from fd import check_generalized_derivatives
 import mbplan as mb
 from mbplan import residuals as res
 from mbplan.formulations.generalized import GeneralizedNLP
+from mbplan.formulations.interval_rows import FRACTIONS
 from mbplan.formulations.maximal import MaximalNLP
 from mbplan.planning.initial_guess import inverse_kinematics
 from mbplan.tasks.paper import IIWA_START
@@ -75,10 +76,14 @@ def test_generalized_derivatives_match_finite_differences(distance: bool) -> Non
     q = np.linspace(ocp.q0, np.zeros(7), ocp.N + 1)
     z = nlp.initial_guess(q) + 0.05 * rng.standard_normal(nlp.n)
     lam = rng.standard_normal(nlp.m)
-    for _item, row0 in nlp.distances:  # fixed-witness-point Hessian: tested in test_collision
-        lam[row0:] = 0.0
+    for block in nlp.own:  # fixed-witness-point Hessian: tested in test_collision
+        if isinstance(block.item.residual, res.Distance):
+            lam[block.row0 : block.row0 + block.size] = 0.0
     check_generalized_derivatives(nlp, z, lam)
-    assert nlp.m == 2 * 3 * 7 + 1 + 2 + 1 + 6 + 3 + 3 + 3 * 7 + (3 * 7 * 2 if distance else 0)
+    between = 3 * len(FRACTIONS)  # rows between knots: 3 intervals
+    com, pairs = 7, 7 * 2
+    knots = 2 * 3 * 7 + 1 + 2 + 1 + 6 + 3 + 3 + (3 + between) * com
+    assert nlp.m == knots + ((3 + between) * pairs if distance else 0)
 
 
 @pytest.mark.parametrize("case", ["iiwa", "iiwa-distance", "panda"])

@@ -83,8 +83,8 @@ def test_python_residuals_match_the_joint_space_residuals_and_finite_differences
     goal = pin.SE3(pin.rpy.rpyToMatrix(0.1, 0.2, 0.3), np.array([0.4, 0.1, 0.6]))
     ocp.add_constraint("pose", res.FramePlacement("iiwa_link_ee", goal), "terminal")
     ocp.add_constraint("point", res.FrameTranslation("iiwa_link_4", [0.1, 0.0, 0.7]))
-    ocp.add_constraint("com", res.ComOutsideCylinder("post", 0.03))
-    ocp.add_constraint("clearance", res.Distance(0.02))
+    ocp.add_constraint("com", res.ComOutsideCylinder("post", 0.03, between_knots=False))
+    ocp.add_constraint("clearance", res.Distance(0.02, between_knots=False))
     state = crocoddyl.StateMultibody(MODEL)
     rng = np.random.default_rng(0)
     x = np.concatenate([np.array(IIWA_TARGET) + 0.3 * rng.standard_normal(7), np.ones(7)])
@@ -136,6 +136,6 @@ def test_csqp_keeps_the_coal_distance_margin() -> None:
     ocp = mb.OCP(mb.load_robot("iiwa", damping=False), scene, N=8, dt=0.1)
     ocp.add_cost("velocity", res.JointVelocity(), 1e-2)
     ocp.add_cost("goal", res.JointPosition(IIWA_TARGET), 1.0, "terminal")
-    ocp.add_constraint("clearance", res.Distance(0.03))
+    ocp.add_constraint("clearance", res.Distance(0.03, between_knots=False))
     result = mb.plan(ocp, "csqp", max_iter=100, warm_start="linear")
     assert result.violations["clearance"] <= CONSTRAINT_TOLERANCE, result.violations

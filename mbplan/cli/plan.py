@@ -4,6 +4,7 @@ saved and optionally replayed."""
 from __future__ import annotations
 
 import argparse
+import math
 import warnings
 from collections.abc import Callable
 from typing import Any
@@ -110,11 +111,12 @@ def _plan(args: argparse.Namespace) -> int:
     )
     goals = ", ".join(f"{k} {v:.3g}" for k, v in {**check.violations, **check.goal_errors}.items())
     soft = f", final goal error {check.final_goal_error_rad:.3f} rad" if check.goal_errors else ""
+    kept = "" if math.isnan(check.margin_kept) else f" ({check.margin_kept:.0%} of the margin)"
     if getattr(problem.robot, "loops", ()):
         soft += f", loop closure residual {check.closure_residual:.2g}"
     print(
         f"verification: {'passed' if check.passed else 'FAILED'}; min obstacle clearance "
-        f"{check.min_obstacle_distance_m:.3f} m{soft}"
+        f"{check.min_obstacle_distance_m:.3f} m along the motion{kept}{soft}"
         + (f"\n  constraint violations / goal errors: {goals}" if args.task_file else "")
         + "".join(f"\n  - {r}" for r in check.reasons)
     )

@@ -16,7 +16,9 @@ and knot by knot (equalities ``r = 0``, inequalities
 ``Σ w ½‖r(x_k)‖²`` (a CasADi expression of ``z``). Residuals are their joint-space rows
 (:mod:`mbplan.formulations.joint_space`): exact first and second derivatives by CasADi, or the
 rows' own derivatives in ``q`` (coal distances: witness-point gradient, fixed-witness-point
-Hessian, :mod:`mbplan.residuals.distance`).
+Hessian, :mod:`mbplan.residuals.distance`); an obstacle residual with ``between_knots`` adds its
+rows at configurations of the motion between knots ``k`` and ``k+1``
+(:mod:`mbplan.formulations.interval_rows`).
 
 Pinocchio's pip wheel has no CasADi bindings, so the constraint function, its Jacobian and the
 Lagrangian Hessian are ``casadi.Callback`` functions given to ``casadi.nlpsol`` (``g`` and the
@@ -29,7 +31,6 @@ Lagrangian Hessian are ``casadi.Callback`` functions given to ``casadi.nlpsol`` 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import casadi as cs
 import numpy as np
@@ -45,7 +46,8 @@ from mbplan.formulations.generalized_loops import (
     loop_functions,
     loop_rows,
 )
-from mbplan.formulations.joint_space import knot_function
+from mbplan.formulations.interval_rows import ConfigurationRows, interval_rows, knot_rows
+from mbplan.formulations.joint_space import configuration_rows, knot_function
 from mbplan.ocp.problem import OCP, Item
 from mbplan.residuals.base import SymbolicRows
 
@@ -111,18 +113,19 @@ class GeneralizedNLP:
         self._bounds()
         row = 2 * N * nv
         self.rows: list[_Rows] = []
-        self.distances: list[tuple[Item, int]] = []
-        self._own: list[Any] = []  # the rows with their own derivatives of self.distances
         self.costs: list[_Rows] = []
+        own = []  # rows with their own derivatives in q, placed after the CasADi rows
         for item in ocp.items:
             r = item.residual
             if item.role == "constraint" and r.variable_bounds(robot) is not None:
                 continue
             form = r.joint_space(robot, ocp.scene)
-            if not isinstance(form, SymbolicRows):  # rows with their own derivatives in q
-                self.distances.append((item, row))
-                self._own.append(form)
-                row += form.size * len(item.knots)
+            if not isinstance(form, SymbolicRows):
+                own.append((knot_rows, item, form))
+            if item.role == "constraint" and r.between_knots:
+                between = configuration_rows(robot, ocp.scene, r.between_knots_form())
+                own.append((interval_rows, item, between))
+            if not isinstance(form, SymbolicRows):
                 continue
             fn = knot_function(robot, ocp.scene, r)
             x = cs.SX.sym("x", fn.size1_in(0))
@@ -139,15 +142,19 @@ class GeneralizedNLP:
             for x, out, cols, row0 in loop_blocks(self, self.loops, row):
                 self.rows.append(_Rows.of(None, x, out, cols, row0))
             row += loop_rows(N, self.loops)
+        self.own: list[ConfigurationRows] = []
+        for place, item, form in own:
+            self.own.append(place(self, item, form, row))
+            row += self.own[-1].size
         self.m = row
         self.lbg = np.zeros(self.m)
         self.ubg = np.zeros(self.m)
         for r in self.rows:
             if r.sense == "ineq":
                 self.lbg[r.row0 : r.row0 + r.m * r.K] = -np.inf
-        for (item, row0), form in zip(self.distances, self._own, strict=True):
-            size = form.size * len(item.knots)
-            self.lbg[row0 : row0 + size] = -np.inf
+        for own in self.own:
+            if own.item.sense == "ineq":
+                self.lbg[own.row0 : own.row0 + own.size] = -np.inf
         self._jacobian_pattern()
         self._hessian_pattern()
 
@@ -258,8 +265,8 @@ class GeneralizedNLP:
         )
         for r in self.rows:
             g[r.row0 : r.row0 + r.m * r.K] += np.asarray(r.value.map(r.K)(self._x(r, z))).T.ravel()
-        for (item, row0), form in zip(self.distances, self._own, strict=True):
-            g[row0 : row0 + form.size * len(item.knots)] = form.values(q[item.knots]).ravel()
+        for own in self.own:
+            g[own.row0 : own.row0 + own.size] = own.values(q, v)
         return g
 
     def _jacobian_pattern(self) -> None:
@@ -280,19 +287,7 @@ class GeneralizedNLP:
             lr, lc = (np.array(a, dtype=np.int64) for a in r.jac.sparsity_out(0).get_triplet())
             k = np.arange(r.K)[:, None]
             triplets.append(((r.row0 + k * r.m + lr).ravel(), r.cols[:, lc].ravel()))
-        self._dist_masks = []
-        for (item, row0), form in zip(self.distances, self._own, strict=True):
-            K, P = len(item.knots), form.size
-            mask = np.broadcast_to(form.jacobian_support()[None], (K, P, nv))
-            rows = row0 + np.arange(K * P).reshape(K, P)
-            cols = self.iq(item.knots)[:, None, :]
-            self._dist_masks.append(mask)
-            triplets.append(
-                (
-                    np.broadcast_to(rows[..., None], mask.shape)[mask],
-                    np.broadcast_to(cols, mask.shape)[mask],
-                )
-            )
+        triplets += [(own.jac_rows, own.jac_cols) for own in self.own]
         rows = np.concatenate([r for r, _ in triplets])
         cols = np.concatenate([c for _, c in triplets])
         self.jac_pattern = SparsePattern((self.m, self.n), rows, cols, np.ones(rows.size, bool))
@@ -319,8 +314,7 @@ class GeneralizedNLP:
         ]
         for r in self.rows:
             parts.append(np.asarray(r.jac.map(r.K)(self._x(r, z)).nonzeros()))
-        for (item, _), form, mask in zip(self.distances, self._own, self._dist_masks, strict=True):
-            parts.append(form.jacobian(q[item.knots])[mask])
+        parts += [own.jacobian_values(q, v) for own in self.own]
         return np.concatenate(parts)
 
     def jacobian(self, z: np.ndarray) -> sp.csc_matrix:
@@ -335,8 +329,7 @@ class GeneralizedNLP:
         for r in (*self.rows, *self.costs):
             lr, lc = (np.array(a, dtype=np.int64) for a in r.hess.sparsity_out(0).get_triplet())
             triplets.append((r.cols[:, lr].ravel(), r.cols[:, lc].ravel()))
-        for item, _ in self.distances:
-            triplets.append(block(self.iq(item.knots), self.iq(item.knots)))
+        triplets += [(own.hess_rows, own.hess_cols) for own in self.own]
         rows = np.concatenate([r for r, _ in triplets])
         cols = np.concatenate([c for _, c in triplets])
         self.hess_pattern = SparsePattern((self.n, self.n), rows, cols, rows <= cols)
@@ -377,10 +370,7 @@ class GeneralizedNLP:
             parts.append(np.asarray(r.hess.map(r.K)(self._x(r, z), L).nonzeros()))
         for r in self.costs:
             parts.append(sigma * np.asarray(r.hess.map(r.K)(self._x(r, z)).nonzeros()))
-        for (item, row0), form in zip(self.distances, self._own, strict=True):
-            K = len(item.knots)
-            mu = lam[row0 : row0 + K * form.size].reshape(K, form.size)
-            parts.append(form.hessian(q[item.knots], mu).ravel())
+        parts += [block.hessian_values(q, v, lam) for block in self.own]
         return np.concatenate(parts)
 
     def lagrangian_hessian(self, z: np.ndarray, sigma: float, lam: np.ndarray) -> sp.csc_matrix:

@@ -12,11 +12,13 @@ every order are exact. Rows with their own derivatives (coal distances) are eval
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Any
 
 import casadi as cs
 import numpy as np
 import pinocchio as pin
 
+from mbplan.errors import InputError
 from mbplan.formulations.free_body import evaluate_body
 from mbplan.lie import SO3
 from mbplan.ocp.scene import Scene
@@ -135,3 +137,55 @@ def evaluate(
 def _mapped(fn: cs.Function, knots: int) -> cs.Function:
     """``fn`` over ``knots`` knots (its parameters shared)."""
     return fn.map(knots)
+
+
+class SymbolicConfigurationRows:
+    """A state residual's CasADi rows that read ``q`` alone, with their own derivatives in ``q``
+    (the interface of :class:`~mbplan.residuals.distance.DistanceRows`), so that a formulation
+    can evaluate them at configurations other than its knots."""
+
+    def __init__(self, robot: Robot, scene: Scene, residual: Residual):
+        fn = knot_function(robot, scene, residual)
+        x = cs.SX.sym("x", fn.size1_in(0))
+        if residual.space != "state" or cs.depends_on(fn(x), x[robot.nv :]):
+            raise InputError(
+                f"{type(residual).__name__}: rows between knots need a state residual of q alone"
+            )
+        q = cs.SX.sym("q", robot.nv)
+        r = fn(cs.vertcat(q, cs.SX.zeros(robot.nv)))
+        mu = cs.SX.sym("mu", r.numel())
+        jac = cs.jacobian(r, q)
+        self.size = r.numel()
+        self._support = np.array(cs.DM(jac.sparsity(), 1).full(), dtype=bool)
+        self._value = cs.Function("r", [q], [r])
+        self._jac = cs.Function("j", [q], [cs.densify(jac)])
+        self._hess = cs.Function("h", [q, mu], [cs.densify(cs.hessian(cs.dot(mu, r), q)[0])])
+
+    def values(self, q: np.ndarray) -> np.ndarray:
+        """The rows ``(K, P)`` at ``q (K, nv)``."""
+        return np.array(_mapped(self._value, len(q))(q.T)).T.reshape(len(q), self.size)
+
+    def jacobian(self, q: np.ndarray) -> np.ndarray:
+        """``∂r/∂q`` ``(K, P, nv)``."""
+        J = np.array(_mapped(self._jac, len(q))(q.T))  # (P, K·nv), one block per knot
+        return J.reshape(self.size, len(q), -1).transpose(1, 0, 2)
+
+    def jacobian_support(self) -> np.ndarray:
+        """``(P, nv)`` bool: the structural nonzeros of the Jacobian."""
+        return self._support
+
+    def hessian(self, q: np.ndarray, mu: np.ndarray) -> np.ndarray:
+        """``Σ_p μ_kp ∇²r_p`` ``(K, nv, nv)``."""
+        H = np.array(_mapped(self._hess, len(q))(q.T, np.asarray(mu).T))
+        return H.reshape(q.shape[1], len(q), -1).transpose(1, 0, 2)
+
+
+def configuration_rows(robot: Robot, scene: Scene, residual: Residual) -> Any:
+    """The residual's rows with their own derivatives in ``q``: its own (coal distances) or its
+    CasADi rows as :class:`SymbolicConfigurationRows`."""
+    form = residual.joint_space(robot, scene)
+    return (
+        SymbolicConfigurationRows(robot, scene, residual)
+        if isinstance(form, SymbolicRows)
+        else form
+    )

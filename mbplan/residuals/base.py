@@ -18,6 +18,11 @@ passing a context it provides (symbolic kinematics, the maximal layout, the Croc
 * verification: :attr:`Residual.is_obstacle` (checked by :meth:`Residual.clearance` on the replay),
   :meth:`Residual.violation_tolerance` and :meth:`Residual.violation_reason`.
 
+An obstacle residual with :attr:`Residual.between_knots` also holds along each interval's motion:
+the generalized formulation adds its joint-space rows at configurations of the interval
+(:mod:`mbplan.formulations.interval_rows`), the maximal formulation terms on the bodies'
+interpolated poses (its :meth:`Residual.maximal_terms`); shooting and free bodies refuse it.
+
 A translation a kind does not provide raises :class:`~mbplan.errors.InputError` naming the
 residual and the formulation (:meth:`Residual.inexpressible`), before any solve. Every subclass
 whose name does not start with ``_`` is registered in :data:`RESIDUALS` (``kind`` of its
@@ -108,7 +113,8 @@ class Residual:
     """Base class of the residual kinds (module docstring). ``space`` is ``"state"`` or
     ``"control"``, ``sense`` the constraint sense, ``cost``/``constraint`` whether it can be a
     cost / a constraint, ``free_body`` whether it applies to a free body, ``is_obstacle`` whether it
-    keeps the robot out of an obstacle (the verifier checks it on the replay's substeps)."""
+    keeps the robot out of an obstacle (the verifier checks it on the replay's substeps),
+    ``between_knots`` whether its rows also hold between the knots (module docstring)."""
 
     space: ClassVar[str] = "state"
     sense: ClassVar[str] = "eq"
@@ -116,6 +122,8 @@ class Residual:
     constraint: ClassVar[bool] = True
     free_body: ClassVar[bool] = False
     is_obstacle: ClassVar[bool] = False
+    # not annotated: obstacle residuals redefine it as their last field
+    between_knots = False
     input_limits: ClassVar[bool] = False  # limits the applied torques or inputs
     steps: ClassVar[bool] = False  # reads a free body's rotation step F (evaluating it needs dt)
 
@@ -146,6 +154,8 @@ class Residual:
         if cls is None:
             raise InputError(f"unknown residual kind {kind!r}; known: {sorted(RESIDUALS)}")
         kwargs = {k: v for k, v in data.items() if k != "kind"}
+        if "between_knots" in {f.name for f in fields(cls)}:  # no key: a knot-only constraint
+            kwargs.setdefault("between_knots", False)
         for k, v in kwargs.items():
             if isinstance(v, list):
                 kwargs[k] = tuple(v) if k in ("joints", "objects") else np.array(v, dtype=float)
@@ -154,6 +164,19 @@ class Residual:
     def inexpressible(self, formulation: str) -> InputError:
         """The error of a translation this kind does not provide."""
         return InputError(f"{type(self).__name__} cannot be expressed in {formulation}")
+
+    def between_knots_form(self) -> Residual:
+        """The residual whose joint-space rows a formulation evaluates between knots."""
+        return self
+
+    def knots_only(self, formulation: str) -> None:
+        """Raise :class:`InputError` if this residual holds between knots, which
+        ``formulation`` cannot express."""
+        if self.between_knots:
+            raise InputError(
+                f"{type(self).__name__}(between_knots=True) cannot be expressed in "
+                f"{formulation}, which constrains the knots only; pass between_knots=False"
+            )
 
     # -- joint space (generalized coordinates, the verifier) -----------------------------------
     def joint_space(self, robot: Any, scene: Scene) -> Any:

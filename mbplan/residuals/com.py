@@ -1,5 +1,5 @@
 """Eq. (62): the COM of every moving link (of a free body: its position) outside a vertical scene
-cylinder, ``(r + margin)² - ‖(x_i, y_i) - c‖² ≤ 0``."""
+cylinder, ``(r + margin)² - ‖(x_i, y_i) - c‖² ≤ 0``; for a robot also between the knots."""
 
 from __future__ import annotations
 
@@ -13,15 +13,23 @@ import numpy as np
 from mbplan.errors import InputError
 from mbplan.residuals.base import Residual, ShootingResidual, SymbolicContext, SymbolicRows
 from mbplan.robots.free_body import FreeBody
-from mbplan.transcription.constraints import cylinder_clearance, cylinder_clearance_function
+from mbplan.transcription.constraints import (
+    cylinder_clearance,
+    cylinder_clearance_function,
+    interval_cylinder_clearance_function,
+)
+from mbplan.transcription.intervals import interval_samples
 from mbplan.transcription.terms import Term
-from mbplan.validation import as_real
+from mbplan.validation import as_bool, as_real
 
 
 @dataclass(frozen=True, eq=False)
 class ComOutsideCylinder(Residual):
     """Eq. (62): ``(r + margin)² - ‖(x_i, y_i) - c‖² ≤ 0`` for the COM ``p_i`` of every moving
-    link and the vertical scene cylinder ``obstacle`` (infinite in z). Constraint only."""
+    link and the vertical scene cylinder ``obstacle`` (infinite in z). Constraint only.
+
+    ``between_knots=True`` also keeps the COMs out along each interval's motion (a robot only,
+    :mod:`mbplan.residuals.base`); False constrains the knots only, as the RIPM paper does."""
 
     sense: ClassVar[str] = "ineq"
     cost: ClassVar[bool] = False
@@ -29,12 +37,17 @@ class ComOutsideCylinder(Residual):
     is_obstacle: ClassVar[bool] = True
     obstacle: str = ""
     margin: float = 0.0
+    between_knots: bool = True
 
     def resolve(self, robot: Any, scene: Any) -> Residual:
         o = scene[self.obstacle]
         if o.shape != "cylinder" or not np.allclose(o.pose[:3, 2], [0, 0, 1], atol=1e-9):
             raise InputError(f"ComOutsideCylinder: {o} is not a vertical cylinder")
-        return replace(self, margin=as_real(self.margin, "ComOutsideCylinder.margin"))
+        between = as_bool(self.between_knots, "ComOutsideCylinder.between_knots")
+        if between and isinstance(robot, FreeBody):
+            self.knots_only(f"the free body {robot.name!r}'s coordinates")
+        margin = as_real(self.margin, "ComOutsideCylinder.margin")
+        return replace(self, margin=margin, between_knots=between)
 
     def dim(self, robot: Any, scene: Any) -> int:
         return 1 if isinstance(robot, FreeBody) else robot.model.njoints - 1
@@ -65,10 +78,18 @@ class ComOutsideCylinder(Residual):
     def maximal_terms(self, ctx: Any, item: Any) -> list[Term]:
         nb = ctx.mm.nb
         k, b = (a.ravel() for a in np.meshgrid(item.knots, np.arange(nb), indexing="ij"))
+        circle = self.circle(ctx.ocp.scene)
         fn = cylinder_clearance_function(ctx.jit)
-        return [
-            Term(item.name, "ineq", fn, {"p": ("p", k * nb + b)}, {"c": self.circle(ctx.ocp.scene)})
-        ]
+        terms = [Term(item.name, "ineq", fn, {"p": ("p", k * nb + b)}, {"c": circle})]
+        if not self.between_knots:
+            return terms
+        k, s = interval_samples(item.knots)
+        j, b = (a.ravel() for a in np.meshgrid(np.arange(k.size), np.arange(nb), indexing="ij"))
+        sites = k[j] * nb + b
+        fn = interval_cylinder_clearance_function(ctx.jit)
+        bind = {"p": ("p", sites), "v": ("v", sites)}
+        params = {"c": circle, "h": s[j] * ctx.ocp.dt}
+        return [*terms, Term(f"{item.name}/between_knots", "ineq", fn, bind, params)]
 
     def body_parameters(self, scene: Any) -> dict[str, Any]:
         return {"c": self.circle(scene)}
@@ -80,6 +101,7 @@ class ComOutsideCylinder(Residual):
     def shooting(self, ctx: Any, item: Any) -> ShootingResidual:
         """``‖(x_i, y_i) - c‖ - r ≥ margin`` (in metres, the form the FDDP penalty is tuned
         for)."""
+        self.knots_only("shooting")
         x, y, radius = self.circle(ctx.ocp.scene)
         model = ctx.com_clearance((x, y), radius - self.margin)
         lower, upper = np.full(model.nr, self.margin), np.full(model.nr, np.inf)

@@ -305,11 +305,12 @@ def _costs(t: Table, ocp: OCP, goal: Residual, goal_table: Table) -> None:
 
 
 def _constraints(t: Table, ocp: OCP, position_limits: bool) -> None:
-    keys = ("obstacle", "margin", "position_limits", "velocity_limits", "torque_limits")
-    t.check_keys(keys)
+    obstacles = ("obstacle", "margin", "between_knots")
+    t.check_keys((*obstacles, "position_limits", "velocity_limits", "torque_limits"))
     kind = t.string("obstacle", choices=("distance", "com")) or "distance"
     margin = t.number("margin")
     margin = MARGIN if margin is None else margin
+    between_knots = t.boolean("between_knots", True)
     for name, residual, on in (
         ("position_limits", JointPositionLimits(), position_limits),
         ("velocity_limits", JointVelocityLimits(), t.boolean("velocity_limits", True)),
@@ -331,7 +332,7 @@ def _constraints(t: Table, ocp: OCP, position_limits: bool) -> None:
                     'use obstacle = "distance"',
                 )
     try:
-        add_obstacle_constraint(ocp, kind, margin)
+        add_obstacle_constraint(ocp, kind, margin, between_knots)
     except InputError as err:
         raise t.error("obstacle", str(err)) from None
 

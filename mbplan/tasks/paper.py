@@ -122,15 +122,19 @@ def iiwa_scene(constraint: str = "com") -> Scene:
     return Scene().add_cylinder("cylinder", r, h, (x, y, 0.5 * h))
 
 
-def add_obstacle_constraint(ocp: OCP, constraint: str, margin: float = IIWA_MARGIN) -> OCP:
+def add_obstacle_constraint(
+    ocp: OCP, constraint: str, margin: float = IIWA_MARGIN, between_knots: bool = False
+) -> OCP:
     """Eq. (62) against every scene cylinder (``"com"``) or coal distances to every scene object
-    (``"distance"``), at knots ``1..N``."""
+    (``"distance"``), at knots ``1..N`` (and with ``between_knots`` along the intervals; the
+    paper's tasks constrain the knots only)."""
     if constraint == "com":
         for o in ocp.scene:
-            ocp.add_constraint(f"com_outside_{o.name}", ComOutsideCylinder(o.name, margin))
+            residual = ComOutsideCylinder(o.name, margin, between_knots)
+            ocp.add_constraint(f"com_outside_{o.name}", residual)
     elif constraint == "distance":
         if len(ocp.scene):
-            ocp.add_constraint("clearance", Distance(margin))
+            ocp.add_constraint("clearance", Distance(margin, between_knots=between_knots))
     else:
         raise InputError(f"constraint: expected 'com' (eq. 62) or 'distance', got {constraint!r}")
     return ocp
@@ -228,7 +232,7 @@ def drone_docking(
         limits = BodyInputLimits([0.0, -tau, -tau, -tau], [prm.thrust_limit, tau, tau, tau])
         ocp.add_constraint("input_limits", limits)
     for name in scene.names:
-        ocp.add_constraint(name, ComOutsideCylinder(name, margin))
+        ocp.add_constraint(name, ComOutsideCylinder(name, margin, between_knots=False))
     return ocp
 
 

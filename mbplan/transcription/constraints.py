@@ -1,4 +1,5 @@
-"""Constraint residuals shared by the transcriptions (RIPM paper §VIII): obstacle clearance."""
+"""Constraint residuals shared by the transcriptions (RIPM paper §VIII): obstacle clearance, at a
+knot and between knots (:mod:`mbplan.transcription.intervals`)."""
 
 from __future__ import annotations
 
@@ -23,4 +24,22 @@ def cylinder_clearance_function(jit: bool) -> RiemannianFunction:
     """:func:`cylinder_clearance` of a point ``p ∈ R³`` with the cylinder as parameter ``c``."""
     return RiemannianFunction(
         "cylinder_clearance", [("p", R(3))], cylinder_clearance, [("c", 3)], jit=jit
+    )
+
+
+# process-wide cache, result-neutral: compiled from its symbolic key alone
+@cache
+def interval_cylinder_clearance_function(jit: bool) -> RiemannianFunction:
+    """:func:`cylinder_clearance` of the point ``p + h v`` between knots (``h = sΔt``) with
+    the cylinder ``c`` and ``h`` as parameters."""
+
+    def clearance(p: cs.SX, v: cs.SX, c: cs.SX, h: cs.SX) -> cs.SX:
+        return cylinder_clearance(p + h * v, c)
+
+    return RiemannianFunction(
+        "interval_cylinder_clearance",
+        [("p", R(3)), ("v", R(3))],
+        clearance,
+        [("c", 3), ("h", 1)],
+        jit=jit,
     )

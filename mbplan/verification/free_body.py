@@ -62,17 +62,17 @@ def replay(ocp: OCP, result: PlanResult) -> tuple[dict[str, np.ndarray], np.ndar
     return out, deviation, why
 
 
-def clearance(ocp: OCP, result: PlanResult) -> float:
-    """Smallest clearance (m, without margin) of the segments ``p_k → p_{k+1}`` from the OCP's
-    obstacle constraints (inf without any)."""
+def clearances(ocp: OCP, result: PlanResult) -> dict[str, float]:
+    """Smallest clearance (m, without margin) of the segments ``p_k → p_{k+1}`` from every
+    obstacle constraint of the OCP, by name."""
     s = np.linspace(0.0, 1.0, SUBSTEPS + 1)[None, :, None]
     p = result.q[:, :3]
     points = (p[:-1, None] + s * (p[1:, None] - p[:-1, None])).reshape(-1, 3)
-    out = np.inf
-    for item in ocp.constraints:
-        if item.residual.is_obstacle:
-            out = min(out, item.residual.clearance(ocp.robot, ocp.scene, points, None))
-    return out
+    return {
+        i.name: i.residual.clearance(ocp.robot, ocp.scene, points, None)
+        for i in ocp.constraints
+        if i.residual.is_obstacle
+    }
 
 
 def final_state(ocp: OCP, result: PlanResult, replayed: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -96,13 +96,13 @@ def verify_free_body(ocp: OCP, result: PlanResult) -> Verification:
         if dev > tol
     ]
     violations = constraint_violations(ocp, result.q, result.v, result.tau)
-    gap = clearance(ocp, result)
+    gaps = clearances(ocp, result)
     goals = goal_errors(ocp, *final_state(ocp, result, replayed))
-    reasons += replay_reasons(ocp, violations, gap, goals)
+    reasons += replay_reasons(ocp, violations, gaps, goals)
     limits = [i for i in ocp.constraints if i.residual.input_limits]
     return Verification(
         max_joint_deviation_rad=dev_pose,
-        min_obstacle_distance_m=gap,
+        min_obstacle_distance_m=min(gaps.values(), default=np.inf),
         final_goal_error_rad=max(goals.values(), default=float("nan")),
         torque_limit_violation=max((violations[i.name] for i in limits), default=0.0),
         passed=not reasons,
@@ -112,4 +112,5 @@ def verify_free_body(ocp: OCP, result: PlanResult) -> Verification:
         velocity_deviation_ratio=dev_twist / tol,
         violations=violations,
         goal_errors=goals,
+        clearances=gaps,
     )

@@ -51,9 +51,12 @@ Thresholds (all documented values are checked by ``tests/test_verification.py``)
   involve ``τ``).
 * every constraint of the OCP, by name (:attr:`Verification.violations`): obstacle constraints
   (:attr:`~mbplan.residuals.Residual.is_obstacle`: :class:`~mbplan.residuals.Distance`,
-  :class:`~mbplan.residuals.ComOutsideCylinder`) on every RK4 substep of the replayed intervals without their margin (which exists to absorb
-  the inter-knot motion): ``min_obstacle_distance_m`` ≥ 0, coal through the planner's own path
-  (:mod:`mbplan.multibody.collision`); the others at the planned knots within
+  :class:`~mbplan.residuals.ComOutsideCylinder`) on every RK4 substep of the replayed intervals
+  (:data:`SUBSTEPS` or more per interval), by name (``clearances``), coal through the planner's
+  own path (:mod:`mbplan.multibody.collision`): without their margin ``min_obstacle_distance_m``
+  ≥ 0, and a constraint with ``between_knots`` must keep
+  :data:`~mbplan.verification.report.MARGIN_KEPT` of its margin (``margin_kept``); the others at
+  the planned knots within
   :data:`~mbplan.residuals.base.CONSTRAINT_TOLERANCE` (or the constraint's own ``tolerance``;
   :meth:`~mbplan.residuals.Residual.violation_tolerance`); torque limits on the applied torques
   (``tau_knots`` when given) within :data:`~mbplan.residuals.base.TORQUE_TOLERANCE`
@@ -92,6 +95,7 @@ from mbplan.verification.report import (
     Verification,
     constraint_violations,
     goal_errors,
+    margin_kept,
     replay_reasons,
 )
 
@@ -220,13 +224,14 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
                 "(twice the explicit-Euler error at that knot)"
             )
     violations = constraint_violations(ocp, result.q, result.v, result.tau, result.tau_knots)
-    obstacles = [i for i in ocp.constraints if i.residual.is_obstacle]
     substeps = path.reshape(-1, path.shape[-1])
-    clearance = min((_clearance(ocp, i, substeps) for i in obstacles), default=np.inf)
+    clearances = {
+        i.name: _clearance(ocp, i, substeps) for i in ocp.constraints if i.residual.is_obstacle
+    }
     q_final = np.vstack([result.q[:-1], q_end[-1:]])
     v_final = np.vstack([result.v[:-1], v_end[-1:]])
     goals = goal_errors(ocp, q_final, v_final)
-    reasons += replay_reasons(ocp, violations, clearance, goals)
+    reasons += replay_reasons(ocp, violations, clearances, goals)
     closure = closure_error(ocp.robot, result.q)
     passive = passive_torque(ocp.robot, result.tau, result.tau_knots)
     reasons += closure_reasons(ocp.robot, closure) + passive_reasons(ocp.robot, passive, result.tau)
@@ -234,7 +239,7 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
     violation = max((violations[i.name] for i in torque), default=0.0)
     return Verification(
         max_joint_deviation_rad=float(dev_q.max()),
-        min_obstacle_distance_m=float(clearance),
+        min_obstacle_distance_m=float(min(clearances.values(), default=np.inf)),
         final_goal_error_rad=max(goals.values(), default=float("nan")),
         torque_limit_violation=violation,
         passed=not reasons,
@@ -247,4 +252,6 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
         goal_errors=goals,
         closure_residual=closure,
         passive_torque_nm=passive,
+        clearances=clearances,
+        margin_kept=margin_kept(ocp, clearances),
     )

@@ -1,5 +1,6 @@
 """What a verification reports, and the checks every replay shares: each constraint of the OCP
-by name at the planned knots, the soft goals at their last knot, the hard constraints met.
+by name at the planned knots, the soft goals at their last knot, the hard constraints met, the
+obstacles along the replayed motion between knots.
 
 Thresholds are documented in :mod:`mbplan.verification.multibody`."""
 
@@ -13,13 +14,21 @@ from mbplan.formulations.joint_space import evaluate
 from mbplan.ocp.problem import OCP, Item
 from mbplan.residuals.base import CONSTRAINT_TOLERANCE, TORQUE_TOLERANCE
 
-__all__ = ["CONSTRAINT_TOLERANCE", "TORQUE_TOLERANCE", "Verification"]
+__all__ = ["CONSTRAINT_TOLERANCE", "MARGIN_KEPT", "TORQUE_TOLERANCE", "Verification"]
+
+MARGIN_KEPT = 0.9
+"""The fraction of its margin an obstacle constraint with ``between_knots`` keeps along the
+replayed motion, or the plan fails."""
 
 
 @dataclass(frozen=True)
 class Verification:
     """Outcome of :func:`mbplan.verify` (:mod:`mbplan.verification.multibody` for the metrics and
-    thresholds; :mod:`mbplan.verification.loops` for ``closure_residual``, the largest loop
+    thresholds). ``min_obstacle_distance_m`` is the smallest clearance (without margins) along the
+    replayed motion, knots and the samples between them; ``clearances`` that of every obstacle
+    constraint by name; ``margin_kept`` the smallest fraction of its margin that an obstacle
+    constraint with ``between_knots`` keeps there (NaN without one; below :data:`MARGIN_KEPT`
+    the plan fails); :mod:`mbplan.verification.loops` for ``closure_residual``, the largest loop
     closure residual at the planned knots, and ``passive_torque_nm``, the largest torque of a
     passive joint)."""
 
@@ -37,6 +46,8 @@ class Verification:
     goal_errors: dict[str, float] = field(default_factory=dict)
     closure_residual: float = float("nan")
     passive_torque_nm: float = float("nan")
+    clearances: dict[str, float] = field(default_factory=dict)
+    margin_kept: float = float("nan")
 
 
 def at_knots(ocp: OCP, item: Item, q, v, tau) -> np.ndarray:
@@ -87,16 +98,41 @@ def hard_constraints_met(ocp: OCP, violations: dict[str, float]) -> list[str]:
     return reasons
 
 
+def margin_kept(ocp: OCP, clearances: dict[str, float]) -> float:
+    """The smallest ``clearance / margin`` of the obstacle constraints with ``between_knots``
+    and a margin (NaN without one)."""
+    kept = [
+        clearances[i.name] / i.residual.margin
+        for i in ocp.constraints
+        if i.residual.is_obstacle and i.residual.between_knots and i.residual.margin > 0.0
+    ]
+    return min(kept, default=float("nan"))
+
+
 def replay_reasons(
-    ocp: OCP, violations: dict[str, float], clearance: float, goals: dict[str, float]
+    ocp: OCP, violations: dict[str, float], clearances: dict[str, float], goals: dict[str, float]
 ) -> list[str]:
-    """Reasons a replayed plan fails besides its dynamics: the replay entering an obstacle
-    (``clearance`` < 0, without the margins), a hard constraint violated at the planned knots
-    (obstacle constraints are judged by the replay's clearance instead: their margin absorbs
-    the motion between knots), a soft goal missed at the end of the replay (``goals``)."""
+    """Reasons a replayed plan fails besides its dynamics: the replay entering an obstacle (a
+    clearance in ``clearances`` < 0, without the margins), an obstacle constraint with
+    ``between_knots`` keeping less than :data:`MARGIN_KEPT` of its margin along the replay, a
+    hard constraint violated at the planned knots (obstacle constraints are judged by the
+    replay's clearance instead), a soft goal missed at the end of the replay (``goals``)."""
     reasons = []
+    clearance = min(clearances.values(), default=np.inf)
     if clearance < 0.0:
         reasons.append(f"the replayed motion enters an obstacle ({clearance:.3g} m)")
+    for item in ocp.constraints:
+        r = item.residual
+        if (
+            r.is_obstacle
+            and r.between_knots
+            and 0.0 <= clearances[item.name] < MARGIN_KEPT * r.margin
+        ):
+            reasons.append(
+                f"obstacle constraint {item.name!r} keeps {clearances[item.name] / r.margin:.0%} "
+                f"of its margin {r.margin:g} m between knots ({clearances[item.name]:.4f} m; "
+                f"required {MARGIN_KEPT:.0%})"
+            )
     reasons += hard_constraints_met(
         ocp, {n: (0.0 if ocp[n].residual.is_obstacle else x) for n, x in violations.items()}
     )

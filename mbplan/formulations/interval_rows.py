@@ -1,0 +1,99 @@
+"""Rows with their own derivatives in ``q`` placed in the generalized NLP: at the knots (coal
+distances) and between the knots (obstacle residuals with ``between_knots``).
+
+Eq. (61) moves the arm over interval ``k`` from ``(q_k, v_k)`` with the constant acceleration
+``a_k = (v_{k+1} - v_k)/Δt`` of its dynamics row; its explicit-Euler kinematics keeps only the
+first-order term, ``q_{k+1} = q_k + Δt v_k``, so the motion does not end at the next knot. The
+configuration at the fraction ``s ∈ [0, 1]`` of the interval is::
+
+    q_k(s) = q_k + sΔt v_k + ½s²Δt (v_{k+1} - v_k),
+
+the verifier's replay to second order. Obstacle rows between knots are evaluated there at
+:data:`FRACTIONS`: the midpoint and the motion's end ``q_k + ½Δt (v_k + v_{k+1})``, which the knot
+``q_{k+1}`` does not pin (it lies ``½Δt²‖a_k‖`` away). Each row reads knots ``k`` and ``k+1``
+only, and the configurations are linear in the variables, so the derivatives are those of the
+residual at ``q_k(s)`` times the coefficients: ``∂r/∂x_t = c_t ∂r/∂q``,
+``∂²(μᵀr)/∂x_t∂x_u = c_t c_u ∇²_q(μᵀr)``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from mbplan.ocp.problem import Item
+
+FRACTIONS = (0.5, 1.0)
+"""The fractions ``s`` of every interval at which obstacle rows are added."""
+
+
+def _gather(arrays: list[np.ndarray], masks: list[np.ndarray]) -> np.ndarray:
+    """The entries of each array (broadcast to its mask) where its mask holds, concatenated."""
+    pieces = [np.broadcast_to(a, m.shape)[m] for a, m in zip(arrays, masks, strict=True)]
+    return np.concatenate(pieces)
+
+
+class ConfigurationRows:
+    """The rows ``form`` (own derivatives in ``q``, ``P`` per site) at ``K`` site configurations
+    ``Q_i = Σ_t c_ti X_t[k_ti]``, linear in knot variables: ``terms`` lists ``(block, knots
+    (K,), coefficients (K,))`` with block ``"q"`` or ``"v"``. ``nlp`` gives the columns of the
+    knots' variables in ``z`` (knot 0 is data: no column). Rows ``row0 + i·P + p``."""
+
+    def __init__(self, nlp: Any, item: Item, form: Any, terms: list, row0: int):
+        self.item, self.form, self.row0 = item, form, row0
+        self.terms = [(b, np.asarray(k, np.int64), np.asarray(c, float)) for b, k, c in terms]
+        self.K, self.P = len(self.terms[0][1]), form.size
+        self.size = self.K * self.P
+        index = {"q": nlp.iq, "v": nlp.iv}
+        cols = [np.where(k[:, None] > 0, index[b](k), -1) for b, k, _ in self.terms]
+        support = form.jacobian_support()[None]  # (1, P, nv)
+        self._jac = [support & (c[:, None, :] >= 0) for c in cols]
+        rows = self.row0 + np.arange(self.size).reshape(self.K, self.P, 1)
+        self.jac_rows = _gather([rows] * len(cols), self._jac)
+        self.jac_cols = _gather([c[:, None, :] for c in cols], self._jac)
+        n = len(cols)
+        self._pairs = [(t, u) for t in range(n) for u in range(n)]
+        blocks = [(cols[t][:, :, None], cols[u][:, None, :]) for t, u in self._pairs]
+        self._hess = [(r >= 0) & (c >= 0) for r, c in blocks]
+        self.hess_rows = _gather([r for r, _ in blocks], self._hess)
+        self.hess_cols = _gather([c for _, c in blocks], self._hess)
+
+    def configurations(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """``Q (K, nv)`` of the trajectory ``q, v (N+1, nv)``."""
+        X = {"q": q, "v": v}
+        return sum(c[:, None] * X[b][k] for b, k, c in self.terms)
+
+    def values(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return self.form.values(self.configurations(q, v)).ravel()
+
+    def jacobian_values(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Values in the order of ``jac_rows, jac_cols``."""
+        G = self.form.jacobian(self.configurations(q, v))  # (K, P, nv)
+        return _gather([c[:, None, None] * G for _, _, c in self.terms], self._jac)
+
+    def hessian_values(self, q: np.ndarray, v: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        """Values of ``∇²(μᵀr)`` (``μ``: this block's multipliers in ``lam``) in the order of
+        ``hess_rows, hess_cols``."""
+        mu = lam[self.row0 : self.row0 + self.size].reshape(self.K, self.P)
+        H = self.form.hessian(self.configurations(q, v), mu)  # (K, nv, nv)
+        c = [coefficients for _, _, coefficients in self.terms]
+        return _gather([(c[t] * c[u])[:, None, None] * H for t, u in self._pairs], self._hess)
+
+
+def knot_rows(nlp: Any, item: Item, form: Any, row0: int) -> ConfigurationRows:
+    """``form`` at the item's knots ``q_k``."""
+    return ConfigurationRows(nlp, item, form, [("q", item.knots, np.ones(len(item.knots)))], row0)
+
+
+def interval_rows(nlp: Any, item: Item, form: Any, row0: int) -> ConfigurationRows:
+    """``form`` at ``q_k(s)`` (module docstring) of the intervals ``k = knot - 1`` ending at the
+    item's knots, for every fraction ``s`` of :data:`FRACTIONS` (interval-major)."""
+    k, s = (a.ravel() for a in np.meshgrid(item.knots - 1, FRACTIONS, indexing="ij"))
+    dt = nlp.dt
+    terms = [
+        ("q", k, np.ones(k.size)),
+        ("v", k, (s - 0.5 * s * s) * dt),
+        ("v", k + 1, 0.5 * s * s * dt),
+    ]
+    return ConfigurationRows(nlp, item, form, terms, row0)

@@ -1,0 +1,41 @@
+"""The bodies' poses between the LGVI's knots, where obstacle rows that hold between knots are
+evaluated in maximal coordinates.
+
+The LGVI steps each body by ``R_{k+1} = R_k F_k`` and ``p_{k+1} = p_k + Δt v_k`` (eq. 27), so
+the pose at the fraction ``s ∈ [0, 1]`` of interval ``k`` is taken on the geodesic between the
+knots, ``(R_k exp(s log F_k), p_k + sΔt v_k)``: a function of knot ``k``'s variables alone, equal
+to the knots at ``s = 0`` and ``s = 1``. It is the chord of the body's path over the interval,
+within ``⅛Δt²‖a‖`` of the continuous motion (``a``: the body's acceleration), like the knots
+themselves lie on it to second order.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import casadi as cs
+import numpy as np
+
+from mbplan.lie import SO3
+
+FRACTIONS = (0.5,)
+"""The fractions ``s`` of every interval at which obstacle rows are added (the knots are
+``s = 0`` and ``s = 1``)."""
+
+
+def interval_pose(R: Any, p: Any, F: Any, v: Any, s: Any, h: Any) -> tuple[Any, Any]:
+    """``(R exp(s log F), p + h v)`` with ``h = sΔt``: CasADi symbols, or NumPy batches ``R, F
+    (K, 3, 3)``, ``p, v (K, 3)``, ``s, h (K,)``."""
+    if isinstance(R, np.ndarray):
+        phi = SO3.log(F) * np.asarray(s)[:, None]
+        return R @ SO3.exp(phi), p + np.asarray(h)[:, None] * v
+    return cs.mtimes(R, SO3.exp(s * SO3.log(F))), p + h * v
+
+
+def interval_samples(knots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The intervals ``k = knot - 1`` ending at an item's ``knots``, without interval 0 (its
+    variables are the fixed initial state), once per fraction: ``(k, s)``, interval-major."""
+    intervals = np.asarray(knots, dtype=np.int64) - 1
+    intervals = intervals[intervals >= 1]
+    k, s = np.meshgrid(intervals, np.asarray(FRACTIONS), indexing="ij")
+    return k.ravel(), s.ravel()
