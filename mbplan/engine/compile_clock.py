@@ -28,40 +28,38 @@ _NUMBA_EVENT = "numba:compiler_lock"
 
 @contextmanager
 def compiling() -> Iterator[None]:
-    """Marks the block as kernel compilation for every running :class:`CompileClock`."""
+    """Marks the block as kernel compilation for the calling thread's running clocks
+    (:class:`CompileClock`)."""
     with event.trigger_event(COMPILE_EVENT):
         yield
 
 
-class CompileClock(event.Listener):
+class CompileClock:
     """Wall time since :meth:`start` (or construction) split into compilation (``compile_s``,
-    this thread's only) and the rest (:meth:`elapsed`). Listens while started; :meth:`stop`
-    (or leaving the ``with`` block) stops listening, after which both stay fixed."""
+    this thread's only) and the rest (:meth:`elapsed`). Counts while started; :meth:`stop`
+    (or leaving the ``with`` block) stops it, after which both stay fixed."""
 
     def __init__(self) -> None:
-        self._thread = threading.get_ident()
         self._depth = 0
         self._since = 0.0
         self._t0 = time.perf_counter()
         self._t1: float | None = None
         self.compile_s = 0.0
-        self._listening = False
 
     def start(self) -> CompileClock:
-        """Reset both times to zero and start listening."""
+        """Reset both times to zero and start counting (in the calling thread)."""
         self._t0, self._t1, self.compile_s, self._depth = time.perf_counter(), None, 0.0, 0
-        if not self._listening:
-            for kind in (_NUMBA_EVENT, COMPILE_EVENT):
-                event.register(kind, self)
-            self._listening = True
+        clocks = _running()
+        if self not in clocks:
+            clocks.append(self)
         return self
 
     def stop(self) -> None:
-        """Stop listening; :meth:`elapsed` and ``compile_s`` stay as they are now."""
-        if self._listening:
-            for kind in (_NUMBA_EVENT, COMPILE_EVENT):
-                event.unregister(kind, self)
-            self._listening = False
+        """Stop counting; :meth:`elapsed` and ``compile_s`` stay as they are now (call it in the
+        thread that started the clock)."""
+        clocks = _running()
+        if self in clocks:
+            clocks.remove(self)
             self._t1 = time.perf_counter()
 
     def __enter__(self) -> CompileClock:
@@ -80,14 +78,43 @@ class CompileClock(event.Listener):
         running = time.perf_counter() - self._since if self._depth and self._t1 is None else 0.0
         return self.wall() - self.compile_s - running
 
-    def on_start(self, ev: event.Event) -> None:
-        if threading.get_ident() == self._thread:
-            if self._depth == 0:
-                self._since = time.perf_counter()
-            self._depth += 1
+    def _begin(self) -> None:
+        if self._depth == 0:
+            self._since = time.perf_counter()
+        self._depth += 1
 
-    def on_end(self, ev: event.Event) -> None:
-        if threading.get_ident() == self._thread and self._depth:
+    def _end(self) -> None:
+        if self._depth:
             self._depth -= 1
             if self._depth == 0:
                 self.compile_s += time.perf_counter() - self._since
+
+
+_threads = threading.local()
+
+
+def _running() -> list[CompileClock]:
+    """The clocks started in the calling thread."""
+    clocks = getattr(_threads, "clocks", None)
+    if clocks is None:
+        clocks = _threads.clocks = []
+    return clocks
+
+
+class _Listener(event.Listener):
+    """Tells the calling thread's running clocks that a compilation begins or ends (numba
+    broadcasts an event in the thread that compiles)."""
+
+    def on_start(self, ev: event.Event) -> None:
+        for clock in getattr(_threads, "clocks", ()):
+            clock._begin()
+
+    def on_end(self, ev: event.Event) -> None:
+        for clock in getattr(_threads, "clocks", ()):
+            clock._end()
+
+
+# process-wide, registered once: numba's list of listeners is never changed while a thread
+# broadcasts; each thread's clocks are its own (thread-local)
+for _kind in (_NUMBA_EVENT, COMPILE_EVENT):
+    event.register(_kind, _Listener())
