@@ -90,8 +90,10 @@ def test_plan_results_carry_their_compile_time_through_the_file(tmp_path):
 # ------------------------------------------------------------------------ disk cache
 @pytest.fixture
 def store(tmp_path, monkeypatch) -> Path:
-    """An empty store of its own (the compiled kernels stay where they are)."""
+    """An empty store of its own (the compiled kernels stay where they are), storing what is
+    quick to build too."""
     monkeypatch.setattr(disk_cache, "store_dir", lambda: tmp_path / "store")
+    monkeypatch.setattr(disk_cache, "MIN_BUILD_S", 0.0)
     monkeypatch.delenv("MBPLAN_DISK_CACHE", raising=False)
     return tmp_path / "store"
 
@@ -161,6 +163,14 @@ def test_a_damaged_entry_is_rebuilt_and_replaced(store):
         np.testing.assert_array_equal(got, np.arange(4.0) + 1, err_msg=what)
         assert entry.read_bytes() != data, what  # written again
     assert not list(store.rglob("*.tmp"))
+
+
+def test_a_value_quick_to_build_is_not_stored(store, monkeypatch):
+    monkeypatch.setattr(disk_cache, "MIN_BUILD_S", 0.05)
+    disk_cache.cached("probe", lambda: "quick", lambda: np.zeros(3))
+    assert not list(store.rglob("*.pkl"))
+    disk_cache.cached("probe", lambda: "slow", lambda: time.sleep(0.05) or np.zeros(3))
+    assert len(list(store.rglob("*.pkl"))) == 1
 
 
 def test_the_cache_is_off_on_request_and_its_size_is_bounded(store, monkeypatch):

@@ -26,6 +26,7 @@ import os
 import pickle
 import sys
 import threading
+import time
 from collections.abc import Callable, Hashable
 from functools import cache
 from importlib import metadata
@@ -38,8 +39,11 @@ from mbplan.engine.jit import cache_dir
 
 V = TypeVar("V")
 
-MAX_BYTES = 1024**3
+MAX_BYTES = 512 * 1024**2
 """Size of the stored entries (all kinds) above which the least recently used are removed."""
+
+MIN_BUILD_S = 0.005
+"""A value built faster is not stored by :func:`cached` (reading it back would cost as much)."""
 
 _MAGIC = b"mbplan-disk-cache-1\n"
 _LIBRARIES = ("numpy", "scipy", "numba", "casadi", "pin", "pymetis", "qdldl", "coal")
@@ -95,7 +99,8 @@ def digest_of(kind: str, key: Hashable) -> str:
 def cached(
     kind: str, key: Callable[[], Hashable], build: Callable[[], V], context: Any = None
 ) -> V:
-    """The entry of ``kind`` and ``key()`` from the disk, or ``build()`` written there.
+    """The entry of ``kind`` and ``key()`` from the disk, or ``build()``, written there if it
+    took :data:`MIN_BUILD_S` or more.
     ``context``: an object that ``build`` may keep in the value (e.g. the caller's workspace),
     stored as a reference: a loaded value holds the loading call's ``context`` instead."""
     if not enabled():
@@ -104,8 +109,10 @@ def cached(
     found = lookup(kind, k, context)
     if found is not MISSING:
         return found
+    start = time.perf_counter()
     value = build()
-    store(kind, k, value, context)
+    if time.perf_counter() - start >= MIN_BUILD_S:
+        store(kind, k, value, context)
     return value
 
 
