@@ -219,6 +219,36 @@ def test_a_riemannian_function_whose_library_is_gone_is_compiled_again(
     assert entry.exists()
 
 
+# ------------------------------------------------------------------------ robots
+def test_visual_meshes_are_read_when_first_drawn_as_they_were(monkeypatch):
+    """A robot's visual geometry is read at the first ``visual_model`` (a plan never reads it),
+    and is then what Pinocchio reads eagerly, also with locked joints."""
+    import pinocchio as pin
+
+    from mbplan.robots import IIWA_URDF, load, load_robot
+
+    calls = []
+    read = pin.buildGeomFromUrdf
+    monkeypatch.setattr(pin, "buildGeomFromUrdf", lambda *a, **k: calls.append(1) or read(*a, **k))
+    desc = load(IIWA_URDF)
+    robot = load_robot(desc, lock=["iiwa_joint_7"])
+    assert calls == []
+    model, visual = pin.buildModelsFromUrdf(
+        str(IIWA_URDF),
+        package_dirs=[str(IIWA_URDF.parent)],
+        geometry_types=[pin.GeometryType.VISUAL],
+    )
+    joint = model.getJointId("iiwa_joint_7")
+    reduced = pin.buildReducedModel(model, [visual], [joint], pin.neutral(model))[1][0]
+    for got, expected in ((desc.visual_model, visual), (robot.visual_model, reduced)):
+        assert [(g.name, g.parentJoint, g.parentFrame) for g in got.geometryObjects] == [
+            (g.name, g.parentJoint, g.parentFrame) for g in expected.geometryObjects
+        ]
+        for a, b in zip(got.geometryObjects, expected.geometryObjects, strict=True):
+            np.testing.assert_array_equal(a.placement.homogeneous, b.placement.homogeneous)
+    assert calls == [1] and robot.visual_model is robot.visual_model  # read once
+
+
 # ------------------------------------------------------------------------ determinism
 _CHILD = """
 import pathlib, sys
