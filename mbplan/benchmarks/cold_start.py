@@ -10,6 +10,7 @@ the subprocess then plans the same task again (warm: everything in memory) and r
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import statistics
@@ -85,4 +86,6 @@ def measure(task: str, method: str) -> dict[str, float]:
 
 
 if __name__ == "__main__":
-    print(json.dumps(measure(sys.argv[1], sys.argv[2])))
+    gc.freeze()  # as the `mbplan` program does (mbplan.cli.main.console)
+    print(json.dumps(measure(sys.argv[1], sys.argv[2])), flush=True)
+    gc.freeze()
