@@ -142,6 +142,13 @@ def test_a_value_that_would_not_come_back_as_it_is_is_not_stored(store, make):
     assert not list(store.rglob("*.pkl"))
 
 
+def test_a_key_that_cannot_be_pickled_is_built_every_time(store):
+    builds = []
+    for _ in range(2):
+        disk_cache.cached("probe", lambda: (lambda: 0,), lambda: builds.append(1) or [1])
+    assert builds == [1, 1] and not store.exists()
+
+
 def test_a_damaged_entry_is_rebuilt_and_replaced(store):
     disk_cache.cached("probe", lambda: "other", lambda: np.arange(4.0))
     disk_cache.cached("probe", lambda: "key", lambda: np.arange(4.0))

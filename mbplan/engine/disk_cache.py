@@ -14,7 +14,8 @@ is the loading caller's. A value that pickling would not give back so (a view of
 another array, a strided view, a ctypes pointer) is not stored. Entries are written to a
 temporary file and renamed (:func:`os.replace`: a reader never sees a partial file); one that
 cannot be read back (truncated, corrupt, another key's) is a miss: built and written again.
-When the entries exceed :data:`MAX_BYTES`, the least recently used ones are removed.
+When the entries exceed :data:`MAX_BYTES`, the least recently used ones are removed. Entries
+are pickles, as numba's cache is: the folder is the user's own.
 """
 
 from __future__ import annotations
@@ -100,9 +101,9 @@ def cached(
     kind: str, key: Callable[[], Hashable], build: Callable[[], V], context: Any = None
 ) -> V:
     """The entry of ``kind`` and ``key()`` from the disk, or ``build()``, written there if it
-    took :data:`MIN_BUILD_S` or more.
-    ``context``: an object that ``build`` may keep in the value (e.g. the caller's workspace),
-    stored as a reference: a loaded value holds the loading call's ``context`` instead."""
+    took :data:`MIN_BUILD_S` or more. ``context``: an object that ``build`` may keep in the
+    value (e.g. the caller's workspace), stored as a reference: a loaded value holds the
+    loading call's ``context`` instead."""
     if not enabled():
         return build()
     k = key()
@@ -120,20 +121,26 @@ MISSING: Any = object()
 """What :func:`lookup` returns for an entry it does not have."""
 
 
-def _path(kind: str, key: Hashable) -> tuple[Path, str]:
-    name = digest_of(kind, key)
+def _path(kind: str, key: Hashable) -> tuple[Path, str] | None:
+    """Where the entry of ``kind`` and ``key`` is kept (None: a key that cannot be pickled)."""
+    try:
+        name = digest_of(kind, key)
+    except Exception:  # an unpicklable key: never stored
+        return None
     return store_dir() / kind / f"{name}.pkl", name
 
 
 def lookup(kind: str, key: Hashable, context: Any = None) -> Any:
     """The stored entry of ``kind`` and ``key`` (with ``context``: :func:`cached`), or
     :data:`MISSING` (none, or the cache is off)."""
-    return load(*_path(kind, key), context) if enabled() else MISSING
+    where = _path(kind, key) if enabled() else None
+    return MISSING if where is None else load(*where, context)
 
 
 def store(kind: str, key: Hashable, value: Any, context: Any = None) -> bool:
     """Store ``value`` as the entry of ``kind`` and ``key`` (:func:`save`)."""
-    return save(*_path(kind, key), value, context) if enabled() else False
+    where = _path(kind, key) if enabled() else None
+    return where is not None and save(*where, value, context)
 
 
 def load(path: Path, name: str, context: Any = None) -> Any:
@@ -171,7 +178,7 @@ def save(path: Path, name: str, value: Any, context: Any = None) -> bool:
         pickler.dump(value)
         pickler.check_aliasing()
         pickler.dump(pickler.read_only)  # references to arrays of the value (pickled once)
-    except (_Uncacheable, pickle.PicklingError, TypeError, ValueError, AttributeError):
+    except Exception:  # _Uncacheable, or not picklable at all
         return False
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
     try:
