@@ -1,5 +1,3 @@
-import sys
+from mbplan.cli.main import console
 
-from mbplan.cli.main import main
-
-sys.exit(main())
+console()

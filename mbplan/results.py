@@ -28,8 +28,12 @@ class PlanResult(SolverResult):
     ``q (N+1, nq)``, ``v (N+1, nv)`` at the knots, ``tau (N, nv)`` held over ``[t_k, t_{k+1}]``,
     ``dt`` (s). ``status`` is the solver's status string, ``success`` its convergence flag; a
     result with non-finite ``q``, ``v`` or ``tau`` is never successful. ``solve_time_s`` is the
-    solver's wall time (including callbacks), ``total_time_s`` adds building the problem,
-    ``time_per_iter_s = solve_time_s / max(iterations, 1)``. ``kkt_history (iterations+1, 2)``
+    solver's wall time (including callbacks), ``total_time_s`` the plan's (building the problem,
+    warm start, compilation, solve), ``time_per_iter_s = solve_time_s / max(iterations, 1)``;
+    ``compile_time_s`` is the part of ``total_time_s`` spent building, compiling and loading
+    kernels (CasADi functions compiled to C, numba functions: :mod:`mbplan.engine.compile_clock`;
+    large on a first run only, as the compiled kernels are cached on disk), which neither
+    ``solve_time_s`` nor ``extra["build_time_s"]`` include. ``kkt_history (iterations+1, 2)``
     holds the primal and dual infeasibility ``(inf_pr, inf_du)`` per iteration, iteration 0 first.
     ``entered_restoration`` is None when the solver has no restoration phase. Maximal-coordinate
     solutions add body orientations ``R (N+1, nb, 3, 3)``, COM positions ``p (N+1, nb, 3)`` and
@@ -57,6 +61,7 @@ class PlanResult(SolverResult):
     v: np.ndarray
     tau: np.ndarray
     dt: float
+    compile_time_s: float = 0.0
     kkt_history: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
     entered_restoration: bool | None = None
     extra: dict[str, Any] = field(default_factory=dict)
@@ -221,6 +226,7 @@ def _load_ocp(text: str, robot: Any, path: Any) -> tuple[Any, str]:
 
 def _required(name: str) -> bool:
     return name not in _OPTIONAL and name not in (
+        "compile_time_s",
         "kkt_history",
         "entered_restoration",
         "extra",

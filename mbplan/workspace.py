@@ -6,7 +6,8 @@ analyses) and the joint reductions, keyed by everything each one is built from: 
 function of its key alone, so a solve gives the same result with a fresh workspace, a reused
 one or none, and only the time to build differs. Pass the same workspace to the solves of one
 family (every case of a benchmark, every solve of a receding-horizon loop) to build each entry
-once; without one, a solve builds what it needs for itself."""
+once; without one, a solve builds what it needs for itself. The costly kinds are also kept on
+disk (:func:`shared`'s ``disk``), so that a new process loads them."""
 
 from __future__ import annotations
 
@@ -14,6 +15,8 @@ import threading
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from typing import Any, TypeVar
+
+from mbplan.engine.disk_cache import cached
 
 V = TypeVar("V")
 
@@ -58,9 +61,21 @@ class Workspace:
 
 
 def shared(
-    workspace: Workspace | None, kind: str, key: Callable[[], Hashable], build: Callable[[], V]
+    workspace: Workspace | None,
+    kind: str,
+    key: Callable[[], Hashable],
+    build: Callable[[], V],
+    *,
+    disk: bool = False,
 ) -> V:
-    """``build()``, kept in ``workspace`` under ``key()`` (``None``: built for this call)."""
-    if workspace is None:
+    """``build()``, kept in ``workspace`` under ``key()`` (``None``: built for this call);
+    ``disk``: also kept on disk (:mod:`mbplan.engine.disk_cache`), loaded instead of built by
+    a new process (a value whose arrays or workspace would not come back as they are is not
+    stored: it is built)."""
+    if workspace is None and not disk:
         return build()
-    return workspace.get_or_build(kind, key(), build)
+    k = key()
+    make = build
+    if disk:
+        make = lambda: cached(kind, lambda: k, build, workspace)  # noqa: E731
+    return make() if workspace is None else workspace.get_or_build(kind, k, make)

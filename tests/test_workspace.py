@@ -67,7 +67,9 @@ def test_threads_building_one_key_get_the_same_value():
 
 def test_a_reused_workspace_builds_nothing_again_and_changes_no_result(monkeypatch):
     """A problem solved again with the same workspace reuses its KKT pattern, analysis and
-    reduction (the same values: the same pick) and gives the result of a solve with none."""
+    reduction (the same values: the same pick) and gives the result of a solve with none (the
+    disk cache off: every entry is built here)."""
+    monkeypatch.setenv("MBPLAN_DISK_CACHE", "off")
     built = []
     original = reduction_module.Reduction.__init__
 

@@ -6,6 +6,7 @@ Tasks: :mod:`mbplan.tasks.speed`; profile and orderings:
 
 from __future__ import annotations
 
+import json
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -13,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from mbplan.benchmarks.cold_start import cold_starts
 from mbplan.benchmarks.common import plan_row
 from mbplan.benchmarks.kkt_profile import ordering_stats, profile_solve
 from mbplan.benchmarks.speed_report import INTERVALS, baseline, chain_plot, markdown
@@ -216,6 +218,7 @@ def run(
     summary["orderings"] = orderings
     if n_drone:
         summary["drone_horizon_scaling"] = drone_docking.horizon_scaling(seed)
+    summary["cold"] = cold_starts()
     summary["command"] = (
         f"mbplan bench speed --n-iiwa {n_iiwa} --n-iiwa-distance {n_dist} --n-drone {n_drone} "
         f"--links {','.join(map(str, links))} --seed {seed} --workers {workers} --out {out}"
@@ -225,6 +228,23 @@ def run(
     write_atomic(out / "results.md", markdown(summary))
     if {"chain", "chain-obstacle"} & set(rows_by_task):
         chain_plot(summary, links, out)
+    return summary
+
+
+def run_cold(out: Path, repeats: int = 3) -> dict:
+    """The ``cold`` section alone (:func:`~mbplan.benchmarks.cold_start.cold_starts`), put into
+    the summary already in ``out`` (if any: the other sections are kept as they are) and
+    rendered with it."""
+    from mbplan.benchmarks.common import machine_info, write_atomic, write_json
+
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "summary.json"
+    summary = json.loads(path.read_text()) if path.is_file() else {"tasks": {}}
+    summary["cold"] = cold_starts(repeats=repeats)
+    summary.setdefault("command", f"mbplan bench speed --cold-only --out {out}")
+    summary.setdefault("machine", machine_info())
+    write_json(path, summary)
+    write_atomic(out / "results.md", markdown(summary))
     return summary
 
 

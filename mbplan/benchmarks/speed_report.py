@@ -111,6 +111,10 @@ def markdown(s: dict) -> str:
     ):
         if task in s["tasks"]:
             lines += _chain_table(s["tasks"][task], title)
+    if "cold" in s:
+        lines += _cold_table(s["cold"])
+    if "profile" not in s:  # a run of the cold section alone (`--cold-only`)
+        return "\n".join(lines) + "\n"
     prof = s["profile"]
     lines += [
         "## RIPM profile per iteration (median over the profiled cases, ms per iteration)",
@@ -176,6 +180,33 @@ def markdown(s: dict) -> str:
             f"{h['linear_ratio']:.0f}).",
         ]
     return "\n".join(lines) + "\n"
+
+
+def _cold_table(cold: dict) -> list[str]:
+    """The ``cold`` section (:mod:`mbplan.benchmarks.cold_start`)."""
+    lines = [
+        "## Cold start: the plan in a new process (disk caches warm) beside the same plan warm",
+        "",
+        "Medians over new processes (`python -m mbplan.benchmarks.cold_start TASK METHOD`, one "
+        "discarded first), each planning the task twice: *process* is its wall time, *startup* "
+        "what it spends besides the two plans (interpreter, imports, exit); *cold* is the first "
+        "plan (loading the compiled kernels, *kernels*, and the structures kept on disk), "
+        "*warm* the second (everything in memory). A plan is `mbplan.plan`'s wall time, a solve "
+        "the solver's own.",
+        "",
+        "| task | method | process [s] | startup [s] | cold plan [s] | kernels [s] "
+        "| cold solve [s] | warm plan [s] | warm solve [s] | cold / warm plan |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for task, methods in cold.items():
+        for method, c in methods.items():
+            lines.append(
+                f"| {task} | {method} | {c['process_s']:.2f} | {c['startup_s']:.2f} "
+                f"| {c['cold_plan_s']:.2f} | {c['cold_compile_s']:.2f} | {c['cold_solve_s']:.2f} "
+                f"| {c['warm_plan_s']:.2f} | {c['warm_solve_s']:.2f} "
+                f"| {_ratio(c['cold_plan_s'], c['warm_plan_s'])} |"
+            )
+    return [*lines, ""]
 
 
 def _chain_table(ch: dict, title: str) -> list[str]:

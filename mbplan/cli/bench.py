@@ -103,9 +103,13 @@ def _bench_ilqr(args: argparse.Namespace) -> int:
 
 
 def _bench_speed(args: argparse.Namespace) -> int:
-    from mbplan.benchmarks.speed import run
+    from mbplan.benchmarks.speed import run, run_cold
 
     out = output_dir(args.out, "--out")
+    if args.cold_only:
+        run_cold(out)
+        print((Path(args.out) / "results.md").read_text())
+        return 0
     run(
         out,
         n_iiwa=args.n_iiwa,
@@ -247,6 +251,12 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     )
     speed.add_argument("--seed", type=integer(0), default=0)
     speed.add_argument("--out", default="out/bench/speed", help="output directory")
+    speed.add_argument(
+        "--cold-only",
+        action="store_true",
+        help="only the cold-start section (each task planned in a new process beside the same "
+        "plan warm), added to the summary already in --out",
+    )
     _add_pool_options(speed)
     speed.set_defaults(func=_bench_speed)
     lie = bench_sub.add_parser(

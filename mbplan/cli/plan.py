@@ -108,6 +108,11 @@ def _plan(args: argparse.Namespace) -> int:
     print(
         f"{result.method}: {result.status} after {result.iterations} iterations, "
         f"{result.solve_time_s:.2f} s ({1e3 * result.time_per_iter_s:.1f} ms/iteration)"
+        + (
+            f"; kernels compiled or loaded in {result.compile_time_s:.2f} s"
+            if result.compile_time_s
+            else ""
+        )
     )
     goals = ", ".join(f"{k} {v:.3g}" for k, v in {**check.violations, **check.goal_errors}.items())
     soft = f", final goal error {check.final_goal_error_rad:.3f} rad" if check.goal_errors else ""

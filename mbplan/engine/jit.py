@@ -24,7 +24,9 @@ from pathlib import Path
 import casadi as cs
 import numba as nb
 import numpy as np
+from numba.core import event
 
+from mbplan.engine.compile_clock import compiling
 from mbplan.engine.site_loop_source import COMPILE_FLAGS, GENERATOR_KEY, site_loop_source
 from mbplan.errors import InputError, MbplanError
 
@@ -57,7 +59,6 @@ class SiteLoop:
         self.c_loop.argtypes = [ctypes.c_longlong, ctypes.c_void_p, ctypes.c_void_p]
         self.c_loop.restype = ctypes.c_int
         self.entry_point = int(ctypes.cast(self.c_loop, ctypes.c_void_p).value or 0)
-        announce_uncached_numba(data_address)  # first run only
 
     def bind(self, inputs: Sequence[np.ndarray], outputs: Sequence[np.ndarray]) -> BoundLoop:
         """The evaluation at the sites of these arrays, bound to their memory: every call reads
@@ -145,18 +146,39 @@ def compile_functions(
     fns: Mapping[str, cs.Function], flags: tuple[str, ...] = DEFAULT_FLAGS
 ) -> dict[str, cs.Function]:
     """:func:`compile_function` of each value; the C compilers of uncached ones run in parallel."""
-    paths = _compiled(fns, flags)
-    return {k: cs.external(fn.name(), str(paths[k])) for k, fn in fns.items()}
+    with compiling():
+        paths = _compiled(fns, flags)
+        return {k: cs.external(fn.name(), str(paths[k])) for k, fn in fns.items()}
 
 
 def compile_site_loops(
     fns: Mapping[str, cs.Function], flags: tuple[str, ...] = DEFAULT_FLAGS
 ) -> dict[str, tuple[cs.Function, SiteLoop]]:
     """Each value compiled, as :func:`compile_functions` gives it and as a :class:`SiteLoop`."""
-    paths = _compiled(fns, flags)
-    return {
-        k: (cs.external(fn.name(), str(paths[k])), SiteLoop(fn, paths[k])) for k, fn in fns.items()
-    }
+    paths = library_paths(fns, flags)
+    return load_site_loops({k: (fn.name(), paths[k]) for k, fn in fns.items()})
+
+
+def library_paths(
+    fns: Mapping[str, cs.Function], flags: tuple[str, ...] = DEFAULT_FLAGS
+) -> dict[str, Path]:
+    """The shared object of each value in the cache, compiled if missing."""
+    with compiling():
+        return _compiled(fns, flags)
+
+
+def load_site_loops(
+    libraries: Mapping[str, tuple[str, Path]],
+) -> dict[str, tuple[cs.Function, SiteLoop]]:
+    """The compiled function ``name`` of each value's shared object ``path`` (as
+    :func:`library_paths` gives it), as :func:`compile_functions` gives it and as a
+    :class:`SiteLoop`."""
+    out = {}
+    with compiling():
+        for key, (name, path) in libraries.items():
+            fn = cs.external(name, str(path))
+            out[key] = (fn, SiteLoop(fn, path))
+    return out
 
 
 def _compiled(fns: Mapping[str, cs.Function], flags: tuple[str, ...]) -> dict[str, Path]:
@@ -213,17 +235,25 @@ def _announce_compilation() -> None:
     if not _announced:
         _announced.append(True)
         print(
-            "mbplan: compiling kernels, first run only (cached on disk; up to a minute) ...",
+            "mbplan: compiling kernels, first run only (cached on disk; up to a minute; "
+            "`mbplan warmup` compiles them ahead) ...",
             file=sys.stderr,
             flush=True,
         )
 
 
-def announce_uncached_numba(*dispatchers: object) -> None:
-    """Print the first-run line if a numba ``cache=True`` dispatcher has no cache index yet
-    (numba then compiles it at its first call)."""
-    if not all(numba_cached(d) for d in dispatchers):
+class _NumbaCompilation(event.Listener):
+    """The first-run line when numba compiles a kernel (one loaded from numba's disk cache is
+    no compilation: its ``numba:compile`` event is not triggered)."""
+
+    def on_start(self, ev: event.Event) -> None:
         _announce_compilation()
+
+    def on_end(self, ev: event.Event) -> None:
+        pass
+
+
+event.register("numba:compile", _NumbaCompilation())  # process-wide: the line is printed once
 
 
 _INDEXES_SEEN: set[str] = set()

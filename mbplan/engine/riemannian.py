@@ -22,13 +22,25 @@ index arithmetic with no Python loop over knots.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import casadi as cs
 import numpy as np
 
-from mbplan.engine.jit import SiteLoop, check_site_arrays, compile_site_loops
-from mbplan.engine.site_function import SiteFunction, Slot
+from mbplan.engine import disk_cache
+from mbplan.engine.compile_clock import compiling
+from mbplan.engine.jit import (
+    DEFAULT_FLAGS,
+    SiteLoop,
+    cache_dir,
+    check_site_arrays,
+    compiler,
+    library_paths,
+    load_site_loops,
+)
+from mbplan.engine.site_function import ORDER, SiteFunction, Slot
+from mbplan.engine.site_loop_source import GENERATOR_KEY
 
 
 def _unpack(vec: cs.SX, slots: Sequence[Slot]) -> dict[str, cs.SX]:
@@ -68,14 +80,80 @@ class RiemannianFunction(SiteFunction):
     ) -> None:
         super().__init__(name, variables, parameters)
         self.jit = jit
+        self._loops: dict[str, SiteLoop] = {}
+        with compiling():
+            self._build(name, residual)
+        self._maps: dict[tuple[str, int], cs.Function] = {}
+        self._buffers: dict[tuple[str, int], tuple] = {}
 
+    def _build(self, name: str, residual: Callable[..., cs.SX]) -> None:
+        """The derivatives (symbolic) and the three functions, compiled if ``jit``: a compiled
+        function's derivatives' patterns and shared objects are kept on disk by its value's
+        expression (:mod:`mbplan.engine.disk_cache`), and a new process loads them instead of
+        deriving and hashing the derivatives again."""
         z = cs.SX.sym("z", self.nz)
         p = cs.SX.sym("p", self.np)
-        xi = cs.SX.sym("xi", self.n)
         args = _unpack(z, self.variables) | _unpack(p, self.parameters)
         # dense: the value buffers are dense, a structural zero row would be left unwritten
         r0 = cs.densify(cs.vec(cs.SX(residual(**args))))
         self.m = r0.size1()
+        value = cs.Function(f"{name}_value", [z, p], [r0])
+        key = self._key(value) if self.jit and disk_cache.enabled() else None
+        if key is not None and self._load(disk_cache.lookup("riemannian", key)):
+            return
+        self._derive(name, residual, z, p, args, r0)
+        if self.jit:
+            paths = library_paths(self._functions)
+            libraries = {k: (fn.name(), paths[k]) for k, fn in self._functions.items()}
+            self._load_libraries(libraries)
+            if key is not None:
+                entry = {
+                    "patterns": (self.jac_rows, self.jac_cols, self.hess_rows, self.hess_cols),
+                    "libraries": {k: (n, p.name) for k, (n, p) in libraries.items()},
+                }
+                disk_cache.store("riemannian", key, entry)
+
+    def _key(self, value: cs.Function) -> tuple:
+        """What the derivatives and their compiled code are a function of besides this module's
+        and the groups' code (:func:`~mbplan.engine.disk_cache.code_version`): the value's
+        expression, the variables' groups and slots, the compiler and its flags."""
+        slots = tuple(
+            (s.name, s.shape, s.offset, s.tangent.start, s.tangent.stop, type(s.group).__qualname__,
+             s.group.dim, tuple(s.group.element_shape))
+            for s in self.variables
+        )  # fmt: skip
+        return (value.serialize(), slots, compiler(), DEFAULT_FLAGS, cs.__version__, GENERATOR_KEY)
+
+    def _load(self, entry: Any) -> bool:
+        """Take the patterns and load the shared objects of a stored entry; False (nothing
+        taken) if there is none or a shared object is missing."""
+        try:
+            patterns, stored = entry["patterns"], entry["libraries"]
+            libraries = {k: (str(n), cache_dir() / str(f)) for k, (n, f) in stored.items()}
+        except (TypeError, KeyError, ValueError):
+            return False
+        if set(libraries) != set(ORDER) or not all(p.is_file() for _, p in libraries.values()):
+            return False
+        self.jac_rows, self.jac_cols, self.hess_rows, self.hess_cols = patterns
+        self._load_libraries(libraries)
+        return True
+
+    def _load_libraries(self, libraries: dict[str, tuple[str, Path]]) -> None:
+        compiled = load_site_loops(libraries)
+        self._functions = {k: fn for k, (fn, _) in compiled.items()}
+        self._loops = {k: loop for k, (_, loop) in compiled.items()}
+
+    def _derive(
+        self,
+        name: str,
+        residual: Callable[..., cs.SX],
+        z: cs.SX,
+        p: cs.SX,
+        args: dict[str, cs.SX],
+        r0: cs.SX,
+    ) -> None:
+        """The derivatives along the retraction and the three functions (CasADi SX)."""
+        xi = cs.SX.sym("xi", self.n)
         lam = cs.SX.sym("lam", self.m)
 
         perturbed = dict(args)
@@ -102,13 +180,6 @@ class RiemannianFunction(SiteFunction):
             "jacobian": cs.Function(f"{name}_jacobian", [z, p], [r0, jac_nz]),
             "hessian": cs.Function(f"{name}_hessian", [z, p, lam], [r0, jac_nz, hess_nz]),
         }
-        self._loops: dict[str, SiteLoop] = {}
-        if jit:
-            compiled = compile_site_loops(self._functions)
-            self._functions = {k: fn for k, (fn, _) in compiled.items()}
-            self._loops = {k: loop for k, (_, loop) in compiled.items()}
-        self._maps: dict[tuple[str, int], cs.Function] = {}
-        self._buffers: dict[tuple[str, int], tuple] = {}
 
     def __repr__(self) -> str:
         return (

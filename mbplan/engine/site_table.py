@@ -12,7 +12,7 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-from mbplan.engine.jit import BoundLoop, announce_uncached_numba
+from mbplan.engine.jit import BoundLoop
 
 
 @intrinsic
@@ -46,7 +46,6 @@ class SiteTable:
     the calls, whose memory the table's addresses point into."""
 
     def __init__(self, calls: Sequence[BoundLoop]) -> None:
-        announce_uncached_numba(run_site_loops)  # first run only
         self.calls = tuple(calls)
         self.rows = np.array([c.table_row() for c in self.calls], np.int64).reshape(-1, 4)
         self.rows.setflags(write=False)

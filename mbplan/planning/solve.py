@@ -8,7 +8,6 @@ method is one line, e.g. ``METHODS["mlg-ipm"] = Method("maximal", solve_mlg_ipm)
 from __future__ import annotations
 
 import dataclasses
-import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -16,6 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mbplan.engine.compile_clock import CompileClock
 from mbplan.errors import InfeasibleRequestError, InputError
 from mbplan.formulations.free_body_shooting import check_shooting_ocp
 from mbplan.formulations.joint_space import evaluate
@@ -100,20 +100,24 @@ def plan(
         from mbplan.solvers.kkt.system import compile_kernels_in_background
 
         compile_kernels_in_background()  # first run: numba compiles while the C compiler runs
-    t0 = time.perf_counter()
-    if isinstance(warm_start, str):
-        q_guess = initial_path(ocp, warm_start)
-    else:
-        q_guess = as_array(warm_start, (ocp.N + 1, ocp.robot.nq), "warm_start")
-        if isinstance(ocp.robot, FreeBody):
-            zero = np.flatnonzero(np.linalg.norm(q_guess[:, 3:], axis=1) < 1e-9)
-            if zero.size:
-                raise InputError(
-                    f"warm_start: knot {zero[0]} has a zero quaternion (columns 3:7, x y z w)"
-                )
-    guess_time = time.perf_counter() - t0
+    with CompileClock() as guessing:
+        q_guess = warm_start_path(ocp, warm_start)
     result = METHODS[method].solve(ocp, q_guess, settings)
-    return finish(ocp, result, guess_time)
+    return finish(ocp, result, guessing.elapsed(), guessing.compile_s)
+
+
+def warm_start_path(ocp: OCP, warm_start: str | ArrayLike) -> np.ndarray:
+    """The joint path ``(N+1, nq)`` a plan starts from (:func:`plan`'s ``warm_start``)."""
+    if isinstance(warm_start, str):
+        return initial_path(ocp, warm_start)
+    q_guess = as_array(warm_start, (ocp.N + 1, ocp.robot.nq), "warm_start")
+    if isinstance(ocp.robot, FreeBody):
+        zero = np.flatnonzero(np.linalg.norm(q_guess[:, 3:], axis=1) < 1e-9)
+        if zero.size:
+            raise InputError(
+                f"warm_start: knot {zero[0]} has a zero quaternion (columns 3:7, x y z w)"
+            )
+    return q_guess
 
 
 def check_start(ocp: OCP) -> None:
@@ -158,9 +162,12 @@ def check_plan_request(
     return settings
 
 
-def finish(ocp: OCP, result: PlanResult, guess_time: float = 0.0) -> PlanResult:
+def finish(
+    ocp: OCP, result: PlanResult, guess_time: float = 0.0, guess_compile_time: float = 0.0
+) -> PlanResult:
     """Attach ``ocp``, the constraint violations and goal errors (and the loops' closure
-    residual, ``extra["closure_residual"]``); set ``success`` (one meaning)."""
+    residual, ``extra["closure_residual"]``); set ``success`` (one meaning); add the warm start's
+    time (``guess_time``, and the kernels it compiled, ``guess_compile_time``) to the plan's."""
     from mbplan.verification.loops import closure_error, closure_reasons
     from mbplan.verification.report import constraint_violations, goal_errors, hard_constraints_met
 
@@ -184,7 +191,8 @@ def finish(ocp: OCP, result: PlanResult, guess_time: float = 0.0) -> PlanResult:
         result,
         success=bool(result.success and finite and not unmet),
         message=message,
-        total_time_s=result.total_time_s + guess_time,
+        total_time_s=result.total_time_s + guess_time + guess_compile_time,
+        compile_time_s=result.compile_time_s + guess_compile_time,
         violations=violations,
         goal_errors=goal,
         ocp=ocp,

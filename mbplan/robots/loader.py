@@ -18,6 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import InputError, RobotModelError
+from mbplan.robots.lazy_geometry import LazyGeometry, resolved
 
 DATA = Path(__file__).resolve().parent / "data"
 IIWA_URDF = DATA / "iiwa14.urdf"
@@ -74,13 +75,19 @@ _URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating",
 
 @dataclass(frozen=True, eq=False)
 class RobotDescription:
-    """A loaded robot: kinematic/inertial model plus optional geometry."""
+    """A loaded robot: kinematic/inertial model plus optional geometry (``visual``: a model, or
+    one loaded when first asked for, :mod:`.lazy_geometry`; :attr:`visual_model` builds it)."""
 
     name: str
     model: pin.Model
     collision_model: pin.GeometryModel | None
-    visual_model: pin.GeometryModel | None
+    visual: pin.GeometryModel | LazyGeometry | None
     urdf_path: Path | None
+
+    @property
+    def visual_model(self) -> pin.GeometryModel | None:
+        """The visual geometry (its meshes read now, the first time)."""
+        return resolved(self.visual)
 
 
 RobotSpec = str | os.PathLike[str] | pin.Model | RobotDescription
@@ -166,15 +173,32 @@ def _load_urdf(
     path: Path, name: str | None, package_dirs: list[Path], geometry: bool
 ) -> RobotDescription:
     validate_urdf(path)
-    types = [pin.GeometryType.COLLISION, pin.GeometryType.VISUAL] if geometry else []
+    dirs = [str(d) for d in package_dirs]
+    types = [pin.GeometryType.COLLISION] if geometry else []
     try:
-        model, *geoms = pin.buildModelsFromUrdf(
-            str(path), package_dirs=[str(d) for d in package_dirs], geometry_types=types
-        )
+        model, *geoms = pin.buildModelsFromUrdf(str(path), package_dirs=dirs, geometry_types=types)
     except (RuntimeError, ValueError) as err:
         raise RobotModelError(f"Pinocchio cannot build a model from {path}: {err}") from err
-    collision, visual = geoms if geometry else (None, None)
-    return RobotDescription(name or model.name, model, collision, visual, path)
+    if not geometry:
+        return RobotDescription(name or model.name, model, None, None, path)
+    visual = visual_geometry(model, path, dirs)
+    return RobotDescription(name or model.name, model, geoms[0], visual, path)
+
+
+def visual_geometry(model: pin.Model, path: Path, package_dirs: list[str]) -> LazyGeometry:
+    """The visual geometry of the URDF ``path`` for ``model`` (Pinocchio's, built from it), read
+    when it is first asked for."""
+    kind = pin.GeometryType.VISUAL
+
+    def build() -> pin.GeometryModel:
+        try:
+            return pin.buildGeomFromUrdf(model, str(path), kind, package_dirs=package_dirs)
+        except (RuntimeError, ValueError) as err:
+            raise RobotModelError(
+                f"Pinocchio cannot read the visual geometry of {path}: {err}"
+            ) from err
+
+    return LazyGeometry(build)
 
 
 def load_mjcf(

@@ -32,7 +32,8 @@ from mbplan.robots import RobotDescription, load
 from mbplan.robots.continuous import to_angles, unbounded_revolute_model
 from mbplan.robots.free_body import FreeBody
 from mbplan.robots.joints import joint_kind
-from mbplan.robots.loader import MECHANISMS, MJCF_SUFFIXES, load_mjcf, mimic_tags
+from mbplan.robots.lazy_geometry import LazyGeometry, resolved
+from mbplan.robots.loader import MECHANISMS, MJCF_SUFFIXES, load_mjcf, mimic_tags, visual_geometry
 from mbplan.robots.loops import (
     Loop,
     close_loops,
@@ -58,21 +59,27 @@ class Mimic:
 @dataclass(frozen=True, eq=False)
 class Robot:
     """A fixed-base robot: ``model`` (1-dof joints only; ``model.damping`` the viscous joint
-    damping every formulation applies), collision and visual geometry (may be None), its
-    ``source`` (JSON-serialisable, see :func:`load_robot`), the locked joints, the continuous
-    joints (revolute without limits in ``model``: :mod:`mbplan.robots.continuous`), the mimic
+    damping every formulation applies), collision and visual geometry (may be None; the visual
+    meshes are read when first drawn: :attr:`visual_model`), its ``source``
+    (JSON-serialisable, see :func:`load_robot`), the locked joints, the continuous joints
+    (revolute without limits in ``model``: :mod:`mbplan.robots.continuous`), the mimic
     couplings its OCPs impose, its loop closures and its passive (unactuated) joints."""
 
     name: str
     model: pin.Model
     collision_model: pin.GeometryModel | None
-    visual_model: pin.GeometryModel | None
+    visual: pin.GeometryModel | LazyGeometry | None
     source: dict[str, Any]
     locked: dict[str, float] = field(default_factory=dict)
     continuous: tuple[str, ...] = ()
     mimic: tuple[Mimic, ...] = ()
     loops: tuple[Loop, ...] = ()
     passive: tuple[str, ...] = ()
+
+    @property
+    def visual_model(self) -> pin.GeometryModel | None:
+        """The visual geometry (its meshes read now, the first time)."""
+        return resolved(self.visual)
 
     @property
     def nq(self) -> int:
@@ -233,9 +240,7 @@ def _load(
     if not damping:
         model = pin.Model(desc.model)  # a copy: the caller's (or the cached) model is untouched
         model.damping[:] = 0.0
-        desc = RobotDescription(
-            desc.name, model, desc.collision_model, desc.visual_model, desc.urdf_path
-        )
+        desc = RobotDescription(desc.name, model, desc.collision_model, desc.visual, desc.urdf_path)
     tags = _mimic_tags(desc)
     couplings = _couplings(desc, tags, locked) if mimic == "couple" else ()
     source = {**source, "damping": bool(damping)} | ({"mimic": mimic} if tags else {})
@@ -244,7 +249,7 @@ def _load(
         desc.name,
         desc.model,
         desc.collision_model,
-        desc.visual_model,
+        desc.visual,
         source,
         locked,
         continuous,
@@ -320,7 +325,7 @@ def _unbounded(desc: RobotDescription) -> tuple[RobotDescription, tuple[str, ...
     for name in _ref_names(refs):
         model.referenceConfigurations[name] = to_angles(desc.model, np.array(refs[name]))
     return RobotDescription(
-        desc.name, model, desc.collision_model, desc.visual_model, desc.urdf_path
+        desc.name, model, desc.collision_model, desc.visual, desc.urdf_path
     ), names
 
 
@@ -378,9 +383,12 @@ def _load_path(
     if not path.is_file():
         raise InputError(f"URDF file not found: {path}")
     try:
-        model, collision, visual = pin.buildModelsFromUrdf(str(path), package_dirs=dirs)
+        model, collision = pin.buildModelsFromUrdf(
+            str(path), package_dirs=dirs, geometry_types=[pin.GeometryType.COLLISION]
+        )
     except (RuntimeError, ValueError) as err:
         raise RobotModelError(f"Pinocchio cannot build a model from {path}: {err}") from None
+    visual = visual_geometry(model, path, dirs)
     desc = RobotDescription(model.name, model, collision, visual, path)
     return desc, {"kind": "urdf", "path": str(path.resolve()), "package_dirs": dirs}, [], None
 
@@ -434,14 +442,16 @@ def _reduced(desc: RobotDescription, locked: dict[str, float]) -> RobotDescripti
         j = model.getJointId(name)
         q[model.joints[j].idx_q] = value
         ids.append(j)
-    geoms = [g for g in (desc.collision_model, desc.visual_model) if g is not None]
-    if geoms:
-        reduced, reduced_geoms = pin.buildReducedModel(model, geoms, ids, q)
+    collision = desc.collision_model
+    if collision is not None:
+        reduced, (collision,) = pin.buildReducedModel(model, [collision], ids, q)
     else:
-        reduced, reduced_geoms = pin.buildReducedModel(model, ids, q), []
-    it = iter(reduced_geoms)
-    collision = next(it) if desc.collision_model is not None else None
-    visual = next(it) if desc.visual_model is not None else None
+        reduced = pin.buildReducedModel(model, ids, q)
+    visual = desc.visual
+    if isinstance(visual, LazyGeometry):  # reduced when it is first asked for
+        visual = visual.then(lambda g: pin.buildReducedModel(model, [g], ids, q)[1][0])
+    elif visual is not None:
+        visual = pin.buildReducedModel(model, [visual], ids, q)[1][0]
     keep = [model.joints[model.getJointId(n)].idx_q for n in reduced.names[1:]]
     for name in _ref_names(refs):  # the reference configurations without the locked joints
         reduced.referenceConfigurations[name] = np.array(refs[name])[keep]

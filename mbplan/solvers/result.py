@@ -94,7 +94,10 @@ class RIPMResult(SolverResult):
     ``x`` is a manifold point (the last accepted iterate); ``y``, ``z`` are the multipliers of
     ``h = 0`` and ``g ≤ 0`` (``z > 0``) and ``s > 0`` the slacks (``s = -g(x)`` at convergence).
     All are finite whatever the status; only when ``x0`` itself cannot be evaluated are
-    ``objective`` NaN and the errors infinite.
+    ``objective`` NaN and the errors infinite. ``wall_time_s`` is the solve's wall time without
+    the kernels compiled (or loaded from their disk caches) during it, ``compile_time_s``
+    (:mod:`mbplan.engine.compile_clock`): a first solve in a fresh environment compiles for tens
+    of seconds, which is no property of the solver.
     """
 
     status: RIPMStatus
@@ -122,6 +125,9 @@ class RIPMResult(SolverResult):
     """Numeric KKT factorizations: every inertia-correction trial, and the least-squares
     multipliers' (at the start, and after restoration with ``resto_ls_multipliers``); a trial
     whose joint reduction falls back to the full factorization counts twice."""
+    compile_time_s: float = 0.0
+    """Seconds of kernel compilation (and cache loading) during the solve, not in
+    ``wall_time_s``."""
 
     @property
     def success(self) -> bool:
@@ -131,5 +137,5 @@ class RIPMResult(SolverResult):
         return (
             f"RIPMResult(status={self.status.name}, iterations={self.iterations}, "
             f"objective={self.objective:.10g}, kkt_error={self.kkt_error:.3e}, "
-            f"wall_time_s={self.wall_time_s:.4f})"
+            f"wall_time_s={self.wall_time_s:.4f}, compile_time_s={self.compile_time_s:.4f})"
         )

@@ -53,6 +53,3 @@ def collect_derivatives(
     if hess_slot.shape[0] == 0:
         return grad, eq, ineq, eq_data, ineq_data, np.zeros(0)
     return grad, eq, ineq, eq_data, ineq_data, accumulate(hess_slot, hess, hess_nnz + 1)[:hess_nnz]
-
-
-EVALUATION_KERNELS = (gather_inputs, collect_values, collect_derivatives)

@@ -17,7 +17,6 @@ from typing import Any
 import numba as nb
 import numpy as np
 
-from mbplan.engine.jit import announce_uncached_numba
 from mbplan.lie.group import MEMBERSHIP_TOL, rotation_error
 from mbplan.lie.rn import RnGroup
 from mbplan.lie.so3 import SO3Group
@@ -81,8 +80,6 @@ class PackedLayout:
 
         self._so3_off, self._so3_col = cat(so3_off), cat(so3_col)
         self._rn_dst, self._rn_src = cat(rn_dst), cat(rn_src)
-        if self.retractable:
-            announce_uncached_numba(_retract)  # first run only
 
     def pack(self, point: Mapping[str, np.ndarray]) -> np.ndarray | None:
         """The packed vector of ``point`` (``packed`` itself for a :class:`PackedPoint` of

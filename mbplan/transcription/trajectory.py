@@ -16,12 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from mbplan.engine.jit import announce_uncached_numba
 from mbplan.engine.site_table import bound_calls
 from mbplan.errors import InputError
 from mbplan.finite import finite_vector
 from mbplan.transcription.evaluation_kernels import (
-    EVALUATION_KERNELS,
     collect_derivatives,
     collect_values,
     gather_inputs,
@@ -110,7 +108,6 @@ class _Structure:
         names = [t.name for t in terms]
         if len(set(names)) != len(names):
             raise InputError(f"duplicate term names: {names}")
-        announce_uncached_numba(*EVALUATION_KERNELS)  # first run only
         index = {name: variables.tangent_index(name) for name in variables.blocks}
         for t in terms:
             for arg, (block, ix) in t.bind.items():
@@ -202,7 +199,9 @@ def _structure(
             ),
         )
 
-    return shared(workspace, "structure", key, lambda: _Structure(variables, terms, workspace))
+    return shared(
+        workspace, "structure", key, lambda: _Structure(variables, terms, workspace), disk=True
+    )
 
 
 class _TermLayout:

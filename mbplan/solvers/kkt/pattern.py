@@ -13,7 +13,6 @@ from typing import ClassVar
 import numpy as np
 import scipy.sparse as sp
 
-from mbplan.engine.jit import announce_uncached_numba
 from mbplan.errors import InputError
 from mbplan.solvers.kkt.ldl.kernels import NUMERIC_KERNELS
 from mbplan.solvers.kkt.ldl.solve import SOLVE_KERNELS
@@ -70,6 +69,7 @@ def analysis(
         "analysis",
         lambda: (len(indptr) - 1, indptr.tobytes(), indices.tobytes(), ordering),
         lambda: _analysis(indptr, indices, ordering, workspace),
+        disk=True,  # an ordering (METIS) of a large pattern costs seconds
     )
 
 
@@ -83,7 +83,6 @@ def _analysis(
             return amd
         metis = analysis(indptr, indices, "metis", workspace)
         return metis if metis.flops < amd.flops else amd
-    announce_uncached_numba(*_ENTRY_KERNELS)  # first run only
     n = len(indptr) - 1
     rows = np.repeat(np.arange(n), np.diff(indptr))
     return Analysis(n, rows, indices, _ORDERS[ordering](indptr, indices))
@@ -167,6 +166,7 @@ def _kkt_pattern(
             *(a.tobytes() for m in blocks for a in (m.indptr, m.indices)),
         ),
         lambda: _new_kkt_pattern(n, n_eq, n_ineq, blocks, ordering, workspace),
+        disk=True,
     )
 
 

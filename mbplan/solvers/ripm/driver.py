@@ -29,7 +29,6 @@ from typing import Any
 
 import numpy as np
 
-from mbplan.engine.jit import announce_uncached_numba
 from mbplan.errors import InputError
 from mbplan.solvers.kkt.reduced.system import ReducedKKTSystem, kkt_system
 from mbplan.solvers.kkt.system import KKTSystem
@@ -37,7 +36,7 @@ from mbplan.solvers.nlp import NLPEvaluation, Point, RIPMProblem
 from mbplan.solvers.result import RIPMResult, RIPMStatus
 from mbplan.solvers.ripm.barrier import BarrierStrategy
 from mbplan.solvers.ripm.iterate import Iterate, Residuals, Step, Stop, Trial, amax, finite
-from mbplan.solvers.ripm.kernels import RIPM_KERNELS, safeguarded_duals
+from mbplan.solvers.ripm.kernels import safeguarded_duals
 from mbplan.solvers.ripm.line_search import FilterLineSearch, Search
 from mbplan.solvers.ripm.newton import NewtonStep
 from mbplan.solvers.ripm.options import RIPMOptions
@@ -75,14 +74,6 @@ def solve_ripm(
     return _main_phase(problem, opts, workspace).run(x0, y0, z0, s0)
 
 
-# process-wide cache, result-neutral: prints a first-run line only
-@functools.cache
-def _announce_uncached_kernels() -> None:
-    """The first-run line if the iteration's numba kernels are not cached yet (once per
-    process)."""
-    announce_uncached_numba(*RIPM_KERNELS)
-
-
 @dataclass
 class _Shared:
     """What the main phase and a restoration phase share: KKT system, counters, record."""
@@ -98,7 +89,6 @@ def _main_phase(
 ) -> _Iterations:
     """The main phase of a solve of ``problem`` with its components (the KKT system's symbolic
     work kept in ``workspace``)."""
-    _announce_uncached_kernels()
     lin, term, bar = o.linear_solver, o.termination, o.barrier
     kkt = kkt_system(problem, lin.kkt_method, lin.kkt_ordering, lin.kkt_pivot_threshold, workspace)
     sh = _Shared(kkt, Counters(), Recorder(o.output.print_level))
@@ -183,6 +173,8 @@ class _Iterations:
             self._iterate()
         except Stop as stop:
             return self._result(stop.status, stop.message)
+        finally:
+            self.sh.recorder.clock.stop()  # also when an error or an interrupt ends the solve
         raise AssertionError("unreachable")  # pragma: no cover
 
     def _iterate(self) -> None:

@@ -276,24 +276,3 @@ def safeguarded_duals(z, dz, alpha, s, mu, kappa) -> np.ndarray:  # pragma: no c
     for i in range(z.shape[0]):
         out[i] = min(max(z[i] + alpha * dz[i], mu / (kappa * s[i])), kmu / s[i])
     return out
-
-
-RIPM_KERNELS = (
-    pairwise_sum,
-    abs_sum,
-    abs_max,
-    csr_transpose_times,
-    residuals,
-    complementarity_error,
-    measures,
-    newton_diagonal,
-    newton_rhs,
-    slack_step,
-    frac_to_boundary,
-    mean_product,
-    affine_complementarity,
-    corrector_shift,
-    ratio_sum,
-    constraint_values,
-    safeguarded_duals,
-)

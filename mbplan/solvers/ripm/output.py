@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import math
 import sys
-import time
 from dataclasses import dataclass
 
+from mbplan.engine.compile_clock import CompileClock
 from mbplan.solvers.result import IterationHistory, RIPMResult, RIPMStatus
 from mbplan.solvers.ripm.iterate import Iterate, Residuals
 
@@ -27,18 +27,19 @@ class StepRecord:
 
 
 class Recorder:
-    """The history and the log of one solve (``print_level > 0``: printed)."""
+    """The history and the log of one solve (``print_level > 0``: printed); its times leave
+    out the kernels' compilation (:class:`~mbplan.engine.compile_clock.CompileClock`)."""
 
     def __init__(self, print_level: int) -> None:
         self.history = IterationHistory()
         self.printing = print_level > 0
-        self.t0 = time.perf_counter()
+        self.clock = CompileClock()
 
     def _out(self, line: str) -> None:
         print(line, file=sys.stdout)
 
     def start(self, n: int, n_eq: int, n_ineq: int) -> None:
-        self.t0 = time.perf_counter()
+        self.clock.start()
         if self.printing:
             self._out(f"RIPM: n = {n}, n_eq = {n_eq}, n_ineq = {n_ineq}")
             self._out(_HEADER)
@@ -60,7 +61,7 @@ class Recorder:
         h.alpha_du.append(last.a_du)
         h.alpha_pr.append(last.a_pr)
         h.ls_trials.append(last.ls)
-        h.time_s.append(time.perf_counter() - self.t0)
+        h.time_s.append(self.clock.elapsed())
         h.restoration.append(restoration)
         if self.printing:
             rg = f"{math.log10(last.dw):5.1f}" if last.dw > 0 else "    -"
@@ -76,13 +77,15 @@ class Recorder:
     ) -> RIPMResult:  # fmt: skip
         """The result at ``it`` (``res`` its residuals, ``None`` if it has no evaluation);
         ``counts``: evaluations, trial evaluations, factorizations."""
-        wall = time.perf_counter() - self.t0
+        self.clock.stop()
+        wall = self.clock.elapsed()
         ok = res is not None
         result = RIPMResult(
             status=status,
             message=message,
             iterations=iterations,
             wall_time_s=wall,
+            compile_time_s=self.clock.compile_s,
             x=it.x,
             y=it.y,
             z=it.z,
@@ -101,7 +104,7 @@ class Recorder:
             self._out(
                 f"\nRIPM {status.name}: {message}\n  iterations {iterations}, objective "
                 f"{result.objective:.12e}, E_0 {result.kkt_error:.2e}, time {wall:.3f} s "
-                f"({counts[0]} evaluations, {counts[1]} trial evaluations, "
+                f"+ compilation {self.clock.compile_s:.3f} s ({counts[0]} evaluations, {counts[1]} trial evaluations, "
                 f"{counts[2]} factorizations)"
             )
         return result

@@ -356,6 +356,3 @@ def sigma_of(diagonal, n, me, y_rows, sigma, sigma_used) -> int:
         if sigma[r] != sigma_used[r]:
             changed = 1
     return changed
-
-
-VALUE_KERNELS = (group_values, block_values, copy_values, sigma_of)

@@ -228,6 +228,3 @@ def tt_apply(v, out, red_cols, dep, ebuf, eoff, shape, reach_red, reach_ptr, uof
         rr = reach_red[U64(reach_ptr[b]) :]
         for q in range(m):
             out[U64(rr[q])] -= tmp[q]
-
-
-PRODUCT_KERNELS = (times_t, hr_values, tdt_values)

@@ -15,18 +15,16 @@ import weakref
 import numpy as np
 import scipy.sparse as sp
 
-from mbplan.engine.jit import announce_uncached_numba
 from mbplan.solvers.kkt.elimination import EliminationPlan
 from mbplan.solvers.kkt.reduced.kernels import (
-    VALUE_KERNELS,
     block_values,
     copy_values,
     group_values,
     sigma_of,
 )
 from mbplan.solvers.kkt.reduced.layout import ReductionLayout
-from mbplan.solvers.kkt.reduced.products import PRODUCT_KERNELS, hr_values, tdt_values, times_t
-from mbplan.solvers.kkt.reduced.solves import SOLVE_KERNELS, expand_solution, reduce_rhs, residual
+from mbplan.solvers.kkt.reduced.products import hr_values, tdt_values, times_t
+from mbplan.solvers.kkt.reduced.solves import expand_solution, reduce_rhs, residual
 from mbplan.solvers.kkt.reduced.symbolic import ReductionSymbolic, Slots
 from mbplan.solvers.kkt.system import Inertia, KKTSystem
 from mbplan.workspace import Workspace, shared
@@ -61,10 +59,9 @@ def reduction(
         )
 
     def build() -> Reduction:
-        announce_uncached_numba(*VALUE_KERNELS, *PRODUCT_KERNELS, *SOLVE_KERNELS)  # first run only
         return Reduction(plan, hess, ae, ai, ordering, pivot_threshold, workspace)
 
-    return shared(workspace, "reduction", key, build).fresh()
+    return shared(workspace, "reduction", key, build, disk=True).fresh()  # most of a 1st solve
 
 
 def picked_entries(plan: EliminationPlan, ae: sp.csr_matrix) -> np.ndarray:

@@ -186,6 +186,3 @@ def residual(hp, hi, hx, hd, ep, ei, ex, ip, ii, ix, diag, x, b, res) -> float:
     if den > 0:
         return nr / den
     return 0.0 if nr == 0 else np.inf
-
-
-SOLVE_KERNELS = (reduce_rhs, expand_solution, residual)
