@@ -56,8 +56,10 @@ def _control_blocks(rng, knots=10, dim=6, nu=3, zero_control=None):
 
 def _without_small_front_paths(monkeypatch):
     """Analyses built from now on without direct leaves or merged siblings (every front through
-    its own update matrix; a KKT system without a workspace builds its own)."""
+    its own update matrix; a KKT system without a workspace builds its own, and none is read
+    from the disk cache, whose keys do not hold the patched constant)."""
     monkeypatch.setattr(ldl_layout, "DIRECT_COLUMNS", 0)
+    monkeypatch.setenv("MBPLAN_DISK_CACHE", "off")
 
 
 @pytest.mark.parametrize("case", [*CASES[2:], "control"])
