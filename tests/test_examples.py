@@ -98,3 +98,17 @@ def test_compare_formulations_reduced(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     for name in ("ripm.npz", "ipopt.npz", "side_by_side.html", "convergence.png"):
         assert (tmp_path / name).stat().st_size > 0, name
+
+
+def test_fourbar_example_plans_both_formulations_closed(tmp_path):
+    """The four-bar script: both formulations solved, verified, at the rocker goal with the loop
+    closed (its own exit status), the plans saved and the replay page written."""
+    proc = run_example("fourbar_crank.py", "--out", str(tmp_path), "--horizon", "20")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    import mbplan as mb
+
+    for method in ("ripm", "ipopt"):
+        plan = mb.load_npz(tmp_path / f"fourbar_{method}.npz")
+        check = mb.verify(plan)
+        assert plan.success and check.passed and check.closure_residual <= 1e-9
+    assert any(p.suffix == ".html" for p in tmp_path.iterdir())

@@ -18,6 +18,7 @@ PANDA = str(EXAMPLES_TASKS / "panda_boxes.toml")
 IIWA = str(EXAMPLES_TASKS / "iiwa_obstacle.toml")
 UR5 = str(EXAMPLES_TASKS / "ur5_shelf.toml")
 MIMIC = str(EXAMPLES_TASKS / "panda_mimic.toml")
+FOURBAR = str(EXAMPLES_TASKS / "fourbar_crank.toml")
 FINGERS_LOCKED = '--set=robot.lock=["panda_finger_joint1", "panda_finger_joint2"]'
 
 
@@ -69,6 +70,8 @@ CASES = [
     pytest.param(MIMIC, "ipopt", ["--horizon", "12", "--dt", "0.125"], id="panda-mimic-ipopt"),
     pytest.param(UR5, "ripm", ["--horizon", "12"], id="ur5-ripm"),
     pytest.param(UR5, "ipopt", ["--horizon", "12"], id="ur5-ipopt"),
+    pytest.param(FOURBAR, "ripm", [], id="fourbar-ripm"),  # a closed loop, full size
+    pytest.param(FOURBAR, "ipopt", [], id="fourbar-ipopt"),
 ]
 
 
@@ -85,6 +88,8 @@ def test_task_file_plans_and_verifies(tmp_path, capsys, path, method, flags):
     assert mb.verify(result).passed  # from the file alone: the OCP travels with the result
     assert result.extra["task_file"]["path"] == path
     assert "[robot]" in result.extra["task_file"]["toml"]
+    if result.ocp.robot.loops:  # closed at every knot, by independent forward kinematics
+        assert mb.verify(result).closure_residual <= 1e-9
     if "mimic_panda_finger_joint2" in result.ocp.names:  # the fingers coupled at every knot
         assert np.max(np.abs(result.q[:, 7] - result.q[:, 8])) <= 1e-8
     goal = result.ocp["goal"]

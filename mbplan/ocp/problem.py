@@ -19,6 +19,7 @@ dynamics.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -283,9 +284,10 @@ class OCP:
             q0=data["q0"],
             v0=data["v0"],
         )
-        implied = {i.name: i.residual.to_dict() for i in ocp.items}  # the robot's couplings
+        # the robot's couplings and passive joints, as a saved file holds them
+        implied = {i.name: json.loads(json.dumps(i.residual.to_dict())) for i in ocp.items}
         for d in data["items"]:
-            if implied.get(d["name"]) == d["residual"]:
+            if implied.get(d["name"]) == json.loads(json.dumps(d["residual"])):
                 continue
             residual = Residual.from_dict(d["residual"])
             if d["role"] == "cost":
