@@ -5,7 +5,8 @@ both formulations; verified, saved and replayed (an offline meshcat page).
 The robot is the bundled ``fourbar`` (``mbplan robots``): one point closure, the coupler and
 rocker passive (zero torque at every interval), 1 degree of freedom. The same task as
 ``examples/tasks/fourbar_crank.toml``. Exits with status 1 unless every plan is solved,
-verified, reaches the rocker angle within 1e-4 rad at rest and keeps the loop closed.
+verified, reaches the rocker angle within 1e-4 rad at rest and keeps the loop closed. The task
+is :func:`mbplan.tasks.mechanisms.fourbar_crank` (case 0 of ``mbplan bench loops``).
 """
 
 from __future__ import annotations
@@ -18,23 +19,8 @@ import numpy as np
 
 import mbplan as mb
 from mbplan.robots.loops import closure_residual
+from mbplan.tasks.mechanisms import ROCKER_GOAL, WARM_START, fourbar_crank
 from mbplan.viz import static_html
-
-ROCKER_GOAL = 0.5  # rad (the closure puts the crank at 1.347 rad, or at -2.70 rad)
-
-
-def task(N: int = 40, dt: float = 0.05) -> mb.OCP:
-    """From rest at the neutral pose (crank up, the loop closed) to the rocker at
-    ``ROCKER_GOAL``, at rest."""
-    ocp = mb.OCP("fourbar", N=N, dt=dt)
-    ocp.add_cost("velocity", mb.residuals.JointVelocity(), 1e-2)
-    ocp.add_cost("effort", mb.residuals.JointTorque(joints=["crank_joint"]), 1e-2)
-    rocker = mb.residuals.JointPosition([ROCKER_GOAL], joints=["rocker_joint"])
-    ocp.add_terminal_constraint("rocker", rocker)
-    ocp.add_terminal_constraint("rest", mb.residuals.JointVelocity())
-    ocp.add_constraint("limits", mb.residuals.JointPositionLimits())
-    ocp.add_constraint("torque", mb.residuals.JointTorqueLimits())
-    return ocp
 
 
 def loop_gap(plan: mb.PlanResult) -> float:
@@ -44,12 +30,12 @@ def loop_gap(plan: mb.PlanResult) -> float:
 
 
 def main(out: Path, methods: list[str], N: int) -> int:
-    ocp = task(N=N)
+    ocp = fourbar_crank(N=N)
     rocker = int(ocp.robot.joint_indices(["rocker_joint"])[0])
     passive = ocp.robot.joint_indices(ocp.robot.passive)
     ok, plans = True, []
     for method in methods:
-        plan = mb.plan(ocp, method, warm_start="linear")
+        plan = mb.plan(ocp, method, warm_start=WARM_START)
         check = mb.verify(plan)
         error = abs(plan.q[-1, rocker] - ROCKER_GOAL)
         gap, rest = loop_gap(plan), float(np.max(np.abs(plan.v[-1])))

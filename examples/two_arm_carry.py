@@ -5,8 +5,9 @@ pose, in both formulations; verified, saved and replayed (an offline meshcat pag
 The robot is the bundled ``two_arm_carry`` (``mbplan robots``): 12 actuated joints, one weld
 closure, 6 degrees of freedom (the bar's pose); the closure forces make the arms share the
 load. The same task as ``examples/tasks/two_arm_carry.toml``. Exits with status 1 unless every
-plan is solved, verified, brings the bar's centre within 1 mm and 1e-3 rad of ``GOAL`` at rest
-and keeps the loop closed.
+plan is solved, verified, brings the bar's centre within 1 mm and 1e-3 rad of its goal
+(:func:`mbplan.tasks.mechanisms.bar_goal`) at rest and keeps the loop closed. The task is
+:func:`mbplan.tasks.mechanisms.two_arm_carry` (case 0 of ``mbplan bench loops``).
 """
 
 from __future__ import annotations
@@ -20,37 +21,23 @@ import pinocchio as pin
 
 import mbplan as mb
 from mbplan.robots.loops import closure_residual
+from mbplan.tasks.mechanisms import WARM_START, bar_goal, two_arm_carry
 from mbplan.viz import static_html
-
-# the bar's centre (at (0, 0, 0.52), level, along x at the neutral pose) 0.15 m to the side,
-# 0.18 m up and turned 0.35 rad about z
-GOAL = pin.SE3(pin.rpy.rpyToMatrix(0.0, 0.0, 0.35), np.array([0.0, 0.15, 0.70]))
-
-
-def task(N: int = 40, dt: float = 0.05) -> mb.OCP:
-    """From rest at the neutral pose (the weld closed) to the bar at ``GOAL``, at rest."""
-    ocp = mb.OCP("two_arm_carry", N=N, dt=dt)
-    ocp.add_cost("velocity", mb.residuals.JointVelocity(), 1e-2)
-    ocp.add_cost("effort", mb.residuals.JointTorque(), 1e-4)
-    ocp.add_terminal_constraint("bar", mb.residuals.FramePlacement("bar_center", GOAL))
-    ocp.add_terminal_constraint("rest", mb.residuals.JointVelocity())
-    ocp.add_constraint("limits", mb.residuals.JointPositionLimits())
-    ocp.add_constraint("torque", mb.residuals.JointTorqueLimits())
-    return ocp
 
 
 def main(out: Path, methods: list[str], N: int) -> int:
-    ocp = task(N=N)
+    ocp = two_arm_carry(N=N)
+    goal = bar_goal()
     robot = ocp.robot
     model, data = robot.model, robot.model.createData()
     ok, plans = True, []
     for method in methods:
-        plan = mb.plan(ocp, method, warm_start="linear")
+        plan = mb.plan(ocp, method, warm_start=WARM_START)
         check = mb.verify(plan)
         pin.framesForwardKinematics(model, data, plan.q[-1])
         M = data.oMf[model.getFrameId("bar_center")]
-        dp = float(np.linalg.norm(M.translation - GOAL.translation))
-        dR = float(np.linalg.norm(pin.log3(GOAL.rotation.T @ M.rotation)))
+        dp = float(np.linalg.norm(M.translation - goal.translation))
+        dR = float(np.linalg.norm(pin.log3(goal.rotation.T @ M.rotation)))
         gap = max(float(np.max(np.abs(closure_residual(model, robot.loops, q)))) for q in plan.q)
         half = model.nv // 2  # arm a's joints, then arm b's
         share = [float(np.abs(plan.tau[:, s]).max()) for s in (slice(0, half), slice(half, None))]

@@ -97,3 +97,80 @@ def test_cli_help_and_errors(capsys):
     assert "plan" in capsys.readouterr().out
     assert main(["plan", "--task", "juggling"]) == 2
     assert "unknown task" in capsys.readouterr().err
+
+
+def test_loops_cli_parses_its_options():
+    from mbplan.cli.main import build_parser
+
+    args = build_parser().parse_args(["bench", "loops"])
+    assert (args.n, args.seed, args.methods, args.tol, args.max_iter) == (
+        10,
+        0,
+        ("ripm", "ipopt"),
+        1e-6,
+        500,
+    )
+    assert args.mechanisms == ("fourbar", "delta", "two_arm_carry")
+    given = ["bench", "loops", "--n", "3", "--seed", "4", "--methods", "ipopt"]
+    args = build_parser().parse_args([*given, "--mechanisms", "fourbar", "--out", "x"])
+    assert (args.n, args.seed, args.methods, args.mechanisms, args.out) == (
+        3,
+        4,
+        ("ipopt",),
+        ("fourbar",),
+        "x",
+    )
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--mechanisms", "stewart"], "unknown mechanism 'stewart'"),
+        (["--methods", "snopt"], "unknown method 'snopt'"),
+        (["--methods", "fddp"], "fddp cannot plan 'fourbar'"),
+        (["--n", "0"], "--n: must be >= 1, got 0"),
+    ],
+)
+def test_loops_bad_input_is_named_before_any_solve(tmp_path, capsys, flags, message):
+    out = tmp_path / "loops"
+    assert main(["bench", "loops", "--mechanisms", "fourbar", *flags, "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err
+    assert not (out / "fourbar.jsonl").exists()
+
+
+def test_loops_run_refuses_n_below_one(tmp_path):
+    from mbplan.benchmarks import loops
+
+    with pytest.raises(InputError, match="number of cases"):
+        loops.run(tmp_path, n=0, mechanisms=("fourbar",))
+
+
+@pytest.mark.slow
+def test_loops_tiny_fourbar_run_writes_its_files(tmp_path, capsys):
+    """Two four-bar cases (the example task and one randomized), both methods, through the
+    command line: every row verified, the summary, results.md and the plot written."""
+    out = tmp_path / "loops"
+    flags = ["--n", "2", "--mechanisms", "fourbar", "--out", str(out)]
+    assert main(["bench", "loops", *flags]) == 0
+    assert "## fourbar" in capsys.readouterr().out
+    rows = [json.loads(line) for line in (out / "fourbar.jsonl").read_text().splitlines()]
+    assert sorted((r["case"], r["method"]) for r in rows) == [
+        (0, "ipopt"),
+        (0, "ripm"),
+        (1, "ipopt"),
+        (1, "ripm"),
+    ]
+    assert [r["method"] for r in rows] == ["ripm", "ipopt", "ipopt", "ripm"]  # alternating
+    assert all(r["success"] and r["verified"] and r["closure_residual"] < 1e-8 for r in rows)
+    s = json.loads((out / "summary.json").read_text())
+    fourbar = s["mechanisms"]["fourbar"]["methods"]
+    assert fourbar["ripm"]["verified"] == fourbar["ipopt"]["verified"] == 2
+    assert fourbar["ripm"]["paired_total_ratio"]["cases"] == 2
+    assert fourbar["ripm"]["total_ratio"] == pytest.approx(
+        fourbar["ripm"]["median_total_time_s"] / fourbar["ipopt"]["median_total_time_s"]
+    )
+    text = (out / "results.md").read_text()
+    assert text.startswith("# Closed-loop") and f"Command: `{s['command']}`" in text
+    assert (out / "total_time.png").stat().st_size > 0
+    assert main(["bench", "loops", *flags]) == 0  # resumed: nothing re-run
+    assert "4 of 4 jobs already in" in capsys.readouterr().err

@@ -125,7 +125,7 @@ def test_median_ratio_interval_is_a_paired_bootstrap_of_the_medians():
 
 
 def test_speed_tables_show_each_ratio_with_its_interval():
-    from mbplan.benchmarks.speed import _intervals, _method_stats
+    from mbplan.benchmarks.speed import _method_stats, ratio_intervals
     from mbplan.benchmarks.speed_report import INTERVALS
     from mbplan.benchmarks.speed_report import markdown as _markdown
 
@@ -140,7 +140,7 @@ def test_speed_tables_show_each_ratio_with_its_interval():
                  "verified": True, "iterations": its, "time_per_iter_s": t / its,
                  "total_time_s": t, "solve_time_s": solve * t, "status": "ok"}
             )  # fmt: skip
-    ci = _intervals(rows, "ipopt")
+    ci = ratio_intervals(rows, "ipopt")
     assert set(ci) == {"ipopt", "ripm"} and set(ci["ipopt"]) == {"time_per_iter_s"}
     r = ci["ripm"]
     # total 0.25, solve 0.25 * 0.5 / 0.9, per iteration 0.25 * 10 / 5: one interval each

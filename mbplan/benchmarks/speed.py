@@ -54,7 +54,9 @@ def _total_key(rows: list[dict]) -> str:
     return "total_time_s" if _med(rows, "total_time_s") else "solve_time_s"
 
 
-def _intervals(rows: list[dict], base: str) -> dict[str, dict[str, tuple[float, float] | None]]:
+def ratio_intervals(
+    rows: list[dict], base: str
+) -> dict[str, dict[str, tuple[float, float] | None]]:
     """:data:`INTERVALS` (:func:`~mbplan.benchmarks.common.median_ratio_interval`) of each
     method's median time per iteration and of its medians' ratios to ``base``'s."""
     from mbplan.benchmarks.common import median_ratio_interval
@@ -194,7 +196,7 @@ def run(
             summary["tasks"][name] = {
                 m: _method_stats([r for r in rows if r["method"] == m]) for m in methods
             }
-            summary["intervals"][name] = _intervals(rows, baseline(name))
+            summary["intervals"][name] = ratio_intervals(rows, baseline(name))
     profile: dict[str, list[dict]] = {}
     names = ["iiwa-com"] * bool(n_iiwa) + ["iiwa-distance"] * bool(n_dist)
     names += ["drone", "drone-limits"] * bool(n_drone)

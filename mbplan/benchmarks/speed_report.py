@@ -22,14 +22,15 @@ def baseline(task: str) -> str:
 
 
 def _ratio(a: float | None, b: float | None) -> str:
-    return _within(_quotient(a, b), None)
+    return within(quotient(a, b), None)
 
 
-def _fmt(v: float | None, scale: float = 1.0, digits: int = 1) -> str:
+def fmt(v: float | None, scale: float = 1.0, digits: int = 1) -> str:
+    """``scale * v`` with ``digits`` decimals, ``—`` for ``None``."""
     return "—" if v is None else f"{scale * v:.{digits}f}"
 
 
-def _within(value: float | None, interval: tuple[float, float] | None, scale: float = 1.0) -> str:
+def within(value: float | None, interval: tuple[float, float] | None, scale: float = 1.0) -> str:
     """A cell's value with three significant digits and its interval rounded outwards at the
     same decimals, e.g. ``0.262 (0.246–0.273)``; the plain two-decimal value without one."""
     if value is None:
@@ -42,7 +43,8 @@ def _within(value: float | None, interval: tuple[float, float] | None, scale: fl
     return f"{v:.{d}f} ({np.floor(lo * f) / f:.{d}f}–{np.ceil(hi * f) / f:.{d}f})"
 
 
-def _quotient(a: float | None, b: float | None) -> float | None:
+def quotient(a: float | None, b: float | None) -> float | None:
+    """``a / b``, ``None`` if either is missing or ``b`` is zero."""
     return None if a is None or b is None or b == 0 else a / b
 
 
@@ -89,7 +91,7 @@ def markdown(s: dict) -> str:
         for name, m in ms.items():
             c = ci.get(name, {})
             ratios = (
-                _within(_quotient(m[key], b.get(key)), c.get(f"{what}_ratio"))
+                within(quotient(m[key], b.get(key)), c.get(f"{what}_ratio"))
                 for key, what in (
                     ("median_total_time_s", "total"),
                     ("median_solve_time_s", "solve"),
@@ -99,10 +101,10 @@ def markdown(s: dict) -> str:
             total, solve, per_iter = ratios
             lines.append(
                 f"| {name} | {m['verified']}/{m['n']} | {m['converged']}/{m['n']} "
-                f"| {_fmt(m['median_iters'])} "
-                f"| {_within(m['median_time_per_iter_s'], c.get('time_per_iter_s'), 1e3)} "
-                f"| {_fmt(m['median_total_time_s'], 1e3)} | {total} "
-                f"| {_fmt(m.get('median_solve_time_s'), 1e3)} | {solve} | {per_iter} |"
+                f"| {fmt(m['median_iters'])} "
+                f"| {within(m['median_time_per_iter_s'], c.get('time_per_iter_s'), 1e3)} "
+                f"| {fmt(m['median_total_time_s'], 1e3)} | {total} "
+                f"| {fmt(m.get('median_solve_time_s'), 1e3)} | {solve} | {per_iter} |"
             )
         lines += ["", "Statuses: " + "; ".join(f"{n}: {m['statuses']}" for n, m in ms.items()), ""]
     for task, title in (
@@ -224,10 +226,10 @@ def _chain_table(ch: dict, title: str) -> list[str]:
     for k in links:
         r, i = ch["ripm"][k], ch["ipopt"][k]
         lines.append(
-            f"| {k} | {_fmt(r['median_iters'], digits=0)} "
-            f"| {_fmt(r['median_time_per_iter_s'], 1e3)} | {_fmt(i['median_iters'], digits=0)} "
-            f"| {_fmt(i['median_time_per_iter_s'], 1e3)} | {_fmt(r['median_total_time_s'], digits=2)} "
-            f"| {_fmt(i['median_total_time_s'], digits=2)} "
+            f"| {k} | {fmt(r['median_iters'], digits=0)} "
+            f"| {fmt(r['median_time_per_iter_s'], 1e3)} | {fmt(i['median_iters'], digits=0)} "
+            f"| {fmt(i['median_time_per_iter_s'], 1e3)} | {fmt(r['median_total_time_s'], digits=2)} "
+            f"| {fmt(i['median_total_time_s'], digits=2)} "
             f"| {_ratio(r['median_total_time_s'], i['median_total_time_s'])} "
             f"| {r['verified']} / {i['verified']} |"
         )

@@ -124,6 +124,24 @@ def _bench_speed(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_loops(args: argparse.Namespace) -> int:
+    from mbplan.benchmarks.loops import run
+
+    run(
+        output_dir(args.out, "--out"),
+        n=args.n,
+        seed=args.seed,
+        methods=args.methods,
+        mechanisms=args.mechanisms,
+        tol=args.tol,
+        max_iter=args.max_iter,
+        workers=args.workers,
+        scheduler=args.scheduler,
+    )
+    print((Path(args.out) / "results.md").read_text())
+    return 0
+
+
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     """The ``bench`` subcommand of the ``mbplan`` parser, one sub-subcommand per benchmark."""
     bench = sub.add_parser(
@@ -259,6 +277,33 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     )
     _add_pool_options(speed)
     speed.set_defaults(func=_bench_speed)
+    loops = bench_sub.add_parser(
+        "loops",
+        help="RIPM vs IPOPT on the closed-loop mechanisms (fourbar, delta, two_arm_carry): the "
+        "example task and seeded randomizations of it",
+    )
+    loops.add_argument(
+        "--n", type=integer(1), default=10, help="cases per mechanism (case 0: the example task)"
+    )
+    loops.add_argument("--seed", type=integer(0), default=0, help="seed of the randomized cases")
+    loops.add_argument(
+        "--methods", type=names, default=("ripm", "ipopt"), help="comma-separated (ipopt: baseline)"
+    )
+    loops.add_argument(
+        "--mechanisms",
+        type=names,
+        default=("fourbar", "delta", "two_arm_carry"),
+        help="comma-separated: fourbar, delta, two_arm_carry",
+    )
+    loops.add_argument(
+        "--tol", type=real(), default=1e-6, help="convergence tolerance of every method"
+    )
+    loops.add_argument(
+        "--max-iter", type=integer(1), default=500, help="iteration limit of every method"
+    )
+    loops.add_argument("--out", default="out/bench/loops", help="output directory")
+    _add_pool_options(loops)
+    loops.set_defaults(func=_bench_loops)
     lie = bench_sub.add_parser(
         "lie-ipm",
         help="MLG-IPM vs Lai-Yoshise, RIPM, IPOPT on the MLG-IPM paper's SO(7)/SL(7) problems",
