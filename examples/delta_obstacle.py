@@ -23,7 +23,7 @@ import pinocchio as pin
 
 import mbplan as mb
 from mbplan.robots.loops import closure_residual
-from mbplan.tasks.mechanisms import DELTA_GOAL, WARM_START, delta_obstacle
+from mbplan.tasks.mechanisms import DELTA_GOAL, TOL, WARM_START, delta_obstacle
 from mbplan.viz import static_html
 
 
@@ -34,7 +34,7 @@ def main(out: Path, methods: list[str], N: int) -> int:
     frame = model.getFrameId("platform")
     ok, plans = True, []
     for method in methods:
-        plan = mb.plan(ocp, method, warm_start=WARM_START)
+        plan = mb.plan(ocp, method, warm_start=WARM_START, tol=TOL)
         check = mb.verify(plan)
         pin.framesForwardKinematics(model, data, plan.q[-1])
         error = float(np.linalg.norm(data.oMf[frame].translation - DELTA_GOAL))

@@ -19,7 +19,7 @@ import numpy as np
 
 import mbplan as mb
 from mbplan.robots.loops import closure_residual
-from mbplan.tasks.mechanisms import ROCKER_GOAL, WARM_START, fourbar_crank
+from mbplan.tasks.mechanisms import ROCKER_GOAL, TOL, WARM_START, fourbar_crank
 from mbplan.viz import static_html
 
 
@@ -35,7 +35,7 @@ def main(out: Path, methods: list[str], N: int) -> int:
     passive = ocp.robot.joint_indices(ocp.robot.passive)
     ok, plans = True, []
     for method in methods:
-        plan = mb.plan(ocp, method, warm_start=WARM_START)
+        plan = mb.plan(ocp, method, warm_start=WARM_START, tol=TOL)
         check = mb.verify(plan)
         error = abs(plan.q[-1, rocker] - ROCKER_GOAL)
         gap, rest = loop_gap(plan), float(np.max(np.abs(plan.v[-1])))

@@ -21,7 +21,7 @@ import pinocchio as pin
 
 import mbplan as mb
 from mbplan.robots.loops import closure_residual
-from mbplan.tasks.mechanisms import WARM_START, bar_goal, two_arm_carry
+from mbplan.tasks.mechanisms import TOL, WARM_START, bar_goal, two_arm_carry
 from mbplan.viz import static_html
 
 
@@ -32,7 +32,7 @@ def main(out: Path, methods: list[str], N: int) -> int:
     model, data = robot.model, robot.model.createData()
     ok, plans = True, []
     for method in methods:
-        plan = mb.plan(ocp, method, warm_start=WARM_START)
+        plan = mb.plan(ocp, method, warm_start=WARM_START, tol=TOL)
         check = mb.verify(plan)
         pin.framesForwardKinematics(model, data, plan.q[-1])
         M = data.oMf[model.getFrameId("bar_center")]

@@ -15,6 +15,8 @@ from mbplan.robots.loops import (
     close_loops,
     closure_jacobian,
     closure_residual,
+    independent_joints,
+    loop_jacobian,
     loop_residual,
 )
 from mbplan.robots.mjcf import mjcf_actuated
@@ -102,6 +104,19 @@ def test_mjcf_connect_and_actuators_are_read(fourbar):
     np.testing.assert_allclose(closure_residual(fourbar.model, fourbar.loops, q), 0.0, atol=1e-12)
     J = closure_jacobian(fourbar.model, fourbar.loops, q)
     assert J.shape == (2, 3) and np.linalg.matrix_rank(J) == 2
+
+
+def test_independent_joints_keep_the_actuated_ones_and_fix_every_velocity(tmp_path, fourbar):
+    q = fourbar.configuration("neutral")
+    assert fourbar.independent_joints(q) == ("crank_joint",)
+    J = loop_jacobian(fourbar.model, fourbar.loops, q)
+    for passive in ([], [1, 2], [0]):  # any preference: rank(J) dependent joints, the rest fixed
+        keep = independent_joints(fourbar.model, fourbar.loops, q, passive)
+        assert len(keep) == 3 - np.linalg.matrix_rank(J)
+        assert np.linalg.matrix_rank(np.vstack([J, np.eye(3)[keep]])) == 3  # J v = 0, v[keep] = 0
+    assert independent_joints(fourbar.model, fourbar.loops, q, [0]).tolist() in ([1], [2])
+    open_chain = mbplan.load_robot(_mjcf(tmp_path, equality="", name="open.xml"))
+    assert open_chain.independent_joints(q) == ("crank_joint", "coupler_joint", "rocker_joint")
 
 
 def test_close_loops_keeps_fixed_coordinates(fourbar):

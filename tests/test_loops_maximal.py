@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from functools import cache
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -22,7 +23,12 @@ from mbplan.formulations.maximal_layout import maximal_layout
 from mbplan.lie import SO3
 from mbplan.multibody import body_poses, maximal_model
 from mbplan.multibody.loops import loop_residuals
-from mbplan.planning.initial_guess import closed_path, goal_configuration, initial_path
+from mbplan.planning.initial_guess import (
+    closed_path,
+    goal_configuration,
+    initial_path,
+    path_clearance,
+)
 from mbplan.planning.solve import plan
 from mbplan.residuals import JointPosition, JointTorque, JointVelocity
 from mbplan.robots.loops import (
@@ -36,6 +42,7 @@ from mbplan.simulation import simulate_maximal
 from mbplan.simulation.warm_start import maximal_warm_start
 from mbplan.solvers.kkt.reduced.system import ReducedKKTSystem
 from mbplan.solvers.kkt.system import Inertia, KKTSystem
+from mbplan.taskfile import load_task
 from mbplan.tasks.speed import maximal_ripm_problem
 from mbplan.transcription.loops import (
     loop_constraint_function,
@@ -45,6 +52,8 @@ from mbplan.transcription.loops import (
 from mbplan.transcription.multibody import multibody_layout
 from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import TrajectoryVariables
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "tasks"
 
 SPATIAL = {"point": 4, "revolute": 6, "weld": 7}  # joints: one degree of freedom each
 BRANCHES = (("point", 4), ("revolute", 6), ("point", 4))  # two loops share a multiplier block
@@ -258,6 +267,23 @@ def test_warm_start_paths_close_the_loops_and_head_for_the_partial_goal() -> Non
     np.testing.assert_allclose(path[-1], goal, atol=1e-8)
 
 
+def test_warm_start_of_a_frame_goal_closes_the_loops_and_reaches_the_goal() -> None:
+    """The inverse kinematics takes the closures as rows; a "via" path is closed at every knot
+    and clear of the obstacle (the delta's straight path collides with the box)."""
+    for name in ("two_arm_carry", "delta_obstacle"):
+        ocp = load_task(EXAMPLES / f"{name}.toml", {"horizon.N": 12}).ocp
+        robot, goal = ocp.robot, ocp["goal"].residual
+        path = initial_path(ocp, "via")
+        gaps = [np.abs(closure_residual(robot.model, robot.loops, q)).max() for q in path]
+        assert max(gaps) <= 1e-9
+        assert path_clearance(ocp, path) <= 0.0
+        np.testing.assert_allclose(path[-1], goal_configuration(ocp), atol=1e-6)
+        data = robot.model.createData()
+        pin.framesForwardKinematics(robot.model, data, path[-1])
+        M = data.oMf[robot.frame_id(goal.frame)]
+        np.testing.assert_allclose(M.translation, goal.translation, atol=1e-6)
+
+
 # ----------------------------------------------------------------------------- the RIPM
 
 
@@ -324,6 +350,15 @@ def test_ripm_plans_on_the_closures(task, kkt_method: str) -> None:
         assert result.q[-1, 2] == pytest.approx(0.3, abs=1e-9)
         assert abs(result.q[-1, 0]) > 0.5  # the crank drove it there
         assert MaximalNLP(ocp, jit=True).passive == (1, 2)
+
+
+def test_ripm_plans_the_two_arm_carry_at_rest_in_few_iterations() -> None:
+    """Rest on the independent joints and a closed warm start at the goal: a handful of
+    iterations (500 without convergence when rest was imposed on all 12 joints)."""
+    task = load_task(EXAMPLES / "two_arm_carry.toml", {"horizon.N": 12, "horizon.dt": 1 / 6})
+    result = plan(task.ocp, "ripm", warm_start=task.warm_start, tol=task.tol)
+    assert result.success and result.iterations <= 10, (result.status, result.iterations)
+    assert np.abs(result.v[-1]).max() <= 1e-9  # every joint at rest
 
 
 def test_validate_dynamics_covers_loop_mechanisms(tmp_path) -> None:

@@ -16,7 +16,7 @@ import mbplan as mb
 from mbplan.cli.main import main
 from mbplan.errors import InputError, RobotModelError
 from mbplan.robots import MECHANISMS, available_arms, available_robots, load
-from mbplan.robots.loops import closure_jacobian, closure_residual
+from mbplan.robots.loops import closure_jacobian, closure_residual, loop_jacobian
 from mbplan.robots.mjcf import mjcf_equality_names
 from mbplan.robots.robot import robot_from_source
 from mbplan.taskfile import load_task
@@ -269,3 +269,26 @@ def test_example_task_files_build_their_ocps(name: str):
     assert robot.loops and np.max(np.abs(closure_residual(robot.model, robot.loops, ocp.q0))) < 1e-8
     assert {"goal", "rest", "torque_limits"} <= set(ocp.names)
     assert "velocity_limits" not in ocp.names  # MJCF has none
+
+
+@pytest.mark.parametrize(
+    ("name", "joints"),
+    [
+        ("fourbar_crank", ("crank_joint",)),
+        ("delta_obstacle", ("leg1_shoulder", "leg2_shoulder", "leg3_shoulder")),
+        ("two_arm_carry", None),
+    ],
+)
+def test_rest_is_imposed_on_independent_joints(name: str, joints: tuple[str, ...] | None):
+    """``[goal] rest`` of a loop robot: zero velocity on as many joints as it has dof (the
+    actuated ones where they determine the others), which with the closures' ``J v = 0`` rests
+    every joint, and no row repeats a closure's (a rank-deficient constraint Jacobian)."""
+    ocp = load_task(EXAMPLES / f"{name}.toml").ocp
+    robot, rest = ocp.robot, ocp["rest"].residual.joints
+    J = loop_jacobian(robot.model, robot.loops, ocp.q0)
+    assert len(rest) == robot.nv - np.linalg.matrix_rank(J)
+    assert (
+        np.linalg.matrix_rank(np.vstack([J, np.eye(robot.nv)[robot.joint_indices(rest)]]))
+        == robot.nv
+    )
+    assert joints is None or rest == joints

@@ -296,7 +296,7 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
         help="comma-separated: fourbar, delta, two_arm_carry",
     )
     loops.add_argument(
-        "--tol", type=real(), default=1e-6, help="convergence tolerance of every method"
+        "--tol", type=real(), default=1e-8, help="convergence tolerance of every method"
     )
     loops.add_argument(
         "--max-iter", type=integer(1), default=500, help="iteration limit of every method"

@@ -40,12 +40,13 @@ from mbplan.residuals import (
 )
 from mbplan.robots.continuous import joint_ranges
 from mbplan.robots.free_body import FreeBody, quaternions, rotations
-from mbplan.robots.loops import CLOSE_TOLERANCE, close_loops
+from mbplan.robots.loops import CLOSE_TOLERANCE, close_loops, closure_residual, loop_jacobian
 from mbplan.robots.robot import Robot
 
 VIA_CANDIDATES = 256  # random via points tried by the "via" warm start
 IK_STARTS = 32  # random restarts of the inverse kinematics
 IK_TOLERANCE = 1e-8  # ‖error‖ (m, rad) at which the IK stops
+COARSE_STRIDE = 4  # a loop robot's candidate paths: every 4th knot judged first
 
 
 def path_clearance(ocp: OCP, path: np.ndarray) -> float:
@@ -75,8 +76,9 @@ def inverse_kinematics(
     seed: int = 0,
 ) -> np.ndarray:
     """A configuration within the joint limits that reaches ``goal`` (damped least squares from
-    ``q_init``, then from :data:`IK_STARTS` seeded random configurations) and that ``accept(q)``
-    (e.g. collision-free), if given. :class:`InfeasibleRequestError` naming the frame and the best
+    ``q_init``, then from :data:`IK_STARTS` seeded random configurations), closes the robot's
+    loops (their residuals as further rows) and that ``accept(q)`` (e.g. collision-free), if
+    given. :class:`InfeasibleRequestError` naming the frame and the best
     error if none does: the goal is outside the workspace (or blocked)."""
     model, data = robot.model, robot.model.createData()
     fid = robot.frame_id(goal.frame)
@@ -96,6 +98,9 @@ def inverse_kinematics(
                 w = pin.log3(goal.rotation.T @ M.rotation)
                 e = np.concatenate([e, w])
                 J = np.vstack([J, pin.Jlog3(goal.rotation.T @ M.rotation) @ J6[3:]])
+            if robot.loops:  # the closures as further rows: a closed configuration
+                e = np.concatenate([e, closure_residual(model, robot.loops, q)])
+                J = np.vstack([J, loop_jacobian(model, robot.loops, q)])
             err = float(np.linalg.norm(e))
             if err < IK_TOLERANCE:
                 break
@@ -153,8 +158,7 @@ def initial_path(ocp: OCP, kind: str = "linear") -> np.ndarray:
         raise InputError(f"warm_start: expected 'linear', 'via' or an array, got {kind!r}")
     if isinstance(ocp.robot, FreeBody):
         return geodesic_path(ocp)
-    path = _open_path(ocp, kind)
-    return closed_path(ocp.robot, path) if ocp.robot.loops else path
+    return _path(ocp, kind)
 
 
 def closed_path(robot: Robot, path: np.ndarray) -> np.ndarray:
@@ -162,10 +166,16 @@ def closed_path(robot: Robot, path: np.ndarray) -> np.ndarray:
     (:func:`~mbplan.robots.loops.close_loops`): the actuated joints kept, the passive ones
     started from the previous knot's (else every joint free). Knots that cannot be closed are
     left as they are (the planner's closure constraints then pull them)."""
+    return _close_path(robot, path)[0]
+
+
+def _close_path(robot: Robot, path: np.ndarray) -> tuple[np.ndarray, bool]:
+    """:func:`closed_path` and whether every knot closes."""
     model, loops = robot.model, robot.loops
     passive = robot.joint_indices(robot.passive)
     actuated = np.setdiff1d(np.arange(robot.nq), passive)
     out = np.array(path, dtype=float)
+    closed = True
     for k in range(len(out)):
         start = out[k].copy()
         if k:
@@ -175,16 +185,21 @@ def closed_path(robot: Robot, path: np.ndarray) -> np.ndarray:
             q, gap = close_loops(model, loops, start)
         if gap <= CLOSE_TOLERANCE:
             out[k] = q
-    return out
+        closed &= gap <= CLOSE_TOLERANCE
+    return out, closed
 
 
-def _open_path(ocp: OCP, kind: str) -> np.ndarray:
-    """:func:`initial_path` before the loops are closed."""
+def _path(ocp: OCP, kind: str) -> np.ndarray:
+    """:func:`initial_path` of a robot (with loops, every candidate path closed)."""
+    robot = ocp.robot
     q0, q_goal = ocp.q0, goal_configuration(ocp)
     s = np.concatenate([[0.0], np.linspace(0.0, 1.0, ocp.N)])
     linear = q0 + s[:, None] * (q_goal - q0)
-    if kind == "linear" or path_clearance(ocp, linear) <= 0.0:
-        return linear
+    if kind == "linear":
+        return closed_path(robot, linear) if robot.loops else linear
+    clear = _first_clear(ocp, linear[None])
+    if clear is not None:
+        return clear
     rng = np.random.default_rng(0)
     mid = 0.5 * (q0 + q_goal)
     lo, hi = joint_ranges(ocp.robot, mid)
@@ -198,13 +213,31 @@ def _open_path(ocp: OCP, kind: str) -> np.ndarray:
     start, size = 0, 1
     while start < len(vias):  # the shortest clear one, in batches of 1, 2, 4, ... candidates
         via = vias[start : start + size, None]
-        paths = q0 + first * (via - q0) + second * (q_goal - via)
-        clear = np.flatnonzero(path_clearances(ocp, paths) <= 0.0)
-        if clear.size:
-            return paths[clear[0]].copy()
+        clear = _first_clear(ocp, q0 + first * (via - q0) + second * (q_goal - via))
+        if clear is not None:
+            return clear
         start, size = start + size, 2 * size
     warnings.warn(WarmStartWarning(VIA_FALLBACK), stacklevel=2)
-    return linear
+    return closed_path(robot, linear) if robot.loops else linear
+
+
+def _first_clear(ocp: OCP, paths: np.ndarray) -> np.ndarray | None:
+    """The first of ``paths (P, K, nq)`` that keeps clear of the obstacle constraints at its
+    knots, or ``None``. With loops each candidate is closed (:func:`closed_path`) and must close
+    at every knot; its every :data:`COARSE_STRIDE`-th knot is closed and judged first, where
+    most candidates already collide."""
+    robot = ocp.robot
+    if not robot.loops:
+        clear = np.flatnonzero(path_clearances(ocp, paths) <= 0.0)
+        return paths[clear[0]].copy() if clear.size else None
+    for path in paths:
+        for knots in (slice(None, None, COARSE_STRIDE), slice(None)):
+            closed, ok = _close_path(robot, path[knots])
+            if not ok or path_clearance(ocp, closed) > 0.0:
+                break
+        else:
+            return closed
+    return None
 
 
 VIA_FALLBACK = (

@@ -15,6 +15,11 @@ point closure: its out-of-plane row vanishes identically). Redundant rows make t
 Jacobian rank deficient and their forces indeterminate, so :func:`resolve_loops` finds them on
 the closed reference configuration and keeps only independent rows
 (:attr:`Loop.components`, :attr:`Loop.dropped`, reported by ``mbplan robots`` and ``plan``).
+
+The joint velocities of a closed robot are dependent too (``J v = 0``): a condition on every
+joint's velocity, such as rest at the last knot, repeats the closures' rows.
+:func:`independent_joints` finds joints whose velocities determine all the others', on which
+such a condition is imposed once.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
+import scipy.linalg
 
 from mbplan.errors import InputError, RobotModelError
 
@@ -150,11 +156,13 @@ def close_loops(
     q = np.array(q, dtype=float)
     free = np.setdiff1d(np.arange(q.size), np.asarray(fixed, dtype=np.int64))
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
-    for _ in range(iterations):
+    exact = model.nq == model.nv  # 1-dof joints: loop_jacobian's columns are q's
+    for _ in range(iterations if free.size else 0):
         r = closure_residual(model, loops, q)
         if r.size == 0 or np.max(np.abs(r)) < tolerance:
             break
-        J = closure_jacobian(model, loops, q)[:, free]
+        J = loop_jacobian(model, loops, q) if exact else closure_jacobian(model, loops, q)
+        J = J[:, free]
         q[free] -= np.linalg.lstsq(J, r, rcond=None)[0]
         q = np.where(np.isfinite(lo) & np.isfinite(hi), np.clip(q, lo, hi), q)
     r = closure_residual(model, loops, q)
@@ -357,3 +365,30 @@ def loop_jacobian(model: pin.Model, loops: Sequence[Loop], q: np.ndarray) -> np.
             rows.append(0.5 * (np.trace(Mrel) * np.eye(3) - Mrel) @ w)
         parts.append(np.vstack(rows)[loop.rows])
     return np.vstack(parts)
+
+
+def independent_joints(
+    model: pin.Model, loops: Sequence[Loop], q: np.ndarray, passive: Sequence[int] = ()
+) -> np.ndarray:
+    """Velocity indices of a largest set of joints whose velocities determine every other
+    joint's through the closures at ``q`` (``J v = 0``, ``J`` of :func:`loop_jacobian`): all
+    joints but a well-conditioned dependent set, as many as ``J`` has rank, chosen by
+    column-pivoted QR among the ``passive`` velocity indices first, then among the others (the
+    actuated joints stay independent where the passive ones take up the closures). ``v = 0`` on
+    them is ``v = 0`` on every joint while the dependent joints' columns of ``J`` stay
+    invertible, with no row repeating a closure's (every joint without loops)."""
+    nv = model.nv
+    J = loop_jacobian(model, loops, q) if loops else np.zeros((0, nv))
+    tol = RANK_TOLERANCE * max(1.0, float(np.max(np.abs(J), initial=0.0)))
+    first = np.unique(np.asarray(passive, dtype=np.int64))
+    basis = np.zeros((J.shape[0], 0))
+    dependent: list[int] = []
+    for group in (first, np.setdiff1d(np.arange(nv), first)):
+        if not group.size or basis.shape[1] == J.shape[0]:
+            continue
+        cols = J[:, group] - basis @ (basis.T @ J[:, group])
+        Q, R, piv = scipy.linalg.qr(cols, mode="economic", pivoting=True)
+        rank = int(np.sum(np.abs(np.diag(R)) > tol))
+        dependent += group[piv[:rank]].tolist()
+        basis = np.hstack([basis, Q[:, :rank]])
+    return np.setdiff1d(np.arange(nv), dependent)

@@ -37,6 +37,7 @@ from mbplan.robots.loader import MECHANISMS, MJCF_SUFFIXES, load_mjcf, mimic_tag
 from mbplan.robots.loops import (
     Loop,
     close_loops,
+    independent_joints,
     loop_from_spec,
     loops_from_constraints,
     resolve_loops,
@@ -114,6 +115,17 @@ class Robot:
     def closed(self, q: np.ndarray) -> np.ndarray:
         """The configuration nearest ``q`` that closes the loops (``q`` if there are none)."""
         return close_loops(self.model, self.loops, q)[0] if self.loops else np.asarray(q)
+
+    def independent_joints(self, q: np.ndarray) -> tuple[str, ...]:
+        """Joints whose velocities determine all the others' through the loops at ``q``
+        (:func:`~mbplan.robots.loops.independent_joints`: the actuated ones where they do); a
+        velocity condition on every joint, e.g. rest at the last knot, is imposed on these
+        alone (``JointVelocity(joints=robot.independent_joints(q))``) to keep the constraint
+        Jacobian of full rank. Every joint without loops."""
+        passive = self.joint_indices(self.passive)
+        keep = independent_joints(self.model, self.loops, np.asarray(q, dtype=float), passive)
+        names = self.model.names[1:]
+        return tuple(n for n in names if self.joint_indices((n,))[0] in keep)
 
     def coupled(self, q: np.ndarray) -> np.ndarray:
         """``q`` with every mimic follower at ``multiplier · q[leader] + offset``."""

@@ -97,7 +97,8 @@ def load_task(
     residual = _goal(goal, robot, full_names, limits)
     _costs(doc.table("cost"), ocp, residual, goal)
     if goal.boolean("rest", False):
-        ocp.add_constraint("rest", JointVelocity(), knots="terminal")
+        joints = robot.independent_joints(q0) if getattr(robot, "loops", ()) else None
+        ocp.add_constraint("rest", JointVelocity(joints=joints), knots="terminal")
     _constraints(doc.table("constraints"), ocp, limits)
     method, warm_start, tol, max_iter = _solver(doc.table("solver"))
     return Task(
