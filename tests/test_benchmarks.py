@@ -107,7 +107,7 @@ def test_loops_cli_parses_its_options():
         10,
         0,
         ("ripm", "ipopt"),
-        1e-6,
+        1e-8,
         500,
     )
     assert args.mechanisms == ("fourbar", "delta", "two_arm_carry")
