@@ -34,13 +34,12 @@ from mbplan.benchmarks.speed import ratio_intervals
 from mbplan.benchmarks.speed_report import INTERVALS, fmt, quotient, within
 from mbplan.errors import InputError
 from mbplan.planning.solve import check_plan_request, plan
-from mbplan.tasks.mechanisms import DT, MECHANISMS, WARM_START, N, mechanism_case
+from mbplan.tasks.mechanisms import DT, MECHANISMS, TOL, WARM_START, N, mechanism_case
 from mbplan.validation import as_int, as_real
 from mbplan.workspace import Workspace
 
 METHODS = ("ripm", "ipopt")
 BASELINE = "ipopt"  # the method the others' times are divided by
-TOL = 1e-6
 MAX_ITER = 500
 WARM_UP_ITERATIONS = 5
 
