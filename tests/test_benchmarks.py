@@ -139,10 +139,10 @@ def test_loops_bad_input_is_named_before_any_solve(tmp_path, capsys, flags, mess
 
 
 def test_loops_run_refuses_n_below_one(tmp_path):
-    from mbplan.benchmarks import loops
+    from mbplan.benchmarks import families, loops
 
     with pytest.raises(InputError, match="number of cases"):
-        loops.run(tmp_path, n=0, mechanisms=("fourbar",))
+        families.run(loops.SUITE, tmp_path, n=0, families=("fourbar",))
 
 
 @pytest.mark.slow
@@ -163,7 +163,7 @@ def test_loops_tiny_fourbar_run_writes_its_files(tmp_path, capsys):
     assert [r["method"] for r in rows] == ["ripm", "ipopt", "ipopt", "ripm"]  # alternating
     assert all(r["success"] and r["verified"] and r["closure_residual"] < 1e-8 for r in rows)
     s = json.loads((out / "summary.json").read_text())
-    fourbar = s["mechanisms"]["fourbar"]["methods"]
+    fourbar = s["families"]["fourbar"]["methods"]
     assert fourbar["ripm"]["verified"] == fourbar["ipopt"]["verified"] == 2
     assert fourbar["ripm"]["paired_total_ratio"]["cases"] == 2
     assert fourbar["ripm"]["total_ratio"] == pytest.approx(

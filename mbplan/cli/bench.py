@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
 
 from mbplan.cli.support import add_constraint_option, integer, integer_list, names, real
@@ -124,22 +125,51 @@ def _bench_speed(args: argparse.Namespace) -> int:
     return 0
 
 
-def _bench_loops(args: argparse.Namespace) -> int:
-    from mbplan.benchmarks.loops import run
+def _bench_suite(module: str) -> Callable[[argparse.Namespace], int]:
+    """The command running the :class:`~mbplan.benchmarks.families.Suite` of ``module``."""
 
-    run(
-        output_dir(args.out, "--out"),
-        n=args.n,
-        seed=args.seed,
-        methods=args.methods,
-        mechanisms=args.mechanisms,
-        tol=args.tol,
-        max_iter=args.max_iter,
-        workers=args.workers,
-        scheduler=args.scheduler,
+    def bench(args: argparse.Namespace) -> int:
+        from importlib import import_module
+
+        from mbplan.benchmarks.families import run
+
+        suite = import_module(module).SUITE
+        run(
+            suite,
+            output_dir(args.out, "--out"),
+            n=args.n,
+            seed=args.seed,
+            methods=args.methods,
+            families=getattr(args, suite.family_flag),
+            tol=args.tol,
+            max_iter=args.max_iter,
+            workers=args.workers,
+            scheduler=args.scheduler,
+        )
+        print((Path(args.out) / "results.md").read_text())
+        return 0
+
+    return bench
+
+
+def _add_suite_options(
+    parser: argparse.ArgumentParser, n: int, families: tuple[str, ...], flag: str, tol: float
+) -> None:
+    """The options of a family benchmark (:mod:`mbplan.benchmarks.families`)."""
+    parser.add_argument("--n", type=integer(1), default=n, help="cases per family")
+    parser.add_argument("--seed", type=integer(0), default=0, help="seed of the drawn cases")
+    parser.add_argument(
+        "--methods", type=names, default=("ripm", "ipopt"), help="comma-separated (ipopt: baseline)"
     )
-    print((Path(args.out) / "results.md").read_text())
-    return 0
+    parser.add_argument(
+        f"--{flag}", type=names, default=families, help=f"comma-separated: {', '.join(families)}"
+    )
+    parser.add_argument(
+        "--tol", type=real(), default=tol, help="convergence tolerance of every method"
+    )
+    parser.add_argument(
+        "--max-iter", type=integer(1), default=500, help="iteration limit of every method"
+    )
 
 
 def add_bench_parser(sub: argparse._SubParsersAction) -> None:
@@ -280,30 +310,28 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     loops = bench_sub.add_parser(
         "loops",
         help="RIPM vs IPOPT on the closed-loop mechanisms (fourbar, delta, two_arm_carry): the "
-        "example task and seeded randomizations of it",
+        "example task (case 0) and seeded randomizations of it",
     )
-    loops.add_argument(
-        "--n", type=integer(1), default=10, help="cases per mechanism (case 0: the example task)"
-    )
-    loops.add_argument("--seed", type=integer(0), default=0, help="seed of the randomized cases")
-    loops.add_argument(
-        "--methods", type=names, default=("ripm", "ipopt"), help="comma-separated (ipopt: baseline)"
-    )
-    loops.add_argument(
-        "--mechanisms",
-        type=names,
-        default=("fourbar", "delta", "two_arm_carry"),
-        help="comma-separated: fourbar, delta, two_arm_carry",
-    )
-    loops.add_argument(
-        "--tol", type=real(), default=1e-8, help="convergence tolerance of every method"
-    )
-    loops.add_argument(
-        "--max-iter", type=integer(1), default=500, help="iteration limit of every method"
-    )
+    _add_suite_options(loops, 10, ("fourbar", "delta", "two_arm_carry"), "mechanisms", 1e-8)
     loops.add_argument("--out", default="out/bench/loops", help="output directory")
     _add_pool_options(loops)
-    loops.set_defaults(func=_bench_loops)
+    loops.set_defaults(func=_bench_suite("mbplan.benchmarks.loops"))
+    robustness = bench_sub.add_parser(
+        "robustness",
+        help="RIPM vs IPOPT on seeded families of hard tasks (graded chains, mesh arms among "
+        "boxes, goals near limits, at rest, near singular, paper tasks from the linear warm "
+        "start), with a failure table",
+    )
+    _add_suite_options(
+        robustness,
+        20,
+        ("graded_chain", "arm_boxes", "near_limits", "rest_goal", "near_singular", "paper_linear"),
+        "families",
+        1e-6,
+    )
+    robustness.add_argument("--out", default="out/bench/robustness", help="output directory")
+    _add_pool_options(robustness)
+    robustness.set_defaults(func=_bench_suite("mbplan.benchmarks.robustness"))
     lie = bench_sub.add_parser(
         "lie-ipm",
         help="MLG-IPM vs Lai-Yoshise, RIPM, IPOPT on the MLG-IPM paper's SO(7)/SL(7) problems",

@@ -9,7 +9,9 @@ exp(Δθ a)``:
   (target zero only) ``w (1 - cos(θ_{k+1} - θ_k))/Δt²``, a constraint the central difference
   ``(θ_{k+1} - θ_{k-1})/(2Δt)`` of ``atan2`` steps (the velocity a plan reports);
 * joint position limits ``cos(θ - θ_mid) ≥ cos(θ_half)`` and velocity limits
-  ``cos(θ_{k+1} - θ_k) ≥ cos(v_max Δt)`` (exact for ranges below 2π; symmetric velocity limits).
+  ``cos(θ_{k+1} - θ_k) ≥ cos(v_max Δt)`` (exact for ranges below 2π, an arc of ``π - ε`` about
+  the middle for ranges in ``[2π, 2π + 2ε)``: :class:`~mbplan.residuals.JointPositionLimits`;
+  symmetric velocity limits).
 
 Prismatic joints, from the displacement ``d = (R_p a_p)ᵀ(pivot_c - pivot_p)``
 (:func:`mbplan.dynamics.joints.prismatic_displacement`): ``½ w (d - d_t)²`` and ``d - d_t``,

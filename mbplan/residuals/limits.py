@@ -109,16 +109,25 @@ class JointPositionLimits(_Limits):
         return free
 
     def maximal_terms(self, ctx: Any, item: Any) -> list[Term]:
-        """No rows for continuous joints, nor for a revolute range of 2π or more (it limits no
-        rotation: cos ≥ -1)."""
+        """``cos(θ - mid) ≥ cos(half)`` per revolute joint; no rows for continuous joints.
+
+        A rotation forgets the turns: a revolute range of 2π or more limits no rotation
+        (``cos ≥ -1``). A range ``R`` in ``[2π, 2π + 2ε)`` (UR elbows: ±π) keeps the open arc
+        ``|θ - mid| < π - ε``, ``ε = min(v̄Δt, π/2) / 2`` with ``v̄`` the joint's velocity limit:
+        a step of at most ``v̄Δt`` cannot jump the excluded arc of width ``2ε``, so the joint
+        cannot wrap past its limits; the last ``ε`` of the range at either end is given up.
+        Wider ranges have no rows (a plan leaving them fails :func:`mbplan.verify`)."""
         mm = ctx.mm
         lo, hi = np.asarray(self.lower)[mm.idx_v], np.asarray(self.upper)[mm.idx_v]
+        vmax = np.asarray(ctx.ocp.robot.model.velocityLimit, dtype=float)[mm.idx_v]
+        step = np.where(np.isfinite(vmax) & (vmax > 0), vmax * ctx.ocp.dt, np.inf)
+        eps = 0.5 * np.minimum(step, 0.5 * np.pi)
         limited = np.isin(mm.idx_v, self.indices(ctx.ocp.robot))
-        b = np.flatnonzero(limited & (~mm.revolute | (hi - lo < 2 * np.pi)))
+        b = np.flatnonzero(limited & (~mm.revolute | (hi - lo < 2 * np.pi + 2 * eps)))
         if not b.size:
             return []
-        lo, hi = lo[b], hi[b]
-        half = np.minimum(0.5 * (hi - lo), np.pi)
+        lo, hi, eps = lo[b], hi[b], eps[b]
+        half = np.where(hi - lo < 2 * np.pi, 0.5 * (hi - lo), np.pi - eps)
         per = {"R_mid": ctx.about_axis(b, 0.5 * (lo + hi)), "cos_half": np.cos(half)}
         return ctx.joint_terms(item, "position_limits", b, per, {"lo": lo, "hi": hi})
 
