@@ -171,6 +171,15 @@ def test_loops_tiny_fourbar_run_writes_its_files(tmp_path, capsys):
     )
     text = (out / "results.md").read_text()
     assert text.startswith("# Closed-loop") and f"Command: `{s['command']}`" in text
+    lines = text.splitlines()
+    for i, line in enumerate(lines):  # every table: header, separator and rows alike wide
+        if line.startswith("|---"):
+            table = [lines[i - 1]]
+            for row in lines[i:]:
+                if not row.startswith("|"):
+                    break
+                table.append(row)
+            assert len({row.count("|") for row in table}) == 1, table[:2]
     assert (out / "total_time.png").stat().st_size > 0
     assert main(["bench", "loops", *flags]) == 0  # resumed: nothing re-run
     assert "4 of 4 jobs already in" in capsys.readouterr().err

@@ -397,7 +397,7 @@ def markdown(suite: Suite, s: dict[str, Any]) -> str:
             "| method | solved & verified | converged | median iters | time/iter [ms] "
             f"| total [s] | solve [s] | compile [s]{extra} | total / {base} "
             f"| paired total / {base} | solve / {base} |",
-            "|---|" + "---:|" * (11 + len(suite.extra_columns)),
+            "|---|" + "---:|" * (10 + len(suite.extra_columns)),
         ]
         for method, e in fs["methods"].items():
             paired = e.get("paired_total_ratio")
