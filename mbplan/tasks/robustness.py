@@ -51,6 +51,7 @@ from mbplan.tasks.paper import (
     iiwa_obstacle_cases,
     tracking_ocp,
 )
+from mbplan.tasks.speed import chain_urdf
 
 ATTEMPTS = 2000  # draws of a case before giving up
 
@@ -83,28 +84,9 @@ def _rng(seed: int, index: int, family: str) -> np.random.Generator:
 def graded_chain_urdf(n: int) -> str:
     """URDF of a hanging chain of ``n`` equal links (revolute x, y, x, ...; 4.8 m, 16 kg) with
     torque limits falling linearly along it (:data:`CHAIN_EFFORT`)."""
-    L, m, r = CHAIN_LENGTH / n, CHAIN_MASS / n, 0.01
-    ixx, izz = m * (3 * r * r + L * L) / 12, m * r * r / 2
-    efforts = np.linspace(*CHAIN_EFFORT, n)
-    parts = ['<?xml version="1.0"?>', f'<robot name="graded_chain{n}">', '<link name="base"/>']
-    parent = "base"
-    for i in range(n):
-        link = f"link{i + 1}"
-        parts.append(
-            f'<link name="{link}"><inertial><origin xyz="0 0 {-L / 2}"/><mass value="{m}"/>'
-            f'<inertia ixx="{ixx}" iyy="{ixx}" izz="{izz}" ixy="0" ixz="0" iyz="0"/>'
-            "</inertial></link>"
-        )
-        axis = "1 0 0" if i % 2 == 0 else "0 1 0"
-        parts.append(
-            f'<joint name="joint{i + 1}" type="revolute"><parent link="{parent}"/>'
-            f'<child link="{link}"/><origin xyz="0 0 {-L if i else 0.0}"/><axis xyz="{axis}"/>'
-            f'<limit lower="{-CHAIN_RANGE}" upper="{CHAIN_RANGE}" effort="{efforts[i]:.4f}" '
-            f'velocity="{CHAIN_VELOCITY}"/></joint>'
-        )
-        parent = link
-    parts.append("</robot>")
-    return "\n".join(parts)
+    return chain_urdf(
+        n, CHAIN_LENGTH, CHAIN_MASS, CHAIN_EFFORT, CHAIN_VELOCITY, CHAIN_RANGE, "graded_chain"
+    )
 
 
 # process-wide cache, result-neutral: the robot is a function of n alone

@@ -54,11 +54,22 @@ CHAIN_LENGTH = 1.0  # m, whole chain
 CHAIN_MASS = 2.0  # kg, whole chain
 
 
-def chain_urdf(n: int) -> str:
-    """URDF of a hanging serial chain of ``n`` equal links (revolute x, y, x, ...), 1 m, 2 kg."""
-    L, m, r = CHAIN_LENGTH / n, CHAIN_MASS / n, 0.01
+def chain_urdf(
+    n: int,
+    length: float = CHAIN_LENGTH,
+    mass: float = CHAIN_MASS,
+    efforts: tuple[float, float] = (100.0, 100.0),
+    velocity: float = 10.0,
+    position_range: float = 3.1,
+    name: str = "chain",
+) -> str:
+    """URDF of a hanging serial chain of ``n`` equal links (revolute x, y, x, ...) of total
+    ``length`` and ``mass``, position limits ``±position_range``, torque limits falling linearly
+    from ``efforts[0]`` at the first joint to ``efforts[1]`` at the last."""
+    L, m, r = length / n, mass / n, 0.01
     ixx, izz = m * (3 * r * r + L * L) / 12, m * r * r / 2
-    parts = ['<?xml version="1.0"?>', f'<robot name="chain{n}">', '<link name="base"/>']
+    effort = np.linspace(*efforts, n)
+    parts = ['<?xml version="1.0"?>', f'<robot name="{name}{n}">', '<link name="base"/>']
     parent = "base"
     for i in range(n):
         link = f"link{i + 1}"
@@ -72,7 +83,9 @@ def chain_urdf(n: int) -> str:
         parts.append(
             f'<joint name="joint{i + 1}" type="revolute"><parent link="{parent}"/>'
             f'<child link="{link}"/><origin xyz="0 0 {z}"/><axis xyz="{axis}"/>'
-            '<limit lower="-3.1" upper="3.1" effort="100" velocity="10"/></joint>'
+            f'<limit lower="{-position_range}" upper="{position_range}" '
+            f'effort="{np.format_float_positional(effort[i], 4, trim="-")}" '
+            f'velocity="{velocity:g}"/></joint>'
         )
         parent = link
     parts.append("</robot>")
