@@ -474,6 +474,7 @@ def test_degenerate_mode_retries_zero_once_the_perturbation_is_small():
     from mbplan.tasks.speed import TASKS
 
     problem, x0, options = TASKS["drone"](0)
+    options = options.replace(kappa_curvature=0.0)  # the inertia alone decides, as in WB
     runs = {
         z: solve_ripm(problem, x0, options.replace(degenerate_zero_below=z)) for z in (0.0, 1e-2)
     }
@@ -794,3 +795,51 @@ def test_a_non_finite_predictor_step_leaves_mu_finite(monkeypatch):
     res = solve_ripm(hs071(), HS071_X0)
     assert broken and res.status is RIPMStatus.CONVERGED
     assert abs(res.objective - 17.0140172891) < 1e-8 and np.isfinite(res.history.mu).all()
+
+
+def test_curvature_test_keeps_a_step_whose_inertia_only_the_regularization_spoils():
+    """``min ½x₀² + ½x₁² - ½x₂²`` s.t. ``x₀ + x₁ = 1``, ``x₀ + x₁ + 10⁻⁶ x₂ = 1``: the reduced
+    Hessian is positive definite and the exact KKT matrix has the right inertia, but ``A_E``'s
+    smallest singular value (~7e-7) is below ``√ε`` of the static regularization ε = 1e-9, so
+    the factorized matrix shows ``-x₂²`` as one negative eigenvalue too many. The step has
+    positive curvature: the curvature test keeps it (one Newton step, no δ_w); the inertia
+    alone regularizes along x₂, which the nearly dependent rows barely hold, and diverges."""
+    e = 1e-6
+    nlp = EuclideanNLP(
+        3,
+        lambda x: 0.5 * x[0] ** 2 + 0.5 * x[1] ** 2 - 0.5 * x[2] ** 2,
+        lambda x: np.array([x[0], x[1], -x[2]]),
+        lambda x, s, y, z: s * np.diag([1.0, 1.0, -1.0]),
+        eq=lambda x: np.array([x[0] + x[1] - 1.0, x[0] + x[1] + e * x[2] - 1.0]),
+        eq_jacobian=lambda x: np.array([[1.0, 1.0, 0.0], [1.0, 1.0, e]]),
+        n_eq=2,
+    )
+    x0 = np.array([0.3, 0.7, 0.0])  # feasible: the test runs at nearly feasible iterates
+    kept = solve_ripm(nlp, x0, tol=1e-9)
+    assert kept.status is RIPMStatus.CONVERGED and kept.iterations <= 2
+    assert max(kept.history.delta_w) == 0.0
+    np.testing.assert_allclose(kept.x, [0.5, 0.5, 0.0], atol=1e-6)
+    inertia_only = solve_ripm(nlp, x0, tol=1e-9, kappa_curvature=0.0)
+    assert inertia_only.status is not RIPMStatus.CONVERGED
+    assert max(inertia_only.history.delta_w) > 1.0
+    with pytest.raises(InputError, match="kappa_curvature"):
+        RIPMOptions(kappa_curvature=-1.0)
+
+
+def test_curvature_test_still_regularizes_genuine_negative_curvature():
+    """``min -½x₀² + ¼x₀⁴ + ½x₁²`` s.t. ``x₁ = 0.1`` from near the maximum at ``x₀ = 0``: the
+    reduced Hessian is negative there, the Newton step has negative curvature, δ_w > 0 is used
+    and the solve reaches a minimum ``x₀ = ±1``, not the stationary point at 0."""
+    nlp = EuclideanNLP(
+        2,
+        lambda x: -0.5 * x[0] ** 2 + 0.25 * x[0] ** 4 + 0.5 * x[1] ** 2,
+        lambda x: np.array([-x[0] + x[0] ** 3, x[1]]),
+        lambda x, s, y, z: s * np.diag([-1.0 + 3.0 * x[0] ** 2, 1.0]),
+        eq=lambda x: np.array([x[1] - 0.1]),
+        eq_jacobian=lambda x: np.array([[0.0, 1.0]]),
+        n_eq=1,
+    )
+    r = solve_ripm(nlp, np.array([1e-3, 0.0]), tol=1e-9)
+    assert r.status is RIPMStatus.CONVERGED
+    assert max(r.history.delta_w) > 0.0
+    np.testing.assert_allclose(np.abs(r.x), [1.0, 0.1], atol=1e-6)

@@ -194,6 +194,13 @@ class InertiaOptions(_Group):
     ``κ_w⁻ δ_w,last`` instead of 0 (one factorization fewer per such iteration; 0: always try
     ``δ_w = 0`` first, WB Algorithm IC). IPOPT enters this mode only for singular matrices,
     not for wrong inertia: measured worse here."""
+    kappa_curvature: float = 1e-8
+    """A factorization with more negative pivots than constraints is kept when its step ``dx``
+    has ``dxᵀ(W + δ_w I + A_Iᵀ Σ A_I) dx ≥ kappa_curvature · dxᵀdx`` (the inertia-free test of
+    Chiang & Zavala 2016; main phase, nearly feasible iterates: ``CURVATURE_TEST_INF_PR`` of
+    :mod:`mbplan.solvers.ripm.newton`): the statically regularized LDLᵀ counts negative
+    curvature off the constraints' tangent space where ``A_E`` is nearly rank deficient, and
+    ``δ_w`` would otherwise grow to ~10⁻² and the iterates crawl. 0: the inertia alone."""
     degenerate_zero_below: float = 1e-2
     """In the mode of ``degenerate_iters``, a first trial ``κ_w⁻ δ_w,last`` below this is
     ``δ_w = 0`` instead: the zero trial is skipped only while the perturbation is large, so an iterate
@@ -207,6 +214,7 @@ class InertiaOptions(_Group):
             "kappa_w_plus_first": self.kappa_w_plus_first > 1,
             "degenerate_iters": self.degenerate_iters >= 0,
             "degenerate_zero_below": self.degenerate_zero_below >= 0,
+            "kappa_curvature": self.kappa_curvature >= 0,
         }
 
 
