@@ -150,11 +150,13 @@ def test_mesh_obstacle_relative_to_the_task_file(tmp_path):
     assert ocp["clearance"].residual.objects == ("left", "right", "cube")
 
 
-@pytest.mark.parametrize(("robot", "limited"), [("iiwa", 7), ("ur5", 0)])
+@pytest.mark.parametrize(("robot", "limited"), [("iiwa", 7), ("ur5", 1)])
 def test_full_turn_position_limits_add_no_maximal_rows(robot, limited):
-    """A joint range of 2π or more (the UR5's ±2π, its elbow's ±π) limits no rotation; in
-    maximal coordinates it would be ``cos(θ - mid) ≥ -1``, a barrier that is active at θ - mid
-    = ±π with a zero gradient there (the UR5 task took 467 RIPM iterations with it, 37 without)."""
+    """A joint range wider than 2π (the UR5's ±2π) limits no rotation: no rows in maximal
+    coordinates (``cos(θ - mid) ≥ -1`` would be a barrier active at θ - mid = ±π with a zero
+    gradient there: the UR5 task took 467 RIPM iterations with it, 37 without). A range of
+    exactly 2π (its elbow's ±π) keeps the arc ``|θ - mid| ≤ π - ε`` (``tests/test_wrapping_limits.py``),
+    whose boundary has a nonzero gradient: the UR5 task still takes 37."""
     from mbplan.formulations.maximal import MaximalNLP
     from mbplan.residuals import JointPositionLimits
 
