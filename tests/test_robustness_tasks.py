@@ -14,6 +14,7 @@ from mbplan.errors import InputError
 from mbplan.formulations.joint_space import evaluate
 from mbplan.residuals import Distance
 from mbplan.tasks import robustness as tasks
+from mbplan.tasks.arm_sweep import joint_ranges
 
 
 def _item(ocp, name):
@@ -58,7 +59,7 @@ def test_arm_boxes_cycles_the_mesh_arms_and_keeps_start_and_goal_clear(index):
 def test_near_limits_puts_half_the_goal_joints_next_to_a_limit():
     for index in range(len(tasks.ARMS)):
         ocp = tasks.near_limits_case(index)
-        lo, hi = tasks._ranges(ocp.robot)
+        lo, hi = joint_ranges(ocp.robot)
         goal = _item(ocp, "goal").residual.target
         gap = tasks.LIMIT_GAP * (hi - lo)
         near = np.isclose(goal, lo + gap) | np.isclose(goal, hi - gap)

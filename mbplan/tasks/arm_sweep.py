@@ -24,23 +24,31 @@ def sweep_robot(name: str) -> mb.Robot:
     return mb.load_robot(name, lock=prismatic)
 
 
+def joint_ranges(robot: mb.Robot) -> tuple[np.ndarray, np.ndarray]:
+    """The joints' position limits clipped to ``[-π, π]``, where goals are drawn."""
+    model = robot.model
+    return np.maximum(model.lowerPositionLimit, -np.pi), np.minimum(model.upperPositionLimit, np.pi)
+
+
+def tool_frame(robot: mb.Robot) -> str:
+    """The BODY frame of the last joint (the tool's link)."""
+    frames = [f for f in robot.model.frames if f.type == pin.FrameType.BODY and f.parentJoint > 0]
+    return max(frames, key=lambda f: f.parentJoint).name
+
+
 def sweep_tasks(robot: mb.Robot, seed: int) -> dict[str, mb.OCP]:
     """A joint-goal and a frame-goal task (``KINDS``) from a sampled start ``q0`` to a sampled
     goal; the frame is the BODY frame of the last joint (its origin: the frame goal of the
     3-dof ``finger_edu`` has rank 2, ``tests/test_sweep.py``)."""
     model = robot.model
-    lo = np.maximum(model.lowerPositionLimit, -np.pi)
-    hi = np.minimum(model.upperPositionLimit, np.pi)
+    lo, hi = joint_ranges(robot)
     rng = np.random.default_rng(seed)
     q0 = 0.5 * (lo + hi) + 0.2 * (hi - lo) * rng.uniform(-0.5, 0.5, robot.nq)
     q_goal = np.clip(q0 + 0.3 * rng.uniform(-1, 1, robot.nq), lo, hi)
-    tip = max(
-        (f for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint > 0),
-        key=lambda f: f.parentJoint,
-    )
+    tip = tool_frame(robot)
     data = model.createData()
     pin.framesForwardKinematics(model, data, q_goal)
-    point = data.oMf[model.getFrameId(tip.name)].translation.copy()
+    point = data.oMf[model.getFrameId(tip)].translation.copy()
     tasks = {}
     for kind in KINDS:
         ocp = mb.OCP(robot, N=6, dt=0.1, q0=q0)
@@ -49,7 +57,7 @@ def sweep_tasks(robot: mb.Robot, seed: int) -> dict[str, mb.OCP]:
         if kind == "joint":
             ocp.add_terminal_constraint("goal", mb.residuals.JointPosition(q_goal))
         else:
-            ocp.add_terminal_constraint("goal", mb.residuals.FrameTranslation(tip.name, point))
+            ocp.add_terminal_constraint("goal", mb.residuals.FrameTranslation(tip, point))
         tasks[kind] = ocp
     return tasks
 

@@ -44,7 +44,7 @@ from mbplan.residuals import (
     JointVelocityLimits,
 )
 from mbplan.robots.robot import Robot, load_robot
-from mbplan.tasks.arm_sweep import sweep_robot
+from mbplan.tasks.arm_sweep import joint_ranges, sweep_robot, tool_frame
 from mbplan.tasks.paper import (
     add_obstacle_constraint,
     drone_docking_cases,
@@ -122,17 +122,6 @@ def graded_chain_case(index: int, seed: int = 0) -> OCP:
 # --------------------------------------------------------------------------------- arms
 
 
-def _ranges(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
-    model = robot.model
-    return np.maximum(model.lowerPositionLimit, -np.pi), np.minimum(model.upperPositionLimit, np.pi)
-
-
-def _tool(robot: Robot) -> str:
-    """The BODY frame of the last joint (the tool's link)."""
-    frames = [f for f in robot.model.frames if f.type == pin.FrameType.BODY and f.parentJoint > 0]
-    return max(frames, key=lambda f: f.parentJoint).name
-
-
 def _pose(robot: Robot, frame: str, q: np.ndarray) -> pin.SE3:
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, q)
@@ -153,7 +142,7 @@ def _arm_ocp(robot: Robot, q0: np.ndarray, scene: Scene | None = None) -> OCP:
 
 def _start_and_goal(robot: Robot, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """A start in the central half of every joint range, a goal up to 1 rad from it."""
-    lo, hi = _ranges(robot)
+    lo, hi = joint_ranges(robot)
     q0 = 0.5 * (lo + hi) + 0.25 * (hi - lo) * rng.uniform(-1, 1, robot.nq)
     return q0, np.clip(q0 + rng.uniform(-1, 1, robot.nq), lo, hi)
 
@@ -177,7 +166,7 @@ def arm_boxes_case(index: int, seed: int = 0) -> OCP:
     and the goal configurations."""
     robot = sweep_robot(MESH_ARMS[index % len(MESH_ARMS)])
     rng = _rng(seed, index, "arm_boxes")
-    tool = _tool(robot)
+    tool = tool_frame(robot)
     for _ in range(ATTEMPTS):
         q0, q_goal = _start_and_goal(robot, rng)
         a, b = _pose(robot, tool, q0).translation, _pose(robot, tool, q_goal).translation
@@ -201,7 +190,7 @@ def near_limits_case(index: int, seed: int = 0) -> OCP:
     ``LIMIT_GAP`` of the range end they are nearer."""
     robot = sweep_robot(ARMS[index % len(ARMS)])
     rng = _rng(seed, index, "near_limits")
-    lo, hi = _ranges(robot)
+    lo, hi = joint_ranges(robot)
     q0, q_goal = _start_and_goal(robot, rng)
     edge = rng.permutation(robot.nq)[: robot.nq // 2]
     gap = LIMIT_GAP * (hi - lo)
@@ -217,7 +206,7 @@ def rest_goal_case(index: int, seed: int = 0) -> OCP:
     at a drawn goal configuration, reached at rest."""
     robot = sweep_robot(ARMS[index % len(ARMS)])
     q0, q_goal = _start_and_goal(robot, _rng(seed, index, "rest_goal"))
-    ocp = _pose_goal(_arm_ocp(robot, q0), _tool(robot), q_goal)
+    ocp = _pose_goal(_arm_ocp(robot, q0), tool_frame(robot), q_goal)
     ocp.add_constraint("rest", JointVelocity(), knots="terminal")
     return ocp
 
@@ -229,10 +218,10 @@ def near_singular_case(index: int, seed: int = 0) -> OCP:
     robot = sweep_robot(ARMS[index % len(ARMS)])
     model, data = robot.model, robot.model.createData()
     rng = _rng(seed, index, "near_singular")
-    tool = _tool(robot)
+    tool = tool_frame(robot)
     fid = model.getFrameId(tool)
     q0, _ = _start_and_goal(robot, rng)
-    lo, hi = _ranges(robot)
+    lo, hi = joint_ranges(robot)
     best, sigma = None, np.inf
     for _ in range(SINGULAR_SAMPLES):
         q = np.clip(q0 + rng.uniform(-1, 1, robot.nq), lo, hi)
