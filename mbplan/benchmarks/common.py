@@ -187,4 +187,6 @@ def plan_row(ocp: Any, method: str, **plan_options: Any) -> tuple[dict[str, Any]
     }
     if getattr(ocp.robot, "loops", ()):
         row["closure_residual"] = float(check.closure_residual)
+    if np.isfinite(check.margin_kept):
+        row["margin_kept"] = float(check.margin_kept)
     return row, result, check

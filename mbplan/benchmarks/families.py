@@ -45,6 +45,13 @@ class Family:
     case: Callable[[int, int], OCP]
     warm_start: str
     about: str
+    n: int | None = None
+    """At most this many cases whatever the suite's ``n`` (a published task, repeated for its
+    timing); None: the suite's."""
+
+    def cases(self, n: int) -> int:
+        """The number of cases of a run asking for ``n`` per family."""
+        return n if self.n is None else min(n, self.n)
 
 
 @dataclass(frozen=True)
@@ -66,6 +73,10 @@ class Suite:
     """The CLI option that selects families."""
     family_noun: str = "family"
     """What the suite calls a family in messages."""
+    profile: Callable[[Sequence[str], int], dict[str, Any]] | None = None
+    """``profile(families, seed)``, run after the families: a summary entry (``"profile"``)."""
+    profile_markdown: Callable[[dict[str, Any]], list[str]] | None = None
+    """The results.md section of that entry."""
 
 
 # process-wide, result-neutral (a workspace only keeps structures a plan would build anyway):
@@ -151,7 +162,7 @@ def _jobs(
     """Every (case, method), case by case, the methods' order reversed every other case."""
     return [
         Job(i, m, solve_case, (family, m, seed, i, tol, max_iter))
-        for i in range(n)
+        for i in range(family.cases(n))
         for m in (methods if i % 2 == 0 else methods[::-1])
     ]
 
@@ -249,6 +260,8 @@ def run(
         entry = family_summary(rows, name, tol, suite.baseline, suite.extra_columns)
         entry.update(about=family.about, warm_start=family.warm_start)
         summary["families"][name] = entry
+    if suite.profile is not None:
+        summary["profile"] = suite.profile(families, seed)
     summary["command"] = command(suite, out, n, seed, methods, families, tol, max_iter, workers)
     summary["machine"] = machine_info()
     summary["wall_time_s"] = time.perf_counter() - t0

@@ -199,6 +199,8 @@ def markdown(suite: Suite, s: dict[str, Any]) -> str:
                     f"| {why}{f' ({extras})' if extras else ''} |"
                 )
         lines.append("")
+    if suite.profile_markdown is not None and "profile" in s:
+        lines += [*suite.profile_markdown(s["profile"]), ""]
     lines.append(f"Wall time of the run: {s['wall_time_s']:.0f} s.")
     return "\n".join(lines) + "\n"
 

@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from mbplan.engine.callback import CallbackFunction
+from mbplan.multibody import coal_pass
 from mbplan.solvers import RIPMOptions, RIPMResult, solve_ripm
 from mbplan.solvers.kkt import system as ls
 from mbplan.solvers.kkt.ldl.symbolic import Analysis
@@ -48,6 +50,9 @@ class _TimedProblem:
 
 
 PROFILE_KEYS = ("evaluate", "values", "retract", "assembly", "factorize", "solve")
+DISTANCE_KEYS = ("distances", "coal", "coal_pairs")
+"""Inside ``evaluate``/``values``: the coal distance callbacks, the compiled coal pass and the
+number of pairs it was asked."""
 _KKT_CLASSES = (ls.KKTSystem, ReducedKKTSystem)
 
 
@@ -86,6 +91,34 @@ def _timed_kkt(clock: dict[str, float]):
             setattr(cls, name, fn)
 
 
+@contextmanager
+def _timed_distances(clock: dict[str, float]):
+    """Timers on the coal distance callbacks (inside ``evaluate`` and ``values``: not part of
+    the profile's sum) and on the compiled coal pass, with the pairs it was asked."""
+    call, sites = CallbackFunction._call, coal_pass.site_distances
+
+    def timed_call(self: CallbackFunction, kind: str, inputs: list) -> list:
+        t0 = time.perf_counter()
+        try:
+            return call(self, kind, inputs)
+        finally:
+            clock["distances"] += time.perf_counter() - t0
+
+    def timed_sites(*args: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return sites(*args)
+        finally:
+            clock["coal"] += time.perf_counter() - t0
+            clock["coal_pairs"] += len(args[2])
+
+    try:
+        CallbackFunction._call, coal_pass.site_distances = timed_call, timed_sites
+        yield
+    finally:
+        CallbackFunction._call, coal_pass.site_distances = call, sites
+
+
 def warm_kkt(problem: Any, x0: Any, seed: int = 0) -> tuple[tuple, np.ndarray, np.ndarray]:
     """A KKT system of ``problem`` at ``x0`` as the RIPM meets it: multipliers ``y ~ N(0, 1)``,
     ``z, s`` uniform in ``[0.5, 2]``, ``δ_w = 1e-6``; its blocks (Hessian's lower triangle,
@@ -101,12 +134,13 @@ def warm_kkt(problem: Any, x0: Any, seed: int = 0) -> tuple[tuple, np.ndarray, n
 def profile_solve(problem: Any, x0: Any, options: RIPMOptions) -> dict[str, Any]:
     """Solve once (after a warm-up solve for compilation and the symbolic work, kept in a
     workspace both solves share) and return the time per iteration of each part, in ms, with
-    counts per iteration."""
+    counts per iteration; with coal distances also their time per iteration, their share of
+    the solve and the compiled pass's pairs per iteration and µs per pair."""
     workspace = Workspace()
     solve_ripm(problem, x0, options, workspace=workspace)
     clock: dict[str, float] = dict.fromkeys(PROFILE_KEYS, 0.0)
-    clock |= {"n_" + k: 0 for k in PROFILE_KEYS}
-    with _timed_kkt(clock):
+    clock |= {"n_" + k: 0 for k in PROFILE_KEYS} | dict.fromkeys(DISTANCE_KEYS, 0.0)
+    with _timed_kkt(clock), _timed_distances(clock):
         t0 = time.perf_counter()
         res: RIPMResult = solve_ripm(
             _TimedProblem(problem, clock), x0, options, workspace=workspace
@@ -127,6 +161,11 @@ def profile_solve(problem: Any, x0: Any, options: RIPMOptions) -> dict[str, Any]
     for k in PROFILE_KEYS:
         row[k + "_per_iter"] = clock["n_" + k] / it
     row["kkt_dim"] = problem.n + problem.n_eq + problem.n_ineq
+    if clock["distances"]:
+        row["distances_ms"] = 1e3 * clock["distances"] / it
+        row["distance_share"] = clock["distances"] / wall
+        row["coal_pairs_per_iter"] = clock["coal_pairs"] / it
+        row["us_per_coal_pair"] = 1e6 * clock["coal"] / max(clock["coal_pairs"], 1)
     return row
 
 

@@ -332,6 +332,17 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     robustness.add_argument("--out", default="out/bench/robustness", help="output directory")
     _add_pool_options(robustness)
     robustness.set_defaults(func=_bench_suite("mbplan.benchmarks.robustness"))
+    scenes = bench_sub.add_parser(
+        "scenes",
+        help="RIPM vs IPOPT among obstacles with coal distances (UR5 shelf, panda between boxes, "
+        "iiwa, a sweep of mesh-collision arms among random boxes), with the RIPM's time split",
+    )
+    _add_suite_options(
+        scenes, 100, ("ur5_shelf", "panda_boxes", "iiwa_distance", "mesh_sweep"), "families", 1e-6
+    )
+    scenes.add_argument("--out", default="out/bench/scenes", help="output directory")
+    _add_pool_options(scenes)
+    scenes.set_defaults(func=_bench_suite("mbplan.benchmarks.scenes"))
     lie = bench_sub.add_parser(
         "lie-ipm",
         help="MLG-IPM vs Lai-Yoshise, RIPM, IPOPT on the MLG-IPM paper's SO(7)/SL(7) problems",

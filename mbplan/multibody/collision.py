@@ -43,6 +43,7 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import InputError
+from mbplan.multibody import coal_pass
 from mbplan.multibody.convex import collision_geometry, is_polytope
 
 # witness points are accurate to about sqrt(tolerance) (gradient errors 3e-6 at 1e-10, 1.5e-7 at
@@ -209,16 +210,59 @@ def signed_distances(
     ``min(d, cap)`` is continuous, and constant (zero normal: zero derivatives) where
     ``d > cap``; a pair whose :func:`lower_bounds` exceeds ``cap`` is not sent to coal. One
     request per polytope pair; a curved or mesh pair's tight request is cross-checked
-    (``_CROSS_CHECK``), coal's defaults if both fail, :class:`InputError` if that fails too."""
+    (``_CROSS_CHECK``), coal's defaults if both fail, :class:`InputError` if that fails too.
+    The pairs sent to coal are asked in one compiled call (:mod:`mbplan.multibody.coal_pass`),
+    pair by pair from Python where it is not available."""
     S = len(pair)
     cap = np.broadcast_to(np.asarray(cap, dtype=float), (S,))
     distance, normal, point = cap.copy(), np.zeros((S, 3)), np.array(translation, dtype=float)
     near = np.flatnonzero(lower_bounds(pairs, pair, rotation, translation) <= cap)
-    for s, i in zip(near.tolist(), pair[near].tolist(), strict=True):
-        d, result = _pair_distance(pairs, i, coal.Transform3s(rotation[s], translation[s]))
-        if d < cap[s]:
-            distance[s], normal[s], point[s] = d, result.normal, result.getNearestPoint1()
+    found = _compiled_distances(pairs, pair[near], rotation[near], translation[near])
+    if found is None:
+        found = _python_distances(pairs, pair[near], rotation[near], translation[near])
+    d, n, p = found
+    keep = d < cap[near]
+    distance[near[keep]], normal[near[keep]], point[near[keep]] = d[keep], n[keep], p[keep]
     return Contacts(distance, normal, point)
+
+
+def _compiled_distances(
+    pairs: CollisionPairs, pair: np.ndarray, rotation: np.ndarray, translation: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Distances, normals and robot witness points of pairs ``pair (S,)`` in one compiled call
+    (:mod:`mbplan.multibody.coal_pass`); None where it is not available or a pair failed."""
+    if len(pair) == 0:
+        return np.empty(0), np.empty((0, 3)), np.empty((0, 3))
+    robot, obstacle = (coal_pass.addresses(s) for s in (pairs.robot_shapes, pairs.obstacle_shapes))
+    return coal_pass.site_distances(
+        (robot[0][pair], robot[1][pair]),
+        (obstacle[0][pair], obstacle[1][pair]),
+        pairs.checked[pair],
+        (rotation, translation),
+        (pairs.obstacle_rotation[pair], pairs.obstacle_translation[pair]),
+        np.array(
+            [
+                POLYTOPE_TOLERANCE,
+                GJK_TOLERANCE,
+                CHECK_TOLERANCE,
+                EPA_TOLERANCE,
+                _CROSS_CHECK,
+                _FAILED,
+            ]
+        ),
+    )
+
+
+def _python_distances(
+    pairs: CollisionPairs, pair: np.ndarray, rotation: np.ndarray, translation: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_compiled_distances` pair by pair from Python (raises where coal fails)."""
+    S = len(pair)
+    distance, normal, point = np.empty(S), np.empty((S, 3)), np.empty((S, 3))
+    for s, i in enumerate(pair.tolist()):
+        d, result = _pair_distance(pairs, i, coal.Transform3s(rotation[s], translation[s]))
+        distance[s], normal[s], point[s] = d, result.normal, result.getNearestPoint1()
+    return distance, normal, point
 
 
 def _pair_distance(

@@ -160,10 +160,11 @@ def _clear(robot: Robot, scene: Scene, qs: list[np.ndarray]) -> bool:
     return bool(np.max(evaluate(robot, scene, rows, np.array(qs), None, None)) <= 0)
 
 
-def arm_boxes_case(index: int, seed: int = 0) -> OCP:
+def arm_boxes_case(index: int, seed: int = 0, between_knots: bool = False) -> OCP:
     """Case ``index`` of ``arm_boxes`` (module docstring): the arm ``MESH_ARMS[index % 6]``;
     boxes of sides 5–20 cm centred near the tool's straight path, kept when clear of the start
-    and the goal configurations."""
+    and the goal configurations; the margin at the knots, and between them with
+    ``between_knots``."""
     robot = sweep_robot(MESH_ARMS[index % len(MESH_ARMS)])
     rng = _rng(seed, index, "arm_boxes")
     tool = tool_frame(robot)
@@ -181,7 +182,7 @@ def arm_boxes_case(index: int, seed: int = 0) -> OCP:
     else:
         raise InfeasibleRequestError(f"arm_boxes case {index}: no clear scene")
     ocp = _pose_goal(_arm_ocp(robot, q0, scene), tool, q_goal)
-    return add_obstacle_constraint(ocp, "distance", MARGIN)
+    return add_obstacle_constraint(ocp, "distance", MARGIN, between_knots)
 
 
 def near_limits_case(index: int, seed: int = 0) -> OCP:
