@@ -3,6 +3,8 @@ takes over wherever it cannot."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import coal
 import numpy as np
 import pytest
@@ -28,54 +30,57 @@ def _sites(pairs: C.CollisionPairs, S: int = 400, seed: int = 0):
     return pair, R, rng.uniform(-0.5, 0.5, (S, 3))
 
 
+def _both_paths(monkeypatch, pairs, pair, R, t, cap):
+    """signed_distances through the compiled pass and pair by pair from Python."""
+    compiled = C.signed_distances(pairs, pair, R, t, cap)
+    with monkeypatch.context() as m:
+        m.setattr(coal_pass, "library", lambda: None)
+        python = C.signed_distances(pairs, pair, R, t, cap)
+    return compiled, python
+
+
 @pytest.mark.skipif(coal_pass.library() is None, reason="no C++ compiler or coal headers")
 @pytest.mark.parametrize(
     ("robot", "geometry"), [("ur5", "convex"), ("ur5", "mesh"), ("iiwa", "convex")]
 )
-def test_compiled_distances_equal_the_python_loop_bit_for_bit(robot, geometry) -> None:
+@pytest.mark.parametrize("cap", [np.inf, 0.1])
+def test_compiled_distances_equal_the_python_loop_bit_for_bit(monkeypatch, robot, geometry, cap):
     """Hull/box, hull/curved (cross-checked), BVH mesh and primitive pairs, separated and
-    penetrating: the same distances, normals and witness points to the last bit."""
+    penetrating, uncapped and capped (pruned by the lower bound): the same distances, normals
+    and witness points to the last bit."""
     pairs = C.collision_pairs(load(robot).collision_model, OBSTACLES, geometry)
     pair, R, t = _sites(pairs, 120 if geometry == "mesh" else 400)
-    compiled = C._compiled_distances(pairs, pair, R, t)
-    python = C._python_distances(pairs, pair, R, t)
-    assert compiled is not None
-    assert (python[0] < 0).any() and (python[0] > 0).any()
-    for a, b in zip(compiled, python, strict=True):
-        np.testing.assert_array_equal(a, b)
+    caps = np.full(len(pair), cap)
+    compiled, python = _both_paths(monkeypatch, pairs, pair, R, t, caps)
+    assert (python.distance < 0).any() and (python.distance > 0).any()
+    assert (python.distance == cap).any() == np.isfinite(cap)
+    for field in ("distance", "normal", "robot_point"):
+        np.testing.assert_array_equal(getattr(compiled, field), getattr(python, field))
 
 
 @pytest.mark.skipif(coal_pass.library() is None, reason="no C++ compiler or coal headers")
-def test_a_site_whose_shape_is_not_what_python_says_falls_back() -> None:
-    """A node type that does not match the shape at the address: no answer from the pass
-    (the caller then asks coal pair by pair)."""
+def test_the_pass_sends_only_pairs_within_their_cap_and_a_wrong_shape_type_falls_back():
+    """Pairs whose lower bound exceeds the cap are not sent to coal; a node type that does not
+    match the shape at the address gives no answer (the caller then asks coal pair by pair)."""
     pairs = C.collision_pairs(load("iiwa").collision_model, OBSTACLES)
-    pair, R, t = _sites(pairs, 8)
-    robot, obstacle = (coal_pass.addresses(s) for s in (pairs.robot_shapes, pairs.obstacle_shapes))
-    args = [
-        (robot[0][pair], robot[1][pair]),
-        (obstacle[0][pair], obstacle[1][pair]),
-        pairs.checked[pair],
-        (R, t),
-        (pairs.obstacle_rotation[pair], pairs.obstacle_translation[pair]),
-        np.array([1e-10, 1e-13, 1e-11, 1e-8, 1e-8, 1e100]),
-    ]
-    assert coal_pass.site_distances(*args) is not None
-    wrong = robot[1][pair].copy()
-    wrong[3] = int(coal.NODE_TYPE.GEOM_OCTREE)
-    args[0] = (robot[0][pair], wrong)
-    assert coal_pass.site_distances(*args) is None
+    pair, R, t = _sites(pairs, 300)
+    shapes, tolerances = C._pass_shapes(pairs), C._tolerances()
+    cap = np.full(len(pair), 0.05)
+    found = coal_pass.site_distances(shapes, pair, R, t, cap, tolerances)
+    bound = C.lower_bounds(pairs, pair, R, t)
+    assert found is not None and found[3] == np.sum(bound <= cap) < len(pair)
+    wrong = shapes.robot[1].copy()
+    wrong[pair[0]] = int(coal.NODE_TYPE.GEOM_OCTREE)
+    bad = dataclasses.replace(shapes, robot=(shapes.robot[0], wrong))
+    assert coal_pass.site_distances(bad, pair, R, t, np.full(len(pair), np.inf), tolerances) is None
 
 
 def test_without_the_library_distances_come_pair_by_pair_and_agree(monkeypatch) -> None:
     pairs = C.collision_pairs(load("ur5").collision_model, OBSTACLES)
     pair, R, t = _sites(pairs, 60, seed=3)
-    cap = np.full(len(pair), 0.3)
-    expected = C.signed_distances(pairs, pair, R, t, cap)
-    monkeypatch.setattr(coal_pass, "library", lambda: None)
-    python = C.signed_distances(pairs, pair, R, t, cap)
+    compiled, python = _both_paths(monkeypatch, pairs, pair, R, t, np.full(len(pair), 0.3))
     for field in ("distance", "normal", "robot_point"):
-        np.testing.assert_array_equal(getattr(expected, field), getattr(python, field))
+        np.testing.assert_array_equal(getattr(compiled, field), getattr(python, field))
 
 
 def test_a_missing_compiler_or_the_switch_leaves_the_python_loop(monkeypatch, capsys) -> None:

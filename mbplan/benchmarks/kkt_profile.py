@@ -106,11 +106,10 @@ def _timed_distances(clock: dict[str, float]):
 
     def timed_sites(*args: Any) -> Any:
         t0 = time.perf_counter()
-        try:
-            return sites(*args)
-        finally:
-            clock["coal"] += time.perf_counter() - t0
-            clock["coal_pairs"] += len(args[2])
+        found = sites(*args)
+        clock["coal"] += time.perf_counter() - t0
+        clock["coal_pairs"] += 0 if found is None else found[3]
+        return found
 
     try:
         CallbackFunction._call, coal_pass.site_distances = timed_call, timed_sites

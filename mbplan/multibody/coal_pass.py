@@ -25,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 from collections.abc import Sequence
+from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
 
@@ -109,7 +110,14 @@ def library() -> ctypes.CDLL | None:
     int64 = np.ctypeslib.ndpointer(np.int64, flags="C_CONTIGUOUS")
     int32 = np.ctypeslib.ndpointer(np.int32, flags="C_CONTIGUOUS")
     uint8 = np.ctypeslib.ndpointer(np.uint8, flags="C_CONTIGUOUS")
-    call.argtypes = [ctypes.c_longlong, int64, int64, int32, uint8, *[_DOUBLE] * 8]
+    call.argtypes = [
+        ctypes.c_longlong,
+        *[int64] * 3,
+        int32,
+        uint8,
+        *[_DOUBLE] * 11,
+        ctypes.POINTER(ctypes.c_longlong),
+    ]
     call.restype = ctypes.c_longlong
     return lib
 
@@ -125,34 +133,66 @@ def addresses(shapes: Sequence[coal.CollisionGeometry]) -> tuple[np.ndarray, np.
     return address, kind
 
 
+@dataclass(frozen=True)
+class PairShapes:
+    """What the pass reads of ``P`` (robot geometry, obstacle) pairs: both shapes' addresses
+    and node types (:func:`addresses`), the cross-check flag ``checked (P,)``, the local AABBs
+    ``robot_box``, ``obstacle_box`` ``(P, 6)`` (center, half extents) and the obstacles' world
+    poses (``obstacle_rotation (P, 3, 3)``, ``obstacle_translation (P, 3)``)."""
+
+    robot: tuple[np.ndarray, np.ndarray]
+    obstacle: tuple[np.ndarray, np.ndarray]
+    checked: np.ndarray
+    robot_box: np.ndarray
+    obstacle_box: np.ndarray
+    obstacle_rotation: np.ndarray
+    obstacle_translation: np.ndarray
+
+
 def site_distances(
-    robot: tuple[np.ndarray, np.ndarray],
-    obstacle: tuple[np.ndarray, np.ndarray],
-    checked: np.ndarray,
-    robot_pose: tuple[np.ndarray, np.ndarray],
-    obstacle_pose: tuple[np.ndarray, np.ndarray],
+    shapes: PairShapes,
+    pair: np.ndarray,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    cap: np.ndarray,
     tolerances: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Coal's distance ``(S,)``, normal ``(S, 3)`` and robot witness point ``(S, 3)`` of each
-    site: ``robot``/``obstacle`` are the sites' ``(address, node type)`` (:func:`addresses`),
-    ``checked (S,)`` their cross-check flag, the poses ``(rotation (S, 3, 3), translation
-    (S, 3))`` in the world, ``tolerances`` as ``coal_pass.cpp`` reads them. None where the
-    library is missing or a site failed in it."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
+    """Coal's distance ``(S,)`` capped at ``cap (S,)``, normal ``(S, 3)`` and robot witness
+    point ``(S, 3)`` of each site: pair ``pair (S,)`` with the robot geometry at ``rotation
+    (S, 3, 3)``, ``translation (S, 3)``; as
+    :func:`~mbplan.multibody.collision.signed_distances` defines them (a site whose lower bound
+    exceeds its cap is not sent to coal), with the number of sites sent to coal.
+    ``tolerances`` as ``coal_pass.cpp`` reads them. None where the library is missing or a site
+    failed in it."""
     lib = library()
     if lib is None:
         return None
-    S = len(checked)
+    S = len(pair)
     distance, normal, point = np.empty(S), np.empty((S, 3)), np.empty((S, 3))
+    sent = ctypes.c_longlong(0)
     failed = lib.mbplan_coal_distances(
         S,
-        np.ascontiguousarray(robot[0], dtype=np.int64),
-        np.ascontiguousarray(obstacle[0], dtype=np.int64),
-        np.ascontiguousarray(np.stack([robot[1], obstacle[1]], axis=1), dtype=np.int32),
-        np.ascontiguousarray(checked, dtype=np.uint8),
-        *(np.ascontiguousarray(a, dtype=np.float64) for a in (*robot_pose, *obstacle_pose)),
-        np.ascontiguousarray(tolerances, dtype=np.float64),
+        np.ascontiguousarray(pair, dtype=np.int64),
+        shapes.robot[0],
+        shapes.obstacle[0],
+        np.ascontiguousarray(np.stack([shapes.robot[1], shapes.obstacle[1]], axis=1)),
+        np.ascontiguousarray(shapes.checked, dtype=np.uint8),
+        *(
+            np.ascontiguousarray(a, dtype=np.float64)
+            for a in (
+                shapes.robot_box,
+                shapes.obstacle_box,
+                shapes.obstacle_rotation,
+                shapes.obstacle_translation,
+                rotation,
+                translation,
+                cap,
+                tolerances,
+            )
+        ),
         distance,
         normal,
         point,
+        ctypes.byref(sent),
     )
-    return None if failed >= 0 else (distance, normal, point)
+    return None if failed >= 0 else (distance, normal, point, sent.value)

@@ -215,54 +215,39 @@ def signed_distances(
     pair by pair from Python where it is not available."""
     S = len(pair)
     cap = np.broadcast_to(np.asarray(cap, dtype=float), (S,))
+    found = coal_pass.site_distances(
+        _pass_shapes(pairs), pair, rotation, translation, cap, _tolerances()
+    )
+    if found is not None:
+        return Contacts(*found[:3])
     distance, normal, point = cap.copy(), np.zeros((S, 3)), np.array(translation, dtype=float)
-    near = np.flatnonzero(lower_bounds(pairs, pair, rotation, translation) <= cap)
-    found = _compiled_distances(pairs, pair[near], rotation[near], translation[near])
-    if found is None:
-        found = _python_distances(pairs, pair[near], rotation[near], translation[near])
-    d, n, p = found
-    keep = d < cap[near]
-    distance[near[keep]], normal[near[keep]], point[near[keep]] = d[keep], n[keep], p[keep]
+    for s in np.flatnonzero(lower_bounds(pairs, pair, rotation, translation) <= cap).tolist():
+        i, placement = int(pair[s]), coal.Transform3s(rotation[s], translation[s])
+        d, result = _pair_distance(pairs, i, placement)
+        if d < cap[s]:
+            distance[s], normal[s], point[s] = d, result.normal, result.getNearestPoint1()
     return Contacts(distance, normal, point)
 
 
-def _compiled_distances(
-    pairs: CollisionPairs, pair: np.ndarray, rotation: np.ndarray, translation: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Distances, normals and robot witness points of pairs ``pair (S,)`` in one compiled call
-    (:mod:`mbplan.multibody.coal_pass`); None where it is not available or a pair failed."""
-    if len(pair) == 0:
-        return np.empty(0), np.empty((0, 3)), np.empty((0, 3))
-    robot, obstacle = (coal_pass.addresses(s) for s in (pairs.robot_shapes, pairs.obstacle_shapes))
-    return coal_pass.site_distances(
-        (robot[0][pair], robot[1][pair]),
-        (obstacle[0][pair], obstacle[1][pair]),
-        pairs.checked[pair],
-        (rotation, translation),
-        (pairs.obstacle_rotation[pair], pairs.obstacle_translation[pair]),
-        np.array(
-            [
-                POLYTOPE_TOLERANCE,
-                GJK_TOLERANCE,
-                CHECK_TOLERANCE,
-                EPA_TOLERANCE,
-                _CROSS_CHECK,
-                _FAILED,
-            ]
-        ),
+def _tolerances() -> np.ndarray:
+    """The request policy as :mod:`mbplan.multibody.coal_pass` reads it."""
+    return np.array(
+        [POLYTOPE_TOLERANCE, GJK_TOLERANCE, CHECK_TOLERANCE, EPA_TOLERANCE, _CROSS_CHECK, _FAILED]
     )
 
 
-def _python_distances(
-    pairs: CollisionPairs, pair: np.ndarray, rotation: np.ndarray, translation: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_compiled_distances` pair by pair from Python (raises where coal fails)."""
-    S = len(pair)
-    distance, normal, point = np.empty(S), np.empty((S, 3)), np.empty((S, 3))
-    for s, i in enumerate(pair.tolist()):
-        d, result = _pair_distance(pairs, i, coal.Transform3s(rotation[s], translation[s]))
-        distance[s], normal[s], point[s] = d, result.normal, result.getNearestPoint1()
-    return distance, normal, point
+def _pass_shapes(pairs: CollisionPairs) -> coal_pass.PairShapes:
+    """The pairs as the compiled pass reads them (addresses taken now: they are the live
+    objects' own, never stored)."""
+    return coal_pass.PairShapes(
+        robot=coal_pass.addresses(pairs.robot_shapes),
+        obstacle=coal_pass.addresses(pairs.obstacle_shapes),
+        checked=pairs.checked,
+        robot_box=np.concatenate([pairs.robot_center, pairs.robot_half], axis=1),
+        obstacle_box=np.concatenate([pairs.obstacle_center, pairs.obstacle_half], axis=1),
+        obstacle_rotation=pairs.obstacle_rotation,
+        obstacle_translation=pairs.obstacle_translation,
+    )
 
 
 def _pair_distance(
