@@ -18,7 +18,7 @@ from test_generalized import small_cases
 import mbplan as mb
 from mbplan.engine import check_derivatives
 from mbplan.formulations.generalized import GeneralizedNLP
-from mbplan.formulations.interval_rows import FRACTIONS
+from mbplan.formulations.interval_rows import SecantRows, secant
 from mbplan.formulations.joint_space import evaluate
 from mbplan.formulations.maximal import MaximalNLP
 from mbplan.multibody import body_poses, maximal_model
@@ -41,7 +41,7 @@ from mbplan.transcription.distance import (
     interval_distance_function,
     pair_bodies,
 )
-from mbplan.transcription.intervals import interval_pose
+from mbplan.transcription.intervals import SECANT_ENDS, SECANT_HALF_WIDTH, interval_pose
 from mbplan.verification.report import MARGIN_KEPT
 
 PANDA_TASK = Path(__file__).resolve().parents[1] / "examples" / "tasks" / "panda_boxes.toml"
@@ -68,21 +68,29 @@ def _nlp(constraint: str) -> tuple[GeneralizedNLP, np.ndarray]:
     return nlp, z + 0.1 * np.random.default_rng(6).standard_normal(nlp.n)
 
 
-def _intervals(nlp: GeneralizedNLP):
-    (block,) = [b for b in nlp.own if b.K == nlp.N * len(FRACTIONS)]
+def _intervals(nlp: GeneralizedNLP) -> SecantRows:
+    (block,) = [b for b in nlp.own if isinstance(b, SecantRows)]
     return block
 
 
 def test_generalized_rows_sit_on_the_interval_motion_with_exact_derivatives() -> None:
-    """Eq. (62) between knots: rows at ``q_k + sΔt v_k + ½s²Δt(v_{k+1} - v_k)``, Jacobian and
-    Hessian against central differences of the whole NLP."""
+    """Eq. (62) between knots: the secant through the rows at ``q_k + sΔt v_k + ½s²Δt(v_{k+1} -
+    v_k)``, ``s = ½ ∓ δ``, at ``σ = 0, 1``; Jacobian and Hessian against central differences of
+    the whole NLP."""
     nlp, z = _nlp("com")
     block = _intervals(nlp)
     q, v, _ = nlp.unpack(z)
-    k, s = 2, FRACTIONS[-1]
-    expected = q[k] + s * nlp.dt * v[k] + 0.5 * s * s * nlp.dt * (v[k + 1] - v[k])
-    i = k * len(FRACTIONS) + len(FRACTIONS) - 1
-    np.testing.assert_allclose(block.configurations(q, v)[i], expected, rtol=1e-14)
+    samples, weights = secant()
+    Q = block.sample_configurations(q, v)
+    for j, s in enumerate(samples):
+        expected = q[2] + s * nlp.dt * v[2] + 0.5 * s * s * nlp.dt * (v[3] - v[2])
+        np.testing.assert_allclose(Q[j, 2], expected, rtol=1e-14)
+    r = np.stack([block.form.values(Q[j]) for j in range(2)])  # (sample, interval, P)
+    line = r[0] + (SECANT_ENDS[:, None, None] - samples[0]) * (r[1] - r[0]) / (
+        samples[1] - samples[0]
+    )
+    np.testing.assert_allclose(block.values(q, v), np.swapaxes(line, 0, 1).ravel(), atol=1e-14)
+    assert np.allclose(weights.sum(axis=1), 1.0)
     lam = np.random.default_rng(4).standard_normal(nlp.m)
     check_generalized_derivatives(nlp, z, lam)
 
@@ -103,23 +111,30 @@ def test_generalized_distance_rows_have_the_witness_point_derivatives() -> None:
 
     ocp = nlp.ocp
     q, v, _ = nlp.unpack(z)
-    Q = block.configurations(q, v)
-    _, _, kin, contacts, _ = distance_values(ocp.robot, ocp.scene, block.form.residual, Q, 1)
+    _, weights = secant()
     joints = block.form.pairs.joint
-    R, t = kin.rotation[:, joints], kin.translation[:, joints]
-    local = np.einsum("kpji,kpj->kpi", R, contacts.robot_point - t)  # witness points, fixed
-    mu = np.random.default_rng(7).uniform(0.5, 2.0, (block.K, block.P))
+    witness = []  # per sample: the witness points (link frames) and normals, fixed
+    for Q in block.sample_configurations(q, v):
+        _, _, kin, contacts, _ = distance_values(ocp.robot, ocp.scene, block.form.residual, Q, 1)
+        R, t = kin.rotation[:, joints], kin.translation[:, joints]
+        witness.append((np.einsum("kpji,kpj->kpi", R, contacts.robot_point - t), contacts.normal))
+    lam_rows = np.random.default_rng(7).uniform(0.5, 2.0, (block.size // (2 * block.P), 2, block.P))
     lam = np.zeros(nlp.m)
-    lam[block.row0 : block.row0 + block.size] = mu.ravel()
+    lam[block.row0 : block.row0 + block.size] = lam_rows.ravel()
     data = ocp.robot.model.createData()
 
     def model(x: np.ndarray) -> float:
-        """``Σ μ nᵀ p₁`` with the witness points and normals fixed (``c = margin - d``)."""
-        chain = chain_kinematics(ocp.robot.model, data, block.configurations(*nlp.unpack(x)[:2]))
-        points = chain.translation[:, joints] + np.einsum(
-            "kpij,kpj->kpi", chain.rotation[:, joints], local
-        )
-        return float(np.sum(mu[..., None] * contacts.normal * points))
+        """``Σ λ_σ Σ_j w_σj nⱼᵀ p₁ⱼ`` with the witness points and normals fixed."""
+        total = 0.0
+        for j, Q in enumerate(block.sample_configurations(*nlp.unpack(x)[:2])):
+            chain = chain_kinematics(ocp.robot.model, data, Q)
+            local, normal = witness[j]
+            points = chain.translation[:, joints] + np.einsum(
+                "kpij,kpj->kpi", chain.rotation[:, joints], local
+            )
+            mu = np.einsum("ksp,s->kp", lam_rows, weights[:, j])
+            total += float(np.sum(mu[..., None] * normal * points))
+        return total
 
     U = nlp.lagrangian_hessian(z, 0.0, lam).toarray()
     H = U + U.T - np.diag(np.diag(U))
@@ -155,9 +170,11 @@ def _pose(xyz, rotvec) -> np.ndarray:
 
 
 def test_maximal_distance_between_knots_has_witness_point_derivatives_on_the_retraction() -> None:
-    """Coal distances at ``(R exp(s log F), p + sΔt v)``: the value is coal's at that pose, the
-    Jacobian matches central differences along the retraction of ``(R, p, F, v)``, the Hessian
-    is that of the fixed-witness-point model ``nᵀ(p_s + R_s a)`` (four-point differences)."""
+    """Coal distances at ``(R exp(t log F), p + tΔt v)`` for ``t = s ∓ δ`` as two secant rows
+    ``margin - ℓ(σ)``, ``σ = 0, 1``, ``ℓ`` the line through the two distances: the values are
+    coal's, the Jacobian matches central differences along the retraction of ``(R, p, F, v)``
+    and the Hessian is that of the fixed-witness-point model ``Σ_j w_σj nⱼᵀ(p_t + R_t aⱼ)``
+    (four-point differences)."""
     desc, mm, R, p, F, v, dt = _maximal_interval()
     obstacles = [
         (coal.Sphere(0.1), _pose((0.35, 0.25, 0.6), (0.0, 0.0, 0.0))),
@@ -168,29 +185,53 @@ def test_maximal_distance_between_knots_has_witness_point_derivatives_on_the_ret
     f = interval_distance_function(mm, pairs)
     sites = {"R": R[b], "p": p[b], "F": F[b], "v": v[b]}
     params = {"pair": np.arange(P), "margin": 0.02, "s": s, "h": s * dt}
-    Rs, ps = interval_pose(R[b], p[b], F[b], v[b], np.full(P, s), np.full(P, s * dt))
-    at_pose = distance_constraint_function(mm, pairs).value(
-        {"R": Rs, "p": ps}, {"pair": np.arange(P), "margin": 0.02}
+    at_knot = distance_constraint_function(mm, pairs)
+    samples = np.array([s - SECANT_HALF_WIDTH, s + SECANT_HALF_WIDTH])
+    poses = [
+        interval_pose(R[b], p[b], F[b], v[b], np.full(P, t), np.full(P, t * dt)) for t in samples
+    ]
+    d = np.stack(
+        [
+            0.02 - at_knot.value({"R": Rt, "p": pt}, {"pair": np.arange(P), "margin": 0.02})[:, 0]
+            for Rt, pt in poses
+        ],
+        axis=1,
     )
-    np.testing.assert_allclose(f.value(sites, params), at_pose, atol=1e-12)
-    lam = np.random.default_rng(1).uniform(0.5, 2.0, (P, 1))
+    slope = (d[:, 1] - d[:, 0]) / (samples[1] - samples[0])
+    line = d[:, :1] + (np.array([0.0, 1.0])[None] - samples[0]) * slope[:, None]
+    np.testing.assert_allclose(f.value(sites, params), 0.02 - line, atol=1e-12)
+    assert np.abs(slope).max() > 1e-2  # the rows differ from the distances at the samples
+    lam = np.random.default_rng(1).uniform(0.5, 2.0, (P, 2))
     H = f.dense_hessian(f.hessian(sites, params, lam)[2])
-    geometry_R = Rs @ pairs.placement[:, :3, :3]
-    geometry_t = ps + np.einsum("pij,pj->pi", Rs, pairs.placement[:, :3, 3] - mm.com_in_joint[b])
-    contacts = signed_distances(pairs, np.arange(P), geometry_R, geometry_t)
-    a = np.einsum("pji,pj->pi", Rs, contacts.robot_point - ps)
+    witness = []
+    for Rt, pt in poses:
+        geometry_R = Rt @ pairs.placement[:, :3, :3]
+        geometry_t = pt + np.einsum(
+            "pij,pj->pi", Rt, pairs.placement[:, :3, 3] - mm.com_in_joint[b]
+        )
+        contacts = signed_distances(pairs, np.arange(P), geometry_R, geometry_t)
+        witness.append((np.einsum("pji,pj->pi", Rt, contacts.robot_point - pt), contacts.normal))
+    weights = (np.array([[samples[1], -samples[0]], [samples[1] - 1, 1 - samples[0]]])) / (
+        samples[1] - samples[0]
+    )  # [σ, sample]
     h, eye = 1e-4, np.eye(f.n)
     for i in range(P):
         one = {n: x[i] for n, x in sites.items()}
         check = check_derivatives(f, one, params | {"pair": i}, step_jacobian=1e-5)
-        assert check.jacobian_error < 2e-6, (pairs.names[i], check)
+        # the distances' 2e-6 (curved shapes, witness points to ~sqrt(GJK tolerance)) times the
+        # secant's weights (|w| ≤ 2.5, Σ|w| = 4 per row)
+        assert check.jacobian_error < 8e-6, (pairs.names[i], check)
 
         def model(xi: np.ndarray, i: int = i, one: dict = one) -> float:
             x = f.retract({n: y[None] for n, y in one.items()}, xi[None])
-            Rx, px = interval_pose(
-                x["R"], x["p"], x["F"], x["v"], np.array([s]), np.array([s * dt])
-            )
-            return float(lam[i, 0] * contacts.normal[i] @ (px[0] + Rx[0] @ a[i]))
+            total = 0.0
+            for j, t in enumerate(samples):
+                Rx, px = interval_pose(
+                    x["R"], x["p"], x["F"], x["v"], np.array([t]), np.array([t * dt])
+                )
+                a, n = witness[j][0][i], witness[j][1][i]
+                total += (lam[i] @ weights[:, j]) * (n @ (px[0] + Rx[0] @ a))
+            return float(total)
 
         fd = np.array(
             [
@@ -211,15 +252,18 @@ def test_maximal_distance_between_knots_has_witness_point_derivatives_on_the_ret
 
 
 def test_maximal_com_between_knots_has_exact_derivatives() -> None:
-    """Eq. (62) at ``p + sΔt v``: value, Jacobian and Hessian along the retraction."""
+    """Eq. (62) at ``p + tΔt v``, ``t = ½ ∓ δ``, as the secant's two ends: value, Jacobian and
+    Hessian along the retraction."""
     _, _, _, p, _, v, dt = _maximal_interval()
     f = interval_cylinder_clearance_function(False)
     c = np.array([0.4, 0.2, 0.13])
+    samples = 0.5 + SECANT_HALF_WIDTH * np.array([-1.0, 1.0])
     for b in range(len(p)):
-        params = {"c": c, "h": 0.5 * dt}
-        point = p[b] + 0.5 * dt * v[b]
-        r = f.value({"p": p[b], "v": v[b]}, params)[0, 0]
-        assert r == pytest.approx(c[2] ** 2 - np.sum((point[:2] - c[:2]) ** 2), abs=1e-14)
+        params = {"c": c, "s": 0.5, "dt": dt}
+        at = [c[2] ** 2 - np.sum((p[b] + t * dt * v[b] - c)[:2] ** 2) for t in samples]
+        slope = (at[1] - at[0]) / (samples[1] - samples[0])
+        expected = at[0] + (SECANT_ENDS - samples[0]) * slope
+        np.testing.assert_allclose(f.value({"p": p[b], "v": v[b]}, params)[0], expected, atol=1e-14)
         assert check_derivatives(f, {"p": p[b], "v": v[b]}, params).ok(1e-6)
 
 
@@ -270,7 +314,7 @@ def test_knot_only_obstacles_add_no_rows_between_knots() -> None:
     knots, between = (small_cases(1, "distance", 0.05, b)[0] for b in (False, True))
     nlps = [GeneralizedNLP(ocp) for ocp in (knots, between)]
     assert [b.K for b in nlps[0].own] == [knots.N]
-    assert [b.K for b in nlps[1].own] == [knots.N, knots.N * len(FRACTIONS)]
+    assert [b.K for b in nlps[1].own] == [knots.N, knots.N * len(SECANT_ENDS)]
     assert nlps[1].m == nlps[0].m + nlps[1].own[1].size
     z = nlps[0].initial_guess(initial_path(knots, "linear"))
     np.testing.assert_array_equal(nlps[1].constraints(z)[: nlps[0].m], nlps[0].constraints(z))

@@ -24,9 +24,9 @@ def _clearance(ocp):
 
 
 def test_the_scenes_are_the_example_tasks_the_iiwa_and_the_sweep_between_knots():
-    shelf, panda = tasks.ur5_shelf_case(3), tasks.panda_boxes_case(0)
+    shelf, panda = scenes.ur5_shelf_case(3), scenes.panda_boxes_case(0)
     assert (shelf.robot.name, len(shelf.scene), panda.robot.name) == ("ur5", 3, "panda")
-    assert shelf.to_dict() == tasks.ur5_shelf_case(0, seed=7).to_dict()  # the published task
+    assert shelf.to_dict() == scenes.ur5_shelf_case(0, seed=7).to_dict()  # the published task
     sweep, knots_only = tasks.mesh_sweep_case(4), robustness.arm_boxes_case(4)
     assert _clearance(sweep).between_knots and not _clearance(knots_only).between_knots
     assert sweep.scene.names == knots_only.scene.names
@@ -35,9 +35,9 @@ def test_the_scenes_are_the_example_tasks_the_iiwa_and_the_sweep_between_knots()
 
 
 def test_a_missing_example_task_is_named(monkeypatch, tmp_path):
-    monkeypatch.setattr(tasks, "EXAMPLE_TASKS", tmp_path)
+    monkeypatch.setattr(scenes, "EXAMPLE_TASKS", tmp_path)
     with pytest.raises(InputError, match=r"ur5_shelf\.toml: no such example task"):
-        tasks.ur5_shelf_case(0)
+        scenes.ur5_shelf_case(0)
 
 
 def test_families_with_a_fixed_count_run_at_most_that_many_cases():
@@ -60,7 +60,7 @@ def test_scenes_cli_parses_and_names_bad_input_before_any_solve(tmp_path, capsys
 def test_the_profile_splits_an_iteration_and_counts_the_coal_pairs():
     """The panda's profile: the distances take a share of every iteration, the compiled pass
     was asked for pairs, and the section renders every family's row."""
-    problem, x0 = maximal_ripm_problem(tasks.panda_boxes_case(0), "via")
+    problem, x0 = maximal_ripm_problem(scenes.panda_boxes_case(0), "via")
     row = profile_solve(problem, x0, RIPMOptions(tol=1e-6, max_iter=500, **LGVI_RIPM_OPTIONS))
     assert row["status"] == "CONVERGED"
     assert 0.0 < row["distances_ms"] < row["per_iter_ms"]

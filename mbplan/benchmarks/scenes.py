@@ -11,22 +11,48 @@ Regenerate: ``mbplan bench scenes --n 100 --seed 0 --out benchmarks/results/scen
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from mbplan.benchmarks.families import Family, Suite
 from mbplan.benchmarks.kkt_profile import profile_solve
 from mbplan.benchmarks.speed_report import fmt
+from mbplan.errors import InputError
+from mbplan.ocp.problem import OCP
 from mbplan.planning.methods import LGVI_RIPM_OPTIONS
 from mbplan.solvers import RIPMOptions
 from mbplan.tasks import scenes
 from mbplan.tasks.speed import maximal_ripm_problem
+
+EXAMPLE_TASKS = Path(__file__).resolve().parents[2] / "examples" / "tasks"
+
+
+def example_task(name: str) -> OCP:
+    """The OCP of ``examples/tasks/NAME.toml``."""
+    from mbplan.taskfile import load_task
+
+    path = EXAMPLE_TASKS / f"{name}.toml"
+    if not path.is_file():
+        raise InputError(f"{path}: no such example task (the scenes read a source checkout)")
+    return load_task(path).ocp
+
+
+def ur5_shelf_case(index: int, seed: int = 0) -> OCP:
+    """``examples/tasks/ur5_shelf.toml`` (every case: the published task)."""
+    return example_task("ur5_shelf")
+
+
+def panda_boxes_case(index: int, seed: int = 0) -> OCP:
+    """``examples/tasks/panda_boxes.toml`` (every case: the published task)."""
+    return example_task("panda_boxes")
+
 
 FAMILIES = {
     f.name: f
     for f in (
         Family(
             "ur5_shelf",
-            scenes.ur5_shelf_case,
+            ur5_shelf_case,
             "via",
             "`examples/tasks/ur5_shelf.toml`: the UR5 (collision meshes as convex hulls) moves "
             "its tool over a shelf of three boxes, 2 cm margin kept between the knots (N = 40); "
@@ -35,7 +61,7 @@ FAMILIES = {
         ),
         Family(
             "panda_boxes",
-            scenes.panda_boxes_case,
+            panda_boxes_case,
             "via",
             "`examples/tasks/panda_boxes.toml`: the panda (meshes as hulls, fingers free) puts "
             "its hand down between two boxes, 2 cm margin between the knots (N = 30); every "

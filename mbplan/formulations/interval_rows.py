@@ -8,12 +8,17 @@ configuration at the fraction ``s ∈ [0, 1]`` of the interval is::
 
     q_k(s) = q_k + sΔt v_k + ½s²Δt (v_{k+1} - v_k),
 
-the verifier's replay to second order. Obstacle rows between knots are evaluated there at
-:data:`FRACTIONS`: the midpoint and the motion's end ``q_k + ½Δt (v_k + v_{k+1})``, which the knot
-``q_{k+1}`` does not pin (it lies ``½Δt²‖a_k‖`` away). Each row reads knots ``k`` and ``k+1``
-only, and the configurations are linear in the variables, so the derivatives are those of the
-residual at ``q_k(s)`` times the coefficients: ``∂r/∂x_t = c_t ∂r/∂q``,
-``∂²(μᵀr)/∂x_t∂x_u = c_t c_u ∇²_q(μᵀr)``.
+the verifier's replay to second order. Obstacle rows between knots are the secant of the row
+through two configurations of the interval, ``s = ½ ∓ δ``
+(:data:`~mbplan.transcription.intervals.SECANT_HALF_WIDTH`), evaluated
+at both ends ``σ = 0, 1``: ``ℓ_σ = Σ_j w_σj r(q_k(s_j))``. Where the row is concave along the
+interval (a distance to a convex obstacle along a straight motion), its secant lies above it
+outside ``[s₁, s₂]``, so ``ℓ_0, ℓ_1 ≤ 0`` keep it ``≤ 0`` there, up to the motion's end
+``q_k + ½Δt (v_k + v_{k+1})``, which the knot ``q_{k+1}`` does not pin (it lies ``½Δt²‖a_k‖``
+away). Each row reads knots ``k`` and ``k+1`` only, and the configurations are linear in the
+variables, so the derivatives are those of the residual at ``q_k(s)`` times the coefficients:
+``∂r/∂x_t = c_t ∂r/∂q``, ``∂²(μᵀr)/∂x_t∂x_u = c_t c_u ∇²_q(μᵀr)``, and the secant's are their
+weighted sums.
 """
 
 from __future__ import annotations
@@ -23,9 +28,14 @@ from typing import Any
 import numpy as np
 
 from mbplan.ocp.problem import Item
+from mbplan.transcription.intervals import secant_weights
 
-FRACTIONS = (0.5, 1.0)
-"""The fractions ``s`` of every interval at which obstacle rows are added."""
+
+def secant() -> tuple[np.ndarray, np.ndarray]:
+    """The samples ``s_j (2,)`` of every interval's secant and its weights ``w (2, 2)``
+    ``[σ, sample]`` (:func:`~mbplan.transcription.intervals.secant_weights` centred at ``½``)."""
+    lo, hi, weights = secant_weights(np.array([0.5]))
+    return np.array([lo[0], hi[0]]), weights[0]
 
 
 def _gather(arrays: list[np.ndarray], masks: list[np.ndarray]) -> np.ndarray:
@@ -86,14 +96,68 @@ def knot_rows(nlp: Any, item: Item, form: Any, row0: int) -> ConfigurationRows:
     return ConfigurationRows(nlp, item, form, [("q", item.knots, np.ones(len(item.knots)))], row0)
 
 
-def interval_rows(nlp: Any, item: Item, form: Any, row0: int) -> ConfigurationRows:
-    """``form`` at ``q_k(s)`` (module docstring) of the intervals ``k = knot - 1`` ending at the
-    item's knots, for every fraction ``s`` of :data:`FRACTIONS` (interval-major)."""
-    k, s = (a.ravel() for a in np.meshgrid(item.knots - 1, FRACTIONS, indexing="ij"))
-    dt = nlp.dt
-    terms = [
+def _interval_terms(k: np.ndarray, s: np.ndarray, dt: float) -> list:
+    """The terms of ``q_k(s)`` (module docstring) of intervals ``k`` at fractions ``s``."""
+    return [
         ("q", k, np.ones(k.size)),
         ("v", k, (s - 0.5 * s * s) * dt),
         ("v", k + 1, 0.5 * s * s * dt),
     ]
-    return ConfigurationRows(nlp, item, form, terms, row0)
+
+
+class SecantRows(ConfigurationRows):
+    """``form``'s secant rows ``ℓ_σ`` (module docstring) of the intervals ``k = knot - 1`` ending
+    at the item's knots, rows ``row0 + (2i + σ)·P + p`` for interval ``i``. The sparsity is that
+    of :class:`ConfigurationRows` over the same knots; the Hessian of an interval sits on its
+    ``σ = 0`` site."""
+
+    def __init__(self, nlp: Any, item: Item, form: Any, row0: int):
+        k = np.repeat(np.asarray(item.knots) - 1, 2)
+        super().__init__(nlp, item, form, _interval_terms(k, np.zeros(k.size), nlp.dt), row0)
+        self.samples, self.weights = secant()
+        self._at = [
+            ConfigurationRows(
+                nlp, item, form, _interval_terms(k[::2], np.full(k.size // 2, t), nlp.dt), row0
+            )
+            for t in self.samples
+        ]
+
+    def sample_configurations(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """``q_k(s_j)`` ``(2, K, nv)`` of the two samples ``s_j`` of every interval."""
+        return np.stack([at.configurations(q, v) for at in self._at])
+
+    def values(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        r = np.stack([at.form.values(at.configurations(q, v)) for at in self._at])  # (2, K, P)
+        return np.einsum("sj,jkp->ksp", self.weights, r).ravel()
+
+    def jacobian_values(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        G = [at.form.jacobian(at.configurations(q, v)) for at in self._at]  # (K, P, nv) each
+        pieces = []
+        for t in range(len(self.terms)):
+            c = [at.terms[t][2] for at in self._at]
+            Gt = sum(
+                self.weights[None, :, j, None, None] * (c[j][:, None, None] * G[j])[:, None]
+                for j in range(2)
+            )  # (K, σ, P, nv)
+            pieces.append(Gt.reshape(-1, *Gt.shape[2:]))
+        return _gather(pieces, self._jac)
+
+    def hessian_values(self, q: np.ndarray, v: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        mu = lam[self.row0 : self.row0 + self.size].reshape(-1, 2, self.P)  # (K, σ, P)
+        H = [
+            at.form.hessian(at.configurations(q, v), np.einsum("ksp,s->kp", mu, self.weights[:, j]))
+            for j, at in enumerate(self._at)
+        ]  # (K, nv, nv) each
+        blocks = []
+        for t, u in self._pairs:
+            c = [(at.terms[t][2] * at.terms[u][2])[:, None, None] for at in self._at]
+            on_first = c[0] * H[0] + c[1] * H[1]
+            blocks.append(
+                np.stack([on_first, np.zeros_like(on_first)], 1).reshape(-1, *on_first.shape[1:])
+            )
+        return _gather(blocks, self._hess)
+
+
+def interval_rows(nlp: Any, item: Item, form: Any, row0: int) -> SecantRows:
+    """``form``'s secant rows between the knots (:class:`SecantRows`)."""
+    return SecantRows(nlp, item, form, row0)

@@ -88,7 +88,7 @@ class ComOutsideCylinder(Residual):
         sites = k[j] * nb + b
         fn = interval_cylinder_clearance_function(ctx.jit)
         bind = {"p": ("p", sites), "v": ("v", sites)}
-        params = {"c": circle, "h": s[j] * ctx.ocp.dt}
+        params = {"c": circle, "s": s[j], "dt": ctx.ocp.dt}
         return [*terms, Term(f"{item.name}/between_knots", "ineq", fn, bind, params)]
 
     def body_parameters(self, scene: Any) -> dict[str, Any]:

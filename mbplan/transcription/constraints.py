@@ -9,6 +9,7 @@ import casadi as cs
 
 from mbplan.engine import RiemannianFunction
 from mbplan.lie import R
+from mbplan.transcription.intervals import SECANT_ENDS, SECANT_HALF_WIDTH
 
 
 def cylinder_clearance(p: cs.SX, c: cs.SX) -> cs.SX:
@@ -30,16 +31,22 @@ def cylinder_clearance_function(jit: bool) -> RiemannianFunction:
 # process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def interval_cylinder_clearance_function(jit: bool) -> RiemannianFunction:
-    """:func:`cylinder_clearance` of the point ``p + h v`` between knots (``h = sΔt``) with
-    the cylinder ``c`` and ``h`` as parameters."""
+    """The secant rows (:data:`~mbplan.transcription.intervals.SECANT_HALF_WIDTH`) of
+    :func:`cylinder_clearance` of the point ``p + tΔt v`` between knots: the line through its
+    values at ``t = s ∓ δ``, at both ends of the interval; the cylinder ``c``, the secant's
+    centre ``s`` and ``Δt`` as parameters."""
 
-    def clearance(p: cs.SX, v: cs.SX, c: cs.SX, h: cs.SX) -> cs.SX:
-        return cylinder_clearance(p + h * v, c)
+    def clearance(p: cs.SX, v: cs.SX, c: cs.SX, s: cs.SX, dt: cs.SX) -> cs.SX:
+        lo, hi = s - SECANT_HALF_WIDTH, s + SECANT_HALF_WIDTH
+        at = [cylinder_clearance(p + t * dt * v, c) for t in (lo, hi)]
+        return cs.vertcat(
+            *((at[0] * (hi - end) + at[1] * (end - lo)) / (hi - lo) for end in SECANT_ENDS)
+        )
 
     return RiemannianFunction(
         "interval_cylinder_clearance",
         [("p", R(3)), ("v", R(3))],
         clearance,
-        [("c", 3), ("h", 1)],
+        [("c", 3), ("s", 1), ("dt", 1)],
         jit=jit,
     )

@@ -7,10 +7,16 @@ fixed-witness-point Hessian as derived in :mod:`mbplan.multibody.collision`: wit
 ``a = Rᵀ(p₁ - p)`` and ``m = Rᵀn``, ``∂c/∂ω = a × m``, ``∂c/∂δp = n`` and the ``ω``-block
 ``½(m aᵀ + a mᵀ) - (mᵀa) I``.
 
-Between knots (:func:`interval_distance_function`) the pose is
-:func:`~mbplan.transcription.intervals.interval_pose` of knot ``k``'s ``(R, p, F, v)``; coal gives
-the witness point there, and the derivatives are those of the same fixed-witness-point model
-``nᵀ(p_s + R_s a)`` through the interpolation, by CasADi (:func:`_interval_witness_model`).
+Between knots (:func:`interval_distance_function`) the poses are
+:func:`~mbplan.transcription.intervals.interval_pose` of knot ``k``'s ``(R, p, F, v)`` at two
+fractions ``s ∓ δ`` of the interval; coal gives the distances and witness points there, and two
+rows keep the line through the two distances above the margin at both ends of the interval
+(``σ = 0, 1``): where the distance is convex along the interval (a point moving on a line, a
+convex obstacle) the line lies below it outside ``[s - δ, s + δ]``, so the margin holds along
+the interval up to a dip of order ``δ²`` between the samples, not only at one sample. The rows
+are fixed linear combinations of the two distances, so their derivatives are the same
+combinations of the fixed-witness-point model ``nᵀ(p_s + R_s a)``'s at each sample, through the
+interpolation, by CasADi (:func:`_interval_witness_model`).
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from mbplan.errors import InputError
 from mbplan.lie import SO3, R
 from mbplan.multibody import MaximalModel
 from mbplan.multibody.collision import CollisionPairs, Contacts, signed_distances
-from mbplan.transcription.intervals import interval_pose
+from mbplan.transcription.intervals import interval_pose, secant_weights
 
 _LOWER = np.tril_indices(3)
 
@@ -90,6 +96,11 @@ def distance_constraint_function(
     )
 
 
+SECANT_REACH = 0.25
+"""m: distances between knots are computed up to this beyond the rows' cap, so that a secant
+row reaches its cap continuously (up to link speeds of about ``0.25/Δt``)."""
+
+
 # process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def _interval_witness_model(jit: bool) -> RiemannianFunction:
@@ -109,32 +120,53 @@ def _interval_witness_model(jit: bool) -> RiemannianFunction:
 def interval_distance_function(
     mm: MaximalModel, pairs: CollisionPairs, activation: float = np.inf, jit: bool = False
 ) -> CallbackFunction:
-    """``margin - min(d, margin + activation)`` of pair ``pair`` with its link's body at the
-    fraction ``s`` of the interval from knot ``(R, p, F, v)``; parameters ``pair``, ``margin``
+    """The secant rows ``margin - min(ℓ(σ), margin + activation)``, ``σ = 0, 1``, of pair
+    ``pair`` on interval ``k`` from knot ``(R, p, F, v)``: ``ℓ`` is the line through the
+    distances at the fractions ``s ∓ δ`` (:func:`secant_weights`) of the interval. Where the
+    distance along the interval is convex (a point moving on a line, a convex obstacle) the line
+    lies below it outside ``[s - δ, s + δ]``, so both rows ``≤ 0`` keep the margin along the
+    interval but for a dip of order ``δ²`` between the samples. Parameters ``pair``, ``margin``
     (m), ``s`` and ``h = sΔt`` (s)."""
     body_contacts = _body_contacts(mm, pairs)
     witness = _interval_witness_model(jit)
 
     def evaluate(variables, parameters, multipliers, order):
-        Rb, pb, F, v = (variables[n] for n in ("R", "p", "F", "v"))
-        pair = parameters[:, 0].astype(np.int64)
-        Rs, ps = interval_pose(Rb, pb, F, v, parameters[:, 2], parameters[:, 3])
-        contacts = body_contacts(pair, Rs, ps, parameters[:, 1] + activation)
-        outs = [(parameters[:, 1] - contacts.distance)[:, None]]
+        K = len(parameters)
+        pair, margin = parameters[:, 0].astype(np.int64), parameters[:, 1]
+        s, dt = parameters[:, 2], parameters[:, 3] / parameters[:, 2]
+        cap = margin + activation
+        lo, hi, weights = secant_weights(s)
+        # both samples as one batch of 2K sites: sample j of site k is row j·K + k
+        both = {n: np.concatenate([x, x]) for n, x in variables.items()}
+        t = np.concatenate([lo, hi])
+        Rt, pt = interval_pose(both["R"], both["p"], both["F"], both["v"], t, t * np.tile(dt, 2))
+        contacts = body_contacts(np.tile(pair, 2), Rt, pt, np.tile(cap + SECANT_REACH, 2))
+        line = np.einsum("kij,kj->ki", weights, contacts.distance.reshape(2, K).T)
+        active = line < cap[:, None]
+        outs = [margin[:, None] - np.minimum(line, cap[:, None])]
         if order == 0:
             return outs
-        a = np.einsum("kji,kj->ki", Rs, contacts.robot_point - ps)
-        model = {"a": a, "n": contacts.normal, "s": parameters[:, 2], "h": parameters[:, 3]}
+        # row σ = Σ_j w_σj (margin - d_j): its derivatives are Σ_j w_σj ∂(nⱼᵀ p₁ⱼ)
+        w = weights * active[:, :, None]
+        a = np.einsum("kji,kj->ki", Rt, contacts.robot_point - pt)
+        model = {"a": a, "n": contacts.normal, "s": t, "h": t * np.tile(dt, 2)}
         if order == 1:
-            return [*outs, witness.jacobian(variables, model)[1]]
-        return [*outs, *witness.hessian(variables, model, multipliers)[1:]]
+            J = witness.jacobian(both, model)[1]
+        else:
+            mu = np.einsum("ki,kij->jk", multipliers, w).reshape(-1, 1)
+            _, J, H = witness.hessian(both, model, mu)
+        jac = np.einsum("kij,jkn->kin", w, J.reshape(2, K, -1)).reshape(K, -1)
+        return [*outs, jac] if order == 1 else [*outs, jac, H[:K] + H[K:]]
 
     return CallbackFunction(
         "coal_interval_distance",
         [("R", SO3), ("p", R(3)), ("F", SO3), ("v", R(3))],
         [("pair", 1), ("margin", 1), ("s", 1), ("h", 1)],
-        m=1,
-        jacobian_pattern=(witness.jac_rows, witness.jac_cols),
+        m=2,
+        jacobian_pattern=(
+            np.repeat([0, 1], witness.jac_nnz),
+            np.tile(witness.jac_cols, 2),
+        ),
         hessian_pattern=(witness.hess_rows, witness.hess_cols),
         evaluate=evaluate,
     )

@@ -19,8 +19,26 @@ import numpy as np
 from mbplan.lie import SO3
 
 FRACTIONS = (0.5,)
-"""The fractions ``s`` of every interval at which obstacle rows are added (the knots are
-``s = 0`` and ``s = 1``)."""
+"""The fractions ``s`` of every interval at the centre of its obstacle rows' secant (the knots
+are ``s = 0`` and ``s = 1``)."""
+SECANT_HALF_WIDTH = 0.25
+"""An obstacle row between knots is the line through its values at the fractions ``s ∓ δ`` of
+the interval, evaluated at both ends, :data:`SECANT_ENDS`. Where the row is concave along the
+interval (a distance to a convex obstacle along a straight motion) the line lies above it
+outside ``[s - δ, s + δ]``, so both ends ``≤ 0`` keep the row ``≤ 0`` there; between the samples
+it can exceed the line by the row's curvature times ``δ²/2``."""
+SECANT_ENDS = np.array([0.0, 1.0])
+
+
+def secant_weights(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The samples ``s ∓ δ`` ``(K,)`` each of the secants centred at ``s (K,)`` and the weights
+    ``(K, 2, 2)`` ``[site, σ, sample]`` of the line through the values there, at ``σ = 0, 1``."""
+    s = np.asarray(s, dtype=float)
+    lo, hi = s - SECANT_HALF_WIDTH, s + SECANT_HALF_WIDTH
+    width = (hi - lo)[:, None]
+    to_lo = (hi[:, None] - SECANT_ENDS[None]) / width
+    to_hi = (SECANT_ENDS[None] - lo[:, None]) / width
+    return lo, hi, np.stack([to_lo, to_hi], axis=2)
 
 
 def interval_pose(R: Any, p: Any, F: Any, v: Any, s: Any, h: Any) -> tuple[Any, Any]:
