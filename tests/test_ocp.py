@@ -236,3 +236,29 @@ def test_bad_input_is_named_before_any_solve() -> None:
     velocity = mb.OCP("iiwa", N=4).add_cost("v", res.JointVelocity(np.ones(7)))
     with pytest.raises(mb.InputError, match=r"maximal formulation.*'v'.*nonzero target"):
         mb.plan(velocity, "ripm")
+
+
+def test_inverse_kinematics_reaches_a_goal_whose_solution_lies_on_a_joint_limit() -> None:
+    """The SO-100's jaw at a pose reached with its second joint on its lower limit: damped least
+    squares with clipped steps stalls there from every start (error 1.35); the bounded
+    least-squares polish reaches it."""
+    import pinocchio as pin
+
+    from mbplan.planning import initial_guess
+    from mbplan.residuals import FramePlacement
+    from mbplan.tasks.robustness import sweep_robot
+
+    robot = sweep_robot("so100")
+    q_goal = np.array([-0.038, 0.0, -2.3457, -0.8604, -1.5967, 0.3223])
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q_goal)
+    goal = FramePlacement("jaw", data.oMf[robot.model.getFrameId("jaw")])
+    q_init = np.array([0.359, 0.897, -1.478, -1.421, -1.478, 0.799])
+    q = initial_guess.inverse_kinematics(robot, goal, q_init)
+    data_q = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data_q, q)
+    reached = data_q.oMf[robot.model.getFrameId("jaw")]
+    assert np.linalg.norm(pin.log6(goal.placement.actInv(reached)).vector) < 1e-6
+    assert np.all(q >= robot.model.lowerPositionLimit) and np.all(
+        q <= robot.model.upperPositionLimit
+    )

@@ -70,3 +70,17 @@ def test_the_profile_splits_an_iteration_and_counts_the_coal_pairs():
     assert lines[-1].startswith("| panda_boxes | CONVERGED |")
     assert len(lines[-1].split("|")) == len(lines[-3].split("|"))
     json.dumps(row)  # a summary entry
+
+
+def test_a_plan_refused_before_any_solve_is_the_case_failure_not_the_run_end(monkeypatch):
+    from mbplan.errors import InfeasibleRequestError
+
+    def refuse(*args, **kwargs):
+        raise InfeasibleRequestError("frame goal for 'jaw' is out of reach")
+
+    monkeypatch.setattr(families, "plan_row", refuse)
+    monkeypatch.setattr(families, "_workspace", lambda *args: None)
+    row = families.solve_case(scenes.FAMILIES["iiwa_distance"], "ripm", 0, 1, 1e-6, 10)
+    assert (row["status"], row["success"], row["verified"]) == ("REFUSED", False, False)
+    assert row["verification_reasons"] == ["frame goal for 'jaw' is out of reach"]
+    assert row["description"].startswith("iiwa")

@@ -8,6 +8,10 @@ statuses, and every case a method did not solve and verify with its status and r
 ``total_time.png``. Jobs run case by case, the methods' order reversed every other case, so that
 slow and fast phases of a shared machine fall on every method alike.
 
+A plan refused before any solve (:class:`~mbplan.errors.InfeasibleRequestError`: a warm start
+that reaches no goal, a start inside an obstacle) is that case's failure, status ``REFUSED``
+with the reason, not the run's end.
+
 Timing: before its first timed plan of a family, each process makes one discarded warm-up plan
 of case 0 with each method (:data:`WARM_UP_ITERATIONS` iterations), which compiles the kernels
 and builds the structures its plans of the family share (one
@@ -27,7 +31,7 @@ from mbplan.benchmarks.common import machine_info, plan_row, write_atomic, write
 from mbplan.benchmarks.families_report import family_summary, markdown, plot
 from mbplan.benchmarks.harness import Job, run_jobs
 from mbplan.benchmarks.speed_report import INTERVALS
-from mbplan.errors import InputError
+from mbplan.errors import InfeasibleRequestError, InputError
 from mbplan.ocp.problem import OCP
 from mbplan.planning.solve import check_plan_request, plan
 from mbplan.validation import as_int, as_real
@@ -108,11 +112,34 @@ def solve_case(
     JSON row (:func:`~mbplan.benchmarks.common.plan_row`) with the case's description."""
     workspace = _workspace(family, method, seed, tol)
     ocp = family.case(index, seed)
-    row, _, _ = plan_row(
-        ocp, method, warm_start=family.warm_start, tol=tol, max_iter=max_iter, workspace=workspace
-    )
+    try:
+        row, _, _ = plan_row(
+            ocp,
+            method,
+            warm_start=family.warm_start,
+            tol=tol,
+            max_iter=max_iter,
+            workspace=workspace,
+        )
+    except InfeasibleRequestError as error:  # refused before a solve: the case's failure
+        row = refused_row(error)
     row["description"] = describe(ocp)
     return row
+
+
+def refused_row(error: InfeasibleRequestError) -> dict[str, Any]:
+    """The row of a plan refused before any solve (e.g. a warm start that reaches no goal)."""
+    return {
+        "success": False,
+        "status": "REFUSED",
+        "iterations": 0,
+        "solve_time_s": 0.0,
+        "total_time_s": 0.0,
+        "time_per_iter_s": 0.0,
+        "compile_time_s": 0.0,
+        "verified": False,
+        "verification_reasons": [str(error)],
+    }
 
 
 def describe(ocp: OCP) -> str:

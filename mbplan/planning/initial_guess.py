@@ -21,9 +21,11 @@ IK starts sample them within ``± π`` of the midpoint / the IK's start.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 
 import numpy as np
 import pinocchio as pin
+from scipy.optimize import least_squares
 
 from mbplan.errors import InfeasibleRequestError, InputError, WarmStartWarning
 from mbplan.formulations.joint_space import evaluate
@@ -83,29 +85,36 @@ def inverse_kinematics(
     model, data = robot.model, robot.model.createData()
     fid = robot.frame_id(goal.frame)
     lo, hi = joint_ranges(robot, np.asarray(q_init, float))
+
+    def error(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The goal's (and the loops') residual and its Jacobian at ``q``."""
+        pin.framesForwardKinematics(model, data, q)
+        M = data.oMf[fid]
+        e = M.translation - goal.translation
+        J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
+        J = M.rotation @ J6[:3]
+        if isinstance(goal, FramePlacement):
+            e = np.concatenate([e, pin.log3(goal.rotation.T @ M.rotation)])
+            J = np.vstack([J, pin.Jlog3(goal.rotation.T @ M.rotation) @ J6[3:]])
+        if robot.loops:  # the closures as further rows: a closed configuration
+            e = np.concatenate([e, closure_residual(model, robot.loops, q)])
+            J = np.vstack([J, loop_jacobian(model, robot.loops, q)])
+        return e, J
+
     rng = np.random.default_rng(seed)
     best_err, rejected = np.inf, 0
     for start in range(IK_STARTS + 1):
         q = np.array(q_init, float) if start == 0 else rng.uniform(lo, hi)
         err = np.inf
         for _ in range(200):
-            pin.framesForwardKinematics(model, data, q)
-            M = data.oMf[fid]
-            e = M.translation - goal.translation
-            J6 = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL)
-            J = M.rotation @ J6[:3]
-            if isinstance(goal, FramePlacement):
-                w = pin.log3(goal.rotation.T @ M.rotation)
-                e = np.concatenate([e, w])
-                J = np.vstack([J, pin.Jlog3(goal.rotation.T @ M.rotation) @ J6[3:]])
-            if robot.loops:  # the closures as further rows: a closed configuration
-                e = np.concatenate([e, closure_residual(model, robot.loops, q)])
-                J = np.vstack([J, loop_jacobian(model, robot.loops, q)])
+            e, J = error(q)
             err = float(np.linalg.norm(e))
             if err < IK_TOLERANCE:
                 break
             dq = -J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(len(e)), e)
             q = np.clip(q + dq, lo, hi)
+        if err >= 1e-6:  # clipped steps stall where the solution lies on a limit: bounded LSQ
+            q, err = _bounded_least_squares(error, q, lo, hi)
         best_err = min(best_err, err)
         if err < 1e-6:
             if accept is None or accept(q):
@@ -117,6 +126,37 @@ def inverse_kinematics(
         f"reach: best inverse-kinematics error {best_err:.3g} after {IK_STARTS + 1} starts within "
         f"the joint limits{detail} (is the goal inside the workspace?)"
     )
+
+
+def _bounded_least_squares(
+    error: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+    q: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+) -> tuple[np.ndarray, float]:
+    """``min ½‖e(q)‖²`` within ``[lo, hi]`` from ``q`` (scipy's trust-region reflective
+    method): the configuration and its error norm."""
+    free = hi > lo  # a joint without range keeps its value
+    if not free.any():
+        return q, float(np.linalg.norm(error(q)[0]))
+
+    def full(x: np.ndarray) -> np.ndarray:
+        out = q.copy()
+        out[free] = x
+        return out
+
+    fit = least_squares(
+        lambda x: error(full(x))[0],
+        np.clip(q[free], lo[free], hi[free]),
+        jac=lambda x: error(full(x))[1][:, free],
+        bounds=(lo[free], hi[free]),
+        xtol=1e-15,
+        ftol=1e-15,
+        gtol=1e-15,
+        max_nfev=200,
+    )
+    q = full(fit.x)
+    return q, float(np.linalg.norm(error(q)[0]))
 
 
 def goal_configuration(ocp: OCP) -> np.ndarray:
