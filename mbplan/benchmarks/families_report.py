@@ -110,6 +110,17 @@ def _totals(s: dict[str, Any]) -> list[str]:
     return [*lines, "| **all** | " + " | ".join(cells) + " | |"]
 
 
+PERCENT_COLUMNS = ("margin_kept",)
+"""Extra columns that are fractions, shown in percent (the others in scientific notation)."""
+
+
+def _extra(key: str, value: float | None) -> str:
+    """An extra column's cell."""
+    if value is None:
+        return "—"
+    return f"{100 * value:.0f} %" if key in PERCENT_COLUMNS else f"{value:.1e}"
+
+
 def markdown(suite: Suite, s: dict[str, Any]) -> str:
     """results.md of a :func:`run` summary."""
     st, m = s["settings"], s["machine"]
@@ -153,10 +164,7 @@ def markdown(suite: Suite, s: dict[str, Any]) -> str:
         ]
         for method, e in fs["methods"].items():
             paired = e.get("paired_total_ratio")
-            cells = "".join(
-                " | —" if e[f"median_{key}"] is None else f" | {e[f'median_{key}']:.1e}"
-                for key in suite.extra_columns
-            )
+            cells = "".join(f" | {_extra(key, e[f'median_{key}'])}" for key in suite.extra_columns)
             lines.append(
                 f"| {method} | {e['verified']}/{e['n']} | {e['converged']}/{e['n']} "
                 f"| {fmt(e['median_iters'])} | {fmt(e['median_time_per_iter_s'], 1e3, 2)} "
@@ -188,7 +196,7 @@ def markdown(suite: Suite, s: dict[str, Any]) -> str:
             ]
             for k, f in sorted(failed, key=lambda kf: (kf[1]["case"], kf[0])):
                 extras = "; ".join(
-                    f"{key.replace('_', ' ')} {f[key]:.1e}"
+                    f"{key.replace('_', ' ')} {_extra(key, f[key])}"
                     for key in suite.extra_columns
                     if f.get(key) is not None
                 )

@@ -134,7 +134,7 @@ SUITE = Suite(
     name="scenes",
     title="Scenes: RIPM (maximal) vs IPOPT (generalized) among obstacles with coal distances",
     families=FAMILIES,
-    intro="Families of `mbplan.tasks.scenes`: the example tasks 5 times each, the iiwa's first "
+    intro="Families of `mbplan.benchmarks.scenes`: the example tasks 5 times each, the iiwa's first "
     "20 cases and {n} sweep cases, case i of the sweep drawn from "
     "`numpy.random.default_rng((seed, i, 'arm_boxes'))` with seed {seed}. *margin kept*: the "
     "smallest fraction of a margin the verifier's replay keeps between the knots (median over "
