@@ -184,7 +184,7 @@ def test_maximal_distance_between_knots_has_witness_point_derivatives_on_the_ret
     b, P, s = pair_bodies(mm, pairs), pairs.size, 0.5
     f = interval_distance_function(mm, pairs)
     sites = {"R": R[b], "p": p[b], "F": F[b], "v": v[b]}
-    params = {"pair": np.arange(P), "margin": 0.02, "s": s, "h": s * dt}
+    params = {"pair": np.arange(P), "margin": 0.02, "s": s, "dt": dt}
     at_knot = distance_constraint_function(mm, pairs)
     samples = np.array([s - SECANT_HALF_WIDTH, s + SECANT_HALF_WIDTH])
     poses = [

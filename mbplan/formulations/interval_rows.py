@@ -44,6 +44,12 @@ def _gather(arrays: list[np.ndarray], masks: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(pieces)
 
 
+def _configurations(terms: list, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``Σ_t c_t X_t[k_t]`` ``(K, nv)`` of ``terms`` (:class:`ConfigurationRows`)."""
+    X = {"q": q, "v": v}
+    return sum(c[:, None] * X[b][k] for b, k, c in terms)
+
+
 class ConfigurationRows:
     """The rows ``form`` (own derivatives in ``q``, ``P`` per site) at ``K`` site configurations
     ``Q_i = Σ_t c_ti X_t[k_ti]``, linear in knot variables: ``terms`` lists ``(block, knots
@@ -71,8 +77,7 @@ class ConfigurationRows:
 
     def configurations(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """``Q (K, nv)`` of the trajectory ``q, v (N+1, nv)``."""
-        X = {"q": q, "v": v}
-        return sum(c[:, None] * X[b][k] for b, k, c in self.terms)
+        return _configurations(self.terms, q, v)
 
     def values(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         return self.form.values(self.configurations(q, v)).ravel()
@@ -115,26 +120,24 @@ class SecantRows(ConfigurationRows):
         k = np.repeat(np.asarray(item.knots) - 1, 2)
         super().__init__(nlp, item, form, _interval_terms(k, np.zeros(k.size), nlp.dt), row0)
         self.samples, self.weights = secant()
-        self._at = [
-            ConfigurationRows(
-                nlp, item, form, _interval_terms(k[::2], np.full(k.size // 2, t), nlp.dt), row0
-            )
-            for t in self.samples
+        intervals = k[::2]
+        self._sample_terms = [
+            _interval_terms(intervals, np.full(intervals.size, t), nlp.dt) for t in self.samples
         ]
 
     def sample_configurations(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """``q_k(s_j)`` ``(2, K, nv)`` of the two samples ``s_j`` of every interval."""
-        return np.stack([at.configurations(q, v) for at in self._at])
+        return np.stack([_configurations(terms, q, v) for terms in self._sample_terms])
 
     def values(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        r = np.stack([at.form.values(at.configurations(q, v)) for at in self._at])  # (2, K, P)
+        r = np.stack([self.form.values(Q) for Q in self.sample_configurations(q, v)])  # (2, K, P)
         return np.einsum("sj,jkp->ksp", self.weights, r).ravel()
 
     def jacobian_values(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        G = [at.form.jacobian(at.configurations(q, v)) for at in self._at]  # (K, P, nv) each
+        G = [self.form.jacobian(Q) for Q in self.sample_configurations(q, v)]  # (K, P, nv)
         pieces = []
         for t in range(len(self.terms)):
-            c = [at.terms[t][2] for at in self._at]
+            c = [terms[t][2] for terms in self._sample_terms]
             Gt = sum(
                 self.weights[None, :, j, None, None] * (c[j][:, None, None] * G[j])[:, None]
                 for j in range(2)
@@ -145,12 +148,12 @@ class SecantRows(ConfigurationRows):
     def hessian_values(self, q: np.ndarray, v: np.ndarray, lam: np.ndarray) -> np.ndarray:
         mu = lam[self.row0 : self.row0 + self.size].reshape(-1, 2, self.P)  # (K, σ, P)
         H = [
-            at.form.hessian(at.configurations(q, v), np.einsum("ksp,s->kp", mu, self.weights[:, j]))
-            for j, at in enumerate(self._at)
+            self.form.hessian(Q, np.einsum("ksp,s->kp", mu, self.weights[:, j]))
+            for j, Q in enumerate(self.sample_configurations(q, v))
         ]  # (K, nv, nv) each
         blocks = []
         for t, u in self._pairs:
-            c = [(at.terms[t][2] * at.terms[u][2])[:, None, None] for at in self._at]
+            c = [(terms[t][2] * terms[u][2])[:, None, None] for terms in self._sample_terms]
             on_first = c[0] * H[0] + c[1] * H[1]
             blocks.append(
                 np.stack([on_first, np.zeros_like(on_first)], 1).reshape(-1, *on_first.shape[1:])

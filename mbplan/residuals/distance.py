@@ -206,7 +206,7 @@ class Distance(Residual):
         sites = k[j] * mm.nb + bodies[i]
         fn = interval_distance_function(mm, pairs, self.interval_activation, ctx.jit)
         bind = {n: (n, sites) for n in ("R", "p", "F", "v")}
-        params = {"pair": i.astype(float), "margin": self.margin, "s": s[j], "h": s[j] * ctx.ocp.dt}
+        params = {"pair": i.astype(float), "margin": self.margin, "s": s[j], "dt": ctx.ocp.dt}
         return [*terms, Term(f"{item.name}/between_knots", "ineq", fn, bind, params)]
 
     def shooting(self, ctx: Any, item: Any) -> ShootingResidual:

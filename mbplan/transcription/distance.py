@@ -122,18 +122,19 @@ def interval_distance_function(
 ) -> CallbackFunction:
     """The secant rows ``margin - min(ℓ(σ), margin + activation)``, ``σ = 0, 1``, of pair
     ``pair`` on interval ``k`` from knot ``(R, p, F, v)``: ``ℓ`` is the line through the
-    distances at the fractions ``s ∓ δ`` (:func:`secant_weights`) of the interval. Where the
+    distances at the fractions ``s ∓ δ``
+    (:func:`~mbplan.transcription.intervals.secant_weights`) of the interval. Where the
     distance along the interval is convex (a point moving on a line, a convex obstacle) the line
     lies below it outside ``[s - δ, s + δ]``, so both rows ``≤ 0`` keep the margin along the
     interval but for a dip of order ``δ²`` between the samples. Parameters ``pair``, ``margin``
-    (m), ``s`` and ``h = sΔt`` (s)."""
+    (m), the secant's centre ``s`` and ``Δt`` (s)."""
     body_contacts = _body_contacts(mm, pairs)
     witness = _interval_witness_model(jit)
 
     def evaluate(variables, parameters, multipliers, order):
         K = len(parameters)
         pair, margin = parameters[:, 0].astype(np.int64), parameters[:, 1]
-        s, dt = parameters[:, 2], parameters[:, 3] / parameters[:, 2]
+        s, dt = parameters[:, 2], parameters[:, 3]
         cap = margin + activation
         lo, hi, weights = secant_weights(s)
         # both samples as one batch of 2K sites: sample j of site k is row j·K + k
@@ -161,7 +162,7 @@ def interval_distance_function(
     return CallbackFunction(
         "coal_interval_distance",
         [("R", SO3), ("p", R(3)), ("F", SO3), ("v", R(3))],
-        [("pair", 1), ("margin", 1), ("s", 1), ("h", 1)],
+        [("pair", 1), ("margin", 1), ("s", 1), ("dt", 1)],
         m=2,
         jacobian_pattern=(
             np.repeat([0, 1], witness.jac_nnz),
