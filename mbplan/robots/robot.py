@@ -31,9 +31,9 @@ from mbplan.errors import InputError, RobotModelError
 from mbplan.robots import RobotDescription, load
 from mbplan.robots.continuous import to_angles, unbounded_revolute_model
 from mbplan.robots.free_body import FreeBody
-from mbplan.robots.joints import joint_kind
 from mbplan.robots.lazy_geometry import LazyGeometry, resolved
-from mbplan.robots.loader import MECHANISMS, MJCF_SUFFIXES, load_mjcf, mimic_tags, visual_geometry
+from mbplan.robots.loader import MECHANISMS, MJCF_SUFFIXES, load_mjcf, visual_geometry
+from mbplan.robots.locking import lock_values, reduced_description, reference_names
 from mbplan.robots.loops import (
     Loop,
     close_loops,
@@ -42,19 +42,8 @@ from mbplan.robots.loops import (
     loops_from_constraints,
     resolve_loops,
 )
+from mbplan.robots.mimic import MIMIC_MODES, Mimic, mimic_couplings, mimic_tags_of
 from mbplan.robots.mjcf import mjcf_actuated, mjcf_equality_names
-
-MIMIC_MODES = ("couple", "independent")
-
-
-@dataclass(frozen=True)
-class Mimic:
-    """A coupling ``q[follower] = multiplier · q[leader] + offset`` (a URDF ``<mimic>``)."""
-
-    follower: str
-    leader: str
-    multiplier: float = 1.0
-    offset: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,7 +90,7 @@ class Robot:
             return self.closed(self.coupled(pin.neutral(self.model)))
         raise InputError(
             f"robot {self.name!r} has no configuration {name!r}; known: "
-            f"{', '.join(['neutral', *_ref_names(refs)])}"
+            f"{', '.join(['neutral', *reference_names(refs)])}"
         )
 
     def frame_id(self, frame: str) -> int:
@@ -234,14 +223,14 @@ def _load(
             "MJCF path or a pinocchio.Model"
         )
     desc, continuous = _unbounded(desc)
-    locked = _lock_values(desc, lock)
+    locked = lock_values(desc, lock)
     for loop in file_loops:
         carried = [j for j in (loop.joint1, loop.joint2) if j in locked]
         if carried:
             raise InputError(f"lock: joint {carried[0]!r} carries the loop {loop.name!r}")
     if locked:
         source = {**source, "lock": locked}
-        desc = _reduced(desc, locked)
+        desc = reduced_description(desc, locked)
     _check_joints(desc)
     given_loops = [loop_from_spec(desc.model, s, i) for i, s in enumerate(loops)]
     if given_loops:
@@ -253,8 +242,8 @@ def _load(
         model = pin.Model(desc.model)  # a copy: the caller's (or the cached) model is untouched
         model.damping[:] = 0.0
         desc = RobotDescription(desc.name, model, desc.collision_model, desc.visual, desc.urdf_path)
-    tags = _mimic_tags(desc)
-    couplings = _couplings(desc, tags, locked) if mimic == "couple" else ()
+    tags = mimic_tags_of(desc)
+    couplings = mimic_couplings(desc, tags, locked) if mimic == "couple" else ()
     source = {**source, "damping": bool(damping)} | ({"mimic": mimic} if tags else {})
     continuous = tuple(n for n in continuous if n not in locked)
     robot = Robot(
@@ -289,44 +278,6 @@ def _passive(
     return tuple(n for n in names if n not in actuated)
 
 
-def _mimic_tags(desc: RobotDescription) -> dict[str, tuple[str, float, float]]:
-    """:func:`~mbplan.robots.loader.mimic_tags` of ``desc``'s URDF (none without one)."""
-    path = desc.urdf_path
-    if path is None or Path(path).suffix.lower() != ".urdf":
-        return {}
-    return mimic_tags(path)
-
-
-def _couplings(
-    desc: RobotDescription, tags: dict[str, tuple[str, float, float]], locked: dict[str, float]
-) -> tuple[Mimic, ...]:
-    """The :class:`Mimic` couplings of the URDF ``tags`` among ``desc``'s (unlocked) joints."""
-    model, out = desc.model, []
-    for follower, (leader, m, o) in tags.items():
-        if follower in locked:
-            continue
-        where = f"{desc.name}: joint {follower!r} mimics {leader!r}"
-        if leader in locked:
-            raise InputError(
-                f"{where}, which is locked: lock {follower!r} too (at {m * locked[leader] + o:g}) "
-                "or plan it as an independent joint (mimic='independent')"
-            )
-        if leader in tags:
-            raise RobotModelError(f"{where}, which mimics {tags[leader][0]!r}: not supported")
-        kinds = []
-        for name in (leader, follower):
-            if not model.existJointName(name):
-                raise RobotModelError(f"{where}: {name!r} is not a 1-dof joint of the model")
-            kinds.append(joint_kind(model, model.getJointId(name))[0])
-        if kinds[0] != kinds[1]:
-            raise RobotModelError(
-                f"{where}: a {kinds[1]} joint cannot follow a {kinds[0]} one (plan it as an "
-                "independent joint: mimic='independent')"
-            )
-        out.append(Mimic(follower, leader, m, o))
-    return tuple(out)
-
-
 def _unbounded(desc: RobotDescription) -> tuple[RobotDescription, tuple[str, ...]]:
     """``desc`` with its continuous joints as unbounded revolute joints (reference configurations
     converted to angles)."""
@@ -334,7 +285,7 @@ def _unbounded(desc: RobotDescription) -> tuple[RobotDescription, tuple[str, ...
     if not names:
         return desc, ()
     refs = desc.model.referenceConfigurations
-    for name in _ref_names(refs):
+    for name in reference_names(refs):
         model.referenceConfigurations[name] = to_angles(desc.model, np.array(refs[name]))
     return RobotDescription(
         desc.name, model, desc.collision_model, desc.visual, desc.urdf_path
@@ -416,63 +367,6 @@ def _mjcf(
     if len(names) == len(loops):
         loops = [replace(loop, name=n or loop.name) for loop, n in zip(loops, names, strict=True)]
     return desc, loops, mjcf_actuated(path)
-
-
-def _lock_values(
-    desc: RobotDescription, lock: Mapping[str, float] | Sequence[str] | None
-) -> dict[str, float]:
-    if not lock:
-        return {}
-    model = desc.model
-    refs = model.referenceConfigurations
-    ref = np.array(refs["default"]) if "default" in refs else pin.neutral(model)
-    values = dict(lock) if isinstance(lock, Mapping) else dict.fromkeys(lock)
-    out = {}
-    for name, value in values.items():
-        if not model.existJointName(name):
-            raise InputError(
-                f"lock: robot {desc.name!r} has no joint {name!r}; joints: {list(model.names[1:])}"
-            )
-        joint = model.joints[model.getJointId(name)]
-        if joint.nq != 1:
-            raise InputError(f"lock: joint {name!r} has {joint.nq} coordinates; only 1-dof joints")
-        v = float(ref[joint.idx_q]) if value is None else float(value)
-        if not np.isfinite(v):
-            raise InputError(f"lock: value of joint {name!r} is not finite ({value!r})")
-        out[name] = v
-    return out
-
-
-def _reduced(desc: RobotDescription, locked: dict[str, float]) -> RobotDescription:
-    model = desc.model
-    q = pin.neutral(model)
-    refs = model.referenceConfigurations
-    if "default" in refs:
-        q = np.array(refs["default"])
-    ids = []
-    for name, value in locked.items():
-        j = model.getJointId(name)
-        q[model.joints[j].idx_q] = value
-        ids.append(j)
-    collision = desc.collision_model
-    if collision is not None:
-        reduced, (collision,) = pin.buildReducedModel(model, [collision], ids, q)
-    else:
-        reduced = pin.buildReducedModel(model, ids, q)
-    visual = desc.visual
-    if isinstance(visual, LazyGeometry):  # reduced when it is first asked for
-        visual = visual.then(lambda g: pin.buildReducedModel(model, [g], ids, q)[1][0])
-    elif visual is not None:
-        visual = pin.buildReducedModel(model, [visual], ids, q)[1][0]
-    keep = [model.joints[model.getJointId(n)].idx_q for n in reduced.names[1:]]
-    for name in _ref_names(refs):  # the reference configurations without the locked joints
-        reduced.referenceConfigurations[name] = np.array(refs[name])[keep]
-    return RobotDescription(desc.name, reduced, collision, visual, desc.urdf_path)
-
-
-def _ref_names(refs) -> list[str]:
-    """Names of Pinocchio's ``referenceConfigurations`` (a std::map without ``keys``)."""
-    return [str(pair.key()) if hasattr(pair, "key") else str(pair[0]) for pair in refs]
 
 
 def _check_joints(desc: RobotDescription) -> None:
