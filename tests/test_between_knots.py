@@ -271,9 +271,11 @@ def test_maximal_com_between_knots_has_exact_derivatives() -> None:
 @cache
 def _plan(method: str, between_knots: bool) -> mb.PlanResult:
     """The wrist past a thin cylinder at N = 10 (tests/test_generalized.py), coal distances
-    with a 3 cm margin, from the straight path through it."""
+    with a 3 cm margin, from the straight path through it; to ``tol`` 1e-5 (the secant rows'
+    fixed-witness Hessian lacks the cylinder's curvature: the RIPM's last digits converge
+    linearly and its line search can stall near 4e-6)."""
     ocp = small_cases(1, "distance", radius=0.05, between_knots=between_knots)[0]
-    return mb.plan(ocp, method, warm_start="linear")
+    return mb.plan(ocp, method, warm_start="linear", tol=1e-5)
 
 
 @pytest.mark.parametrize("method", ["ipopt", "ripm"])

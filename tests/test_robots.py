@@ -11,7 +11,14 @@ import pinocchio as pin
 import pytest
 
 from mbplan.errors import InputError, RobotModelError
-from mbplan.robots import IIWA_URDF, RobotDescription, available_robots, load, validate_urdf
+from mbplan.robots import (
+    IIWA_URDF,
+    RobotDescription,
+    available_floating,
+    available_robots,
+    load,
+    validate_urdf,
+)
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -44,7 +51,8 @@ def test_every_available_robot_loads_with_geometry(name: str) -> None:
     assert robot.urdf_path is not None and robot.urdf_path.is_file()
     model = robot.model
     assert model.njoints >= 3  # universe + at least two moving joints
-    assert all(model.joints[j].nv == 1 for j in range(1, model.njoints))  # fixed-base arm
+    first = 2 if name in available_floating() else 1  # a floating base's free flyer, then
+    assert all(model.joints[j].nv == 1 for j in range(first, model.njoints))  # 1-dof joints
     assert isinstance(robot.visual_model, pin.GeometryModel) and robot.visual_model.ngeoms > 0
     assert isinstance(robot.collision_model, pin.GeometryModel)
     for geom in [*robot.visual_model.geometryObjects, *robot.collision_model.geometryObjects]:

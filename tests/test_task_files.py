@@ -19,6 +19,7 @@ IIWA = str(EXAMPLES_TASKS / "iiwa_obstacle.toml")
 UR5 = str(EXAMPLES_TASKS / "ur5_shelf.toml")
 MIMIC = str(EXAMPLES_TASKS / "panda_mimic.toml")
 FOURBAR = str(EXAMPLES_TASKS / "fourbar_crank.toml")
+SOLO = str(EXAMPLES_TASKS / "solo12_tuck.toml")
 FINGERS_LOCKED = '--set=robot.lock=["panda_finger_joint1", "panda_finger_joint2"]'
 
 
@@ -72,6 +73,7 @@ CASES = [
     pytest.param(UR5, "ipopt", ["--horizon", "12"], id="ur5-ipopt"),
     pytest.param(FOURBAR, "ripm", [], id="fourbar-ripm"),  # a closed loop, full size
     pytest.param(FOURBAR, "ipopt", [], id="fourbar-ipopt"),
+    pytest.param(SOLO, "ripm", [], id="solo12-ripm"),  # a floating base in free flight
 ]
 
 

@@ -7,7 +7,10 @@ viscous damping of the model, pushed off it by a smooth random torque that start
 
     τ(t) = RNEA(q_d, q̇_d, q̈_d) + c q̇_d + s ∘ sin²(ω' t),   s = 0.2 M(q₀) u,  u ~ U(-1, 1)
 
-(pushes of ~0.2 rad/s², ``ω' ~ U(5, 15) rad/s``). Speeds stay of order ``A ω`` (≤ 2.4 rad/s), the
+(pushes of ~0.2 rad/s², ``ω' ~ U(5, 15) rad/s``). A floating base is not driven: its six rows of
+``τ`` are zero and the robot flies freely, its base moved by the joints' reactions and gravity;
+the joints then take the pushes alone (no nominal motion: inverse dynamics on a fixed base, e.g.
+gravity compensation, would spin light legs of a falling robot up to ~50 rad/s). Speeds stay of order ``A ω`` (≤ 2.4 rad/s), the
 start is at rest on the motion (no initial layer in stiffly damped joints), and the torques are
 smooth, so the error of a method of order ``p`` behaves as ``C Δt^p`` — unlike a free fall from a
 random pose, where light arms reach 100+ rad/s and errors of right and wrong integrators agree.
@@ -38,6 +41,7 @@ class SmoothScenario:
     omega: np.ndarray  # (nv,)
     push: np.ndarray  # (nv,)
     push_omega: np.ndarray  # (nv,)
+    driven: np.ndarray  # (nv,) bool: the actuated coordinates (all but a floating base's)
 
     def motion(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Nominal ``(q_d, q̇_d, q̈_d)`` at time ``t``."""
@@ -49,8 +53,10 @@ class SmoothScenario:
         """Joint torques ``τ(t)`` (N·m, N for prismatic joints), ``(nv,)``."""
         q, v, a = self.motion(t)
         data = self.model.createData()
-        nominal = pin.rnea(self.model, data, q, v, a) + np.asarray(self.model.damping) * v
-        return nominal + self.push * np.sin(self.push_omega * t) ** 2
+        push = self.push * np.sin(self.push_omega * t) ** 2
+        if not self.driven.all():  # a floating base (module docstring)
+            return np.where(self.driven, push, 0.0)
+        return pin.rnea(self.model, data, q, v, a) + np.asarray(self.model.damping) * v + push
 
     def reference_step(self, dt_min: float) -> int:
         """RK4 substeps per ``dt_min`` (module docstring)."""
@@ -103,20 +109,30 @@ def smooth_scenario(mm: MaximalModel, seed: int) -> SmoothScenario:
     revolute = np.zeros(model.nv, dtype=bool)
     revolute[mm.idx_v] = mm.revolute
     q0 = pin.integrate(model, pin.neutral(model), mid + span * rng.uniform(-0.25, 0.25, model.nv))
+    driven = np.ones(model.nv, dtype=bool)
+    for b in np.flatnonzero(mm.free):
+        driven[mm.idx_v[b] : mm.idx_v[b] + 6] = False
     amplitude = 0.1 * span * rng.uniform(0.5, 1.0, model.nv)
-    amplitude = np.where(revolute, np.minimum(amplitude, 0.3), amplitude)
+    amplitude = np.where(revolute, np.minimum(amplitude, 0.3), amplitude) * driven.all()
     omega = rng.uniform(3.0, 8.0, model.nv)
     M = pin.crba(model, model.createData(), q0)
     M = np.triu(M) + np.triu(M, 1).T
     push = 0.2 * M @ rng.uniform(-1.0, 1.0, model.nv)
-    return SmoothScenario(model, q0, amplitude, omega, push, rng.uniform(5.0, 15.0, model.nv))
+    push_omega = rng.uniform(5.0, 15.0, model.nv)
+    return SmoothScenario(model, q0, amplitude, omega, push, push_omega, driven)
 
 
 def joint_errors(mm: MaximalModel, q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
-    """Joint differences ``(K, nb)`` in rad or m (continuous joints via their (cos, sin) pair)."""
-    plain = mm.idx_q[~mm.continuous]
+    """Joint differences ``(K, nb)`` in rad or m (continuous joints via their (cos, sin) pair; a
+    floating base: the larger of its position error and its rotation angle error)."""
+    plain = ~mm.continuous & ~mm.free
     err = np.zeros((len(q), mm.nb))
-    err[:, ~mm.continuous] = q[:, plain] - q_ref[:, plain]
+    err[:, plain] = q[:, mm.idx_q[plain]] - q_ref[:, mm.idx_q[plain]]
+    for b in np.flatnonzero(mm.free):
+        i = mm.idx_q[b]
+        position = np.linalg.norm(q[:, i : i + 3] - q_ref[:, i : i + 3], axis=1)
+        cos_half = np.abs(np.einsum("ki,ki->k", q[:, i + 3 : i + 7], q_ref[:, i + 3 : i + 7]))
+        err[:, b] = np.maximum(position, 2.0 * np.arccos(np.minimum(cos_half, 1.0)))
     c = mm.idx_q[mm.continuous]
     err[:, mm.continuous] = np.arctan2(
         q[:, c + 1] * q_ref[:, c] - q[:, c] * q_ref[:, c + 1],

@@ -10,7 +10,9 @@ of the least-squares fit ``error ≈ C Δt^p``, and the worst joint constraint r
 A mechanism with loop closures (:func:`mechanism`) moves as in
 :mod:`mbplan.benchmarks.loop_scenario` against Pinocchio's constrained dynamics, and its closure
 residuals count among the constraint residuals.
-Targets: ``p = 2 ± 0.2``, error ≤ 1e-3 at Δt = 1 ms, residual ≤ 1e-10.
+A floating-base robot flies freely (its base not driven, :mod:`mbplan.benchmarks.dynamics_scenario`)
+and reports the drift of its discrete momentum (:func:`~mbplan.simulation.discrete_momentum`).
+Targets: ``p = 2 ± 0.2``, error ≤ 1e-3 at Δt = 1 ms, residual ≤ 1e-10, momentum drift ≤ 1e-9.
 """
 
 from __future__ import annotations
@@ -30,13 +32,19 @@ from mbplan.errors import InputError, MbplanError
 from mbplan.multibody import joint_constraint_residuals, joint_positions, maximal_model
 from mbplan.multibody.loops import loop_residuals
 from mbplan.robots import Robot, available_robots, load, load_robot
+from mbplan.robots.joints import is_floating_root
 from mbplan.robots.loops import Loop
-from mbplan.simulation import simulate_maximal
+from mbplan.simulation import discrete_momentum, simulate_maximal
 
 DTS = (0.008, 0.004, 0.002, 0.001)
 DURATION = 0.4  # s
 SYNTHETIC_DAMPING = 0.1  # N m s/rad (N s/m) on every joint of a robot whose URDF has none
-TARGETS = {"order": (1.8, 2.2), "error_at_1ms": 1e-3, "constraint_residual": 1e-10}
+TARGETS = {
+    "order": (1.8, 2.2),
+    "error_at_1ms": 1e-3,
+    "constraint_residual": 1e-10,
+    "momentum_drift": 1e-9,
+}
 
 
 def mechanism(robot: str | Path) -> tuple[pin.Model, tuple[Loop, ...], tuple[str, ...]]:
@@ -62,6 +70,8 @@ def damping_variants(robot: str | Path) -> dict[str, tuple[pin.Model, str]]:
         how = f"URDF, {np.min(model.damping):g}–{np.max(model.damping):g}"
     else:
         damped.damping[:] = SYNTHETIC_DAMPING
+        if is_floating_root(model, 1):  # a floating base has no joint to damp
+            damped.damping[:6] = 0.0
         how = f"synthetic {SYNTHETIC_DAMPING:g}"
     return {"undamped": (undamped, "none"), "damped": (damped, how)}
 
@@ -98,7 +108,7 @@ def validate_case(
     runs = []
     for dt in dts:
         stride, N = round(dt / h), round(T / dt)
-        tau = np.array([scenario.torque(k * dt)[mm.idx_v] for k in range(N + 1)])
+        tau = np.array([scenario.torque(k * dt)[mm.idx_v[mm.jointed]] for k in range(N + 1)])
         try:
             traj = simulate_maximal(mm, scenario.q0, q_ref[stride], tau, dt, N)
         except MbplanError as err:
@@ -121,6 +131,7 @@ def validate_case(
                 "max_newton_iterations": int(traj.newton_iterations.max()),
             }
             | ({"max_closure_residual": closures} if loops else {})
+            | ({"momentum_drift": _momentum_drift(mm, traj, dt)} if mm.free.any() else {})
         )
     ok = [r for r in runs if "failed" not in r]
     order, constant = _fit(ok, "max_joint_error")
@@ -154,7 +165,20 @@ def _fit(runs: list[dict[str, Any]], key: str) -> tuple[float | None, float | No
 def _joint_counts(mm) -> dict[str, int]:
     """Joints per kind, continuous (unbounded revolute) joints counted apart."""
     kinds = ["continuous" if c else t for t, c in zip(mm.joint_types, mm.continuous, strict=True)]
-    return {k: kinds.count(k) for k in ("revolute", "continuous", "prismatic") if k in kinds}
+    return {
+        k: kinds.count(k) for k in ("revolute", "continuous", "prismatic", "free") if k in kinds
+    }
+
+
+def _momentum_drift(mm, traj, dt: float) -> float:
+    """Largest change of the discrete linear or angular momentum (gravity's impulses taken
+    out, :func:`~mbplan.simulation.discrete_momentum`) relative to its size: a floating robot
+    in free flight keeps both (its joint forces are internal)."""
+    drifts = []
+    for momentum in discrete_momentum(mm, traj, dt):
+        scale = max(float(np.abs(momentum).max()), 1e-300)
+        drifts.append(float(np.abs(momentum - momentum[0]).max()) / scale)
+    return max(drifts)
 
 
 def _verdict(case: dict[str, Any], dts: tuple[float, ...]) -> list[str]:
@@ -171,6 +195,9 @@ def _verdict(case: dict[str, Any], dts: tuple[float, ...]) -> list[str]:
     residuals = [r["max_constraint_residual"] for r in case["runs"] if "failed" not in r]
     if not residuals or max(residuals) > TARGETS["constraint_residual"]:
         missed.append("constraint residual")
+    drifts = [r["momentum_drift"] for r in case["runs"] if "momentum_drift" in r]
+    if drifts and max(drifts) > TARGETS["momentum_drift"]:
+        missed.append("momentum")
     return missed
 
 
@@ -233,19 +260,21 @@ def _markdown(s: dict[str, Any]) -> str:
         f"Scenario: `mbplan.benchmarks.dynamics_scenario` (from rest, smooth torques, T = {s['T']} s,"
         f" seed {s['seed']}); reference RK4 on ABA with damping at ≤ Δt_min/16.  ",
         f"Targets: order {lo}–{hi}, error at Δt = 1 ms ≤ {s['targets']['error_at_1ms']:g}, "
-        f"constraint residual ≤ {s['targets']['constraint_residual']:g}. "
+        f"constraint residual ≤ {s['targets']['constraint_residual']:g}, momentum drift (floating "
+        f"base, relative) ≤ {s['targets'].get('momentum_drift', float('nan')):g}. "
         f"All met: **{'yes' if s['all_targets_met'] else 'no'}**.",
         "",
         "| robot | joints | damping | c/M max [1/s] | max speed [rad/s] | "
         + " | ".join(f"error @ {1e3 * d:g} ms" for d in dts)
-        + " | order p | C [Δt^-p] | constraint residual | Euler order | targets |",
-        "|---|---|---|---:|---:|" + "---:|" * len(dts) + "---:|---:|---:|---:|---|",
+        + " | order p | C [Δt^-p] | constraint residual | momentum drift | Euler order | targets |",
+        "|---|---|---|---:|---:|" + "---:|" * len(dts) + "---:|---:|---:|---:|---:|---|",
     ]
     for c in s["cases"]:
         errors = [
             _fmt(r.get("max_joint_error")) if "failed" not in r else "failed" for r in c["runs"]
         ]
         residuals = [r["max_constraint_residual"] for r in c["runs"] if "failed" not in r]
+        drifts = [r["momentum_drift"] for r in c["runs"] if "momentum_drift" in r]
         joints = ", ".join(f"{n} {k}" for k, n in c["joints"].items())
         lines.append(
             f"| {c['robot']} | {joints} | {c['damping_source']} | {c['max_damping_rate_per_s']:.3g} "
@@ -253,6 +282,7 @@ def _markdown(s: dict[str, Any]) -> str:
             + " | ".join(errors)
             + f" | {_fmt(c['observed_order'], '.2f')} | {_fmt(c['error_constant'], '.2g')} "
             f"| {_fmt(max(residuals, default=None), '.1e')} "
+            f"| {_fmt(max(drifts, default=None), '.1e')} "
             f"| {_fmt(c['euler_observed_order'], '.2f')} "
             f"| {'met' if not c['missed'] else 'missed: ' + ', '.join(c['missed'])} |"
         )

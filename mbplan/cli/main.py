@@ -44,9 +44,14 @@ def _plot(args: argparse.Namespace) -> int:
 
 
 def _robots(args: argparse.Namespace) -> int:
-    from mbplan.robots import MECHANISMS, available_robots, load_robot
+    from mbplan.robots import MECHANISMS, available_floating, available_robots, load_robot
 
+    floating = set(available_floating())
     for name in available_robots():
+        if name in floating:
+            joints = len(load_robot(name).joint_names)
+            print(f"{name}  (floating base: a free body and {joints} joints)")
+            continue
         if name not in MECHANISMS:
             print(name)
             continue

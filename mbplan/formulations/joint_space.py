@@ -4,9 +4,9 @@ the start check and the warm starts.
 
 Per knot, a residual's :class:`~mbplan.residuals.base.SymbolicRows` are a CasADi function of
 ``x = (q, v)`` (state) or ``x = τ`` (control) built on a symbolic forward kinematics of the chain
-of 1-dof joints (Pinocchio's pip wheel has no CasADi bindings; the kinematics of
-revolute/prismatic chains is a product of joint placements and ``exp(θ a)``), so derivatives of
-every order are exact. Rows with their own derivatives (coal distances) are evaluated directly.
+of 1-dof joints and a floating base (Pinocchio's pip wheel has no CasADi bindings; the
+kinematics of revolute/prismatic chains is a product of joint placements and ``exp(θ a)``, a free
+flyer's the rotation of its unit quaternion), so derivatives of every order are exact. Rows with their own derivatives (coal distances) are evaluated directly.
 """
 
 from __future__ import annotations
@@ -24,14 +24,19 @@ from mbplan.lie import SO3
 from mbplan.ocp.scene import Scene
 from mbplan.residuals.base import Residual, SymbolicContext, SymbolicRows
 from mbplan.robots.free_body import FreeBody
+from mbplan.robots.joints import FREE_FLYER
 from mbplan.robots.robot import Robot
 
 
 def joint_axes(model: pin.Model) -> list[tuple[str, np.ndarray]]:
-    """``(kind, unit axis in the joint frame)`` of joints ``1..njoints-1``."""
+    """``(kind, unit axis in the joint frame)`` of joints ``1..njoints-1`` (a free flyer:
+    ``("free", 0)``)."""
     out = []
     for j in range(1, model.njoints):
         joint = model.joints[j]
+        if joint.shortname() == FREE_FLYER:
+            out.append(("free", np.zeros(3)))
+            continue
         data = joint.createData()
         joint.calc(data, np.zeros(1))
         S = np.array(data.S).ravel()
@@ -40,6 +45,13 @@ def joint_axes(model: pin.Model) -> list[tuple[str, np.ndarray]]:
         else:
             out.append(("prismatic", S[:3] / np.linalg.norm(S[:3])))
     return out
+
+
+def quaternion_matrix(quat: cs.SX) -> cs.SX:
+    """The rotation of the unit quaternion ``(x, y, z, w)``: ``I + 2w[u]× + 2[u]×²``."""
+    u, w = quat[:3], quat[3]
+    K = cs.skew(u)
+    return cs.SX.eye(3) + 2.0 * w * K + 2.0 * cs.mtimes(K, K)
 
 
 def symbolic_placements(model: pin.Model, q: cs.SX) -> list[tuple[cs.SX, cs.SX]]:
@@ -51,7 +63,11 @@ def symbolic_placements(model: pin.Model, q: cs.SX) -> list[tuple[cs.SX, cs.SX]]
         R = cs.mtimes(Rp, cs.DM(M.rotation))
         p = pp + cs.mtimes(Rp, cs.DM(M.translation))
         qj = q[model.joints[j].idx_q]
-        if kind == "revolute":
+        if kind == "free":
+            i = model.joints[j].idx_q
+            p = p + cs.mtimes(R, q[i : i + 3])
+            R = cs.mtimes(R, quaternion_matrix(q[i + 3 : i + 7]))
+        elif kind == "revolute":
             R = cs.mtimes(R, SO3.exp(qj * cs.DM(axis)))
         else:
             p = p + cs.mtimes(R, cs.DM(axis)) * qj
@@ -65,8 +81,8 @@ def _state_symbols(robot: Robot) -> tuple[cs.SX, list[tuple[cs.SX, cs.SX]]]:
     """A knot state ``x = (q, v)`` and the joints' :func:`symbolic_placements` at its ``q``, built
     once per robot (the slow part of a state residual's graph; every state residual's function
     takes this ``x``)."""
-    x = cs.SX.sym("x", 2 * robot.nv)
-    return x, symbolic_placements(robot.model, x[: robot.nv])
+    x = cs.SX.sym("x", robot.nq + robot.nv)
+    return x, symbolic_placements(robot.model, x[: robot.nq])
 
 
 def symbolic_rows(robot: Robot, scene: Scene, residual: Residual) -> SymbolicRows:

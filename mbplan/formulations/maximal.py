@@ -22,8 +22,10 @@ from mbplan.formulations.maximal_layout import JointEliminationPlans
 from mbplan.lie import SO3
 from mbplan.multibody import MaximalModel, joint_positions, maximal_model
 from mbplan.ocp.problem import OCP, Item
+from mbplan.robots.configuration import difference, integrate
 from mbplan.robots.loops import Loop
 from mbplan.simulation.closed_loop import closed_loop_actuation
+from mbplan.simulation.reference import mass_matrix
 from mbplan.simulation.warm_start import maximal_warm_start
 from mbplan.transcription.multibody import multibody_layout
 from mbplan.transcription.terms import Term
@@ -111,7 +113,13 @@ class MaximalNLP:
     # -- points and results --------------------------------------------------------------------
     def initial_point(self, q: np.ndarray) -> Point:
         """The LGVI point of a joint path ``q (N+1, nq)`` (inverse dynamics for λ, τ; the
-        passive joints' torques zero)."""
+        passive joints' torques zero). Its first step (knot 0's ``F, v``: data) is the robot's
+        at rest over ``[t_0, t_1]``, held by its joints; a floating base cannot be held: its
+        robot's first step is the free motion under zero joint torque
+        (:func:`free_first_step`)."""
+        if self.mm.free.any():
+            q = np.array(q, dtype=float)
+            q[1] = free_first_step(self.mm.model, self.ocp.q0, self.ocp.v0, self.ocp.dt)
         point = maximal_warm_start(
             self.mm, q, self.ocp.dt, jit=self.jit, workspace=self.workspace, passive=self.passive
         )
@@ -126,8 +134,9 @@ class MaximalNLP:
         """Joint-space view of a maximal point: ``q, v (N+1, nq)``, ``tau (N, nv)`` (interval
         means), ``tau_knots (N+1, nv)`` (first-order hold of the LGVI's knot torques, eq. 29).
 
-        ``q_k`` from the relative poses and ``v_k = (q_{k+1} - q_{k-1})/(2Δt)`` (with
-        ``q_{N+1}`` from ``R_N F_N``). Knot 0's torque does not enter the LGVI, where the arm
+        ``q_k`` from the relative poses and ``v_k = (q_{k+1} ⊖ q_{k-1})/(2Δt)`` (with
+        ``q_{N+1}`` from ``R_N F_N``; ``⊖``: Pinocchio's ``difference``, the base's local
+        velocity for a floating base, whose torques are zero). Knot 0's torque does not enter the LGVI, where the arm
         rests over the first step as in eq. (61): ``tau_knots[0]`` makes the mean over
         ``[t_0, t_1]`` the torque for which eq. (61)'s first step reaches the planned ``v_1``
         (with loop closures: the actuated joints' torques and closure forces that do, least
@@ -139,9 +148,10 @@ class MaximalNLP:
         q = joint_positions(mm, Rk, pk, q_ref=self.ocp.q0)
         v = np.zeros((N + 1, mm.nv))
         v[0] = self.ocp.v0
-        v[1:] = (q[2:] - q[:-2]) / (2 * dt)
-        tau_knots = np.array(x["tau"][:, :, 0])[:, np.argsort(mm.idx_v)]
-        tau_0 = pin.rnea(mm.model, mm.model.createData(), q[0], v[0], (v[1] - v[0]) / dt)
+        v[1:] = central_differences(mm.model, q, dt)
+        tau_knots = np.zeros((N + 1, mm.nv))
+        tau_knots[:, mm.idx_v[mm.jointed]] = x["tau"][:, :, 0]
+        tau_0 = first_step_torque(mm, q[0], v[0], (v[1] - v[0]) / dt)
         tau_0 = tau_0 + np.asarray(mm.model.damping) * v[0]  # the LGVI's viscous damping
         tau_knots[0] = 2.0 * self._actuation(q[0], tau_0) - tau_knots[1]
         tau = 0.5 * (tau_knots[:-1] + tau_knots[1:])
@@ -155,6 +165,41 @@ class MaximalNLP:
             return tau
         active = np.setdiff1d(np.arange(robot.nv), robot.joint_indices(robot.passive))
         return closed_loop_actuation(robot.model, robot.loops, active, q, tau)
+
+
+def first_step_torque(mm: MaximalModel, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Inverse dynamics ``RNEA(q, v, a)`` of the first step; with a floating base, whose rows
+    take no torque, the joints' accelerations ``a`` and the base's that leave its rows
+    balanced (``a_b = -M_bb⁻¹(h_b + M_bj a_j)``): the joint torques for which an Euler step
+    reaches the joints' planned velocities, and zero on the base."""
+    model, data = mm.model, mm.model.createData()
+    base = np.zeros(mm.nv, dtype=bool)
+    for b in np.flatnonzero(mm.free):
+        base[mm.idx_v[b] : mm.idx_v[b] + 6] = True
+    a = np.array(a, dtype=float)
+    if base.any():
+        M = mass_matrix(model, data, q)
+        h = pin.rnea(model, data, q, v, np.zeros(mm.nv))
+        a[base] = -np.linalg.solve(
+            M[np.ix_(base, base)], h[base] + M[np.ix_(base, ~base)] @ a[~base]
+        )
+    tau = pin.rnea(model, data, q, v, a)
+    tau[base] = 0.0
+    return tau
+
+
+def free_first_step(model: pin.Model, q0: np.ndarray, v0: np.ndarray, dt: float) -> np.ndarray:
+    """``q_1 = q_0 ⊕ (Δt v_0 + ½Δt² a_0)``, ``a_0 = ABA(q_0, v_0, 0)``: the first step of a robot
+    released at ``(q_0, v_0)`` with zero joint torques (from rest: every body falls by
+    ``½gΔt²``, the LGVI's own first step when no joint force acts at knot 0)."""
+    a0 = pin.aba(model, model.createData(), q0, v0, np.zeros(model.nv))
+    return integrate(model, q0, dt * np.asarray(v0) + 0.5 * dt**2 * a0)
+
+
+def central_differences(model: pin.Model, q: np.ndarray, dt: float) -> np.ndarray:
+    """``(q_{k+1} ⊖ q_{k-1})/(2Δt)`` for ``k = 1 … K-2`` of a path ``q (K, nq)``: ``(K-2, nv)``
+    (``⊖``: :func:`mbplan.robots.configuration.difference`)."""
+    return difference(model, q[:-2], q[2:]) / (2 * dt)
 
 
 def build(ocp: OCP, jit: bool, workspace: Workspace | None = None) -> tuple[MaximalNLP, float]:

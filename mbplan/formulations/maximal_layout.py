@@ -35,6 +35,7 @@ class MaximalLayout:
     dyn_rows: np.ndarray  # (N, nb, 6)
     con_rows: np.ndarray  # (N+1, nb, 5) joint constraint h(X_{k+1}) of the body's joint, on s_k
     loop_cols: np.ndarray  # (N+1, m) the loop closures' multipliers
+    free: np.ndarray  # (nb,) bool: a body without a joint (a floating base; no λ, τ, h rows)
 
     @property
     def N(self) -> int:
@@ -112,9 +113,6 @@ def _layout(problem, jac: sp.csr_matrix) -> MaximalLayout:
         return idx.reshape(knots, nb, idx.shape[1])
 
     s_cols = np.concatenate([cols(n) for n in ("R", "F", "p", "v")], axis=2)
-    lam_cols = cols("lam")
-    tau = v.blocks.get("tau")
-    tau_cols = cols("tau") if tau is not None and tau.count == nb else -np.ones((knots, nb, 1), int)
     loops = [n for n in v.blocks if n.startswith(LOOP_BLOCK.format(""))]
     loop_cols = np.concatenate(
         [np.zeros((knots, 0), np.int64), *(v.tangent_index(n).reshape(knots, -1) for n in loops)],
@@ -123,10 +121,9 @@ def _layout(problem, jac: sp.csr_matrix) -> MaximalLayout:
     body_of_col = np.full(problem.n, -1, np.int64)
     knot_of_col = np.full(problem.n, -1, np.int64)
     kk, bb = np.meshgrid(np.arange(knots), np.arange(nb), indexing="ij")
-    for c in (s_cols, lam_cols, tau_cols):
-        free = c >= 0
-        body_of_col[c[free]] = np.broadcast_to(bb[..., None], c.shape)[free]
-        knot_of_col[c[free]] = np.broadcast_to(kk[..., None], c.shape)[free]
+    listed = s_cols >= 0
+    body_of_col[s_cols[listed]] = np.broadcast_to(bb[..., None], s_cols.shape)[listed]
+    knot_of_col[s_cols[listed]] = np.broadcast_to(kk[..., None], s_cols.shape)[listed]
     rows_of = problem.term_rows("eq")
     N = knots - 1
     kin_rows = rows_of["body_kinematics"].reshape(N, nb, 6)
@@ -151,13 +148,28 @@ def _layout(problem, jac: sp.csr_matrix) -> MaximalLayout:
             raise InputError(f"{name}: a joint constraint row outside one knot's bodies")
         con_rows[k_min, b_max] = term_rows
         parent[b_max] = np.where(b_min < b_max, b_min, -1)
-    if np.any(parent == -2) or np.any(con_rows[1:] < 0):
-        raise InputError("maximal_layout: every body needs a joint constraint at every knot")
+    # the bodies without a joint constraint are the free ones (a joint slot per other body)
+    free = parent == -2
+    jointed = np.flatnonzero(~free)
+    if v.blocks["lam"].count != len(jointed) or np.any(con_rows[1:, jointed] < 0):
+        raise InputError(
+            "maximal_layout: every jointed body needs a joint constraint at every knot"
+        )
+    parent[free] = -1
+
+    def per_body(name: str, width: int) -> np.ndarray:
+        out = -np.ones((knots, nb, width), np.int64)
+        block = v.blocks.get(name)
+        if block is not None and block.count == len(jointed):
+            out[:, jointed] = v.tangent_index(name).reshape(knots, len(jointed), width)
+        return out
+
+    lam_cols, tau_cols = per_body("lam", 5), per_body("tau", 1)
     if np.any(parent >= np.arange(nb)):
         raise InputError("maximal_layout: bodies must be numbered parents first")
     return MaximalLayout(
         problem.n, problem.n_eq, problem.n_ineq, parent, s_cols, lam_cols, tau_cols, kin_rows,
-        dyn_rows, con_rows, loop_cols,
+        dyn_rows, con_rows, loop_cols, free,
     )  # fmt: skip
 
 
@@ -188,7 +200,7 @@ def joint_elimination_plan(
     ``segment`` deep is one segment. Kept in ``workspace`` by its layout and options (every
     case of a task family has the same)."""
     lay = maximal_layout(problem, eq_jacobian, workspace)
-    actuated = bool(np.all(lay.tau_cols[1:] >= 0))
+    actuated = bool(np.all(lay.tau_cols[1:, ~lay.free] >= 0)) and not lay.free.any()
     if forces is None:
         forces = actuated and lay.depth <= WRENCH_MAX_DEPTH
     elif forces and not actuated:
@@ -208,7 +220,7 @@ def _plan_of_layout(lay: MaximalLayout, forces: bool, segment: int) -> Eliminati
     """:func:`joint_elimination_plan` of a layout, its options resolved (built)."""
     N, nb, parent = lay.N, lay.nb, lay.parent
     depths = lay.depths
-    cut = (depths > 1) & ((depths - 1) % segment == 0)
+    cut = ((depths > 1) & ((depths - 1) % segment == 0)) | lay.free
     m = lay.loop_cols.shape[1]
     width = max(12, 6 + m)  # a wrench block's candidates: λ (5), τ (1), the loops' (first one)
     pad6 = -np.ones(6, np.int64)

@@ -11,6 +11,8 @@ pose ``R = I, p = 0``) and the child body (paper §VI.B):
 * axis:  ``(R_p perp_parent[i])^T (R_c axis_child) = 0`` for ``i = 0, 1``.
 
 A prismatic joint keeps ``R_p^T R_c = R_rel0`` and lets the pivot points separate along the axis.
+A free-flyer joint on the world (a floating base) is no constraint at all: its body is a free
+rigid body, moved by the forces of its children's joints alone (no actuation, no multipliers).
 A robot's loop closures are constraints between two bodies (:mod:`mbplan.multibody.loops`).
 """
 
@@ -51,7 +53,7 @@ class MaximalModel:
     parent: np.ndarray  # (nb,) int, -1 = world
     # joints
     joint_names: tuple[str, ...]
-    joint_types: tuple[str, ...]  # "revolute" or "prismatic"
+    joint_types: tuple[str, ...]  # "revolute", "prismatic" or "free" (a floating base)
     continuous: np.ndarray  # (nb,) bool: revolute without limits, q = (cos, sin)
     pin_joint: np.ndarray  # (nb,) int, Pinocchio joint index
     idx_q: np.ndarray  # (nb,) int, first index in Pinocchio's q
@@ -85,9 +87,37 @@ class MaximalModel:
         return self.model.nv
 
     @property
+    def free(self) -> np.ndarray:
+        """(nb,) bool mask of the free bodies (a floating base: no joint constraint)."""
+        return np.array([t == "free" for t in self.joint_types], dtype=bool)
+
+    @property
+    def jointed(self) -> np.ndarray:
+        """The bodies held by a joint constraint (every body but a floating base), in order:
+        joint slot ``s`` (the multipliers and actuation of a plan) is body ``jointed[s]``."""
+        return np.flatnonzero(~self.free)
+
+    @property
+    def nj(self) -> int:
+        """Number of joint constraints (revolute and prismatic joints)."""
+        return int(np.count_nonzero(~self.free))
+
+    @property
+    def joint_slot(self) -> np.ndarray:
+        """(nb,) each body's joint slot (index in :attr:`jointed`), ``-1`` for a free body."""
+        slot = -np.ones(self.nb, np.int64)
+        slot[self.jointed] = np.arange(self.nj)
+        return slot
+
+    @property
     def revolute(self) -> np.ndarray:
         """(nb,) bool mask of revolute (incl. continuous) joints."""
         return np.array([t == "revolute" for t in self.joint_types], dtype=bool)
+
+    @property
+    def prismatic(self) -> np.ndarray:
+        """(nb,) bool mask of prismatic joints."""
+        return np.array([t == "prismatic" for t in self.joint_types], dtype=bool)
 
 
 def nonstandard_inertia(inertia: np.ndarray) -> np.ndarray:
@@ -126,8 +156,9 @@ def maximal_model(robot: RobotSpec | Robot, loops: Sequence[Loop] | None = None)
     takes, or anything :func:`mbplan.robots.load` accepts) with the loop closures ``loops``
     (default: the robot's; resolved ones, :func:`mbplan.multibody.loops.maximal_loops`).
 
-    Raises :class:`RobotModelError` for a joint that is not revolute, continuous or prismatic
-    (spherical, planar, free-flyer, mimic, helical, universal, composite, ...) and for a body whose
+    Raises :class:`RobotModelError` for a joint that is not revolute, continuous or prismatic, or
+    a free-flyer joint on the world (spherical, planar, a free flyer deeper in the tree, mimic,
+    helical, universal, composite, ...) and for a body whose
     mass or inertia (after merging fixed links) is not positive.
     """
     if isinstance(robot, Robot):
@@ -148,15 +179,19 @@ def maximal_model(robot: RobotSpec | Robot, loops: Sequence[Loop] | None = None)
         placement = model.jointPlacements[j]
         com_parent = model.inertias[parent].lever if parent > 0 else np.zeros(3)
         axis_parent = placement.rotation @ axis
+        free = jtype == "free"
         lo, hi = (
             (-np.inf, np.inf)
-            if continuous
+            if continuous or free
             else (
                 model.lowerPositionLimit[model.idx_qs[j]],
                 model.upperPositionLimit[model.idx_qs[j]],
             )
         )
         iv = model.idx_vs[j]
+        velocity, effort = (
+            (np.inf, 0.0) if free else (model.upperVelocityLimit[iv], model.upperEffortLimit[iv])
+        )
         joint_types.append(jtype)
         for key, value in (
             ("mass", inertia.mass),
@@ -171,13 +206,13 @@ def maximal_model(robot: RobotSpec | Robot, loops: Sequence[Loop] | None = None)
             ("r_child", -inertia.lever),
             ("axis_parent", axis_parent),
             ("axis_child", axis),
-            ("perp_parent", _orthonormal_complement(axis_parent)),
+            ("perp_parent", np.zeros((2, 3)) if free else _orthonormal_complement(axis_parent)),
             ("R_rel0", placement.rotation),
             ("lower_position_limit", lo),
             ("upper_position_limit", hi),
-            ("velocity_limit", model.upperVelocityLimit[iv]),
-            ("effort_limit", model.upperEffortLimit[iv]),
-            ("damping", model.damping[iv]),
+            ("velocity_limit", velocity),
+            ("effort_limit", effort),
+            ("damping", 0.0 if free else model.damping[iv]),
         ):
             cols[key].append(value)
 

@@ -2,7 +2,9 @@
 
 Maximal coordinates of body ``i``: orientation ``R[i]`` (body frame -> world), COM position
 ``p[i]``, body angular velocity ``omega_body[i]`` (body frame, ``R^T dR/dt = omega^``) and COM
-velocity ``v_com[i]`` (world frame).
+velocity ``v_com[i]`` (world frame). A floating base's free-flyer coordinates are its joint
+frame's placement, ``q = (position, quaternion x y z w)``, and Pinocchio's local velocity
+``v = (R^T d(position)/dt, omega_body)``.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
+from scipy.spatial.transform import Rotation
 
 from mbplan.errors import InputError
 from mbplan.multibody.model import MaximalModel
@@ -90,12 +93,22 @@ def joint_positions(
     q[:, mm.idx_q[angle]] = theta[:, angle]
     q[:, mm.idx_q[mm.continuous]] = np.cos(theta[:, mm.continuous])
     q[:, mm.idx_q[mm.continuous] + 1] = np.sin(theta[:, mm.continuous])
-    if not revolute.all():
-        prismatic = ~revolute
+    prismatic, free = mm.prismatic, mm.free
+    if prismatic.any() or free.any():
         p = _require(p, (mm.nb, 3) if single else (len(R), mm.nb, 3), "p")
-        delta = _pivot_separation(mm, Rb, p[None] if single else p, Rp)
+        pb = p[None] if single else p
+    if prismatic.any():
+        delta = _pivot_separation(mm, Rb, pb, Rp)
         axis_world = np.einsum("...bij,bj->...bi", Rp, mm.axis_parent)
         q[:, mm.idx_q[prismatic]] = np.einsum("...bi,...bi->...b", axis_world, delta)[:, prismatic]
+    for b in np.flatnonzero(free):
+        i = mm.idx_q[b]
+        q[:, i : i + 3] = pb[:, b] - Rb[:, b] @ mm.com_in_joint[b]
+        quat = Rotation.from_matrix(Rb[:, b]).as_quat(canonical=True)
+        for k in range(1, len(quat)):  # a path's quaternions without sign jumps
+            if quat[k] @ quat[k - 1] < 0.0:
+                quat[k] = -quat[k]
+        q[:, i + 3 : i + 7] = quat
     return q[0] if single else q
 
 
@@ -119,10 +132,16 @@ def joint_velocities(
     omega_rel = omega - np.einsum("bji,bj->bi", rel, omega_p)
 
     v = np.zeros(mm.nv)
-    revolute = mm.revolute
+    revolute, prismatic, free = mm.revolute, mm.prismatic, mm.free
     v[mm.idx_v[revolute]] = np.einsum("bi,bi->b", mm.axis_child, omega_rel)[revolute]
-    if not revolute.all():
-        prismatic = ~revolute
+    if free.any():
+        v_com = _require(v_com, (mm.nb, 3), "v_com")
+    for b in np.flatnonzero(free):
+        i = mm.idx_v[b]
+        origin_rate = v_com[b] - R[b] @ np.cross(omega[b], mm.com_in_joint[b])
+        v[i : i + 3] = R[b].T @ origin_rate
+        v[i + 3 : i + 6] = omega[b]
+    if prismatic.any():
         p = _require(p, (mm.nb, 3), "p")
         v_com = _require(v_com, (mm.nb, 3), "v_com")
         v_p = _from_parent(mm, v_com, np.zeros(3))
@@ -145,7 +164,8 @@ def joint_velocities(
 def joint_constraint_residuals(mm: MaximalModel, R: npt.ArrayLike, p: npt.ArrayLike) -> np.ndarray:
     """Worst joint constraint residual at each knot of poses ``R (K, nb, 3, 3)``, ``p (K, nb, 3)``:
     ``(K,)``. Revolute: pivot gap (3) and axis ``(R_p perp_i)ᵀ(R_c a)`` (2); prismatic: rotation
-    ``vee(M - Mᵀ)/2``, ``M = R_rel0ᵀR_pᵀR_c`` (3), and slide ``perp_iᵀR_pᵀ gap`` (2)."""
+    ``vee(M - Mᵀ)/2``, ``M = R_rel0ᵀR_pᵀR_c`` (3), and slide ``perp_iᵀR_pᵀ gap`` (2); a free
+    body has none."""
     R, p = np.asarray(R, dtype=float), np.asarray(p, dtype=float)
     out = np.empty(len(R))
     revolute = mm.revolute
@@ -159,7 +179,7 @@ def joint_constraint_residuals(mm: MaximalModel, R: npt.ArrayLike, p: npt.ArrayL
         rotation = np.stack([skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0]], 1)
         slide = np.einsum("bki,bi->bk", perp_world, gap)
         rev = np.concatenate([gap, axis], 1)[revolute]
-        pri = np.concatenate([rotation, slide], 1)[~revolute]
+        pri = np.concatenate([rotation, slide], 1)[mm.prismatic]
         out[k] = np.abs(np.concatenate([rev.ravel(), pri.ravel(), [0.0]])).max()
     return out
 
@@ -181,7 +201,7 @@ def _from_parent(mm: MaximalModel, x: np.ndarray, world: np.ndarray, axis: int =
 
 def _require(x: npt.ArrayLike | None, shape: tuple[int, ...], name: str) -> np.ndarray:
     if x is None:
-        raise InputError(f"{name} is required for a robot with prismatic joints")
+        raise InputError(f"{name} is required for a robot with prismatic joints or a floating base")
     return _array(x, shape, name)
 
 

@@ -8,12 +8,14 @@
 
 The goal configuration is the target of a terminal :class:`~mbplan.residuals.JointPosition`
 (constraint or cost), else the inverse kinematics of a terminal frame goal
-(:func:`inverse_kinematics`, which reports an unreachable goal before any solve), else ``q0``.
+(:func:`inverse_kinematics`, which reports an unreachable goal before any solve; not for a
+floating-base robot, whose base would have to be placed too), else ``q0``.
 A robot with loop closures heads for ``q0`` with the joints of a terminal partial joint goal at
 their targets, the loops closed around them, and every knot of its path closes the loops
 (:func:`closed_path`: the actuated joints kept where possible, the passive ones continued from
 the previous knot, so the path stays on one assembly branch).
-A free body's warm start is the geodesic of :func:`geodesic_path`.
+A free body's warm start is the geodesic of :func:`geodesic_path`; a floating-base robot's is
+Pinocchio's interpolation (the joints linear, the base along its geodesic) for both kinds.
 Continuous joints interpolate in angle (to the target as given, not modulo 2π); via points and
 IK starts sample them within ``± π`` of the midpoint / the IK's start.
 """
@@ -166,7 +168,9 @@ def goal_configuration(ocp: OCP) -> np.ndarray:
     for item in terminal:
         r = item.residual
         if isinstance(r, JointPosition) and r.joints is None:
-            return np.array(r.target)
+            q = np.array(ocp.q0, dtype=float)
+            q[ocp.robot.q_of_v[ocp.robot.joint_indices(None)]] = r.target
+            return q
     loops = getattr(ocp.robot, "loops", ())
     for item in terminal:
         r = item.residual
@@ -185,7 +189,7 @@ def goal_configuration(ocp: OCP) -> np.ndarray:
             return np.array(ocp.q0)
     for item in terminal:
         r = item.residual
-        if isinstance(r, (FramePlacement, FrameTranslation)):
+        if isinstance(r, (FramePlacement, FrameTranslation)) and not ocp.robot.floating:
             return inverse_kinematics(
                 ocp.robot, r, ocp.q0, accept=lambda q: path_clearance(ocp, q[None]) <= 0.0
             )
@@ -234,6 +238,8 @@ def _path(ocp: OCP, kind: str) -> np.ndarray:
     robot = ocp.robot
     q0, q_goal = ocp.q0, goal_configuration(ocp)
     s = np.concatenate([[0.0], np.linspace(0.0, 1.0, ocp.N)])
+    if robot.floating:  # the base's quaternion interpolates on the sphere; no via points
+        return np.array([pin.interpolate(robot.model, q0, q_goal, t) for t in s])
     linear = q0 + s[:, None] * (q_goal - q0)
     if kind == "linear":
         return closed_path(robot, linear) if robot.loops else linear

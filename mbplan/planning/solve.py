@@ -40,19 +40,33 @@ class Method:
     """Refuses, before any solve, an OCP the method cannot plan (``check(ocp, method)``)."""
 
 
-METHODS: dict[str, Method] = {
-    "ripm": Method("maximal", m.solve_ripm_maximal),
-    "mlgipm": Method("maximal", m.solve_mlgipm_maximal),
-    "ipopt": Method("generalized", m.solve_ipopt_generalized),
-    "ipopt-no-restoration": Method("generalized", m.solve_ipopt_no_restoration),
-    "ms-ilqr": Method("shooting", m.solve_ms_ilqr, check_shooting_ocp),
-    "ss-ilqr": Method("shooting", m.solve_ss_ilqr, check_shooting_ocp),
-}
+def _fixed_base(ocp: OCP, method: str) -> None:
+    """:class:`InputError` if the robot of ``ocp`` has a floating base: the generalized
+    transcriptions (IPOPT's, Crocoddyl's) are written for fixed-base robots, whose ``q`` is a
+    vector of joint positions (a free flyer's quaternion would need its own)."""
+    if getattr(ocp.robot, "floating", False):
+        raise InputError(
+            f"method {method!r} does not plan floating-base robots ({ocp.robot.name!r}): its "
+            "generalized-coordinate transcription has no free-flyer joint; plan with 'ripm' "
+            "(maximal coordinates: the base is a free rigid body)"
+        )
 
 
 def _open_chain(ocp: OCP, method: str) -> None:
-    """:class:`InputError` if the robot of ``ocp`` has loops (Crocoddyl's dynamics have none)."""
+    """:class:`InputError` if the robot of ``ocp`` has loops (Crocoddyl's dynamics have none) or
+    a floating base (:func:`_fixed_base`)."""
     refuse_loops(ocp.robot, method)
+    _fixed_base(ocp, method)
+
+
+METHODS: dict[str, Method] = {
+    "ripm": Method("maximal", m.solve_ripm_maximal),
+    "mlgipm": Method("maximal", m.solve_mlgipm_maximal),
+    "ipopt": Method("generalized", m.solve_ipopt_generalized, _fixed_base),
+    "ipopt-no-restoration": Method("generalized", m.solve_ipopt_no_restoration, _fixed_base),
+    "ms-ilqr": Method("shooting", m.solve_ms_ilqr, check_shooting_ocp),
+    "ss-ilqr": Method("shooting", m.solve_ss_ilqr, check_shooting_ocp),
+}
 
 
 def _crocoddyl(name: str) -> Callable[[OCP, np.ndarray, m.Settings], PlanResult]:

@@ -67,11 +67,17 @@ class SymbolicContext:
 
     @property
     def q(self) -> cs.SX:
-        return self.x[: self.robot.nv]
+        """The joint positions by velocity index (``nv``; a floating base's six are zero: the
+        base has frame residuals, not joint ones)."""
+        robot = self.robot
+        if robot.nq == robot.nv:
+            return self.x[: robot.nv]
+        joint = robot.q_of_v >= 0
+        return self.x[np.where(joint, robot.q_of_v, 0).tolist()] * joint.astype(float)
 
     @property
     def v(self) -> cs.SX:
-        return self.x[self.robot.nv :]
+        return self.x[self.robot.nq :]
 
 
 @dataclass(frozen=True, eq=False)

@@ -46,12 +46,13 @@ def torque_terms(ctx: Any, item: Any, kind: str, bodies: np.ndarray, per: dict) 
     """Terms of a torque residual ``kind`` (:data:`_TORQUE`) at the LGVI knots ``item.knots +
     1`` of ``bodies`` with per-body parameters ``per``."""
     cost = item.role == "cost"
-    nb = ctx.mm.nb
+    mm = ctx.mm
     k, i = (a.ravel() for a in np.meshgrid(item.knots + 1, np.arange(len(bodies)), indexing="ij"))
     params = {n: v[i] for n, v in per.items()} | ({"w": item.weight} if cost else {})
     sense = "cost" if cost else item.residual.sense
     fn = _torque_function(kind, ctx.jit)
-    return [Term(item.name, sense, fn, {"tau": ("tau", k * nb + bodies[i])}, params)]
+    slots = mm.joint_slot[bodies[i]]
+    return [Term(item.name, sense, fn, {"tau": ("tau", k * mm.nj + slots)}, params)]
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,7 +82,7 @@ class _JointResidual(Residual):
 
     def _rows(self, ctx: SymbolicContext) -> cs.SX:
         idx = self.indices(ctx.robot).tolist()
-        source = {"q": ctx.q, "v": ctx.v, "tau": ctx.x}[self.variable]
+        source = ctx.x if self.variable == "tau" else getattr(ctx, self.variable)
         return cs.vertcat(*[source[i] for i in idx]) - ctx.theta
 
     def row_label(self, robot: Any, scene: Any, row: int) -> str:

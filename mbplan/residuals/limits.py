@@ -24,6 +24,17 @@ from mbplan.transcription.terms import Term
 from mbplan.validation import as_array
 
 
+def _given(value: Any, default: np.ndarray, free: np.ndarray, name: str) -> np.ndarray:
+    """A given bound ``(nv,)`` (``default`` if None): finite, but for the entries without rows
+    (``free``), which keep their defaults (a floating base's, a continuous joint's: ±inf)."""
+    if value is None:
+        return default
+    if np.shape(value) != free.shape:
+        raise InputError(f"{name}: expected shape {free.shape}, got {np.shape(value)}")
+    finite = np.where(free, 0.0, np.asarray(value, dtype=float))
+    return np.where(free, default, as_array(finite, free.shape, name))
+
+
 @dataclass(frozen=True, eq=False)
 class _Limits(Residual):
     """``(lower - x, x - upper) ≤ 0`` (URDF limits by default). Constraint only."""
@@ -40,9 +51,9 @@ class _Limits(Residual):
     def resolve(self, robot: Any, scene: Any) -> Residual:
         lo, hi = self._defaults(robot)
         name = type(self).__name__
-        lower = lo if self.lower is None else as_array(self.lower, (robot.nv,), f"{name}.lower")
-        upper = hi if self.upper is None else as_array(self.upper, (robot.nv,), f"{name}.upper")
         free = self._unbounded(robot)
+        lower = _given(self.lower, lo, free, f"{name}.lower")
+        upper = _given(self.upper, hi, free, f"{name}.upper")
         if not np.all(np.isfinite(lower[~free])) or not np.all(np.isfinite(upper[~free])):
             raise InputError(f"{name}: limits must be finite (URDF without limits?)")
         if np.any((lower >= upper) & ~free):
@@ -54,8 +65,9 @@ class _Limits(Residual):
         return replace(self, lower=np.array(lower), upper=np.array(upper))
 
     def _unbounded(self, robot: Any) -> np.ndarray:
-        """(nv,) mask of the joints without rows (continuous joints' positions)."""
-        return np.zeros(robot.nv, dtype=bool)
+        """(nv,) mask of the entries without rows (a floating base's; continuous joints'
+        positions)."""
+        return robot.q_of_v < 0
 
     def indices(self, robot: Any) -> np.ndarray:
         """Velocity indices of the limited joints: rows ``(lower - x, x - upper)[indices]``."""
@@ -76,7 +88,7 @@ class _Limits(Residual):
 
     def _rows(self, ctx: SymbolicContext) -> cs.SX:
         keep = self.indices(ctx.robot).tolist()
-        source = {"q": ctx.q, "v": ctx.v, "tau": ctx.x}[self.variable]
+        source = ctx.x if self.variable == "tau" else getattr(ctx, self.variable)
         var = cs.vertcat(*[source[i] for i in keep])
         return cs.vertcat(ctx.theta[: len(keep)] - var, var - ctx.theta[len(keep) :])
 
@@ -101,10 +113,16 @@ class JointPositionLimits(_Limits):
     """Position limits of every joint but the continuous ones (no limits, no rows)."""
 
     def _defaults(self, robot: Any) -> tuple[np.ndarray, np.ndarray]:
-        return robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+        """The URDF limits by velocity index (a floating base's entries unbounded)."""
+        iq = robot.q_of_v
+        joint = iq >= 0
+        lower, upper = np.full(robot.nv, -np.inf), np.full(robot.nv, np.inf)
+        lower[joint] = robot.model.lowerPositionLimit[iq[joint]]
+        upper[joint] = robot.model.upperPositionLimit[iq[joint]]
+        return lower, upper
 
     def _unbounded(self, robot: Any) -> np.ndarray:
-        free = np.zeros(robot.nv, dtype=bool)
+        free = super()._unbounded(robot)
         free[robot.joint_indices(robot.continuous)] = True
         return free
 
@@ -144,8 +162,9 @@ class JointVelocityLimits(_Limits):
         lo, hi = np.asarray(self.lower)[mm.idx_v], np.asarray(self.upper)[mm.idx_v]
         if not np.allclose(lo[mm.revolute], -hi[mm.revolute]):
             raise InputError("asymmetric velocity limits of revolute joints are not expressible")
+        b = mm.jointed
+        lo, hi = lo[b], hi[b]
         per = {"cos_step": np.cos(np.minimum(hi * ctx.ocp.dt, np.pi))}
-        b = np.arange(mm.nb)
         return ctx.joint_terms(item, "velocity_limits", b, per, {"lo": lo, "hi": hi})
 
 
@@ -163,8 +182,9 @@ class JointTorqueLimits(_Limits):
 
     def maximal_terms(self, ctx: Any, item: Any) -> list[Term]:
         mm = ctx.mm
-        per = {"lo": np.asarray(self.lower)[mm.idx_v], "hi": np.asarray(self.upper)[mm.idx_v]}
-        return torque_terms(ctx, item, "limits", np.arange(mm.nb), per)
+        iv = mm.idx_v[mm.jointed]
+        per = {"lo": np.asarray(self.lower)[iv], "hi": np.asarray(self.upper)[iv]}
+        return torque_terms(ctx, item, "limits", mm.jointed, per)
 
     def shooting(self, ctx: Any, item: Any) -> ShootingResidual:
         """Crocoddyl's control residual in ``[lower, upper]`` (CSQP); FDDP imposes the limits

@@ -1,5 +1,6 @@
 """The joints a robot may have, by Pinocchio joint model: revolute (bounded or continuous) and
-prismatic, each about a fixed axis; every other kind is refused by name."""
+prismatic, each about a fixed axis, and a free-flyer root joint (a floating base: its body is a
+free rigid body); every other kind is refused by name."""
 
 from __future__ import annotations
 
@@ -24,16 +25,25 @@ _SUPPORTED: dict[str, tuple[str, np.ndarray | None, bool]] = {
     "JointModelPY": ("prismatic", _E[1], False),
     "JointModelPZ": ("prismatic", _E[2], False),
     "JointModelPrismaticUnaligned": ("prismatic", None, False),
+    "JointModelFreeFlyer": ("free", np.zeros(3), False),
 }
+FREE_FLYER = "JointModelFreeFlyer"
+
+
+def is_floating_root(model: pin.Model, j: int) -> bool:
+    """Whether joint ``j`` is a free-flyer joint on the world (a floating base)."""
+    return model.joints[j].shortname() == FREE_FLYER and model.parents[j] == 0
 
 
 def joint_kind(model: pin.Model, j: int) -> tuple[str, np.ndarray, bool]:
-    """(type, unit axis in the joint frame, continuous) of Pinocchio joint ``j``."""
+    """(type, unit axis in the joint frame, continuous) of Pinocchio joint ``j``; a free-flyer
+    root joint is ``("free", 0, False)``."""
     shortname = model.joints[j].shortname()
-    if shortname not in _SUPPORTED:
+    if shortname not in _SUPPORTED or (shortname == FREE_FLYER and not is_floating_root(model, j)):
         raise RobotModelError(
             f"joint {model.names[j]!r} is a {shortname}, which the maximal-coordinate model does "
-            "not support (only revolute, continuous and prismatic joints)"
+            "not support (only revolute, continuous and prismatic joints, and a free-flyer "
+            "joint on the world)"
         )
     jtype, axis, continuous = _SUPPORTED[shortname]
     if axis is None:

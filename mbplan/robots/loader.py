@@ -69,7 +69,35 @@ _ERD_ARMS: dict[str, tuple[str, str, str | None]] = {
     ),
 }
 
+# Floating-base robots of example-robot-data (a free-flyer root joint): name -> (description
+# folder, URDF path in it, SRDF, the SRDF posture that becomes the ``default`` configuration),
+# as the upstream loaders build them.
+_ERD_FLOATING: dict[str, tuple[str, str, str | None, str | None]] = {
+    "solo8": ("solo_description", "robots/solo.urdf", "srdf/solo.srdf", "standing"),
+    "solo12": ("solo_description", "robots/solo12.urdf", "srdf/solo.srdf", "standing"),
+    "anymal": ("anymal_b_simple_description", "robots/anymal.urdf", "srdf/anymal.srdf", "standing"),
+    "hyq": ("hyq_description", "robots/hyq_no_sensors.urdf", "srdf/hyq.srdf", "standing"),
+    "a1": ("a1_description", "urdf/a1.urdf", "srdf/a1.srdf", "standing"),
+    "go1": ("go1_description", "urdf/go1.urdf", "srdf/go1.srdf", "standing"),
+    "go2": ("go2_description", "urdf/go2.urdf", "srdf/go2.srdf", "standing"),
+    "b1": ("b1_description", "urdf/b1.urdf", "srdf/b1.srdf", "standing"),
+    "bolt": ("bolt_description", "robots/bolt.urdf", "srdf/bolt.srdf", "standing"),
+    "talos": ("talos_data", "robots/talos_reduced.urdf", "srdf/talos.srdf", "half_sitting"),
+    "talos_legs": ("talos_data", "robots/talos_reduced.urdf", "srdf/talos.srdf", "half_sitting"),
+    "g1": ("g1_description", "urdf/g1_29dof_rev_1_0.urdf", None, None),
+}
+# Robots planned with some joints locked at their default configuration: name -> the joints
+# kept (talos_legs: Talos with its torso, arms and head rigid, their mass merged).
+_KEEP_ONLY: dict[str, tuple[str, ...]] = {
+    "talos_legs": tuple(f"leg_{side}_{i}_joint" for side in ("left", "right") for i in range(1, 7)),
+}
+
 MJCF_SUFFIXES = (".xml", ".mjcf")
+# A placeholder <inertial> (KDL-era URDFs put one on a root link, e.g. ANYmal's: 1e-6 kg, every
+# entry 1e-6 kg m²) weighs nothing next to the body it is merged into: it is not checked for the
+# triangle inequality of a rigid body's principal moments.
+NEGLIGIBLE_MASS = 1e-5  # kg
+NEGLIGIBLE_INERTIA = 1e-5  # kg m²
 _URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
 
 
@@ -94,9 +122,16 @@ RobotSpec = str | os.PathLike[str] | pin.Model | RobotDescription
 
 
 def available_robots() -> list[str]:
-    """Names accepted by :func:`load`: the serial arms (:func:`available_arms`) and the
-    mechanisms with closed loops (:data:`MECHANISMS`)."""
-    return [*available_arms(), *MECHANISMS]
+    """Names accepted by :func:`load`: the serial arms (:func:`available_arms`), the
+    mechanisms with closed loops (:data:`MECHANISMS`) and the floating-base robots
+    (:func:`available_floating`)."""
+    return [*available_arms(), *MECHANISMS, *available_floating()]
+
+
+def available_floating() -> list[str]:
+    """The floating-base robots of example-robot-data (quadrupeds and humanoids): a free-flyer
+    root joint, the base a free rigid body."""
+    return list(_ERD_FLOATING)
 
 
 def available_arms() -> list[str]:
@@ -140,6 +175,8 @@ def load(
             return _load_erd(robot, geometry)
         if robot in MECHANISMS:
             return load_mjcf(MECHANISMS[robot], robot, geometry)[0]
+        if robot in _ERD_FLOATING:
+            return _load_erd_floating(robot, geometry)
         if Path(robot).suffix.lower() not in (".urdf", *MJCF_SUFFIXES) and not Path(robot).exists():
             raise InputError(
                 f"unknown robot {robot!r}: not a URDF or MJCF path and not one of "
@@ -169,14 +206,45 @@ def _load_erd(name: str, geometry: bool) -> RobotDescription:
     return desc
 
 
+def _load_erd_floating(name: str, geometry: bool) -> RobotDescription:
+    from mbplan.robots.locking import reduced_description  # locking reads descriptions
+
+    folder, urdf, srdf, posture = _ERD_FLOATING[name]
+    models = _erd_model_dir()
+    desc = _load_urdf(models / folder / urdf, name, [models.parent.parent], geometry, True)
+    model = desc.model
+    if srdf is not None:
+        pin.loadReferenceConfigurations(model, str(models / folder / srdf), False)
+    if posture is not None:
+        model.referenceConfigurations["default"] = model.referenceConfigurations[posture]
+    if name in _KEEP_ONLY:
+        keep = _KEEP_ONLY[name]
+        ref = model.referenceConfigurations["default"]
+        locked = {
+            n: float(ref[model.joints[j].idx_q])
+            for j, n in enumerate(model.names)
+            if j > 1 and n not in keep
+        }
+        desc = reduced_description(desc, locked)
+    return desc
+
+
 def _load_urdf(
-    path: Path, name: str | None, package_dirs: list[Path], geometry: bool
+    path: Path,
+    name: str | None,
+    package_dirs: list[Path],
+    geometry: bool,
+    floating: bool = False,
 ) -> RobotDescription:
+    """The description of the URDF ``path``; ``floating``: with a free-flyer root joint."""
     validate_urdf(path)
     dirs = [str(d) for d in package_dirs]
     types = [pin.GeometryType.COLLISION] if geometry else []
+    root = {"root_joint": pin.JointModelFreeFlyer()} if floating else {}
     try:
-        model, *geoms = pin.buildModelsFromUrdf(str(path), package_dirs=dirs, geometry_types=types)
+        model, *geoms = pin.buildModelsFromUrdf(
+            str(path), package_dirs=dirs, geometry_types=types, **root
+        )
     except (RuntimeError, ValueError) as err:
         raise RobotModelError(f"Pinocchio cannot build a model from {path}: {err}") from err
     if not geometry:
@@ -411,7 +479,8 @@ def _mass_and_inertia(inertial: ET.Element, where: str) -> tuple[float, np.ndarr
         raise RobotModelError(
             f"{where} has a non-positive-definite inertia (principal moments {moments})"
         )
-    if moments[0] + moments[1] < moments[2] - max(tol, 1e-9 * moments[2]):
+    placeholder = mass <= NEGLIGIBLE_MASS and moments[-1] <= NEGLIGIBLE_INERTIA
+    if not placeholder and moments[0] + moments[1] < moments[2] - max(tol, 1e-9 * moments[2]):
         raise RobotModelError(
             f"{where}: <inertia> principal moments {moments} violate the triangle inequality "
             "(I1 + I2 >= I3 holds for every rigid body)"

@@ -31,6 +31,7 @@ from mbplan.errors import InputError, RobotModelError
 from mbplan.robots import RobotDescription, load
 from mbplan.robots.continuous import to_angles, unbounded_revolute_model
 from mbplan.robots.free_body import FreeBody
+from mbplan.robots.joints import is_floating_root
 from mbplan.robots.lazy_geometry import LazyGeometry, resolved
 from mbplan.robots.loader import MECHANISMS, MJCF_SUFFIXES, load_mjcf, visual_geometry
 from mbplan.robots.locking import lock_values, reduced_description, reference_names
@@ -113,8 +114,7 @@ class Robot:
         Jacobian of full rank. Every joint without loops."""
         passive = self.joint_indices(self.passive)
         keep = independent_joints(self.model, self.loops, np.asarray(q, dtype=float), passive)
-        names = self.model.names[1:]
-        return tuple(n for n in names if self.joint_indices((n,))[0] in keep)
+        return tuple(n for n in self.joint_names if self.joint_indices((n,))[0] in keep)
 
     def coupled(self, q: np.ndarray) -> np.ndarray:
         """``q`` with every mimic follower at ``multiplier · q[leader] + offset``."""
@@ -124,19 +124,48 @@ class Robot:
             out[follow] = c.multiplier * out[lead] + c.offset
         return out
 
+    @property
+    def floating(self) -> bool:
+        """Whether the robot has a floating base (a free-flyer root joint: the first 7
+        coordinates of ``q`` are the base's position and quaternion, the first 6 of ``v`` its
+        local velocity)."""
+        return self.model.njoints > 1 and is_floating_root(self.model, 1)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The 1-dof joints (every joint but a floating base's free flyer), in model order."""
+        return tuple(self.model.names[2 if self.floating else 1 :])
+
+    @property
+    def q_of_v(self) -> np.ndarray:
+        """(nv,) the configuration index of each 1-dof joint's velocity index (``-1`` on a
+        floating base's six)."""
+        out = -np.ones(self.nv, np.int64)
+        for j in range(2 if self.floating else 1, self.model.njoints):
+            out[self.model.joints[j].idx_v] = self.model.joints[j].idx_q
+        return out
+
     def joint_indices(self, joints: Sequence[str] | None) -> np.ndarray:
-        """Velocity indices of ``joints`` (all if None); :class:`InputError` on an unknown name."""
+        """Velocity indices of ``joints`` (every 1-dof joint if None: not a floating base's);
+        :class:`InputError` on an unknown name or the floating base's joint."""
         if joints is None:
-            return np.arange(self.nv)
+            joints = self.joint_names
         out = []
         for j in joints:
             if not self.model.existJointName(j):
                 locked = " (it is locked)" if j in self.locked else ""
                 raise InputError(
                     f"robot {self.name!r} has no joint {j!r}{locked}; joints: "
-                    f"{list(self.model.names[1:])}"
+                    f"{list(self.joint_names)}"
                 )
-            out.append(self.model.joints[self.model.getJointId(j)].idx_v)
+            jid = self.model.getJointId(j)
+            if self.model.joints[jid].nv != 1:
+                raise InputError(
+                    f"robot {self.name!r}: {j!r} is its floating base, not a 1-dof joint (use "
+                    "the base's frame residuals); joints: "
+                    f"{list(self.joint_names)}"
+                )
+            out.append(self.model.joints[jid].idx_v)
         return np.array(out, dtype=np.int64)
 
 
@@ -260,6 +289,12 @@ def _load(
     all_loops = [*file_loops, *given_loops]
     if not all_loops:
         return robot
+    if robot.floating:
+        raise RobotModelError(
+            f"{desc.name}: loop closures on a floating-base robot are not supported (its "
+            "closures would be contacts, which mbplan does not model yet); "
+            f"loops: {', '.join(loop.name for loop in all_loops)}"
+        )
     refs = desc.model.referenceConfigurations
     q_ref = robot.configuration("default" if "default" in refs else "neutral")
     return replace(robot, loops=resolve_loops(desc.model, all_loops, q_ref))
@@ -271,7 +306,7 @@ def _passive(
     """The unlocked joints not in ``actuated`` (none if ``actuated`` is None)."""
     if actuated is None:
         return ()
-    names = list(model.names[1:])
+    names = list(model.names[2 if is_floating_root(model, 1) else 1 :])
     for name in actuated:
         if name not in names and name not in locked:
             raise InputError(f"actuated: {name!r} is not a joint of the robot; joints: {names}")
@@ -372,8 +407,11 @@ def _mjcf(
 def _check_joints(desc: RobotDescription) -> None:
     model = desc.model
     for j in range(1, model.njoints):
+        if is_floating_root(model, j):
+            continue
         if model.joints[j].nq != 1 or model.joints[j].nv != 1:
             raise RobotModelError(
                 f"{desc.name}: joint {model.names[j]!r} ({model.joints[j].shortname()}) is not a "
-                "revolute, continuous or prismatic joint (lock it)"
+                "revolute, continuous or prismatic joint, nor a free-flyer joint on the world "
+                "(lock it)"
             )

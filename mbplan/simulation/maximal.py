@@ -34,7 +34,7 @@ class MaximalTrajectory:
     p: np.ndarray  # (N+1, nb, 3)
     F: np.ndarray  # (N+1, nb, 3, 3)
     v: np.ndarray  # (N+1, nb, 3)
-    lam: np.ndarray  # (N+1, nb, 5)
+    lam: np.ndarray  # (N+1, nj, 5) per joint slot (MaximalModel.jointed)
     newton_iterations: np.ndarray  # (N,)
     max_residual: float  # worst ‖step residual‖∞ at convergence
     loop_lam: np.ndarray  # (N+1, m) multipliers of the loop closures (mm.loops order)
@@ -74,15 +74,19 @@ def simulate_maximal(
 ) -> MaximalTrajectory:
     """Simulate ``N`` steps from configurations ``q0`` (t = 0) and ``q1`` (t = Δt).
 
-    ``tau``: joint torques (forces for prismatic joints), ``(nb,)`` constant or ``(N+1, nb)``
-    per knot (knot 0 unused; knot ``k`` acts at ``t = kΔt``). Joints with ``mm.damping > 0``
+    ``tau``: joint torques (forces for prismatic joints), ``(nj,)`` constant or ``(N+1, nj)``
+    per knot, one per joint slot (:attr:`MaximalModel.jointed`: every body but a floating base;
+    knot 0 unused; knot ``k`` acts at ``t = kΔt``). Joints with ``mm.damping > 0``
     are damped (:mod:`mbplan.dynamics.damping`). Both configurations must close ``mm.loops``
     (:func:`initial_state`).
     """
     jit = jit_available() if jit is None else jit
     if N < 1 or dt <= 0:
         raise InputError(f"need N >= 1 and dt > 0, got N={N}, dt={dt}")
-    tau = np.broadcast_to(np.asarray(tau, dtype=float), (N + 1, mm.nb))
+    tau = np.asarray(tau, dtype=float)
+    if tau.shape not in ((mm.nj,), (N + 1, mm.nj)):
+        raise InputError(f"tau: expected shape ({mm.nj},) or ({N + 1}, {mm.nj}), got {tau.shape}")
+    tau = np.broadcast_to(tau, (N + 1, mm.nj))
     if not np.all(np.isfinite(tau)):
         raise InputError("tau contains NaN or inf")
     layout = multibody_layout(mm, 1, dt, jit=jit, kinematics=False, fixed_tau_knots=(0, 1))
@@ -95,7 +99,7 @@ def simulate_maximal(
 
     nb = mm.nb
     R, p, F, v = (np.empty((N + 1, nb, *s)) for s in ((3, 3), (3,), (3, 3), (3,)))
-    lam = np.zeros((N + 1, nb, LAMBDA_DIM))
+    lam = np.zeros((N + 1, mm.nj, LAMBDA_DIM))
     loop_lam = np.zeros((N + 1, sum(lp.dim for lp in mm.loops)))
     R[0], p[0], F[0], v[0] = initial_state(mm, q0, q1, dt)
     iterations = np.zeros(N, dtype=int)
@@ -164,3 +168,28 @@ def _newton(problem: TrajectoryProblem, point: dict, tol: float, max_iter: int, 
         ev = problem.evaluate(point, hessian=False)
         res = float(np.max(np.abs(ev.eq)))
     raise MbplanError(f"LGVI step {step}: Newton did not converge (residual {res:.2e})")
+
+
+def discrete_momentum(
+    mm: MaximalModel, traj: MaximalTrajectory, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The discrete linear and angular momentum (about the world origin) after each step,
+    less gravity's impulses so far: ``(N+1, 3)`` each, constant in free flight (joint forces
+    and torques are internal).
+
+    Linear ``Σ m v_k - k Δt M g`` (eq. 35); angular ``Σ R_k Π_k + p_{k+1} × m v_k`` with
+    ``Π_k = (F_k J - J F_kᵀ)^∨/Δt`` (eq. 34 reads ``Π_{k+1} = F_kᵀ Π_k + τ Δt``), less
+    ``Σ_{j<k} Σ m p_{j+1} × g Δt``."""
+    m, g = mm.mass, mm.gravity
+    K = len(traj.v)
+    linear = np.einsum("b,kbi->ki", m, traj.v) - np.arange(K)[:, None] * dt * m.sum() * g
+    J, F = mm.inertia_nonstandard, traj.F
+    skew = F @ J - J @ np.swapaxes(F, -1, -2)
+    spin = np.stack([skew[..., 2, 1], skew[..., 0, 2], skew[..., 1, 0]], -1) / dt
+    p_next = traj.p + traj.v * dt
+    angular = np.einsum("kbij,kbj->ki", traj.R, spin) + np.einsum(
+        "b,kbi->ki", m, np.cross(p_next, traj.v)
+    )
+    impulse = np.einsum("b,kbi->ki", m, np.cross(p_next, g)) * dt  # gravity's, step k -> k+1
+    angular[1:] -= np.cumsum(impulse[:-1], axis=0)
+    return linear, angular

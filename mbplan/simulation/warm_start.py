@@ -11,7 +11,9 @@ full 6-D wrench to its child, so the solution is exact and the dynamics rows (wi
 damping, evaluated on the given motion) vanish up to round-off. Loop closures add their
 multipliers as unknowns and passive joints take no torque: a mechanism with as many actuators as
 degrees of freedom has square blocks again; otherwise each block is solved in the least-squares
-sense (minimum norm: the forces distributed between the joints and the closures).
+sense (minimum norm: the forces distributed between the joints and the closures). A floating
+base has no joint: its six rows per knot are balanced only by a motion that the joints can
+produce (least squares otherwise: the warm start leaves the base's dynamics residual).
 """
 
 from __future__ import annotations
@@ -73,8 +75,8 @@ def maximal_warm_start(
     v = (p[1:] - p[:-1]) / dt
     nb = mm.nb
     passive = tuple(sorted({int(b) for b in passive}))
-    if any(not 0 <= b < nb for b in passive):
-        raise InputError(f"passive: bodies {passive} outside 0..{nb - 1}")
+    if any(not 0 <= b < nb or mm.free[b] for b in passive):
+        raise InputError(f"passive: bodies {passive} are not jointed bodies of 0..{nb - 1}")
     dynamics = _dynamics_rows(mm, N, float(dt), bool(jit), workspace, passive)
     blocks = dynamics.variables.blocks
     m = sum(lp.dim for lp in mm.loops)
@@ -83,14 +85,14 @@ def maximal_warm_start(
         "p": p[: N + 1],
         "F": F,
         "v": v,
-        "lam": np.zeros((N + 1, nb, LAMBDA_DIM)),
-        "tau": np.zeros((N + 1, nb, 1)),
+        "lam": np.zeros((N + 1, mm.nj, LAMBDA_DIM)),
+        "tau": np.zeros((N + 1, mm.nj, 1)),
     } | multiplier_blocks(mm, np.zeros((N + 1, m)))
     point = {k: a.reshape(blocks[k].shape) for k, a in point.items()}
     x = dynamics.solve(point).reshape(N, -1)
     x = np.concatenate([x[:1], x])  # knot 0 repeats knot 1
-    nl, active = nb * LAMBDA_DIM, dynamics.active
-    tau = np.zeros((N + 1, nb))
+    nl, active = mm.nj * LAMBDA_DIM, dynamics.active
+    tau = np.zeros((N + 1, mm.nj))
     tau[:, active] = x[:, nl : nl + len(active)]
     point["lam"] = x[:, :nl].reshape(blocks["lam"].shape)
     point["tau"] = tau.reshape(blocks["tau"].shape)
@@ -127,13 +129,14 @@ class _DynamicsRows:
         self.variables = TrajectoryVariables(layout.blocks)
         self.problem = TrajectoryProblem(self.variables, layout.terms, workspace)
         self.lock = threading.Lock()
-        nb = mm.nb
+        nb, nj = mm.nb, mm.nj
         self.rows = np.arange(layout.n_dynamics_rows - 6 * N * nb, layout.n_dynamics_rows)
-        self.active = np.setdiff1d(np.arange(nb), np.asarray(passive, dtype=np.int64))
+        passive_slots = mm.joint_slot[np.asarray(passive, dtype=np.int64)]
+        self.active = np.setdiff1d(np.arange(nj), passive_slots)  # joint slots with a torque
         index = self.variables.tangent_index
         parts = [
-            index("lam").reshape(N + 1, nb * LAMBDA_DIM)[1:],
-            index("tau").reshape(N + 1, nb)[1:, self.active],
+            index("lam").reshape(N + 1, nj * LAMBDA_DIM)[1:],
+            index("tau").reshape(N + 1, nj)[1:, self.active],
             *(index(b.name).reshape(N + 1, -1)[1:] for b in loop_blocks(mm, N)),
         ]
         # knot-major, like the rows: step k-1's rows and knot k's columns form block k-1

@@ -237,14 +237,14 @@ def _goal(t: Table, robot: Robot, full_names: list[str] | None, limits: bool) ->
 def _joint_goal(t: Table, robot: Robot, limits: bool) -> Residual:
     """``[goal]`` ``joints`` and ``q``: a goal on those joints only."""
     names = t.strings("joints") or []
-    joints = list(robot.model.names[1:])
+    joints = list(robot.joint_names)
     for name in names:
         if name not in joints:
             raise t.error("joints", f"{name!r} is not a joint of the planned robot: {joints}")
     if not names or len(set(names)) != len(names):
         raise t.error("joints", "expected distinct joint names")
     q = np.array(t.vector("q", len(names), required=True, hint=f" (one per joint of {names})"))
-    idx = robot.joint_indices(names)
+    idx = robot.q_of_v[robot.joint_indices(names)]
     lo, hi = robot.model.lowerPositionLimit[idx], robot.model.upperPositionLimit[idx]
     outside = np.flatnonzero((q < lo - 1e-12) | (q > hi + 1e-12)) if limits else []
     if len(outside):
@@ -259,6 +259,8 @@ def _check_reach(t: Table, robot: Robot, fid: int, xyz: np.ndarray) -> None:
     """Refuse a frame goal farther from the first joint of its chain than the chain can reach
     (the sum of its link lengths and prismatic travel); finer cases are the inverse
     kinematics' (before any solve)."""
+    if robot.floating:  # the base goes anywhere: no bound on a frame's reach
+        return
     model = robot.model
     frame = model.frames[fid]
     chain = []

@@ -1,9 +1,11 @@
 """Transcription of a maximal-coordinate multi-body system (RIPM paper §V.A, §VI.B–C, Fig. 2).
 
-Blocks (``count = nb`` elements per knot, one per body or per joint), knots ``k = 0 … N``:
-``R, F`` (SO(3)), ``p, v`` (R³), ``lam`` (R⁵ per joint: a revolute joint's pivot force and axis
-torques, a prismatic joint's rotation torques and slide forces), ``tau`` (R¹ per joint: actuation
-torque or force). Knot 0 is the fixed initial state.
+Blocks (``nb`` elements per knot, one per body, or ``nj`` per knot, one per joint slot:
+:attr:`~mbplan.multibody.MaximalModel.jointed`), knots ``k = 0 … N``: ``R, F`` (SO(3)), ``p, v``
+(R³), ``lam`` (R⁵ per joint: a revolute joint's pivot force and axis torques, a prismatic
+joint's rotation torques and slide forces), ``tau`` (R¹ per joint: actuation torque or force).
+A floating base is a body without a joint: no multipliers, no actuation, no constraint rows.
+Knot 0 is the fixed initial state.
 
 Equations (eq. 27–28 with 34–35 per body), per step ``k = 0 … N-1``:
 
@@ -249,8 +251,8 @@ def _multibody_layout(
         Block("p", R(3), N + 1, (0,) if kinematics else (0, 1), nb),
         Block("F", SO3, N + 1, (0,), nb),
         Block("v", R(3), N + 1, (0,), nb),
-        Block("lam", R(LAMBDA_DIM), N + 1, (0,), nb),
-        Block("tau", R(1), N + 1, fixed_tau_knots, nb),
+        Block("lam", R(LAMBDA_DIM), N + 1, (0,), mm.nj),
+        Block("tau", R(1), N + 1, fixed_tau_knots, mm.nj),
         *loop_blocks(mm, N),
     ]
     k, b = (a.ravel() for a in np.meshgrid(np.arange(N), np.arange(nb), indexing="ij"))
@@ -286,11 +288,12 @@ def _multibody_layout(
             if world:
                 params |= {"Rp": np.eye(3), "pp": np.zeros(3)}
             now, nxt = kj * nb, (kj + 1) * nb
+            slot = (kj + 1) * mm.nj + mm.joint_slot[j]
             child = {
                 "Rc": ("R", nxt + j),
                 "pc": ("p", nxt + j),
-                "lam": ("lam", nxt + j),
-                "tau": ("tau", nxt + j),
+                "lam": ("lam", slot),
+                "tau": ("tau", slot),
             }
             rows = dyn_rows(kj, j)
             if not world:

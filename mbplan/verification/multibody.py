@@ -80,6 +80,7 @@ from mbplan.errors import InputError
 from mbplan.formulations.joint_space import evaluate
 from mbplan.ocp.problem import OCP, Item
 from mbplan.results import PlanResult
+from mbplan.robots.configuration import difference, integrate
 from mbplan.robots.free_body import FreeBody
 from mbplan.simulation.reference import damped_euler_velocity, damping_rate, integrate_aba
 from mbplan.verification.loops import (
@@ -154,9 +155,9 @@ def _euler_steps(ocp: OCP, result: PlanResult) -> tuple[np.ndarray, np.ndarray]:
     q, v, tau, dt = result.q[:-1], result.v[:-1], result.tau, ocp.dt
     if ocp.robot.loops:
         v_next = [euler_velocity(ocp.robot, q[k], v[k], tau[k], dt) for k in range(ocp.N)]
-        return q + dt * v, np.array(v_next)
+        return integrate(model, q, dt * v), np.array(v_next)
     v_next = [damped_euler_velocity(model, data, q[k], v[k], tau[k], dt) for k in range(ocp.N)]
-    return q + dt * v, np.array(v_next)
+    return integrate(model, q, dt * v), np.array(v_next)
 
 
 def _open_loop_deviation(ocp: OCP, result: PlanResult) -> float:
@@ -167,7 +168,8 @@ def _open_loop_deviation(ocp: OCP, result: PlanResult) -> float:
     for k in range(ocp.N):
         for s in range(steps):
             q, v = _replay_step(ocp, q, v, result, k, s * h, h)
-        deviation = max(deviation, float(np.max(np.abs(q - result.q[k + 1]))))
+        gap = difference(ocp.robot.model, result.q[k + 1], q)
+        deviation = max(deviation, float(np.max(np.abs(gap))))
     return deviation
 
 
@@ -202,11 +204,11 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
     """Check a multibody plan with finite values against ``ocp`` (module docstring)."""
     path, q_end, v_end = _interval_replays(ocp, result)
     q_euler, v_euler = _euler_steps(ocp, result)
-    dev_q = np.max(np.abs(q_end - result.q[1:]), axis=1)
+    model = ocp.robot.model
+    dev_q = np.max(np.abs(difference(model, result.q[1:], q_end)), axis=1)
     dev_v = np.max(np.abs(v_end - result.v[1:]), axis=1)
-    ratio_q = float(
-        np.max(dev_q / (2.0 * np.max(np.abs(q_end - q_euler), axis=1) + DEVIATION_FLOOR))
-    )
+    euler_q = np.max(np.abs(difference(model, q_euler, q_end)), axis=1)
+    ratio_q = float(np.max(dev_q / (2.0 * euler_q + DEVIATION_FLOOR)))
     ratio_v = float(
         np.max(dev_v / (2.0 * np.max(np.abs(v_end - v_euler), axis=1) + DEVIATION_FLOOR))
     )

@@ -1,0 +1,283 @@
+"""Floating-base robots: a free-flyer root joint is a free rigid body in maximal coordinates (no
+constraint rows, no multipliers, no actuation). Loading by name, the maximal model and its
+state maps, the LGVI in free flight against Pinocchio (order 2, momentum), a RIPM plan verified
+by the replay, and the methods that refuse such robots before any solve."""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import mbplan as mb
+from mbplan.benchmarks.validate_dynamics import validate_case
+from mbplan.errors import InputError, RobotModelError
+from mbplan.formulations.joint_space import evaluate
+from mbplan.formulations.maximal import free_first_step
+from mbplan.multibody import (
+    MaximalModel,
+    body_poses,
+    body_velocities,
+    joint_constraint_residuals,
+    joint_positions,
+    joint_velocities,
+    maximal_model,
+)
+from mbplan.residuals import (
+    FrameTranslation,
+    JointPosition,
+    JointPositionLimits,
+    JointTorque,
+    JointTorqueLimits,
+)
+from mbplan.robots import available_floating, available_robots, load, load_robot
+from mbplan.robots.configuration import difference, integrate
+from mbplan.simulation import discrete_momentum, simulate_maximal
+
+QUADRUPEDS = ("solo12", "anymal")
+
+
+@cache
+def _robot(name: str) -> mb.Robot:
+    return load_robot(name)
+
+
+@cache
+def _mm(name: str) -> MaximalModel:
+    return maximal_model(_robot(name))
+
+
+def _random_state(robot: mb.Robot, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A configuration within the joint limits (the base anywhere in a 1 m cube, any
+    orientation) and a random velocity."""
+    rng = np.random.default_rng(seed)
+    model = robot.model
+    lo, hi = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
+    lo[:7], hi[:7] = -1.0, 1.0
+    q = pin.randomConfiguration(model, lo, hi)
+    return q, rng.standard_normal(model.nv)
+
+
+# ---------------------------------------------------------------------------- loading
+
+
+def test_floating_robots_are_listed_and_load_by_name() -> None:
+    names = available_floating()
+    assert {"solo12", "anymal", "talos_legs", "talos"} <= set(names)
+    assert set(names) <= set(available_robots())
+    for name in ("solo12", "anymal", "talos_legs", "talos", "bolt"):
+        robot = _robot(name)
+        assert robot.floating
+        assert robot.model.joints[1].shortname() == "JointModelFreeFlyer"
+        assert robot.nq == robot.nv + 1
+        assert "root_joint" not in robot.joint_names
+        assert len(robot.joint_names) == robot.nv - 6
+        np.testing.assert_array_equal(robot.joint_indices(None), np.arange(6, robot.nv))
+        np.testing.assert_array_equal(robot.q_of_v[6:], np.arange(7, robot.nq))
+        assert np.all(robot.q_of_v[:6] == -1)
+
+
+def test_talos_legs_keeps_the_upper_body_as_one_rigid_body() -> None:
+    legs, full = _robot("talos_legs").model, _robot("talos").model
+    assert legs.nv == 18 and full.nv == 38
+    assert pin.computeTotalMass(legs) == pytest.approx(pin.computeTotalMass(full), rel=1e-12)
+
+
+def test_the_base_is_no_joint_of_a_joint_residual() -> None:
+    robot = _robot("solo12")
+    with pytest.raises(InputError, match="'root_joint' is its floating base"):
+        robot.joint_indices(["root_joint"])
+    assert not load_robot("iiwa").floating
+
+
+def test_a_free_flyer_below_the_root_is_refused() -> None:
+    model = pin.Model()
+    inertia = pin.Inertia(1.0, np.zeros(3), np.diag([0.1, 0.2, 0.25]))
+    j = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "hinge")
+    model.appendBodyToJoint(j, inertia, pin.SE3.Identity())
+    j = model.addJoint(j, pin.JointModelFreeFlyer(), pin.SE3.Identity(), "loose")
+    model.appendBodyToJoint(j, inertia, pin.SE3.Identity())
+    with pytest.raises(RobotModelError, match="'loose' is a JointModelFreeFlyer"):
+        maximal_model(model)
+    with pytest.raises(RobotModelError, match="'loose'"):
+        load_robot(model)
+
+
+# ---------------------------------------------------------------------------- maximal model
+
+
+@pytest.mark.parametrize("name", QUADRUPEDS)
+def test_the_base_is_a_free_body_without_joint_rows(name: str) -> None:
+    mm = _mm(name)
+    assert mm.joint_types[0] == "free" and mm.free[0] and not mm.free[1:].any()
+    assert mm.nb == mm.model.njoints - 1 and mm.nj == mm.nb - 1
+    np.testing.assert_array_equal(mm.jointed, np.arange(1, mm.nb))
+    np.testing.assert_array_equal(mm.joint_slot, np.arange(-1, mm.nb - 1))
+    assert mm.effort_limit[0] == 0.0 and not np.isfinite(mm.upper_position_limit[0])
+    assert mm.mass.sum() == pytest.approx(pin.computeTotalMass(mm.model), rel=1e-12)
+    for seed in range(3):
+        q, _ = _random_state(_robot(name), seed)
+        R, p = body_poses(mm, q)
+        assert joint_constraint_residuals(mm, R[None], p[None])[0] < 1e-12
+
+
+@pytest.mark.parametrize("name", QUADRUPEDS)
+def test_state_maps_round_trip_with_a_floating_base(name: str) -> None:
+    """Free-flyer coordinates are the base joint frame's placement (quaternion ``w ≥ 0``) and
+    Pinocchio's local velocity; COM and kinetic energy as Pinocchio's."""
+    robot, mm = _robot(name), _mm(name)
+    data = robot.model.createData()
+    for seed in range(4):
+        q, v = _random_state(robot, seed)
+        q[3:7] *= np.sign(q[6])  # the canonical sign
+        R, p = body_poses(mm, q)
+        omega, v_com = body_velocities(mm, q, v)
+        np.testing.assert_allclose(joint_positions(mm, R, p, q_ref=q), q, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(joint_velocities(mm, R, omega, p, v_com), v, atol=1e-12)
+        com = mm.mass @ p / mm.mass.sum()
+        np.testing.assert_allclose(com, pin.centerOfMass(robot.model, data, q), atol=1e-12)
+        kinetic = 0.5 * mm.mass @ np.sum(v_com**2, axis=1) + 0.5 * np.einsum(
+            "bi,bij,bj->", omega, mm.inertia, omega
+        )
+        assert kinetic == pytest.approx(pin.computeKineticEnergy(robot.model, data, q, v))
+
+
+def test_a_path_of_base_orientations_keeps_its_quaternions_continuous() -> None:
+    robot, mm = _robot("solo12"), _mm("solo12")
+    q0 = robot.configuration("default")
+    turn = np.zeros(robot.nv)
+    turn[3:6] = [0.3, -0.2, 2.9]  # past π/2 the canonical sign would flip
+    path = np.array([integrate(robot.model, q0, s * turn) for s in np.linspace(0, 1.6, 17)])
+    R, p = body_poses(mm, path)
+    quats = joint_positions(mm, R, p, q_ref=q0)[:, 3:7]
+    assert np.all(np.einsum("ki,ki->k", quats[1:], quats[:-1]) > 0.9)
+    np.testing.assert_allclose(np.abs(np.einsum("ki,ki->k", quats, path[:, 3:7])), 1.0)
+
+
+def test_joint_space_kinematics_of_a_floating_base_are_pinocchio_s() -> None:
+    """The symbolic kinematics (frame residuals of the verifier and the start check) place the
+    base by its quaternion."""
+    robot = _robot("solo12")
+    data = robot.model.createData()
+    foot = robot.model.getFrameId("FL_FOOT")
+    residual = FrameTranslation("FL_FOOT", np.zeros(3))
+    for seed in range(3):
+        q, v = _random_state(robot, seed)
+        pin.framesForwardKinematics(robot.model, data, q)
+        value = evaluate(
+            robot, mb.Scene(), residual.resolve(robot, mb.Scene()), q[None], v[None], None
+        )
+        np.testing.assert_allclose(value[0], data.oMf[foot].translation, atol=1e-12)
+
+
+# ---------------------------------------------------------------------------- free flight
+
+
+def test_a_released_robot_falls_as_one_body() -> None:
+    """From rest with zero joint torques every body falls by ½gt², the joints stay (uniform
+    gravity exerts no internal force): the LGVI and Pinocchio's first step agree exactly."""
+    robot, mm = _robot("solo12"), _mm("solo12")
+    q0, dt, N = robot.configuration("default"), 0.01, 30
+    q1 = free_first_step(robot.model, q0, np.zeros(robot.nv), dt)
+    np.testing.assert_allclose(q1 - q0, np.r_[0, 0, -0.5 * 9.81 * dt**2, np.zeros(16)], atol=1e-15)
+    traj = simulate_maximal(mm, q0, q1, np.zeros(mm.nj), dt, N)
+    q = joint_positions(mm, traj.R, traj.p, q_ref=q0)
+    t = dt * np.arange(N + 1)
+    np.testing.assert_allclose(q[:, 2] - q0[2], -0.5 * 9.81 * t**2, atol=1e-12)
+    np.testing.assert_allclose(q[:, 7:], np.tile(q0[7:], (N + 1, 1)), atol=1e-12)
+
+
+@pytest.mark.parametrize("gravity", [0.0, -9.81])
+def test_free_flight_keeps_the_discrete_momentum(gravity: float) -> None:
+    """Joint forces and torques are internal: the LGVI keeps the discrete linear and angular
+    momentum (less gravity's impulses, :func:`discrete_momentum`) to round-off."""
+    model = _robot("solo12").model.copy()
+    model.gravity.linear = np.array([0.0, 0.0, gravity])
+    mm = maximal_model(model)
+    q0, v0 = _random_state(_robot("solo12"), 7)
+    dt, N = 0.005, 80
+    q1 = integrate(model, q0, dt * 0.3 * v0)
+    tau = np.sin(np.arange(N + 1)[:, None] * dt * np.linspace(3, 9, mm.nj)) * 0.2
+    traj = simulate_maximal(mm, q0, q1, tau, dt, N)
+    for momentum in discrete_momentum(mm, traj, dt):
+        assert np.abs(momentum[0]).max() > 1e-3  # a motion that has some
+        scale = np.abs(momentum).max()
+        np.testing.assert_allclose(momentum, np.tile(momentum[0], (N + 1, 1)), atol=1e-11 * scale)
+    if gravity:  # the raw momentum is not constant: gravity's impulses are what was taken out
+        raw = np.einsum("b,kbi->ki", mm.mass, traj.v)
+        assert np.abs(raw[-1] - raw[0]).max() > 1.0
+
+
+def test_the_lgvi_of_a_floating_robot_is_second_order_against_pinocchio() -> None:
+    case = validate_case(_robot("solo12").model, 0, (0.008, 0.004, 0.002), 0.2)
+    assert 1.8 <= case["observed_order"] <= 2.2
+    assert case["joints"] == {"revolute": 12, "free": 1}
+    assert max(r["max_constraint_residual"] for r in case["runs"]) < 1e-10
+
+
+# ---------------------------------------------------------------------------- planning
+
+
+def _tuck_ocp() -> mb.OCP:
+    """solo12 released 1 m above the ground (no contact) tucks its legs in 0.4 s."""
+    robot = _robot("solo12")
+    q0 = robot.configuration("default")
+    q0[2] = 1.0
+    ocp = mb.OCP(robot, N=20, dt=0.02, q0=q0)
+    target = q0[robot.q_of_v[robot.joint_indices(None)]].copy()
+    target[[1, 4, 7, 10]] += 0.5
+    ocp.add_constraint("goal", JointPosition(target=target), knots="terminal")
+    ocp.add_cost("effort", JointTorque(), weight=1e-3)
+    ocp.add_constraint("position_limits", JointPositionLimits())
+    ocp.add_constraint("torque_limits", JointTorqueLimits())
+    return ocp
+
+
+@cache
+def _tuck_plan() -> mb.PlanResult:
+    return mb.plan(_tuck_ocp(), "ripm", warm_start="linear")
+
+
+def test_a_floating_robot_plans_in_free_flight_and_the_replay_verifies_it() -> None:
+    result = _tuck_plan()
+    assert result.success, result.message
+    assert result.q.shape == (21, 19) and result.tau.shape == (20, 18)
+    assert np.all(result.tau[:, :6] == 0.0) and np.all(result.tau_knots[:, :6] == 0.0)
+    np.testing.assert_allclose(np.linalg.norm(result.q[:, 3:7], axis=1), 1.0, atol=1e-12)
+    fall = result.q[0, 2] - result.q[-1, 2]
+    assert 0.7 < fall < 0.5 * 9.81 * 0.4**2 + 0.05  # the base falls freely, the legs swing
+    check = mb.verify(result)
+    assert check.passed, check.reasons
+
+
+@pytest.mark.parametrize("method", ["ipopt", "fddp", "csqp"])
+def test_generalized_methods_refuse_a_floating_base_before_any_solve(method: str) -> None:
+    with pytest.raises(InputError, match="does not plan floating-base robots"):
+        mb.plan(_tuck_ocp(), method)
+
+
+def test_a_floating_robot_loads_from_a_pinocchio_model() -> None:
+    model = load("solo12", geometry=False).model
+    robot = load_robot(model)
+    assert robot.floating and robot.nv == 18
+
+
+def test_configuration_arithmetic_inverts_itself() -> None:
+    """``(q ⊕ δ) ⊖ q = δ`` on batches, with Pinocchio's free flyer; plain arithmetic when
+    ``nq = nv``."""
+    robot = _robot("solo12")
+    q = np.array([_random_state(robot, s)[0] for s in range(4)])
+    delta = 0.3 * np.random.default_rng(0).standard_normal((4, robot.nv))
+    np.testing.assert_allclose(difference(robot.model, q, integrate(robot.model, q, delta)), delta)
+    arm = load_robot("iiwa").model
+    a, d = np.ones((2, 7)), np.arange(14.0).reshape(2, 7)
+    np.testing.assert_array_equal(integrate(arm, a, d), a + d)
+    np.testing.assert_array_equal(difference(arm, a, a + d), d)
+
+
+def test_loops_on_a_floating_base_are_refused() -> None:
+    foot = {"name": "stance", "frame1": "FL_FOOT", "frame2": "universe"}
+    with pytest.raises(RobotModelError, match="loop closures on a floating-base robot"):
+        load_robot("solo12", loops=[foot])
