@@ -10,10 +10,12 @@ from functools import cache
 import numpy as np
 import pinocchio as pin
 import pytest
+from fd import check_generalized_derivatives
 
 import mbplan as mb
 from mbplan.benchmarks.validate_dynamics import validate_case
 from mbplan.errors import InputError, RobotModelError
+from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.joint_space import evaluate
 from mbplan.formulations.maximal import free_first_step
 from mbplan.multibody import (
@@ -252,8 +254,8 @@ def test_a_floating_robot_plans_in_free_flight_and_the_replay_verifies_it() -> N
     assert check.passed, check.reasons
 
 
-@pytest.mark.parametrize("method", ["ipopt", "fddp", "csqp"])
-def test_generalized_methods_refuse_a_floating_base_before_any_solve(method: str) -> None:
+@pytest.mark.parametrize("method", ["fddp", "csqp"])
+def test_shooting_methods_refuse_a_floating_base_before_any_solve(method: str) -> None:
     with pytest.raises(InputError, match="does not plan floating-base robots"):
         mb.plan(_tuck_ocp(), method)
 
@@ -281,3 +283,57 @@ def test_loops_on_a_floating_base_are_refused() -> None:
     foot = {"name": "stance", "frame1": "FL_FOOT", "frame2": "universe"}
     with pytest.raises(RobotModelError, match="loop closures on a floating-base robot"):
         load_robot("solo12", loops=[foot])
+
+
+def test_the_generalized_nlp_of_a_floating_base_has_exact_derivatives() -> None:
+    """IPOPT's NLP with the base's position and quaternion as coordinates (normalized where
+    read): constraint Jacobian, objective gradient and Lagrangian Hessian against central
+    differences in those coordinates, off the unit sphere too."""
+    robot = _robot("solo12")
+    q0 = robot.configuration("default")
+    ocp = mb.OCP(robot, N=4, dt=0.05, q0=q0)
+    ocp.add_cost("effort", JointTorque(), weight=1e-2)
+    ocp.add_cost("foot", FrameTranslation("FL_FOOT", np.array([0.2, 0.1, -0.1])), weight=3.0)
+    target = q0[robot.q_of_v[robot.joint_indices(None)]] + 0.2
+    ocp.add_constraint("goal", JointPosition(target=target), knots="terminal")
+    nlp = GeneralizedNLP(ocp)
+    assert nlp.n == 4 * (19 + 2 * 18) and nlp.m == 2 * 4 * 18 + 4 + 12
+    rng = np.random.default_rng(3)
+    path = np.array([integrate(robot.model, q0, 0.1 * rng.standard_normal(18)) for _ in range(5)])
+    z = nlp.initial_guess(path) + 0.05 * rng.standard_normal(nlp.n)
+    lam = rng.standard_normal(nlp.m)
+    check_generalized_derivatives(nlp, z, lam)
+
+
+def test_ipopt_plans_a_floating_base_in_free_flight_as_the_ripm() -> None:
+    result = mb.plan(_tuck_ocp(), "ipopt", warm_start="linear")
+    assert result.success, result.message
+    np.testing.assert_allclose(np.linalg.norm(result.q[:, 3:7], axis=1), 1.0, atol=1e-9)
+    assert np.all(result.tau[:, :6] == 0.0)
+    check = mb.verify(result)
+    assert check.passed, check.reasons
+    ripm = _tuck_plan()  # both fall freely the same way
+    assert abs(result.q[-1, 2] - ripm.q[-1, 2]) < 0.05
+
+
+def test_the_free_flight_family_draws_reproducible_reachable_targets() -> None:
+    from mbplan.tasks.floating import SWING, free_flight_case
+
+    a, b = free_flight_case("anymal", 3, seed=1), free_flight_case("anymal", 3, seed=1)
+    target = a["goal"].residual.target
+    np.testing.assert_array_equal(target, b["goal"].residual.target)
+    assert not np.array_equal(target, free_flight_case("anymal", 4, seed=1)["goal"].residual.target)
+    robot = a.robot
+    start = a.q0[robot.q_of_v[robot.joint_indices(None)]]
+    assert np.all(np.abs(target - start) <= SWING + 1e-12)
+    with pytest.raises(InputError, match="unknown robot 'iiwa'"):
+        free_flight_case("iiwa", 0)
+
+
+def test_a_locked_robot_keeps_its_floating_base_in_its_reference_configurations() -> None:
+    robot = _robot("talos_legs")
+    q = robot.configuration("default")
+    assert q.shape == (robot.nq,)
+    np.testing.assert_allclose(np.linalg.norm(q[3:7]), 1.0)
+    full = _robot("talos").configuration("default")
+    np.testing.assert_array_equal(q[:7], full[:7])

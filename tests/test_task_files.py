@@ -74,6 +74,7 @@ CASES = [
     pytest.param(FOURBAR, "ripm", [], id="fourbar-ripm"),  # a closed loop, full size
     pytest.param(FOURBAR, "ipopt", [], id="fourbar-ipopt"),
     pytest.param(SOLO, "ripm", [], id="solo12-ripm"),  # a floating base in free flight
+    pytest.param(SOLO, "ipopt", [], id="solo12-ipopt"),
 ]
 
 

@@ -316,6 +316,15 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     loops.add_argument("--out", default="out/bench/loops", help="output directory")
     _add_pool_options(loops)
     loops.set_defaults(func=_bench_suite("mbplan.benchmarks.loops"))
+    floating = bench_sub.add_parser(
+        "floating",
+        help="RIPM vs IPOPT on floating-base robots in free flight (solo12, anymal, go2, "
+        "talos_legs): seeded joint targets",
+    )
+    _add_suite_options(floating, 10, ("solo12", "anymal", "go2", "talos_legs"), "robots", 1e-6)
+    floating.add_argument("--out", default="out/bench/floating", help="output directory")
+    _add_pool_options(floating)
+    floating.set_defaults(func=_bench_suite("mbplan.benchmarks.floating"))
     robustness = bench_sub.add_parser(
         "robustness",
         help="RIPM vs IPOPT on seeded families of hard tasks (graded chains, mesh arms among "

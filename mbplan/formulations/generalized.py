@@ -8,7 +8,10 @@ For ``k = 0..N-1`` (eq. 61, explicit Euler as the paper writes it)::
     (q_{k+1} - q_k)/Δt - v_k = 0                          kinematics (divided by Δt: rad/s)
     RNEA(q_k, v_k, (v_{k+1} - v_k)/Δt) + D v_{k+1} - τ_k = 0   dynamics
 
-(``D = diag(model.damping)``: URDF viscous joint damping, zero unless the robot has it; taken at
+(a floating base, :mod:`mbplan.formulations.free_flyer`: ``q_k`` holds the base's position and
+quaternion in R⁴, the position step is ``(q_{k+1} ⊖ q_k)/Δt - v_k``, a row ``|quat_k|² - 1 = 0``
+per knot follows the dynamics rows and the base's six torques are bounded to zero;
+``D = diag(model.damping)``: URDF viscous joint damping, zero unless the robot has it; taken at
 ``v_{k+1}``, implicitly, so that stiff damping of light links, ``λ(M⁻¹D) Δt ≫ 1``, stays stable
 and the step relaxes to the quasi-static ``D v = τ - h``), then the OCP's constraints, item by item
 and knot by knot (equalities ``r = 0``, inequalities
@@ -38,7 +41,9 @@ import pinocchio as pin
 import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
+from mbplan.errors import InputError
 from mbplan.formulations.casadi_nlp import NumpyCallback, SparsePattern, block
+from mbplan.formulations.free_flyer import FreeFlyerChart
 from mbplan.formulations.generalized_loops import (
     check_first_step,
     guess_forces,
@@ -50,6 +55,7 @@ from mbplan.formulations.interval_rows import ConfigurationRows, interval_rows, 
 from mbplan.formulations.joint_space import configuration_rows, knot_function
 from mbplan.ocp.problem import OCP, Item
 from mbplan.residuals.base import SymbolicRows
+from mbplan.robots.configuration import difference
 
 FD_STEP_Q = 1e-5  # rad: central differences of the analytic RNEA derivatives in q
 
@@ -98,20 +104,21 @@ class GeneralizedNLP:
         robot = ocp.robot
         self.model, self.data = robot.model, robot.model.createData()
         self.damping = np.array(robot.model.damping, dtype=float)
-        N, nv = ocp.N, robot.nv
-        self.N, self.nv, self.dt = N, nv, ocp.dt
+        N, nq, nv = ocp.N, robot.nq, robot.nv
+        self.N, self.nq, self.nv, self.dt = N, nq, nv, ocp.dt
+        self.chart = FreeFlyerChart(robot.model) if getattr(robot, "floating", False) else None
         self.loops = loop_functions(robot) if robot.loops else None
         if self.loops:
             check_first_step(robot, ocp.q0, ocp.v0, ocp.dt)
         self.nc = self.loops.size if self.loops else 0
-        self.n = 3 * N * nv + N * self.nc
-        a_of_x = np.zeros((3 * nv, 3 * nv))  # (q, v, a) from (q_k, v_k, v_{k+1})
-        a_of_x[: 2 * nv, : 2 * nv] = np.eye(2 * nv)
-        a_of_x[2 * nv :, nv : 2 * nv] = -np.eye(nv) / self.dt
-        a_of_x[2 * nv :, 2 * nv :] = np.eye(nv) / self.dt
+        self.n = N * (nq + 2 * nv) + N * self.nc
+        a_of_x = np.zeros((nq + 2 * nv, nq + 2 * nv))  # (q, v, a) from (q_k, v_k, v_{k+1})
+        a_of_x[: nq + nv, : nq + nv] = np.eye(nq + nv)
+        a_of_x[nq + nv :, nq : nq + nv] = -np.eye(nv) / self.dt
+        a_of_x[nq + nv :, nq + nv :] = np.eye(nv) / self.dt
         self._a_of_x = a_of_x
         self._bounds()
-        row = 2 * N * nv
+        row = 2 * N * nv + (N if self.chart is not None else 0)  # the quaternions' norm rows
         self.rows: list[_Rows] = []
         self.costs: list[_Rows] = []
         own = []  # rows with their own derivatives in q, placed after the CasADi rows
@@ -142,6 +149,13 @@ class GeneralizedNLP:
             for x, out, cols, row0 in loop_blocks(self, self.loops, row):
                 self.rows.append(_Rows.of(None, x, out, cols, row0))
             row += loop_rows(N, self.loops)
+        if own and self.chart is not None:
+            names = ", ".join(sorted({item.name for _, item, _ in own}))
+            raise InputError(
+                f"generalized formulation: {names}: rows with their own derivatives in q (coal "
+                "distances, rows between knots) are not written for a floating base; plan it "
+                "with 'ripm'"
+            )
         self.own: list[ConfigurationRows] = []
         for place, item, form in own:
             self.own.append(place(self, item, form, row))
@@ -160,19 +174,20 @@ class GeneralizedNLP:
 
     # -- layout --------------------------------------------------------------------------------
     def iq(self, k: ArrayLike) -> np.ndarray:
-        """Indices of ``q_k`` (``k = 1..N``) in ``z``, shape ``(*k.shape, nv)``."""
-        return (np.asarray(k)[..., None] - 1) * self.nv + np.arange(self.nv)
+        """Indices of ``q_k`` (``k = 1..N``) in ``z``, shape ``(*k.shape, nq)``."""
+        return (np.asarray(k)[..., None] - 1) * self.nq + np.arange(self.nq)
 
     def iv(self, k: ArrayLike) -> np.ndarray:
-        return self.iq(k) + self.N * self.nv
+        return (np.asarray(k)[..., None] - 1) * self.nv + np.arange(self.nv) + self.N * self.nq
 
     def itau(self, k: ArrayLike) -> np.ndarray:
         """Indices of ``τ_k`` (``k = 0..N-1``)."""
-        return self.iq(np.asarray(k) + 1) + 2 * self.N * self.nv
+        return self.iv(np.asarray(k) + 1) + self.N * self.nv
 
     def ilam(self, k: ArrayLike) -> np.ndarray:
         """Indices of the loop forces ``λ_k`` (``k = 0..N-1``), shape ``(*k.shape, nc)``."""
-        return 3 * self.N * self.nv + np.asarray(k)[..., None] * self.nc + np.arange(self.nc)
+        start = self.N * (self.nq + 2 * self.nv)
+        return start + np.asarray(k)[..., None] * self.nc + np.arange(self.nc)
 
     def _columns(self, item: Item) -> np.ndarray:
         k = item.knots
@@ -189,13 +204,19 @@ class GeneralizedNLP:
         return np.concatenate([q[1:].ravel(), v[1:].ravel(), tau.ravel(), lam.ravel()])
 
     def unpack(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Knots ``q, v (N+1, nv)`` and torques ``tau (N, nv)`` (:meth:`loop_forces`: ``λ``)."""
-        Q, V, T = np.reshape(z[: 3 * self.N * self.nv], (3, self.N, self.nv))
-        return np.vstack([self.ocp.q0, Q]), np.vstack([self.ocp.v0, V]), T
+        """Knots ``q (N+1, nq)``, ``v (N+1, nv)`` and torques ``tau (N, nv)`` (a floating base's
+        quaternions normalized; :meth:`loop_forces`: ``λ``)."""
+        q = self._coordinates(z)
+        V, T = np.reshape(z[self.N * self.nq : self.N * (self.nq + 2 * self.nv)], (2, self.N, -1))
+        return q if self.chart is None else self.chart.normalize(q), np.vstack([self.ocp.v0, V]), T
+
+    def _coordinates(self, z: np.ndarray) -> np.ndarray:
+        """The knots' configuration coordinates in ``z`` as they are, ``(N+1, nq)``."""
+        return np.vstack([self.ocp.q0, np.reshape(z[: self.N * self.nq], (self.N, self.nq))])
 
     def loop_forces(self, z: np.ndarray) -> np.ndarray:
         """The loop forces ``λ (N, nc)`` of the imposed closure rows, per interval."""
-        return np.reshape(z[3 * self.N * self.nv :], (self.N, self.nc))
+        return np.reshape(z[self.N * (self.nq + 2 * self.nv) :], (self.N, self.nc))
 
     def _bounds(self) -> None:
         self.lbz, self.ubz = np.full(self.n, -np.inf), np.full(self.n, np.inf)
@@ -206,8 +227,15 @@ class GeneralizedNLP:
                 continue
             variable, lower, upper = bounds
             index = columns[variable](item.knots)
+            if variable == "q":  # by velocity index: the 1-dof joints' coordinates
+                joint = np.flatnonzero(self.ocp.robot.q_of_v >= 0)
+                index = index[:, self.ocp.robot.q_of_v[joint]]
+                lower, upper = np.asarray(lower)[joint], np.asarray(upper)[joint]
             self.lbz[index] = np.maximum(self.lbz[index], lower)
             self.ubz[index] = np.minimum(self.ubz[index], upper)
+        if self.chart is not None:  # a floating base takes no torque
+            base = self.itau(np.arange(self.N))[:, :6]
+            self.lbz[base] = self.ubz[base] = 0.0
 
     def initial_guess(self, q: np.ndarray) -> np.ndarray:
         """``z`` from a joint path ``q (N+1, nq)`` with eq. (61) met: ``v_k = (q_{k+1} -
@@ -217,11 +245,13 @@ class GeneralizedNLP:
         :func:`~mbplan.formulations.generalized_loops.guess_forces`."""
         if self.loops:
             q = np.vstack([q[:1], [self.ocp.robot.closed(qk) for qk in q[1:]]])
-        v = np.zeros_like(q)
-        v[:-1] = np.diff(q, axis=0) / self.dt
+        v = np.zeros((len(q), self.nv))
+        v[:-1] = difference(self.model, q[:-1], q[1:]) / self.dt
         a = np.diff(v, axis=0) / self.dt
         tau = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
         tau, lam = tau + self.damping * v[1:], None
+        if self.chart is not None:
+            tau[:, :6] = 0.0  # the base's rows are left to the solver
         if self.loops:
             lam, tau = guess_forces(self.ocp.robot, self.loops, q[:-1], tau)
         return self.pack(q, v, tau, lam)
@@ -257,12 +287,19 @@ class GeneralizedNLP:
     def constraints(self, z: np.ndarray) -> np.ndarray:
         q, v, tau = self.unpack(z)
         a = np.diff(v, axis=0) / self.dt
-        kin = np.diff(q, axis=0) / self.dt - v[:-1]
+        if self.chart is None:
+            kin = np.diff(q, axis=0) / self.dt - v[:-1]
+        else:
+            kin = self.chart.kinematics(q, v, self.dt)
         dyn = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
         g = np.zeros(self.m)
         g[: 2 * self.N * self.nv] = np.concatenate(
             [kin.ravel(), (dyn + self.damping * v[1:] - tau).ravel()]
         )
+        if self.chart is not None:
+            g[2 * self.N * self.nv : (2 * self.nv + 1) * self.N] = self.chart.norm_rows(
+                self._coordinates(z)[1:]
+            )
         for r in self.rows:
             g[r.row0 : r.row0 + r.m * r.K] += np.asarray(r.value.map(r.K)(self._x(r, z))).T.ravel()
         for own in self.own:
@@ -274,15 +311,24 @@ class GeneralizedNLP:
         steps, inner = np.arange(N), np.arange(1, N)
         kin = steps[:, None] * nv + np.arange(nv)
         dyn = kin + N * nv
+        if self.chart is None:  # (q_{k+1} - q_k)/Δt: constant diagonals
+            kin_q = [
+                (kin.ravel(), self.iq(steps + 1).ravel()),
+                (kin[inner].ravel(), self.iq(inner).ravel()),
+            ]
+        else:  # (q_{k+1} ⊖ q_k)/Δt: dense blocks in the coordinates
+            kin_q = [block(kin, self.iq(steps + 1)), block(kin[inner], self.iq(inner))]
         triplets = [
-            (kin.ravel(), self.iq(steps + 1).ravel()),
-            (kin[inner].ravel(), self.iq(inner).ravel()),
+            *kin_q,
             (kin[inner].ravel(), self.iv(inner).ravel()),
             block(dyn[inner], self.iq(inner)),
             block(dyn[inner], self.iv(inner)),
             block(dyn, self.iv(steps + 1)),
             (dyn.ravel(), self.itau(steps).ravel()),
         ]
+        if self.chart is not None:  # |quat_k|² - 1, k = 1..N
+            norm = 2 * N * nv + steps[:, None]
+            triplets.append(block(norm, self.iq(steps + 1)[:, self.chart.quaternion]))
         for r in self.rows:
             lr, lc = (np.array(a, dtype=np.int64) for a in r.jac.sparsity_out(0).get_triplet())
             k = np.arange(r.K)[:, None]
@@ -305,13 +351,21 @@ class GeneralizedNLP:
         dq, dv, M = (np.empty((self.N, self.nv, self.nv)) for _ in range(3))
         for k in range(self.N):
             dq[k], dv[k], M[k] = pin.computeRNEADerivatives(self.model, self.data, q[k], v[k], a[k])
+        kin = [self._jac_constant]
+        if self.chart is not None:  # in the coordinates: C = ∂δ/∂q
+            coords = self._coordinates(z)
+            first, second = self.chart.kinematics_jacobians(coords, self.dt)
+            dq = dq @ np.array([self.chart.tangent(qk) for qk in coords[:-1]])
+            kin = [second.ravel(), first[1:].ravel(), np.full((self.N - 1) * self.nv, -1.0)]
         parts = [
-            self._jac_constant,
+            *kin,
             dq[1:].ravel(),
             (dv[1:] - M[1:] / self.dt).ravel(),
             (M / self.dt + np.diag(self.damping)).ravel(),  # D v_{k+1}: linear, no Hessian term
             np.full(self.N * self.nv, -1.0),
         ]
+        if self.chart is not None:
+            parts.append(2.0 * self._coordinates(z)[1:, self.chart.quaternion].ravel())
         for r in self.rows:
             parts.append(np.asarray(r.jac.map(r.K)(self._x(r, z)).nonzeros()))
         parts += [own.jacobian_values(q, v) for own in self.own]
@@ -325,6 +379,11 @@ class GeneralizedNLP:
         inner = np.arange(1, N)
         local = np.concatenate([self.iq(inner), self.iv(inner), self.iv(inner + 1)], axis=1)
         triplets = [block(local, local)]
+        if self.chart is not None:  # the kinematics rows' (q_k, q_{k+1}); the norm rows'
+            pair = np.concatenate([self.iq(inner), self.iq(inner + 1)], axis=1)
+            triplets += [block(self.iq([1]), self.iq([1])), block(pair, pair)]
+            quat = self.iq(np.arange(1, N + 1))[:, self.chart.quaternion]
+            triplets.append((quat.ravel(), quat.ravel()))
         self._hess_sizes = []
         for r in (*self.rows, *self.costs):
             lr, lc = (np.array(a, dtype=np.int64) for a in r.hess.sparsity_out(0).get_triplet())
@@ -335,25 +394,30 @@ class GeneralizedNLP:
         self.hess_pattern = SparsePattern((self.n, self.n), rows, cols, rows <= cols)
 
     def _rnea_hessian(self, q, v, a, lam) -> np.ndarray:
-        """``∇²(λᵀ RNEA(q, v, a))`` over ``(q, v, a)``, ``(3nv, 3nv)`` (module docstring)."""
-        nv, model, data = self.nv, self.model, self.data
+        """``∇²(λᵀ RNEA(q, v, a))`` over ``(q, v, a)``, ``(nq + 2nv)²`` (module docstring; a
+        floating base: over its coordinates ``q``, RNEA at the normalized ones)."""
+        nq, nv, model, data, chart = self.nq, self.nv, self.model, self.data, self.chart
 
         def gradient(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
-            dq, dv, M = pin.computeRNEADerivatives(model, data, qq, vv, a)
+            unit = qq if chart is None else chart.normalize(qq)
+            dq, dv, M = pin.computeRNEADerivatives(model, data, unit, vv, a)
+            if chart is not None:
+                dq = dq @ chart.tangent(qq)
             return np.concatenate([lam @ dq, lam @ dv, lam @ M])
 
-        H = np.zeros((3 * nv, 3 * nv))
+        H = np.zeros((nq + 2 * nv, nq + 2 * nv))
+        for j in range(nq):
+            hq = np.zeros(nq)
+            hq[j] = FD_STEP_Q
+            H[:, j] = (gradient(q + hq, v) - gradient(q - hq, v)) / (2.0 * FD_STEP_Q)
+        vv = slice(nq, nq + nv)
+        base = gradient(q, v)[vv]
         step = np.eye(nv)
         for j in range(nv):
-            hq = FD_STEP_Q * step[j]
-            H[:, j] = (gradient(q + hq, v) - gradient(q - hq, v)) / (2.0 * FD_STEP_Q)
-        base = gradient(q, v)[nv : 2 * nv]
-        for j in range(nv):
-            H[nv : 2 * nv, nv + j] = gradient(q, v + step[j])[nv : 2 * nv] - base
-        qq, vv = slice(0, nv), slice(nv, 2 * nv)
-        H[qq, qq] = 0.5 * (H[qq, qq] + H[qq, qq].T)
+            H[vv, nq + j] = gradient(q, v + step[j])[vv] - base
+        H[:nq, :nq] = 0.5 * (H[:nq, :nq] + H[:nq, :nq].T)
         H[vv, vv] = 0.5 * (H[vv, vv] + H[vv, vv].T)
-        H[:nv, nv:] = H[nv:, :nv].T
+        H[:nq, nq:] = H[nq:, :nq].T
         return H
 
     def _hessian_values(self, z: np.ndarray, sigma: float, lam: np.ndarray) -> np.ndarray:
@@ -361,10 +425,19 @@ class GeneralizedNLP:
         q, v, _ = self.unpack(z)
         a = np.diff(v, axis=0) / self.dt
         lam_dyn = lam[N * nv : 2 * N * nv].reshape(N, nv)
+        coords = q if self.chart is None else self._coordinates(z)
         dyn = np.array(
-            [T.T @ self._rnea_hessian(q[k], v[k], a[k], lam_dyn[k]) @ T for k in range(1, N)]
+            [T.T @ self._rnea_hessian(coords[k], v[k], a[k], lam_dyn[k]) @ T for k in range(1, N)]
         )
         parts = [dyn.ravel()]
+        if self.chart is not None:
+            lam_kin, nq = lam[: N * nv].reshape(N, nv), self.nq
+            pairs = [
+                self.chart.kinematics_hessian(coords[k], coords[k + 1], lam_kin[k], self.dt)
+                for k in range(N)
+            ]
+            parts += [pairs[0][nq:, nq:].ravel(), np.array(pairs[1:]).ravel()]
+            parts.append(np.repeat(2.0 * lam[2 * N * nv : 2 * N * nv + N], 4))
         for r in self.rows:
             L = lam[r.row0 : r.row0 + r.m * r.K].reshape(r.K, r.m).T
             parts.append(np.asarray(r.hess.map(r.K)(self._x(r, z), L).nonzeros()))

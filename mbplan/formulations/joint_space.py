@@ -48,8 +48,10 @@ def joint_axes(model: pin.Model) -> list[tuple[str, np.ndarray]]:
 
 
 def quaternion_matrix(quat: cs.SX) -> cs.SX:
-    """The rotation of the unit quaternion ``(x, y, z, w)``: ``I + 2w[u]× + 2[u]×²``."""
-    u, w = quat[:3], quat[3]
+    """The rotation of the quaternion ``(x, y, z, w)``, normalized: ``I + 2w[u]× + 2[u]×²``
+    (a generalized NLP's quaternion coordinates leave the unit sphere between iterates)."""
+    unit = quat / cs.norm_2(quat)
+    u, w = unit[:3], unit[3]
     K = cs.skew(u)
     return cs.SX.eye(3) + 2.0 * w * K + 2.0 * cs.mtimes(K, K)
 

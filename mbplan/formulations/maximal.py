@@ -15,6 +15,7 @@ from functools import lru_cache
 import numpy as np
 import pinocchio as pin
 import scipy.sparse as sp
+from scipy.spatial.transform import Rotation
 
 from mbplan.errors import InputError
 from mbplan.formulations.maximal_joints import joint_terms
@@ -197,9 +198,19 @@ def free_first_step(model: pin.Model, q0: np.ndarray, v0: np.ndarray, dt: float)
 
 
 def central_differences(model: pin.Model, q: np.ndarray, dt: float) -> np.ndarray:
-    """``(q_{k+1} ⊖ q_{k-1})/(2Δt)`` for ``k = 1 … K-2`` of a path ``q (K, nq)``: ``(K-2, nv)``
-    (``⊖``: :func:`mbplan.robots.configuration.difference`)."""
-    return difference(model, q[:-2], q[2:]) / (2 * dt)
+    """The velocities ``(K-2, nv)`` at knots ``k = 1 … K-2`` of a path ``q (K, nq)``, second
+    order: ``(q_{k+1} - q_{k-1})/(2Δt)`` of the 1-dof joints; a floating base's local velocity
+    ``R_kᵀ(p_{k+1} - p_{k-1})/(2Δt)`` and ``(log(R_kᵀR_{k+1}) - log(R_kᵀR_{k-1}))/(2Δt)``
+    (a screw through ``k-1`` and ``k+1``, Pinocchio's ``difference``, would be off by
+    ``O(Δt |ω| |v|)`` while the base turns and moves)."""
+    v = difference(model, q[:-2], q[2:]) / (2 * dt)
+    if model.nq == model.nv:
+        return v
+    R = Rotation.from_quat(q[:, 3:7]).as_matrix()
+    Rk = np.swapaxes(R[1:-1], -1, -2)
+    v[:, :3] = np.einsum("kij,kj->ki", Rk, q[2:, :3] - q[:-2, :3]) / (2 * dt)
+    v[:, 3:6] = (SO3.log(Rk @ R[2:]) - SO3.log(Rk @ R[:-2])) / (2 * dt)
+    return v
 
 
 def build(ocp: OCP, jit: bool, workspace: Workspace | None = None) -> tuple[MaximalNLP, float]:

@@ -47,8 +47,8 @@ def _fixed_base(ocp: OCP, method: str) -> None:
     if getattr(ocp.robot, "floating", False):
         raise InputError(
             f"method {method!r} does not plan floating-base robots ({ocp.robot.name!r}): its "
-            "generalized-coordinate transcription has no free-flyer joint; plan with 'ripm' "
-            "(maximal coordinates: the base is a free rigid body)"
+            "shooting problem is built for fixed-base robots; plan with 'ripm' (maximal "
+            "coordinates: the base is a free rigid body) or 'ipopt'"
         )
 
 
@@ -62,8 +62,8 @@ def _open_chain(ocp: OCP, method: str) -> None:
 METHODS: dict[str, Method] = {
     "ripm": Method("maximal", m.solve_ripm_maximal),
     "mlgipm": Method("maximal", m.solve_mlgipm_maximal),
-    "ipopt": Method("generalized", m.solve_ipopt_generalized, _fixed_base),
-    "ipopt-no-restoration": Method("generalized", m.solve_ipopt_no_restoration, _fixed_base),
+    "ipopt": Method("generalized", m.solve_ipopt_generalized),
+    "ipopt-no-restoration": Method("generalized", m.solve_ipopt_no_restoration),
     "ms-ilqr": Method("shooting", m.solve_ms_ilqr, check_shooting_ocp),
     "ss-ilqr": Method("shooting", m.solve_ss_ilqr, check_shooting_ocp),
 }

@@ -63,7 +63,8 @@ def reduced_description(desc: RobotDescription, locked: dict[str, float]) -> Rob
         visual = visual.then(lambda g: pin.buildReducedModel(model, [g], ids, q)[1][0])
     elif visual is not None:
         visual = pin.buildReducedModel(model, [visual], ids, q)[1][0]
-    keep = [model.joints[model.getJointId(n)].idx_q for n in reduced.names[1:]]
+    kept = [model.joints[model.getJointId(n)] for n in reduced.names[1:]]
+    keep = [i for joint in kept for i in range(joint.idx_q, joint.idx_q + joint.nq)]
     for name in reference_names(refs):  # the reference configurations without the locked joints
         reduced.referenceConfigurations[name] = np.array(refs[name])[keep]
     return RobotDescription(desc.name, reduced, collision, visual, desc.urdf_path)
