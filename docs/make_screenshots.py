@@ -9,7 +9,8 @@ page (``mbplan.viz.static_html``): docs/iiwa_plan.png and docs/side_by_side.png 
 ``mbplan.tasks.paper.iiwa_obstacle_cases(2, 0)``, primitives only), docs/meshes_<robot>.png for the arms
 with visual meshes and docs/meshes_panda_materials.png (the IPOPT plan in the meshes' own
 materials), and docs/drone.png (the RIPM's docking through clutter of
-``examples/drone_cluttered.py``, halfway). The pages are kept in out/screenshots/.
+``examples/drone_cluttered.py``, halfway), docs/floating_solo12.png (``examples/tasks/solo12_tuck.toml``:
+a floating base in free flight). The pages are kept in out/screenshots/.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import panda_between_boxes  # noqa: E402
 from test_browser import screenshot  # noqa: E402
 
 import mbplan as mb  # noqa: E402
+from mbplan.taskfile import load_task  # noqa: E402
 from mbplan.tasks.drone import cluttered_task  # noqa: E402
 from mbplan.tasks.paper import drone_docking, iiwa_obstacle_cases, tracking_ocp  # noqa: E402
 from mbplan.viz import drone_replay, static_html  # noqa: E402
@@ -56,6 +58,7 @@ TASKS: dict[str, Callable[[], mb.OCP]] = {
     "z1": point_to_point("z1"),
     "xarm7": point_to_point("xarm7"),
     "so100": point_to_point("so100"),
+    "solo12": lambda: load_task(str(ROOT / "examples" / "tasks" / "solo12_tuck.toml")).ocp,
 }
 
 
@@ -82,13 +85,16 @@ def main(robots: list[str]) -> None:
             drone()
             continue
         task = TASKS[robot]()
-        warm = "linear" if robot == "iiwa" else "via"
+        warm = "linear" if robot in ("iiwa", "solo12") else "via"
         results = [mb.plan(task, method, warm_start=warm) for method in ("ripm", "ipopt")]
         for r in results:
             print(f"{robot} {r.method}: {r.status}, {r.iterations} iterations", flush=True)
         if robot == "iiwa":
             shoot(results[:1], task, "iiwa_plan")
             shoot(results, task, "side_by_side")
+            continue
+        if robot == "solo12":
+            shoot(results, task, "floating_solo12")
             continue
         shoot(results, task, f"meshes_{robot}")
         if robot == "panda":

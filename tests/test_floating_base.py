@@ -337,3 +337,20 @@ def test_a_locked_robot_keeps_its_floating_base_in_its_reference_configurations(
     np.testing.assert_allclose(np.linalg.norm(q[3:7]), 1.0)
     full = _robot("talos").configuration("default")
     np.testing.assert_array_equal(q[:7], full[:7])
+
+
+def test_the_base_error_of_validate_dynamics_resolves_tiny_rotations() -> None:
+    """The base's rotation error is the angle of ``q_ref⁻¹q`` to round-off (an arccos of the
+    quaternions' dot product would floor at ~1e-8 rad)."""
+    from scipy.spatial.transform import Rotation
+
+    from mbplan.benchmarks.dynamics_scenario import joint_errors
+
+    mm, q = _mm("solo12"), np.tile(_robot("solo12").configuration("default"), (2, 1))
+    turn = Rotation.from_rotvec([0.3, -0.2, 0.5])
+    q[:, 3:7] = turn.as_quat()
+    moved = q.copy()
+    moved[0, 3:7] = (turn * Rotation.from_rotvec([1e-9, 0.0, 0.0])).as_quat()
+    moved[1, 0] += 2e-3  # and a base position error
+    err = joint_errors(mm, moved, q)[:, 0]
+    np.testing.assert_allclose(err, [1e-9, 2e-3], rtol=1e-6)

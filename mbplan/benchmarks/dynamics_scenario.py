@@ -131,8 +131,11 @@ def joint_errors(mm: MaximalModel, q: np.ndarray, q_ref: np.ndarray) -> np.ndarr
     for b in np.flatnonzero(mm.free):
         i = mm.idx_q[b]
         position = np.linalg.norm(q[:, i : i + 3] - q_ref[:, i : i + 3], axis=1)
-        cos_half = np.abs(np.einsum("ki,ki->k", q[:, i + 3 : i + 7], q_ref[:, i + 3 : i + 7]))
-        err[:, b] = np.maximum(position, 2.0 * np.arccos(np.minimum(cos_half, 1.0)))
+        a, c = q_ref[:, i + 3 : i + 7], q[:, i + 3 : i + 7]  # (x, y, z, w)
+        cos_half = np.einsum("ki,ki->k", a, c)  # the angle of a⁻¹c, without arccos's round-off
+        sin_half = a[:, 3:] * c[:, :3] - c[:, 3:] * a[:, :3] - np.cross(a[:, :3], c[:, :3])
+        angle = 2.0 * np.arctan2(np.linalg.norm(sin_half, axis=1), np.abs(cos_half))
+        err[:, b] = np.maximum(position, angle)
     c = mm.idx_q[mm.continuous]
     err[:, mm.continuous] = np.arctan2(
         q[:, c + 1] * q_ref[:, c] - q[:, c] * q_ref[:, c + 1],

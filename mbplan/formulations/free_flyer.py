@@ -12,18 +12,28 @@ normalized ``q``, times the normalization's Jacobian; a radial change of the qua
 nothing.
 
 Explicit Euler's position step of eq. (61) becomes ``(q_{k+1} ⊖ q_k)/Δt - v_k = 0`` with
-Pinocchio's ``difference`` (its Jacobians ``dDifference``; Hessians by central differences of
-these gradients, step :data:`FD_STEP`).
+Pinocchio's ``difference``: the base's ``log6(M_k⁻¹ M_{k+1})`` as a CasADi expression of the
+coordinates (exact Jacobian and Hessian), the joints' plain differences.
 """
 
 from __future__ import annotations
 
-from itertools import pairwise
+from functools import cache
 
+import casadi as cs
 import numpy as np
 import pinocchio as pin
 
-FD_STEP = 1e-5  # central differences of the analytic gradients in the coordinates
+from mbplan.lie import SE3
+
+
+def quaternion_matrix(quat: cs.SX) -> cs.SX:
+    """The rotation of the quaternion ``(x, y, z, w)``, normalized: ``I + 2w[u]× + 2[u]×²``
+    (a generalized NLP's quaternion coordinates leave the unit sphere between iterates)."""
+    unit = quat / cs.norm_2(quat)
+    u, w = unit[:3], unit[3]
+    K = cs.skew(u)
+    return cs.SX.eye(3) + 2.0 * w * K + 2.0 * cs.mtimes(K, K)
 
 
 class FreeFlyerChart:
@@ -56,35 +66,48 @@ class FreeFlyerChart:
 
     def kinematics(self, q: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:
         """``(q_{k+1} ⊖ q_k)/Δt - v_k`` for the knots ``q (K+1, nq)``, ``v (K+1, nv)``:
-        ``(K, nv)``."""
-        unit = self.normalize(q)
-        steps = [pin.difference(self.model, a, b) for a, b in pairwise(unit)]
-        return np.array(steps) / dt - v[:-1]
+        ``(K, nv)`` (the base's ``log6(M_k⁻¹ M_{k+1})``, the joints' differences)."""
+        step = np.empty((len(q) - 1, self.nv))
+        step[:, :6] = np.array(_base_step()[0].map(len(q) - 1)(q[:-1, :7].T, q[1:, :7].T)).T
+        step[:, 6:] = q[1:, 7:] - q[:-1, 7:]
+        return step / dt - v[:-1]
 
     def kinematics_jacobians(self, q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """``∂/∂q_k`` and ``∂/∂q_{k+1}`` of :meth:`kinematics`, ``(K, nv, nq)`` each."""
-        unit = self.normalize(q)
-        C = np.array([self.tangent(qk) for qk in q])
-        J = [pin.dDifference(self.model, a, b) for a, b in pairwise(unit)]
-        first = np.array([j[0] for j in J]) @ C[:-1] / dt
-        second = np.array([j[1] for j in J]) @ C[1:] / dt
-        return first, second
+        K = len(q) - 1
+        J = np.array(_base_step()[1].map(K)(q[:-1, :7].T, q[1:, :7].T)).reshape(6, K, 14)
+        J = J.transpose(1, 0, 2)
+        first, second = np.zeros((K, self.nv, self.nq)), np.zeros((K, self.nv, self.nq))
+        first[:, :6, :7], second[:, :6, :7] = J[..., :7], J[..., 7:]
+        joints = np.arange(6, self.nv)
+        first[:, joints, joints + 1], second[:, joints, joints + 1] = -1.0, 1.0
+        return first / dt, second / dt
 
-    def kinematics_hessian(
-        self, q0: np.ndarray, q1: np.ndarray, lam: np.ndarray, dt: float
-    ) -> np.ndarray:
-        """``∇²(λᵀ (q₁ ⊖ q₀)/Δt)`` over the coordinates ``(q₀, q₁)``: ``(2nq, 2nq)``; the
-        joints' rows are linear, so only the bases' coordinates have second derivatives."""
-        nq = self.nq
+    def kinematics_hessians(self, q: np.ndarray, lam: np.ndarray, dt: float) -> np.ndarray:
+        """``∇²(λ_kᵀ (q_{k+1} ⊖ q_k)/Δt)`` over the bases' coordinates ``(q_k[:7],
+        q_{k+1}[:7])`` (the joints' rows are linear): ``(K, 14, 14)``, for ``lam (K, nv)``."""
+        K = len(q) - 1
+        H = _base_step()[2].map(K)(q[:-1, :7].T, q[1:, :7].T, lam[:, :6].T / dt)
+        return np.array(H).reshape(14, K, 14).transpose(1, 0, 2)
 
-        def gradient(x: np.ndarray) -> np.ndarray:
-            first, second = self.kinematics_jacobians(np.stack([x[:nq], x[nq:]]), dt)
-            return np.concatenate([lam @ first[0], lam @ second[0]])
 
-        x = np.concatenate([q0, q1])
-        H = np.zeros((2 * nq, 2 * nq))
-        for j in (*range(7), *range(nq, nq + 7)):  # the bases' position and quaternion
-            e = np.zeros(2 * nq)
-            e[j] = FD_STEP
-            H[:, j] = (gradient(x + e) - gradient(x - e)) / (2.0 * FD_STEP)
-        return 0.5 * (H + H.T)
+# process-wide cache, result-neutral: a CasADi function of nothing but its own symbols
+@cache
+def _base_step() -> tuple[cs.Function, cs.Function, cs.Function]:
+    """``log6(M(a)⁻¹ M(b))`` of two free-flyer configurations ``a, b`` (position, quaternion
+    ``x y z w`` normalized where read; Pinocchio's ``difference``), its Jacobian ``(6, 14)``
+    and the Hessian of ``μᵀ log6`` ``(14, 14)``."""
+    a, b, mu = cs.SX.sym("a", 7), cs.SX.sym("b", 7), cs.SX.sym("mu", 6)
+
+    def placement(x: cs.SX) -> cs.SX:
+        return cs.vertcat(cs.horzcat(quaternion_matrix(x[3:7]), x[:3]), cs.DM([[0, 0, 0, 1]]))
+
+    step = SE3.log(cs.mtimes(SE3.inverse(placement(a)), placement(b)))
+    x = cs.vertcat(a, b)
+    return (
+        cs.Function("base_step", [a, b], [step]),
+        cs.Function("base_step_jacobian", [a, b], [cs.densify(cs.jacobian(step, x))]),
+        cs.Function(
+            "base_step_hessian", [a, b, mu], [cs.densify(cs.hessian(cs.dot(mu, step), x)[0])]
+        ),
+    )

@@ -379,9 +379,9 @@ class GeneralizedNLP:
         inner = np.arange(1, N)
         local = np.concatenate([self.iq(inner), self.iv(inner), self.iv(inner + 1)], axis=1)
         triplets = [block(local, local)]
-        if self.chart is not None:  # the kinematics rows' (q_k, q_{k+1}); the norm rows'
-            pair = np.concatenate([self.iq(inner), self.iq(inner + 1)], axis=1)
-            triplets += [block(self.iq([1]), self.iq([1])), block(pair, pair)]
+        if self.chart is not None:  # the kinematics rows' bases (q_k, q_{k+1}); the norm rows'
+            base = np.concatenate([self.iq(inner)[:, :7], self.iq(inner + 1)[:, :7]], axis=1)
+            triplets += [block(self.iq([1])[:, :7], self.iq([1])[:, :7]), block(base, base)]
             quat = self.iq(np.arange(1, N + 1))[:, self.chart.quaternion]
             triplets.append((quat.ravel(), quat.ravel()))
         self._hess_sizes = []
@@ -398,18 +398,21 @@ class GeneralizedNLP:
         floating base: over its coordinates ``q``, RNEA at the normalized ones)."""
         nq, nv, model, data, chart = self.nq, self.nv, self.model, self.data, self.chart
 
-        def gradient(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
+        at_q = None if chart is None else chart.tangent(q)
+
+        def gradient(qq: np.ndarray, vv: np.ndarray, j: int = -1) -> np.ndarray:
+            """At ``qq``, ``q`` moved along coordinate ``j`` (-1: not moved)."""
             unit = qq if chart is None else chart.normalize(qq)
             dq, dv, M = pin.computeRNEADerivatives(model, data, unit, vv, a)
-            if chart is not None:
-                dq = dq @ chart.tangent(qq)
+            if chart is not None:  # C depends on the base's coordinates alone
+                dq = dq @ (chart.tangent(qq) if 0 <= j < 7 else at_q)
             return np.concatenate([lam @ dq, lam @ dv, lam @ M])
 
         H = np.zeros((nq + 2 * nv, nq + 2 * nv))
         for j in range(nq):
             hq = np.zeros(nq)
             hq[j] = FD_STEP_Q
-            H[:, j] = (gradient(q + hq, v) - gradient(q - hq, v)) / (2.0 * FD_STEP_Q)
+            H[:, j] = (gradient(q + hq, v, j) - gradient(q - hq, v, j)) / (2.0 * FD_STEP_Q)
         vv = slice(nq, nq + nv)
         base = gradient(q, v)[vv]
         step = np.eye(nv)
@@ -431,12 +434,8 @@ class GeneralizedNLP:
         )
         parts = [dyn.ravel()]
         if self.chart is not None:
-            lam_kin, nq = lam[: N * nv].reshape(N, nv), self.nq
-            pairs = [
-                self.chart.kinematics_hessian(coords[k], coords[k + 1], lam_kin[k], self.dt)
-                for k in range(N)
-            ]
-            parts += [pairs[0][nq:, nq:].ravel(), np.array(pairs[1:]).ravel()]
+            pairs = self.chart.kinematics_hessians(coords, lam[: N * nv].reshape(N, nv), self.dt)
+            parts += [pairs[0, 7:, 7:].ravel(), pairs[1:].ravel()]
             parts.append(np.repeat(2.0 * lam[2 * N * nv : 2 * N * nv + N], 4))
         for r in self.rows:
             L = lam[r.row0 : r.row0 + r.m * r.K].reshape(r.K, r.m).T

@@ -20,6 +20,7 @@ import pinocchio as pin
 
 from mbplan.errors import InputError
 from mbplan.formulations.free_body import evaluate_body
+from mbplan.formulations.free_flyer import quaternion_matrix
 from mbplan.lie import SO3
 from mbplan.ocp.scene import Scene
 from mbplan.residuals.base import Residual, SymbolicContext, SymbolicRows
@@ -45,15 +46,6 @@ def joint_axes(model: pin.Model) -> list[tuple[str, np.ndarray]]:
         else:
             out.append(("prismatic", S[:3] / np.linalg.norm(S[:3])))
     return out
-
-
-def quaternion_matrix(quat: cs.SX) -> cs.SX:
-    """The rotation of the quaternion ``(x, y, z, w)``, normalized: ``I + 2w[u]× + 2[u]×²``
-    (a generalized NLP's quaternion coordinates leave the unit sphere between iterates)."""
-    unit = quat / cs.norm_2(quat)
-    u, w = unit[:3], unit[3]
-    K = cs.skew(u)
-    return cs.SX.eye(3) + 2.0 * w * K + 2.0 * cs.mtimes(K, K)
 
 
 def symbolic_placements(model: pin.Model, q: cs.SX) -> list[tuple[cs.SX, cs.SX]]:
