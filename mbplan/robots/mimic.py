@@ -10,7 +10,7 @@ from pathlib import Path
 from mbplan.errors import InputError, RobotModelError
 from mbplan.robots import RobotDescription
 from mbplan.robots.joints import joint_kind
-from mbplan.robots.loader import mimic_tags
+from mbplan.robots.urdf_checks import mimic_tags
 
 MIMIC_MODES = ("couple", "independent")
 
@@ -26,7 +26,7 @@ class Mimic:
 
 
 def mimic_tags_of(desc: RobotDescription) -> dict[str, tuple[str, float, float]]:
-    """:func:`~mbplan.robots.loader.mimic_tags` of ``desc``'s URDF (none without one)."""
+    """:func:`~mbplan.robots.urdf_checks.mimic_tags` of ``desc``'s URDF (none without one)."""
     path = desc.urdf_path
     if path is None or Path(path).suffix.lower() != ".urdf":
         return {}
