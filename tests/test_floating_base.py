@@ -354,3 +354,35 @@ def test_the_base_error_of_validate_dynamics_resolves_tiny_rotations() -> None:
     moved[1, 0] += 2e-3  # and a base position error
     err = joint_errors(mm, moved, q)[:, 0]
     np.testing.assert_allclose(err, [1e-9, 2e-3], rtol=1e-6)
+
+
+def test_floating_inputs_are_checked_and_named() -> None:
+    """A start quaternion off the unit sphere, a zero quaternion in a warm start, a goal for
+    every coordinate in a task file: mbplan errors; limit rows are labelled by their joints."""
+    robot = _robot("solo12")
+    q0 = robot.configuration("default")
+    bad = q0.copy()
+    bad[3:7] = [0.0, 0.0, 0.3, 1.0]
+    with pytest.raises(InputError, match="not of unit norm"):
+        mb.OCP(robot, N=4, dt=0.05, q0=bad)
+    flipped = q0.copy()
+    flipped[3:7] = [0.0, 0.0, -0.6, -0.8]
+    assert mb.OCP(robot, N=4, dt=0.05, q0=flipped).q0[6] == pytest.approx(0.8)
+    ocp = _tuck_ocp()
+    guess = np.tile(ocp.q0, (ocp.N + 1, 1))
+    guess[3, 3:7] = 0.0
+    with pytest.raises(InputError, match="knot 3 has a zero quaternion"):
+        mb.plan(ocp, "ripm", warm_start=guess)
+    limits = ocp["position_limits"].residual
+    assert limits.row_label(robot, ocp.scene, 0) == "the lower limit of joint 'FL_HAA'"
+    assert limits.row_label(robot, ocp.scene, 23) == "the upper limit of joint 'HR_KFE'"
+
+
+def test_a_floating_task_file_refuses_a_goal_on_every_coordinate(tmp_path) -> None:
+    from mbplan.taskfile import load_task
+
+    task = tmp_path / "solo.toml"
+    q = ", ".join(str(x) for x in _robot("solo12").configuration("default"))
+    task.write_text(f'[robot]\nname = "solo12"\n[horizon]\nN = 5\ndt = 0.02\n[goal]\nq = [{q}]\n')
+    with pytest.raises(InputError, match=r"lists them: joints = \[\.\.\.\] and q"):
+        load_task(str(task))

@@ -127,11 +127,18 @@ class GeneralizedNLP:
             if item.role == "constraint" and r.variable_bounds(robot) is not None:
                 continue
             form = r.joint_space(robot, ocp.scene)
+            between = item.role == "constraint" and r.between_knots
+            if self.chart is not None and (between or not isinstance(form, SymbolicRows)):
+                raise InputError(
+                    f"generalized formulation: {item.role} {item.name!r}: rows with their own "
+                    "derivatives in q (coal distances) or between knots are not written for a "
+                    "floating base; plan it with 'ripm'"
+                )
             if not isinstance(form, SymbolicRows):
                 own.append((knot_rows, item, form))
-            if item.role == "constraint" and r.between_knots:
-                between = configuration_rows(robot, ocp.scene, r.between_knots_form())
-                own.append((interval_rows, item, between))
+            if between:
+                sampled = configuration_rows(robot, ocp.scene, r.between_knots_form())
+                own.append((interval_rows, item, sampled))
             if not isinstance(form, SymbolicRows):
                 continue
             fn = knot_function(robot, ocp.scene, r)
@@ -149,13 +156,6 @@ class GeneralizedNLP:
             for x, out, cols, row0 in loop_blocks(self, self.loops, row):
                 self.rows.append(_Rows.of(None, x, out, cols, row0))
             row += loop_rows(N, self.loops)
-        if own and self.chart is not None:
-            names = ", ".join(sorted({item.name for _, item, _ in own}))
-            raise InputError(
-                f"generalized formulation: {names}: rows with their own derivatives in q (coal "
-                "distances, rows between knots) are not written for a floating base; plan it "
-                "with 'ripm'"
-            )
         self.own: list[ConfigurationRows] = []
         for place, item, form in own:
             self.own.append(place(self, item, form, row))
@@ -337,12 +337,9 @@ class GeneralizedNLP:
         rows = np.concatenate([r for r, _ in triplets])
         cols = np.concatenate([c for _, c in triplets])
         self.jac_pattern = SparsePattern((self.m, self.n), rows, cols, np.ones(rows.size, bool))
-        self._jac_constant = np.concatenate(
-            [
-                np.full(N * nv, 1.0 / self.dt),
-                np.full((N - 1) * nv, -1.0 / self.dt),
-                np.full((N - 1) * nv, -1.0),
-            ]
+        steps = (np.full(N * nv, 1.0 / self.dt), np.full((N - 1) * nv, -1.0 / self.dt))
+        self._jac_constant = np.concatenate(  # the kinematics rows' q parts: without a chart
+            [*(steps if self.chart is None else ()), np.full((N - 1) * nv, -1.0)]
         )
 
     def _jacobian_values(self, z: np.ndarray) -> np.ndarray:
@@ -356,7 +353,7 @@ class GeneralizedNLP:
             coords = self._coordinates(z)
             first, second = self.chart.kinematics_jacobians(coords, self.dt)
             dq = dq @ np.array([self.chart.tangent(qk) for qk in coords[:-1]])
-            kin = [second.ravel(), first[1:].ravel(), np.full((self.N - 1) * self.nv, -1.0)]
+            kin = [second.ravel(), first[1:].ravel(), self._jac_constant]
         parts = [
             *kin,
             dq[1:].ravel(),

@@ -26,7 +26,7 @@ from mbplan.ocp.problem import OCP, Item
 from mbplan.robots.configuration import difference, integrate
 from mbplan.robots.loops import Loop
 from mbplan.simulation.closed_loop import closed_loop_actuation
-from mbplan.simulation.reference import mass_matrix
+from mbplan.simulation.reference import damped_aba, mass_matrix
 from mbplan.simulation.warm_start import maximal_warm_start
 from mbplan.transcription.multibody import multibody_layout
 from mbplan.transcription.terms import Term
@@ -132,12 +132,12 @@ class MaximalNLP:
         return bodies | self.joint_trajectory(x)
 
     def joint_trajectory(self, x: Point) -> dict[str, np.ndarray]:
-        """Joint-space view of a maximal point: ``q, v (N+1, nq)``, ``tau (N, nv)`` (interval
+        """Joint-space view of a maximal point: ``q (N+1, nq)``, ``v (N+1, nv)``, ``tau (N, nv)`` (interval
         means), ``tau_knots (N+1, nv)`` (first-order hold of the LGVI's knot torques, eq. 29).
 
-        ``q_k`` from the relative poses and ``v_k = (q_{k+1} ⊖ q_{k-1})/(2Δt)`` (with
-        ``q_{N+1}`` from ``R_N F_N``; ``⊖``: Pinocchio's ``difference``, the base's local
-        velocity for a floating base, whose torques are zero). Knot 0's torque does not enter the LGVI, where the arm
+        ``q_k`` from the relative poses and ``v_k`` their central differences (with ``q_{N+1}``
+        from ``R_N F_N``; a floating base's local velocity, :func:`central_differences`; its
+        torques are zero). Knot 0's torque does not enter the LGVI, where the arm
         rests over the first step as in eq. (61): ``tau_knots[0]`` makes the mean over
         ``[t_0, t_1]`` the torque for which eq. (61)'s first step reaches the planned ``v_1``
         (with loop closures: the actuated joints' torques and closure forces that do, least
@@ -190,10 +190,11 @@ def first_step_torque(mm: MaximalModel, q: np.ndarray, v: np.ndarray, a: np.ndar
 
 
 def free_first_step(model: pin.Model, q0: np.ndarray, v0: np.ndarray, dt: float) -> np.ndarray:
-    """``q_1 = q_0 ⊕ (Δt v_0 + ½Δt² a_0)``, ``a_0 = ABA(q_0, v_0, 0)``: the first step of a robot
-    released at ``(q_0, v_0)`` with zero joint torques (from rest: every body falls by
+    """``q_1 = q_0 ⊕ (Δt v_0 + ½Δt² a_0)``, ``a_0`` the forward dynamics (with the joints'
+    damping) under zero torque: the first step of a robot released at ``(q_0, v_0)`` with zero
+    joint torques (from rest: every body falls by
     ``½gΔt²``, the LGVI's own first step when no joint force acts at knot 0)."""
-    a0 = pin.aba(model, model.createData(), q0, v0, np.zeros(model.nv))
+    a0 = damped_aba(model, model.createData(), q0, v0, np.zeros(model.nv))
     return integrate(model, q0, dt * np.asarray(v0) + 0.5 * dt**2 * a0)
 
 

@@ -81,7 +81,8 @@ def maximal_layout(
     problem, eq_jacobian: sp.spmatrix, workspace: Workspace | None = None
 ) -> MaximalLayout:
     """The :class:`MaximalLayout` of the RIPM problem of :mod:`mbplan.formulations.maximal`
-    (revolute and prismatic joints with a constraint row group on every body) from the
+    (revolute and prismatic joints with a constraint row group on every body but the free
+    ones) from the
     pattern of its equality Jacobian; kept in ``workspace`` by everything it reads (the blocks'
     tangent coordinates, the equality terms' rows, the pattern): every case of a task family
     has the same."""
@@ -200,9 +201,13 @@ def joint_elimination_plan(
     ``segment`` deep is one segment. Kept in ``workspace`` by its layout and options (every
     case of a task family has the same)."""
     lay = maximal_layout(problem, eq_jacobian, workspace)
-    actuated = bool(np.all(lay.tau_cols[1:, ~lay.free] >= 0)) and not lay.free.any()
+    actuated = bool(np.all(lay.tau_cols[1:] >= 0))
     if forces is None:
         forces = actuated and lay.depth <= WRENCH_MAX_DEPTH
+    elif forces and lay.free.any():
+        raise InputError(
+            "joint_elimination_plan: no wrench blocks for a free body (a floating base)"
+        )
     elif forces and not actuated:
         raise InputError("joint_elimination_plan: the wrench blocks need a torque on every joint")
     segment = SEGMENT_DEPTH if segment is None else segment

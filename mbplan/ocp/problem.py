@@ -88,11 +88,12 @@ class OCP:
             refs = self.robot.model.referenceConfigurations
             q0 = self.robot.configuration("default" if "default" in refs else "neutral")
         self.q0 = as_array(q0, (nq,), "q0")
-        if isinstance(self.robot, FreeBody):
-            if abs(np.linalg.norm(self.q0[3:]) - 1.0) > 1e-9:
-                raise InputError(f"q0: quaternion {self.q0[3:]} (x, y, z, w) is not of unit norm")
-            if self.q0[6] < 0.0:  # the plans' sign: w ≥ 0
-                self.q0 = np.r_[self.q0[:3], -self.q0[3:]]
+        if isinstance(self.robot, FreeBody) or getattr(self.robot, "floating", False):
+            quat = self.q0[3:7]
+            if abs(np.linalg.norm(quat) - 1.0) > 1e-9:
+                raise InputError(f"q0: quaternion {quat} (x, y, z, w) is not of unit norm")
+            if quat[3] < 0.0:  # the plans' sign: w ≥ 0
+                self.q0 = np.r_[self.q0[:3], -quat, self.q0[7:]]
         self.v0 = as_array(np.zeros(nv) if v0 is None else v0, (nv,), "v0")
         self.items: list[Item] = []
         for c in getattr(self.robot, "mimic", ()):
@@ -140,7 +141,7 @@ class OCP:
 
     def _couple(self, c: Mimic) -> None:
         """The constraint of mimic coupling ``c`` on every state knot (q0 must satisfy it)."""
-        follow = int(self.robot.joint_indices([c.follower])[0])
+        follow = int(self.robot.q_of_v[self.robot.joint_indices([c.follower])[0]])
         expected = self.robot.coupled(self.q0)[follow]
         if abs(self.q0[follow] - expected) > MIMIC_START_TOLERANCE:
             raise InputError(

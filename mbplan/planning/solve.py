@@ -41,9 +41,8 @@ class Method:
 
 
 def _fixed_base(ocp: OCP, method: str) -> None:
-    """:class:`InputError` if the robot of ``ocp`` has a floating base: the generalized
-    transcriptions (IPOPT's, Crocoddyl's) are written for fixed-base robots, whose ``q`` is a
-    vector of joint positions (a free flyer's quaternion would need its own)."""
+    """:class:`InputError` if the robot of ``ocp`` has a floating base: Crocoddyl's shooting
+    problems are built here for fixed-base robots (a free flyer's state needs its own)."""
     if getattr(ocp.robot, "floating", False):
         raise InputError(
             f"method {method!r} does not plan floating-base robots ({ocp.robot.name!r}): its "
@@ -125,12 +124,16 @@ def warm_start_path(ocp: OCP, warm_start: str | ArrayLike) -> np.ndarray:
     if isinstance(warm_start, str):
         return initial_path(ocp, warm_start)
     q_guess = as_array(warm_start, (ocp.N + 1, ocp.robot.nq), "warm_start")
-    if isinstance(ocp.robot, FreeBody):
-        zero = np.flatnonzero(np.linalg.norm(q_guess[:, 3:], axis=1) < 1e-9)
+    if isinstance(ocp.robot, FreeBody) or getattr(ocp.robot, "floating", False):
+        norm = np.linalg.norm(q_guess[:, 3:7], axis=1)
+        zero = np.flatnonzero(norm < 1e-9)
         if zero.size:
             raise InputError(
                 f"warm_start: knot {zero[0]} has a zero quaternion (columns 3:7, x y z w)"
             )
+        if not isinstance(ocp.robot, FreeBody):  # a floating base's poses: unit quaternions
+            q_guess = np.array(q_guess)
+            q_guess[:, 3:7] /= norm[:, None]
     return q_guess
 
 

@@ -86,8 +86,7 @@ class _JointResidual(Residual):
         return cs.vertcat(*[source[i] for i in idx]) - ctx.theta
 
     def row_label(self, robot: Any, scene: Any, row: int) -> str:
-        names = list(robot.model.names[1:])
-        return f"joint {names[int(self.indices(robot)[row])]!r}"
+        return f"joint {robot.joint_name(self.indices(robot)[row])!r}"
 
     def shooting(self, ctx: Any, item: Any) -> ShootingResidual:
         """A cost: Crocoddyl's state residual, weighted on the selected joints."""

@@ -59,7 +59,7 @@ class _Limits(Residual):
         if np.any((lower >= upper) & ~free):
             j = int(np.argmax((lower >= upper) & ~free))
             raise InputError(
-                f"{name}: lower >= upper for joint {robot.model.names[j + 1]!r} "
+                f"{name}: lower >= upper for joint {robot.joint_name(j)!r} "
                 f"({lower[j]:g}, {upper[j]:g}; URDF without limits?)"
             )
         return replace(self, lower=np.array(lower), upper=np.array(upper))
@@ -93,10 +93,9 @@ class _Limits(Residual):
         return cs.vertcat(ctx.theta[: len(keep)] - var, var - ctx.theta[len(keep) :])
 
     def row_label(self, robot: Any, scene: Any, row: int) -> str:
-        names = list(robot.model.names[1:])
         keep = self.indices(robot)
         side = "lower" if row < len(keep) else "upper"
-        return f"the {side} limit of joint {names[int(keep[row % len(keep)])]!r}"
+        return f"the {side} limit of joint {robot.joint_name(keep[row % len(keep)])!r}"
 
     def shooting(self, ctx: Any, item: Any) -> ShootingResidual:
         """Bounds on Crocoddyl's state residual (FDDP: a penalty of the limits' weight)."""

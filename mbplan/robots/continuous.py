@@ -131,6 +131,6 @@ def joint_ranges(robot: Robot, center: np.ndarray) -> tuple[np.ndarray, np.ndarr
     ``center ± π`` for the continuous joints (warm starts, inverse kinematics)."""
     lo = np.array(robot.model.lowerPositionLimit, dtype=float)
     hi = np.array(robot.model.upperPositionLimit, dtype=float)
-    idx = robot.joint_indices(robot.continuous)
+    idx = robot.q_of_v[robot.joint_indices(robot.continuous)]
     lo[idx], hi[idx] = center[idx] - np.pi, center[idx] + np.pi
     return lo, hi

@@ -31,8 +31,9 @@ FREE_FLYER = "JointModelFreeFlyer"
 
 
 def is_floating_root(model: pin.Model, j: int) -> bool:
-    """Whether joint ``j`` is a free-flyer joint on the world (a floating base)."""
-    return model.joints[j].shortname() == FREE_FLYER and model.parents[j] == 0
+    """Whether joint ``j`` is a free-flyer joint on the world and the model's first joint (a
+    floating base: ``q`` and ``v`` start with its coordinates)."""
+    return j == 1 and model.joints[j].shortname() == FREE_FLYER and model.parents[j] == 0
 
 
 def joint_kind(model: pin.Model, j: int) -> tuple[str, np.ndarray, bool]:
@@ -43,7 +44,7 @@ def joint_kind(model: pin.Model, j: int) -> tuple[str, np.ndarray, bool]:
         raise RobotModelError(
             f"joint {model.names[j]!r} is a {shortname}, which the maximal-coordinate model does "
             "not support (only revolute, continuous and prismatic joints, and a free-flyer "
-            "joint on the world)"
+            "joint on the world as the first joint)"
         )
     jtype, axis, continuous = _SUPPORTED[shortname]
     if axis is None:

@@ -120,7 +120,7 @@ class Robot:
         """``q`` with every mimic follower at ``multiplier · q[leader] + offset``."""
         out = np.array(q, dtype=float)
         for c in self.mimic:
-            lead, follow = self.joint_indices((c.leader, c.follower))
+            lead, follow = self.q_of_v[self.joint_indices((c.leader, c.follower))]
             out[follow] = c.multiplier * out[lead] + c.offset
         return out
 
@@ -144,6 +144,14 @@ class Robot:
         for j in range(2 if self.floating else 1, self.model.njoints):
             out[self.model.joints[j].idx_v] = self.model.joints[j].idx_q
         return out
+
+    def joint_name(self, index: int) -> str:
+        """The name of the 1-dof joint with velocity index ``index``."""
+        for j in range(1, self.model.njoints):
+            joint = self.model.joints[j]
+            if joint.idx_v == int(index) and joint.nv == 1:
+                return self.model.names[j]
+        raise InputError(f"robot {self.name!r} has no 1-dof joint at velocity index {index}")
 
     def joint_indices(self, joints: Sequence[str] | None) -> np.ndarray:
         """Velocity indices of ``joints`` (every 1-dof joint if None: not a floating base's);

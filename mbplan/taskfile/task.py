@@ -129,20 +129,23 @@ def _configuration(
     t: Table, name: str, robot: Robot, full_names: list[str] | None, limits: bool
 ) -> np.ndarray:
     """``q`` of ``t[name]``: the planned joints (or all joints of the unlocked robot, the
-    locked ones' values dropped), inside the position limits if those are constrained."""
-    names = list(robot.model.names[1:])
+    locked ones' values dropped; a floating base's position and quaternion first), the joints
+    inside their position limits if those are constrained."""
+    names = list(robot.joint_names)
     sizes = [robot.nq] + ([len(full_names)] if full_names and len(full_names) != robot.nq else [])
-    hint = f" (the joints of {robot.name!r}: {', '.join(names)})"
+    base = "base position and quaternion (x, y, z, w), then " if robot.floating else ""
+    hint = f" (the joints of {robot.name!r}: {base}{', '.join(names)})"
     q = np.array(t.vector(name, sizes, required=True, hint=hint))
     if len(q) != robot.nq:
-        q = q[[full_names.index(n) for n in names]]  # type: ignore[union-attr]
-    lo, hi = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
-    outside = np.flatnonzero((q < lo - 1e-12) | (q > hi + 1e-12)) if limits else []
+        q = q[[full_names.index(n) for n in robot.model.names[1:]]]  # type: ignore[union-attr]
+    iq = robot.q_of_v[robot.joint_indices(None)]
+    lo, hi = robot.model.lowerPositionLimit[iq], robot.model.upperPositionLimit[iq]
+    outside = np.flatnonzero((q[iq] < lo - 1e-12) | (q[iq] > hi + 1e-12)) if limits else []
     if len(outside):
         j = int(outside[0])
         raise t.error(
             name,
-            f"joint {names[j]!r} = {q[j]:g} is outside its limits [{lo[j]:g}, {hi[j]:g}]",
+            f"joint {names[j]!r} = {q[iq][j]:g} is outside its limits [{lo[j]:g}, {hi[j]:g}]",
         )
     return q
 
@@ -216,6 +219,12 @@ def _goal(t: Table, robot: Robot, full_names: list[str] | None, limits: bool) ->
                 raise t.error(key, "a joint goal (q) takes no frame, xyz or rpy")
         if "joints" in t:
             return _joint_goal(t, robot, limits)
+        if robot.floating:
+            raise t.error(
+                "q",
+                "a goal for every joint of a floating-base robot lists them: joints = [...] "
+                "and q = [...] (the base takes frame goals)",
+            )
         return JointPosition(_configuration(t, "q", robot, full_names, limits))
     if "joints" in t:
         raise t.error("joints", "a goal on some joints needs their values: q = [...]")
