@@ -386,3 +386,13 @@ def test_a_floating_task_file_refuses_a_goal_on_every_coordinate(tmp_path) -> No
     task.write_text(f'[robot]\nname = "solo12"\n[horizon]\nN = 5\ndt = 0.02\n[goal]\nq = [{q}]\n')
     with pytest.raises(InputError, match=r"lists them: joints = \[\.\.\.\] and q"):
         load_task(str(task))
+
+
+def test_mbplan_robots_lists_the_floating_bases(capsys) -> None:
+    from mbplan.cli.main import main
+
+    assert main(["robots"]) == 0
+    listed = capsys.readouterr().out
+    assert "solo12  (floating base: a free body and 12 joints)" in listed
+    assert "talos  (floating base: a free body and 32 joints)" in listed
+    assert "talos_legs  (floating base: a free body and 12 joints)" in listed
