@@ -15,7 +15,6 @@ from functools import lru_cache
 import numpy as np
 import pinocchio as pin
 import scipy.sparse as sp
-from scipy.spatial.transform import Rotation
 
 from mbplan.errors import InputError
 from mbplan.formulations.maximal_joints import joint_terms
@@ -24,6 +23,7 @@ from mbplan.lie import SO3
 from mbplan.multibody import MaximalModel, joint_positions, maximal_model
 from mbplan.ocp.problem import OCP, Item
 from mbplan.robots.configuration import difference, integrate
+from mbplan.robots.free_body import rotations
 from mbplan.robots.loops import Loop
 from mbplan.simulation.closed_loop import closed_loop_actuation
 from mbplan.simulation.reference import damped_aba, mass_matrix
@@ -207,7 +207,7 @@ def central_differences(model: pin.Model, q: np.ndarray, dt: float) -> np.ndarra
     v = difference(model, q[:-2], q[2:]) / (2 * dt)
     if model.nq == model.nv:
         return v
-    R = Rotation.from_quat(q[:, 3:7]).as_matrix()
+    R = rotations(q[:, 3:7])
     Rk = np.swapaxes(R[1:-1], -1, -2)
     v[:, :3] = np.einsum("kij,kj->ki", Rk, q[2:, :3] - q[:-2, :3]) / (2 * dt)
     v[:, 3:6] = (SO3.log(Rk @ R[2:]) - SO3.log(Rk @ R[:-2])) / (2 * dt)

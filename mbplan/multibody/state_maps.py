@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 import pinocchio as pin
-from scipy.spatial.transform import Rotation
 
 from mbplan.errors import InputError
 from mbplan.multibody.model import MaximalModel
+from mbplan.robots.free_body import quaternions
 
 
 def body_poses(mm: MaximalModel, q: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -104,7 +104,7 @@ def joint_positions(
     for b in np.flatnonzero(free):
         i = mm.idx_q[b]
         q[:, i : i + 3] = pb[:, b] - Rb[:, b] @ mm.com_in_joint[b]
-        quat = Rotation.from_matrix(Rb[:, b]).as_quat(canonical=True)
+        quat = quaternions(Rb[:, b])
         for k in range(1, len(quat)):  # a path's quaternions without sign jumps
             if quat[k] @ quat[k - 1] < 0.0:
                 quat[k] = -quat[k]
