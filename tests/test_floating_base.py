@@ -396,3 +396,27 @@ def test_mbplan_robots_lists_the_floating_bases(capsys) -> None:
     assert "solo12  (floating base: a free body and 12 joints)" in listed
     assert "talos  (floating base: a free body and 32 joints)" in listed
     assert "talos_legs  (floating base: a free body and 12 joints)" in listed
+
+
+def test_paths_a_floating_base_does_not_take_are_refused_by_name() -> None:
+    """IPOPT with coal distances on a floating base, wrench blocks of the joint elimination for
+    a free body, a torque per body instead of per joint slot: mbplan errors before any solve."""
+    from mbplan.formulations.maximal import MaximalNLP
+    from mbplan.formulations.maximal_layout import joint_elimination_plan
+    from mbplan.residuals import Distance
+
+    robot = _robot("solo12")
+    scene = mb.Scene().add_box("wall", (0.05, 1.0, 1.0), (0.6, 0.0, 1.0))
+    ocp = mb.OCP(robot, scene, N=4, dt=0.02, q0=_tuck_ocp().q0)
+    ocp.add_constraint("clearance", Distance(margin=0.02))
+    with pytest.raises(InputError, match=r"constraint 'clearance'.*floating base; plan it with"):
+        GeneralizedNLP(ocp)
+    nlp = MaximalNLP(_tuck_ocp(), jit=False)
+    point = nlp.initial_point(np.tile(nlp.ocp.q0, (nlp.ocp.N + 1, 1)))
+    jac = nlp.problem.evaluate(point, hessian=False).eq_jacobian
+    with pytest.raises(InputError, match="no wrench blocks for a free body"):
+        joint_elimination_plan(nlp.problem, jac, forces=True)
+    mm = _mm("solo12")
+    q0 = robot.configuration("default")
+    with pytest.raises(InputError, match=r"tau: expected shape \(12,\) or \(4, 12\)"):
+        simulate_maximal(mm, q0, q0, np.zeros(mm.nb), 0.01, 3)
