@@ -16,8 +16,14 @@ from mbplan.errors import InputError, MbplanError
 from mbplan.solvers.result import SolverResult
 from mbplan.validation import output_file
 
-_ARRAYS = ("q", "v", "tau", "kkt_history", "R", "p", "tau_knots")
-_OPTIONAL = ("R", "p", "body_names", "tau_knots", "formulation", "violations", "goal_errors")
+_ARRAYS = (
+    "q", "v", "tau", "kkt_history", "R", "p", "tau_knots", "contact_forces",
+    "contact_forces_knots",
+)  # fmt: skip
+_OPTIONAL = (
+    "R", "p", "body_names", "tau_knots", "formulation", "violations", "goal_errors",
+    "contact_forces", "contact_forces_knots", "contact_frames",
+)  # fmt: skip
 _JSON = ("extra", "violations", "goal_errors")
 
 
@@ -40,7 +46,11 @@ class PlanResult(SolverResult):
     ``body_names``. A method whose forces act at the knots (the LGVI) adds the knot torques
     ``tau_knots (N+1, nv)``: the torque then ramps linearly from ``tau_knots[k]`` to
     ``tau_knots[k+1]`` over ``[t_k, t_{k+1}]`` (first-order hold) and ``tau`` must be its interval
-    mean. ``extra`` holds method-specific numbers (JSON-serialisable).
+    mean. A plan with contacts (:meth:`mbplan.OCP.add_contact`) adds ``contact_frames`` and
+    ``contact_forces (N, nc, 3)``: each contact's world force (N) on the robot at its frame,
+    the mean over each interval (force × Δt is its impulse; zero where it does not act), and
+    the LGVI's knot forces ``contact_forces_knots (N+1, nc, 3)``, ramped like ``tau_knots``.
+    ``extra`` holds method-specific numbers (JSON-serialisable).
 
     One meaning of ``success`` for every method (:func:`mbplan.plan`): the solver converged to
     its tolerance, the trajectory is finite, and every hard constraint of the OCP holds at the
@@ -69,6 +79,9 @@ class PlanResult(SolverResult):
     p: np.ndarray | None = None
     body_names: tuple[str, ...] | None = None
     tau_knots: np.ndarray | None = None
+    contact_forces: np.ndarray | None = None
+    contact_forces_knots: np.ndarray | None = None
+    contact_frames: tuple[str, ...] | None = None
     formulation: str | None = None
     violations: dict[str, float] | None = None
     goal_errors: dict[str, float] | None = None
@@ -107,8 +120,30 @@ class PlanResult(SolverResult):
         finite = all(np.all(np.isfinite(a)) for a in (q, v, tau))
         if self.success and not finite:
             raise InputError("PlanResult: success=True with non-finite q, v or tau")
-        if self.body_names is not None:
-            object.__setattr__(self, "body_names", tuple(str(n) for n in self.body_names))
+        for name in ("body_names", "contact_frames"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, tuple(str(n) for n in getattr(self, name)))
+        self._check_contacts()
+
+    def _check_contacts(self) -> None:
+        forces, knots, frames = self.contact_forces, self.contact_forces_knots, self.contact_frames
+        if forces is None:
+            if knots is not None or frames:
+                raise InputError("PlanResult: contact_forces_knots or frames without forces")
+            return
+        shape = (len(self.tau), len(frames or ()), 3)
+        if forces.shape != shape:
+            raise InputError(f"PlanResult.contact_forces: expected {shape}, got {forces.shape}")
+        if knots is not None:
+            if knots.shape != (shape[0] + 1, *shape[1:]):
+                raise InputError(
+                    f"PlanResult.contact_forces_knots: expected {(shape[0] + 1, *shape[1:])}, "
+                    f"got {knots.shape}"
+                )
+            if not np.allclose(forces, 0.5 * (knots[:-1] + knots[1:]), rtol=1e-12, atol=1e-12):
+                raise InputError(
+                    "PlanResult: contact_forces is not the interval mean of contact_forces_knots"
+                )
 
     @property
     def objective(self) -> float:
@@ -205,7 +240,7 @@ def _field(name: str, value: np.ndarray) -> Any:
         return json.loads(str(value))
     if name == "ocp":
         return str(value)
-    if name == "body_names":
+    if name in ("body_names", "contact_frames"):
         return tuple(str(n) for n in value)
     if name in _ARRAYS:
         return np.array(value, dtype=float)

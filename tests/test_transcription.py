@@ -4,6 +4,7 @@ differences along the retraction, fixed sparsity, additive rows and input valida
 import casadi as cs
 import numpy as np
 import pytest
+from fd import check_problem_derivatives
 
 from mbplan.engine import RiemannianFunction
 from mbplan.engine.jit import jit_available
@@ -34,44 +35,11 @@ def _input_cost():
     )
 
 
-def _lagrangian_checks(prob, x, rng):
-    """Directional FD checks of ∇L, J_h, J_g and Hess L along X exp(t d)."""
-    y = rng.standard_normal(prob.n_eq)
-    z = rng.standard_normal(prob.n_ineq)
-    ev = prob.evaluate(x, 1.0, y, z)
-    H = ev.hessian_lower
-    H = (H + H.T).toarray() - np.diag(H.diagonal())
-
-    def lag(pt):
-        f, h, g = prob.values(pt)
-        return f + y @ h + z @ g
-
-    for _ in range(3):
-        d = rng.standard_normal(prob.n)
-        h = 1e-6
-        xp, xm = prob.retract(x, h * d), prob.retract(x, -h * d)
-        _, hp, gp = prob.values(xp)
-        _, hm, gm = prob.values(xm)
-        grad = ev.gradient + ev.eq_jacobian.T @ y + ev.ineq_jacobian.T @ z
-        fd = (lag(xp) - lag(xm)) / (2 * h)
-        assert abs(fd - grad @ d) <= 1e-6 * max(1.0, abs(fd))
-        np.testing.assert_allclose(
-            (hp - hm) / (2 * h), ev.eq_jacobian @ d, atol=1e-6 * max(1, np.abs(hp).max())
-        )
-        if prob.n_ineq:
-            np.testing.assert_allclose(
-                (gp - gm) / (2 * h), ev.ineq_jacobian @ d, atol=1e-6 * max(1, np.abs(gp).max())
-            )
-        h = 1e-4
-        fd2 = (lag(prob.retract(x, h * d)) - 2 * lag(x) + lag(prob.retract(x, -h * d))) / h**2
-        assert abs(fd2 - d @ H @ d) <= 1e-5 * max(1.0, abs(fd2))
-
-
 def test_free_body_problem_derivatives_match_finite_differences():
     prob, x = _drone_problem(with_input_limits=True)
     N = 40
     assert (prob.n, prob.n_eq) == (16 * N, 12 * N)
-    _lagrangian_checks(prob, x, np.random.default_rng(0))
+    check_problem_derivatives(prob, x, np.random.default_rng(0))
 
 
 def test_additive_rows_sum_contributions():

@@ -1,8 +1,9 @@
 """Generalized coordinates: an :class:`~mbplan.OCP` as eq. (61) with Pinocchio, for IPOPT.
 
-Decision vector ``z = (q_1..q_N, v_1..v_N, τ_0..τ_{N-1}, λ_0..λ_{N-1})``; knot 0 is fixed at
-``(q0, v0)``; the loop forces ``λ_k`` and closure rows exist for a robot with closed loops
-(:mod:`mbplan.formulations.generalized_loops`).
+Decision vector ``z = (q_1..q_N, v_1..v_N, τ_0..τ_{N-1}, λ_0..λ_{N-1}, f)``; knot 0 is fixed
+at ``(q0, v0)``; the loop forces ``λ_k`` and closure rows exist for a robot with closed loops
+(:mod:`mbplan.formulations.generalized_loops`), the contact forces ``f`` with their position and
+friction rows for an OCP with contacts (:mod:`mbplan.formulations.generalized_contacts`).
 For ``k = 0..N-1`` (eq. 61, explicit Euler as the paper writes it)::
 
     (q_{k+1} - q_k)/Δt - v_k = 0                          kinematics (divided by Δt: rad/s)
@@ -44,6 +45,7 @@ from numpy.typing import ArrayLike
 from mbplan.errors import InputError
 from mbplan.formulations.casadi_nlp import NumpyCallback, SparsePattern, block
 from mbplan.formulations.free_flyer import FreeFlyerChart
+from mbplan.formulations.generalized_contacts import contact_rows, guess_contact_forces
 from mbplan.formulations.generalized_loops import (
     check_first_step,
     guess_forces,
@@ -72,6 +74,7 @@ class _Rows:
     cols: np.ndarray
     row0: int
     m: int
+    ineq: bool = False  # rows of no item (loops, contacts): inequalities
 
     @property
     def K(self) -> int:
@@ -79,10 +82,20 @@ class _Rows:
 
     @property
     def sense(self) -> str:
-        return "eq" if self.item is None else self.item.sense
+        if self.item is None:
+            return "ineq" if self.ineq else "eq"
+        return self.item.sense
 
     @classmethod
-    def of(cls, item: Item | None, x: cs.SX, out: cs.SX, cols: np.ndarray, row0: int) -> _Rows:
+    def of(
+        cls,
+        item: Item | None,
+        x: cs.SX,
+        out: cs.SX,
+        cols: np.ndarray,
+        row0: int,
+        ineq: bool = False,
+    ) -> _Rows:
         """The rows ``out(x)`` with their exact Jacobian and Hessian by CasADi."""
         lam = cs.SX.sym("lam", out.numel())
         return cls(
@@ -93,6 +106,7 @@ class _Rows:
             cols,
             row0,
             out.numel(),
+            ineq,
         )
 
 
@@ -112,6 +126,10 @@ class GeneralizedNLP:
             check_first_step(robot, ocp.q0, ocp.v0, ocp.dt)
         self.nc = self.loops.size if self.loops else 0
         self.n = N * (nq + 2 * nv) + N * self.nc
+        intervals = [c.force_intervals(N) for c in ocp.contacts]
+        self._force_at = np.cumsum([self.n] + [3 * len(k) for k in intervals])
+        self._force_intervals = intervals
+        self.n = int(self._force_at[-1])
         a_of_x = np.zeros((nq + 2 * nv, nq + 2 * nv))  # (q, v, a) from (q_k, v_k, v_{k+1})
         a_of_x[: nq + nv, : nq + nv] = np.eye(nq + nv)
         a_of_x[nq + nv :, nq : nq + nv] = -np.eye(nv) / self.dt
@@ -156,6 +174,9 @@ class GeneralizedNLP:
             for x, out, cols, row0 in loop_blocks(self, self.loops, row):
                 self.rows.append(_Rows.of(None, x, out, cols, row0))
             row += loop_rows(N, self.loops)
+        blocks, row = contact_rows(self, row)
+        for x, out, cols, row0, ineq in blocks:
+            self.rows.append(_Rows.of(None, x, out, cols, row0, ineq))
         self.own: list[ConfigurationRows] = []
         for place, item, form in own:
             self.own.append(place(self, item, form, row))
@@ -189,6 +210,18 @@ class GeneralizedNLP:
         start = self.N * (self.nq + 2 * self.nv)
         return start + np.asarray(k)[..., None] * self.nc + np.arange(self.nc)
 
+    def iforce(self, i: int, k: ArrayLike) -> np.ndarray:
+        """Indices of contact ``i``'s force on its intervals ``k``, shape ``(*k.shape, 3)``."""
+        at = np.searchsorted(self._force_intervals[i], np.asarray(k))
+        return self._force_at[i] + at[..., None] * 3 + np.arange(3)
+
+    def contact_forces(self, z: np.ndarray) -> np.ndarray:
+        """Every contact's force ``(N, nc, 3)`` per interval (zero where it does not act)."""
+        out = np.zeros((self.N, len(self._force_intervals), 3))
+        for i, k in enumerate(self._force_intervals):
+            out[k, i] = z[self.iforce(i, k)]
+        return out
+
     def _columns(self, item: Item) -> np.ndarray:
         k = item.knots
         if item.residual.space == "control":
@@ -196,12 +229,20 @@ class GeneralizedNLP:
         return np.concatenate([self.iq(k), self.iv(k)], axis=1)
 
     def pack(
-        self, q: np.ndarray, v: np.ndarray, tau: np.ndarray, lam: np.ndarray | None = None
+        self,
+        q: np.ndarray,
+        v: np.ndarray,
+        tau: np.ndarray,
+        lam: np.ndarray | None = None,
+        forces: np.ndarray | None = None,
     ) -> np.ndarray:
-        """``z`` of knots ``q, v (N+1, nv)``, ``tau (N, nv)`` and loop forces ``lam (N, nc)``
-        (zero if None)."""
+        """``z`` of knots ``q, v (N+1, nv)``, ``tau (N, nv)``, loop forces ``lam (N, nc)`` and
+        contact forces ``forces (N, n_contacts, 3)`` (zero if None)."""
         lam = np.zeros((self.N, self.nc)) if lam is None else lam
-        return np.concatenate([q[1:].ravel(), v[1:].ravel(), tau.ravel(), lam.ravel()])
+        parts = [q[1:].ravel(), v[1:].ravel(), tau.ravel(), lam.ravel()]
+        for i, k in enumerate(self._force_intervals):
+            parts.append(np.zeros(3 * len(k)) if forces is None else forces[k, i].ravel())
+        return np.concatenate(parts)
 
     def unpack(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Knots ``q (N+1, nq)``, ``v (N+1, nv)`` and torques ``tau (N, nv)`` (a floating base's
@@ -216,7 +257,8 @@ class GeneralizedNLP:
 
     def loop_forces(self, z: np.ndarray) -> np.ndarray:
         """The loop forces ``λ (N, nc)`` of the imposed closure rows, per interval."""
-        return np.reshape(z[self.N * (self.nq + 2 * self.nv) :], (self.N, self.nc))
+        start = self.N * (self.nq + 2 * self.nv)
+        return np.reshape(z[start : start + self.N * self.nc], (self.N, self.nc))
 
     def _bounds(self) -> None:
         self.lbz, self.ubz = np.full(self.n, -np.inf), np.full(self.n, np.inf)
@@ -249,12 +291,14 @@ class GeneralizedNLP:
         v[:-1] = difference(self.model, q[:-1], q[1:]) / self.dt
         a = np.diff(v, axis=0) / self.dt
         tau = np.array([pin.rnea(self.model, self.data, q[k], v[k], a[k]) for k in range(self.N)])
-        tau, lam = tau + self.damping * v[1:], None
+        tau, lam, forces = tau + self.damping * v[1:], None, None
+        if self.ocp.contacts:
+            forces, tau = guess_contact_forces(self, q, tau)
         if self.chart is not None:
             tau[:, :6] = 0.0  # the base's rows are left to the solver
         if self.loops:
             lam, tau = guess_forces(self.ocp.robot, self.loops, q[:-1], tau)
-        return self.pack(q, v, tau, lam)
+        return self.pack(q, v, tau, lam, forces)
 
     # -- per-item evaluation -------------------------------------------------------------------
     @staticmethod

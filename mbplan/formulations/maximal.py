@@ -21,6 +21,7 @@ from mbplan.formulations.maximal_joints import joint_terms
 from mbplan.formulations.maximal_layout import JointEliminationPlans
 from mbplan.lie import SO3
 from mbplan.multibody import MaximalModel, joint_positions, maximal_model
+from mbplan.ocp.contacts import generalized_force
 from mbplan.ocp.problem import OCP, Item
 from mbplan.robots.configuration import difference, integrate
 from mbplan.robots.free_body import rotations
@@ -28,7 +29,8 @@ from mbplan.robots.loops import Loop
 from mbplan.simulation.closed_loop import closed_loop_actuation
 from mbplan.simulation.reference import damped_aba, mass_matrix
 from mbplan.simulation.warm_start import maximal_warm_start
-from mbplan.transcription.multibody import multibody_layout
+from mbplan.transcription.contacts import contact_blocks, contact_forces, contact_terms
+from mbplan.transcription.multibody import dynamics_rows, multibody_layout
 from mbplan.transcription.terms import Term
 from mbplan.transcription.trajectory import TrajectoryProblem
 from mbplan.transcription.variables import Point, trajectory_variables
@@ -53,13 +55,14 @@ class MaximalNLP:
         self.body_of_joint = {int(j): b for b, j in enumerate(mm.pin_joint)}
         self.passive = tuple(mm.joint_names.index(name) for name in getattr(robot, "passive", ()))
         layout = multibody_layout(mm, ocp.N, ocp.dt, jit=jit, workspace=workspace)
-        terms = list(layout.terms)
+        terms = [*layout.terms, *contact_terms(mm, ocp.contacts, ocp.N, ocp.dt, jit)]
         for item in ocp.items:
             try:
                 terms += item.residual.maximal_terms(self, item)
             except InputError as err:
                 raise InputError(f"maximal formulation, {item.role} {item.name!r}: {err}") from None
-        variables = trajectory_variables(layout.blocks, workspace)
+        blocks = (*layout.blocks, *contact_blocks(ocp.contacts, ocp.N))
+        variables = trajectory_variables(blocks, workspace)
         self.problem = TrajectoryProblem(variables, terms, workspace)
         # the RIPM's kkt_method="reduced" eliminates the joints through this plan, its pivots
         # picked on the reference values
@@ -117,14 +120,47 @@ class MaximalNLP:
         passive joints' torques zero). Its first step (knot 0's ``F, v``: data) is the robot's
         at rest over ``[t_0, t_1]``, held by its joints; a floating base cannot be held: its
         robot's first step is the free motion under zero joint torque
-        (:func:`free_first_step`)."""
+        (:func:`free_first_step`), or, held by a contact from the start, ``q_0 ⊕ Δt v_0`` (at
+        rest: it stays, as a fixed-base robot does)."""
+        ocp = self.ocp
         if self.mm.free.any():
             q = np.array(q, dtype=float)
-            q[1] = free_first_step(self.mm.model, self.ocp.q0, self.ocp.v0, self.ocp.dt)
+            if any(c.first <= 1 for c in ocp.contacts):  # held from the start
+                q[1] = integrate(self.mm.model, ocp.q0, ocp.dt * ocp.v0)
+            else:
+                q[1] = free_first_step(self.mm.model, ocp.q0, ocp.v0, ocp.dt)
         point = maximal_warm_start(
             self.mm, q, self.ocp.dt, jit=self.jit, workspace=self.workspace, passive=self.passive
         )
-        return self.problem.check_point(point)
+        if not self.ocp.contacts:
+            return self.problem.check_point(point)
+        for block in contact_blocks(self.ocp.contacts, self.ocp.N):
+            point[block.name] = np.zeros(block.shape)
+        return self._balance(self.problem.check_point(point))
+
+    def _balance(self, point: Point) -> Point:
+        """``point`` with the forces of every knot ``k`` (joint multipliers, the active joints'
+        torques, the contact forces) corrected to balance step ``k-1``'s dynamics rows in least
+        squares (minimum-norm change): the warm start's inverse dynamics, with the contacts
+        carrying the base."""
+        mm, N = self.mm, self.ocp.N
+        ev = self.problem.evaluate(point, hessian=False)
+        jac = ev.eq_jacobian.tocsr()
+        index = self.problem.variables.tangent_index
+        active = np.setdiff1d(np.arange(mm.nj), mm.joint_slot[list(self.passive)])
+        per_knot = [
+            index("lam").reshape(N + 1, -1),
+            index("tau").reshape(N + 1, mm.nj)[:, active],
+            *(index(b.name).reshape(N + 1, -1) for b in contact_blocks(self.ocp.contacts, N)),
+        ]
+        cols = np.concatenate(per_knot, axis=1)
+        step = np.zeros(self.problem.n)
+        for k in range(1, N + 1):
+            rows = dynamics_rows(mm.nb, N, np.full(mm.nb, k - 1), np.arange(mm.nb)).ravel()
+            c = cols[k][cols[k] >= 0]
+            A = jac[rows][:, c].toarray()
+            step[c] = np.linalg.lstsq(A, -ev.eq[rows], rcond=None)[0]
+        return self.problem.retract(point, step)
 
     def trajectory(self, x: Point) -> dict:
         """PlanResult fields of a point: :meth:`joint_trajectory`, the bodies' ``R, p``."""
@@ -152,11 +188,50 @@ class MaximalNLP:
         v[1:] = central_differences(mm.model, q, dt)
         tau_knots = np.zeros((N + 1, mm.nv))
         tau_knots[:, mm.idx_v[mm.jointed]] = x["tau"][:, :, 0]
-        tau_0 = first_step_torque(mm, q[0], v[0], (v[1] - v[0]) / dt)
+        a_0, external = (v[1] - v[0]) / dt, None
+        contact = self._contact_trajectory(x, q[0], v[0], a_0)
+        if contact:
+            frames = [mm.model.getFrameId(f) for f in contact["contact_frames"]]
+            external = generalized_force(mm.model, frames, q[0], contact["contact_forces"][0])
+        tau_0 = first_step_torque(mm, q[0], v[0], a_0, external)
         tau_0 = tau_0 + np.asarray(mm.model.damping) * v[0]  # the LGVI's viscous damping
         tau_knots[0] = 2.0 * self._actuation(q[0], tau_0) - tau_knots[1]
         tau = 0.5 * (tau_knots[:-1] + tau_knots[1:])
-        return {"q": q[: N + 1], "v": v, "tau": tau, "tau_knots": tau_knots}
+        return {"q": q[: N + 1], "v": v, "tau": tau, "tau_knots": tau_knots} | contact
+
+    def _contact_trajectory(
+        self, x: Point, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        """``contact_forces_knots (N+1, nc, 3)`` (the LGVI's knot forces, first-order hold like
+        its torques) and their interval means ``contact_forces``. Knot 0's force, which the LGVI
+        does not use, makes the first interval's mean force of the contacts held from the start
+        the one that balances the base's rows of the first step's inverse dynamics
+        ``RNEA(q0, v0, a0)`` (least squares; :meth:`joint_trajectory` does the same for the
+        torques)."""
+        contacts, N, model = self.ocp.contacts, self.ocp.N, self.mm.model
+        if not contacts:
+            return {}
+        knots = contact_forces(contacts, x, N + 1)
+        start = [i for i, c in enumerate(contacts) if c.first <= 1]
+        base = np.zeros(self.mm.nv, dtype=bool)
+        for b in np.flatnonzero(self.mm.free):
+            base[self.mm.idx_v[b] : self.mm.idx_v[b] + 6] = True
+        if start and base.any():
+            demand = pin.rnea(model, model.createData(), q0, v0, a0)[base]
+            data = model.createData()
+            J = [
+                pin.computeFrameJacobian(
+                    model, data, q0, model.getFrameId(contacts[i].frame), pin.LOCAL_WORLD_ALIGNED
+                )[:3, base]
+                for i in start
+            ]
+            mean = np.linalg.lstsq(np.vstack(J).T, demand, rcond=None)[0].reshape(-1, 3)
+            knots[0, start] = 2.0 * mean - knots[1, start]
+        return {
+            "contact_forces": 0.5 * (knots[:-1] + knots[1:]),
+            "contact_forces_knots": knots,
+            "contact_frames": self.ocp.contact_frames,
+        }
 
     def _actuation(self, q: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """The joint torques ``u`` (zero on passive joints) with ``u + Jᵀf = tau`` for some
@@ -168,23 +243,32 @@ class MaximalNLP:
         return closed_loop_actuation(robot.model, robot.loops, active, q, tau)
 
 
-def first_step_torque(mm: MaximalModel, q: np.ndarray, v: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """Inverse dynamics ``RNEA(q, v, a)`` of the first step; with a floating base, whose rows
-    take no torque, the joints' accelerations ``a`` and the base's that leave its rows
-    balanced (``a_b = -M_bb⁻¹(h_b + M_bj a_j)``): the joint torques for which an Euler step
-    reaches the joints' planned velocities, and zero on the base."""
+def first_step_torque(
+    mm: MaximalModel,
+    q: np.ndarray,
+    v: np.ndarray,
+    a: np.ndarray,
+    external: np.ndarray | None = None,
+) -> np.ndarray:
+    """Inverse dynamics ``RNEA(q, v, a) - e`` of the first step under the generalized external
+    force ``e`` (contact forces, :func:`~mbplan.ocp.contacts.generalized_force`; zero if None);
+    with a floating base, whose rows take no torque, the joints' accelerations ``a`` and the
+    base's that leave its rows balanced (``a_b = -M_bb⁻¹(h_b - e_b + M_bj a_j)``): the joint
+    torques for which an Euler step reaches the joints' planned velocities, and zero on the
+    base."""
     model, data = mm.model, mm.model.createData()
     base = np.zeros(mm.nv, dtype=bool)
     for b in np.flatnonzero(mm.free):
         base[mm.idx_v[b] : mm.idx_v[b] + 6] = True
     a = np.array(a, dtype=float)
+    e = np.zeros(mm.nv) if external is None else np.asarray(external, dtype=float)
     if base.any():
         M = mass_matrix(model, data, q)
-        h = pin.rnea(model, data, q, v, np.zeros(mm.nv))
+        h = pin.rnea(model, data, q, v, np.zeros(mm.nv)) - e
         a[base] = -np.linalg.solve(
             M[np.ix_(base, base)], h[base] + M[np.ix_(base, ~base)] @ a[~base]
         )
-    tau = pin.rnea(model, data, q, v, a)
+    tau = pin.rnea(model, data, q, v, a) - e
     tau[base] = 0.0
     return tau
 

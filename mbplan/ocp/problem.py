@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mbplan.errors import InputError
+from mbplan.ocp.contacts import Contact, contact_from_dict, make_contact
 from mbplan.ocp.scene import Scene
 from mbplan.residuals.base import RESIDUALS, Residual
 from mbplan.residuals.coupling import JointCoupling
@@ -96,6 +97,7 @@ class OCP:
                 self.q0 = np.r_[self.q0[:3], -quat, self.q0[7:]]
         self.v0 = as_array(np.zeros(nv) if v0 is None else v0, (nv,), "v0")
         self.items: list[Item] = []
+        self.contacts: list[Contact] = []
         for c in getattr(self.robot, "mimic", ()):
             self._couple(c)
         self._check_loops()
@@ -132,6 +134,47 @@ class OCP:
         tol = None if tolerance is None else as_real(tolerance, f"constraint {name!r} tolerance")
         knots_ = self._knots(name, residual, knots)
         return self._add(Item(name, "constraint", residual, knots_, tolerance=tol))
+
+    def add_contact(
+        self,
+        name: str,
+        frame: str,
+        knots: Sequence[int],
+        position: ArrayLike | None = None,
+        friction: float = 0.7,
+    ) -> OCP:
+        """Hold ``frame`` at the ground point ``position`` (default: where ``q0`` puts it) over
+        the stance ``knots`` (contiguous state knots), its force inside the friction cone of
+        coefficient ``friction`` (:mod:`mbplan.ocp.contacts`)."""
+        if not isinstance(name, str) or not name:
+            raise InputError(f"name: expected a non-empty string, got {name!r}")
+        if name in self.names or name in self.contact_names:
+            raise InputError(f"the OCP already has a cost, constraint or contact named {name!r}")
+        if isinstance(self.robot, FreeBody):
+            raise InputError(f"contact {name!r}: a free body has no frames to hold")
+        if self.robot.loops:
+            raise InputError(f"contact {name!r}: contacts on a robot with loop closures")
+        contact = make_contact(
+            self.robot, self.N, self.q0, self.v0, self.dt, name, frame, knots, position, friction
+        )
+        for other in self.contacts:
+            both = np.intersect1d(other.knots, contact.knots)
+            if other.frame == contact.frame and both.size:
+                raise InputError(
+                    f"contact {name!r}: frame {frame!r} is already held by contact "
+                    f"{other.name!r} at knots {both.tolist()}"
+                )
+        self.contacts.append(contact)
+        return self
+
+    @property
+    def contact_names(self) -> list[str]:
+        return [c.name for c in self.contacts]
+
+    @property
+    def contact_frames(self) -> list[str]:
+        """The frames of the contacts, in order."""
+        return [c.frame for c in self.contacts]
 
     def add_terminal_cost(self, name: str, residual: Residual, weight: float = 1.0, **kw) -> OCP:
         return self.add_cost(name, residual, weight, knots="terminal", **kw)
@@ -180,8 +223,10 @@ class OCP:
     def _add(self, item: Item) -> OCP:
         if not isinstance(item.name, str) or not item.name:
             raise InputError(f"name: expected a non-empty string, got {item.name!r}")
-        if item.name in self.names:
-            raise InputError(f"the OCP already has a cost or constraint named {item.name!r}")
+        if item.name in self.names or item.name in self.contact_names:
+            raise InputError(
+                f"the OCP already has a cost, constraint or contact named {item.name!r}"
+            )
         if isinstance(self.robot, FreeBody) and not item.residual.free_body:
             kinds = [name for name, cls in RESIDUALS.items() if cls.free_body]
             raise InputError(
@@ -245,7 +290,10 @@ class OCP:
         return [i for i in self.items if i.role == "constraint"]
 
     def __repr__(self) -> str:
-        parts = ", ".join(f"{i.role} {i.name}" for i in self.items)
+        parts = ", ".join(
+            [f"{i.role} {i.name}" for i in self.items]
+            + [f"contact {n}" for n in self.contact_names]
+        )
         return (
             f"OCP({self.robot.name}, N={self.N}, dt={self.dt:g}, scene={self.scene.names}, {parts})"
         )
@@ -270,6 +318,7 @@ class OCP:
                 }
                 for i in self.items
             ],
+            "contacts": [c.to_dict() for c in self.contacts],
         }
 
     @classmethod
@@ -295,4 +344,6 @@ class OCP:
                 ocp.add_cost(d["name"], residual, d["weight"], d["knots"], d.get("tolerance"))
             else:
                 ocp.add_constraint(d["name"], residual, d["knots"], d.get("tolerance"))
+        for d in data.get("contacts", ()):
+            ocp.add_contact(**contact_from_dict(d))
         return ocp

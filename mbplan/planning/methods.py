@@ -181,6 +181,11 @@ def _solve_ipopt(
         traj = dict(zip(("q", "v", "tau"), nlp.unpack(z_opt), strict=True))
         if nlp.nc:
             loops = {"loop_forces": nlp.loop_forces(z_opt).tolist()}
+        if ocp.contacts:
+            traj |= {
+                "contact_forces": nlp.contact_forces(z_opt),
+                "contact_frames": ocp.contact_frames,
+            }
     message = stats.status.replace("_", " ")
     if not restoration and resto:
         message = "stopped on entering the restoration phase, which is disabled (max_resto_iter=0)"

@@ -52,10 +52,15 @@ def _fixed_base(ocp: OCP, method: str) -> None:
 
 
 def _open_chain(ocp: OCP, method: str) -> None:
-    """:class:`InputError` if the robot of ``ocp`` has loops (Crocoddyl's dynamics have none) or
-    a floating base (:func:`_fixed_base`)."""
+    """:class:`InputError` if the robot of ``ocp`` has loops (Crocoddyl's dynamics have none), a
+    floating base (:func:`_fixed_base`) or the OCP has contacts (its shooting problem has none)."""
     refuse_loops(ocp.robot, method)
     _fixed_base(ocp, method)
+    if ocp.contacts:
+        raise InputError(
+            f"method {method!r} does not plan contacts ({', '.join(ocp.contact_names)}): its "
+            "shooting problem has no contact model; plan with 'ripm' or 'ipopt'"
+        )
 
 
 METHODS: dict[str, Method] = {
@@ -185,6 +190,7 @@ def finish(
     """Attach ``ocp``, the constraint violations and goal errors (and the loops' closure
     residual, ``extra["closure_residual"]``); set ``success`` (one meaning); add the warm start's
     time (``guess_time``, and the kernels it compiled, ``guess_compile_time``) to the plan's."""
+    from mbplan.verification.contacts import contact_reasons, contact_violations
     from mbplan.verification.loops import closure_error, closure_reasons
     from mbplan.verification.report import constraint_violations, goal_errors, hard_constraints_met
 
@@ -195,7 +201,9 @@ def finish(
     if finite:
         violations = constraint_violations(ocp, result.q, result.v, result.tau, result.tau_knots)
         goal = goal_errors(ocp, result.q, result.v)
+        violations |= contact_violations(ocp, result.q, result.contact_forces)
         unmet = hard_constraints_met(ocp, violations)
+        unmet += contact_reasons(ocp, violations, result.contact_forces)
         if getattr(ocp.robot, "loops", ()):
             extra["closure_residual"] = closure_error(ocp.robot, result.q)
             unmet += closure_reasons(ocp.robot, extra["closure_residual"])

@@ -207,6 +207,15 @@ def _damping_function(jit: bool, world_parent: bool, kind: str = "revolute") -> 
     return RiemannianFunction(f"{kind}_damping", _side("p") + _side("c"), fn, params, jit=jit)
 
 
+def dynamics_rows(
+    nb: int, N: int, step: np.ndarray, body: np.ndarray, kinematics: bool = True
+) -> np.ndarray:
+    """The ``(K, 6)`` LGVI dynamics rows of ``body`` at ``step`` (arrays of ``K``) in the
+    equality rows of :func:`multibody_layout` (after the kinematics rows, if any)."""
+    offset = 6 * N * nb if kinematics else 0
+    return offset + 6 * (np.asarray(step) * nb + np.asarray(body))[:, None] + np.arange(6)
+
+
 @dataclass(frozen=True)
 class MultibodyLayout:
     """Blocks and equality terms of the multi-body dynamics over ``N`` steps."""
@@ -273,7 +282,7 @@ def _multibody_layout(
     terms.append(Term("body_dynamics", "eq", _dynamics_function(jit), dyn_bind, dyn_params))
 
     def dyn_rows(step: np.ndarray, body: np.ndarray) -> np.ndarray:
-        return dyn_offset + 6 * (step * nb + body)[:, None] + np.arange(6)
+        return dynamics_rows(nb, N, step, body, kinematics)
 
     types = np.array(mm.joint_types)
     for kind in JOINT_KINDS:

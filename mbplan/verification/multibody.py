@@ -83,6 +83,14 @@ from mbplan.results import PlanResult
 from mbplan.robots.configuration import difference, integrate
 from mbplan.robots.free_body import FreeBody
 from mbplan.simulation.reference import damped_euler_velocity, damping_rate, integrate_aba
+from mbplan.verification.contacts import (
+    contact_dynamics,
+    contact_reasons,
+    contact_violations,
+    interval_forces,
+    replay_slip,
+    with_contact_forces,
+)
 from mbplan.verification.loops import (
     baumgarte_rate,
     closure_error,
@@ -144,6 +152,13 @@ def _replay_step(
         tau, tau_end = a + s0 * (b - a), a + s1 * (b - a)
     if ocp.robot.loops:
         return rk4_step(ocp.robot, q, v, tau, h, baumgarte_rate(ocp.N, ocp.dt), tau_end)
+    if ocp.contacts:
+        f0, f1 = interval_forces(result, k, t / result.dt, (t + h) / result.dt)
+        u0 = np.concatenate([tau, f0.ravel()])
+        u1 = np.concatenate([tau if tau_end is None else tau_end, f1.ravel()])
+        return integrate_aba(
+            ocp.robot.model, q, v, u0, h, 1, tau_end=u1, acceleration=contact_dynamics(ocp)
+        )
     return integrate_aba(ocp.robot.model, q, v, tau, h, 1, tau_end=tau_end, damping=True)
 
 
@@ -156,7 +171,12 @@ def _euler_steps(ocp: OCP, result: PlanResult) -> tuple[np.ndarray, np.ndarray]:
     if ocp.robot.loops:
         v_next = [euler_velocity(ocp.robot, q[k], v[k], tau[k], dt) for k in range(ocp.N)]
         return integrate(model, q, dt * v), np.array(v_next)
-    v_next = [damped_euler_velocity(model, data, q[k], v[k], tau[k], dt) for k in range(ocp.N)]
+    v_next = [
+        damped_euler_velocity(
+            model, data, q[k], v[k], with_contact_forces(ocp, result, k, tau[k]), dt
+        )
+        for k in range(ocp.N)
+    ]
     return integrate(model, q, dt * v), np.array(v_next)
 
 
@@ -183,6 +203,8 @@ def check_shapes(ocp: OCP, result: PlanResult) -> None:
                 f"result.{name}: shape {getattr(result, name).shape} does not match the OCP "
                 f"(expected {shape})"
             )
+    if ocp.contacts and result.contact_forces is None:
+        raise InputError("result: the OCP has contacts, the plan has no contact forces")
     if not np.isclose(result.dt, ocp.dt, rtol=1e-12, atol=0.0):
         raise InputError(f"result.dt = {result.dt} differs from the OCP's dt = {ocp.dt}")
     if not np.allclose(result.q[0], ocp.q0, rtol=0.0, atol=1e-9) or not np.allclose(
@@ -226,6 +248,9 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
                 "(twice the explicit-Euler error at that knot)"
             )
     violations = constraint_violations(ocp, result.q, result.v, result.tau, result.tau_knots)
+    violations |= contact_violations(ocp, result.q, result.contact_forces)
+    for name, slip in replay_slip(ocp, path).items():
+        violations[name] = max(violations[name], slip)
     substeps = path.reshape(-1, path.shape[-1])
     clearances = {
         i.name: _clearance(ocp, i, substeps) for i in ocp.constraints if i.residual.is_obstacle
@@ -234,6 +259,7 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
     v_final = np.vstack([result.v[:-1], v_end[-1:]])
     goals = goal_errors(ocp, q_final, v_final)
     reasons += replay_reasons(ocp, violations, clearances, goals)
+    reasons += contact_reasons(ocp, violations, result.contact_forces)
     closure = closure_error(ocp.robot, result.q)
     passive = passive_torque(ocp.robot, result.tau, result.tau_knots)
     reasons += closure_reasons(ocp.robot, closure) + passive_reasons(ocp.robot, passive, result.tau)

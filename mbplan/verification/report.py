@@ -134,7 +134,8 @@ def replay_reasons(
                 f"required {MARGIN_KEPT:.0%})"
             )
     reasons += hard_constraints_met(
-        ocp, {n: (0.0 if ocp[n].residual.is_obstacle else x) for n, x in violations.items()}
+        ocp,
+        {i.name: 0.0 if i.residual.is_obstacle else violations[i.name] for i in ocp.constraints},
     )
     for item in ocp.costs:
         if item.name in goals and goals[item.name] > item.tolerance:

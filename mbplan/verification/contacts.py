@@ -1,0 +1,113 @@
+"""Contacts in the independent check of a plan (:mod:`mbplan.verification.multibody`).
+
+A plan with contacts (:meth:`mbplan.OCP.add_contact`) carries its contact forces
+(``result.contact_forces``, and ``contact_forces_knots`` for the LGVI). The replay applies them as
+world forces at the contact frames, ``τ + Σ J_i(q)ᵀ f_i`` with the frames' Jacobians at the
+replayed configuration (zero-order hold, or the knot forces' linear ramp). The checks, by contact
+name:
+
+* ``<name>.position`` (m): the frame's distance from its contact position at every stance knot
+  of the plan, and along the replayed motion of every stance interval (no slip, no lift-off);
+  at most :data:`SLIP_TOLERANCE`;
+* ``<name>.cone`` (N): the largest violation of the friction cone ``‖f_xy‖ ≤ μ f_z`` by the
+  planned forces, at most :data:`~mbplan.residuals.base.CONSTRAINT_TOLERANCE` ``· max(1, |f|)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from mbplan.dynamics.friction import cone_violation
+from mbplan.ocp.contacts import frame_position, generalized_force
+from mbplan.ocp.problem import OCP
+from mbplan.residuals.base import CONSTRAINT_TOLERANCE
+from mbplan.results import PlanResult
+from mbplan.simulation.reference import damped_aba
+
+SLIP_TOLERANCE = 1e-3  # m: how far a held frame may move from its contact position
+
+
+def frame_ids(ocp: OCP) -> list[int]:
+    return [ocp.robot.model.getFrameId(c.frame) for c in ocp.contacts]
+
+
+def interval_forces(result: PlanResult, k: int, s0: float, s1: float) -> tuple[np.ndarray, ...]:
+    """The contact forces ``(nc, 3)`` at fractions ``s0`` and ``s1`` of interval ``k``."""
+    if result.contact_forces_knots is None:
+        return result.contact_forces[k], result.contact_forces[k]
+    a, b = result.contact_forces_knots[k], result.contact_forces_knots[k + 1]
+    return a + s0 * (b - a), a + s1 * (b - a)
+
+
+def contact_dynamics(ocp: OCP) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """``acceleration(q, v, u)`` for :func:`~mbplan.simulation.reference.integrate_aba` with
+    ``u = (τ, f)``: ABA (with the joints' damping) under ``τ + Σ J_i(q)ᵀ f_i``."""
+    model = ocp.robot.model
+    data, frames, nv = model.createData(), frame_ids(ocp), model.nv
+
+    def acceleration(q: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray:
+        forces = u[nv:].reshape(-1, 3)
+        return damped_aba(model, data, q, v, u[:nv] + generalized_force(model, frames, q, forces))
+
+    return acceleration
+
+
+def contact_violations(ocp: OCP, q: np.ndarray, forces: np.ndarray | None) -> dict[str, float]:
+    """``<name>.position`` at the planned stance knots and ``<name>.cone`` of the planned
+    forces ``(N, nc, 3)`` (module docstring; a plan without forces violates every cone by
+    ``inf``)."""
+    model, out = ocp.robot.model, {}
+    for i, c in enumerate(ocp.contacts):
+        fid = model.getFrameId(c.frame)
+        gaps = [np.linalg.norm(frame_position(model, fid, q[k]) - c.position) for k in c.knots]
+        out[f"{c.name}.position"] = float(max(gaps))
+        if forces is None:
+            out[f"{c.name}.cone"] = float("inf")
+            continue
+        out[f"{c.name}.cone"] = float(np.max(cone_violation(forces[:, i], c.friction)))
+    return out
+
+
+def replay_slip(ocp: OCP, path: np.ndarray) -> dict[str, float]:
+    """``<name>.position`` along the replayed substeps ``path (N, S+1, nq)`` of every stance
+    interval."""
+    model, out = ocp.robot.model, {}
+    for c in ocp.contacts:
+        fid = model.getFrameId(c.frame)
+        gaps = [
+            np.linalg.norm(frame_position(model, fid, qs) - c.position)
+            for k in range(c.first, c.last)
+            for qs in path[k]
+        ]
+        out[f"{c.name}.position"] = float(max(gaps, default=0.0))
+    return out
+
+
+def contact_reasons(ocp: OCP, violations: dict[str, float], forces: np.ndarray | None) -> list[str]:
+    """Reasons the contacts fail the checks of the module docstring."""
+    reasons = []
+    scale = 1.0 if forces is None or not forces.size else max(1.0, float(np.abs(forces).max()))
+    for c in ocp.contacts:
+        slip = violations[f"{c.name}.position"]
+        if slip > SLIP_TOLERANCE:
+            reasons.append(
+                f"contact {c.name!r}: frame {c.frame!r} is {slip:.3g} m from its contact "
+                f"position during its stance (tolerance {SLIP_TOLERANCE:g} m)"
+            )
+        cone = violations[f"{c.name}.cone"]
+        if cone > CONSTRAINT_TOLERANCE * scale:
+            reasons.append(
+                f"contact {c.name!r}: its force leaves the friction cone (mu = {c.friction:g}) "
+                f"by {cone:.3g} N"
+            )
+    return reasons
+
+
+def with_contact_forces(ocp: OCP, result: PlanResult, k: int, tau: np.ndarray) -> np.ndarray:
+    """``τ + Σ J_i(q_k)ᵀ f_i`` with interval ``k``'s mean contact forces (the Euler step)."""
+    if not ocp.contacts:
+        return tau
+    q = result.q[k]
+    return tau + generalized_force(ocp.robot.model, frame_ids(ocp), q, result.contact_forces[k])
