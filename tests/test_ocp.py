@@ -38,6 +38,9 @@ def factory_ocp(distance: bool) -> mb.OCP:
     ocp.add_terminal_constraint("pose_eq", res.FramePlacement("iiwa_link_ee", GOAL))
     ocp.add_constraint("point_eq", res.FrameTranslation("iiwa_link_4", [0.1, 0.0, 0.7]), [2])
     ocp.add_constraint("com", res.ComOutsideCylinder("post", 0.02))
+    ocp.add_cost("com_goal", res.ComPosition([0.1, 0.0, 0.5]), 0.7)
+    ocp.add_constraint("com_eq", res.ComPosition([0.0, 0.01, 0.45]), knots=[3])
+    ocp.add_constraint("above", res.FrameHeight("iiwa_link_6", 0.3))
     ocp.add_constraint("coupling", res.JointCoupling("iiwa_joint_6", "iiwa_joint_5", -0.5, 0.1))
     ocp.add_constraint("q_limits", res.JointPositionLimits())
     ocp.add_constraint("v_limits", res.JointVelocityLimits())
@@ -82,7 +85,7 @@ def test_generalized_derivatives_match_finite_differences(distance: bool) -> Non
     check_generalized_derivatives(nlp, z, lam)
     between = 3 * len(SECANT_ENDS)  # rows between knots: 3 intervals, a secant's two ends
     com, pairs = 7, 7 * 2
-    knots = 2 * 3 * 7 + 1 + 2 + 1 + 6 + 3 + 3 + (3 + between) * com
+    knots = 2 * 3 * 7 + 1 + 2 + 1 + 6 + 3 + 3 + (3 + between) * com + 3 + 3  # com_eq, above
     assert nlp.m == knots + ((3 + between) * pairs if distance else 0)
 
 

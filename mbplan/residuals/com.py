@@ -1,16 +1,21 @@
-"""Eq. (62): the COM of every moving link (of a free body: its position) outside a vertical scene
-cylinder, ``(r + margin)² - ‖(x_i, y_i) - c‖² ≤ 0``; for a robot also between the knots."""
+"""Centre-of-mass residuals: eq. (62), the COM of every moving link (of a free body: its position)
+outside a vertical scene cylinder, ``(r + margin)² - ‖(x_i, y_i) - c‖² ≤ 0`` (for a robot also
+between the knots), and the robot's COM at a target (linear in the bodies' positions in maximal
+coordinates)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import cache
 from typing import Any, ClassVar
 
 import casadi as cs
 import numpy as np
 
+from mbplan.engine import RiemannianFunction
 from mbplan.errors import InputError
+from mbplan.lie import R
 from mbplan.residuals.base import Residual, ShootingResidual, SymbolicContext, SymbolicRows
 from mbplan.robots.free_body import FreeBody
 from mbplan.transcription.constraints import (
@@ -20,7 +25,7 @@ from mbplan.transcription.constraints import (
 )
 from mbplan.transcription.intervals import interval_samples
 from mbplan.transcription.terms import Term
-from mbplan.validation import as_bool, as_real
+from mbplan.validation import as_array, as_bool, as_real
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,3 +122,55 @@ class ComOutsideCylinder(Residual):
             return float(np.min(np.hypot(path[:, 0] - xc, path[:, 1] - yc) - base))
         dist2 = radius**2 - evaluate(self, path)  # squared horizontal distance to the axis
         return float(np.min(np.sqrt(np.maximum(dist2, 0.0)) - base))
+
+
+# process-wide cache, result-neutral: compiled from its symbolic key alone
+@cache
+def _com_function(nb: int, cost: bool, jit: bool) -> RiemannianFunction:
+    """``Σ m_b p_b / Σ m_b - target`` of ``nb`` bodies' COMs ``p0 … p{nb-1}`` (as a cost
+    ``½ w ‖r‖²``)."""
+
+    def fn(mass, target, w=None, **p):
+        com = sum(mass[b] * p[f"p{b}"] for b in range(nb)) / cs.sum1(mass)
+        return 0.5 * w * cs.sumsqr(com - target) if cost else com - target
+
+    params = [("mass", nb), ("target", 3)] + ([("w", 1)] if cost else [])
+    name = f"com_position_{nb}_{'cost' if cost else 'eq'}"
+    return RiemannianFunction(name, [(f"p{b}", R(3)) for b in range(nb)], fn, params, jit=jit)
+
+
+@dataclass(frozen=True, eq=False)
+class ComPosition(Residual):
+    """``c(q) - target`` (m, world frame): the centre of mass of the robot's moving links."""
+
+    target: np.ndarray | None = None
+
+    def resolve(self, robot: Any, scene: Any) -> Residual:
+        if isinstance(robot, FreeBody):
+            raise InputError("ComPosition: a free body's COM is its position: use BodyPosition")
+        return replace(self, target=as_array(self.target, (3,), "ComPosition.target"))
+
+    def dim(self, robot: Any, scene: Any) -> int:
+        return 3
+
+    def joint_space(self, robot: Any, scene: Any) -> SymbolicRows:
+        return SymbolicRows((type(self),), np.asarray(self.target, dtype=float), self._rows)
+
+    def _rows(self, ctx: SymbolicContext) -> cs.SX:
+        model, placements = ctx.robot.model, ctx.placements()
+        total, mass = cs.DM.zeros(3), 0.0
+        for j in range(1, model.njoints):
+            Rj, pj = placements[j]
+            inertia = model.inertias[j]
+            total += inertia.mass * (pj + cs.mtimes(Rj, cs.DM(inertia.lever)))
+            mass += inertia.mass
+        return total / mass - ctx.theta
+
+    def maximal_terms(self, ctx: Any, item: Any) -> list[Term]:
+        nb, cost = ctx.mm.nb, item.role == "cost"
+        bind = {f"p{b}": ("p", item.knots * nb + b) for b in range(nb)}
+        params = {"mass": ctx.mm.mass, "target": np.asarray(self.target, dtype=float)}
+        if cost:
+            params["w"] = item.weight
+        fn = _com_function(nb, cost, ctx.jit)
+        return [Term(item.name, "cost" if cost else self.sense, fn, bind, params)]

@@ -1,5 +1,5 @@
 """Frame residuals: the translation ``p_f - p_g`` or the pose error ``(p_f - p_g, log(R_gᵀ R_f))``
-on SO(3)×R³ of a frame on a moving link (world frame). Joint space writes them on the symbolic
+on SO(3)×R³ of a frame on a moving link (world frame), or its height above a level. Joint space writes them on the symbolic
 forward kinematics, maximal coordinates on the pose ``(R_b R_jf, p_b + R_b c)`` of the frame's
 body ``(R_b, p_b)``."""
 
@@ -18,7 +18,7 @@ from mbplan.errors import InputError
 from mbplan.lie import SO3, R
 from mbplan.residuals.base import Residual, SymbolicContext, SymbolicRows
 from mbplan.transcription.terms import Term
-from mbplan.validation import as_array, as_rotation
+from mbplan.validation import as_array, as_real, as_rotation
 
 
 def frame_error(R, p, p_goal, R_goal=None):
@@ -38,7 +38,7 @@ def _frame_function(kind: str, cost: bool, jit: bool) -> RiemannianFunction:
 
     def fn(Rb, pb, R_jf, c, p_g, R_g=None, w=None):
         Rf, pf = cs.mtimes(Rb, R_jf), pb + cs.mtimes(Rb, c)
-        r = frame_error(Rf, pf, p_g, R_g)
+        r = p_g[2] - pf[2] if kind == "height" else frame_error(Rf, pf, p_g, R_g)
         return 0.5 * w * cs.sumsqr(r) if cost else r
 
     params = [("R_jf", (3, 3)), ("c", 3), *goal] + ([("w", 1)] if cost else [])
@@ -80,6 +80,8 @@ class _FrameResidual(Residual):
         Rj, pj = ctx.placements()[frame.parentJoint]
         Rf = cs.mtimes(Rj, cs.DM(frame.placement.rotation))
         pf = pj + cs.mtimes(Rj, cs.DM(frame.placement.translation))
+        if self.kind == "height":
+            return theta[2] - pf[2]
         if self.kind == "translation":
             return frame_error(Rf, pf, theta)
         return frame_error(Rf, pf, theta[9:], cs.reshape(theta[:9], 3, 3))
@@ -149,3 +151,25 @@ class FramePlacement(_FrameResidual):
 
     def goal(self) -> dict[str, np.ndarray]:
         return {"R_g": self.rotation, "p_g": np.asarray(self.translation, dtype=float)}
+
+
+@dataclass(frozen=True, eq=False)
+class FrameHeight(_FrameResidual):
+    """``height - z_frame ≤ 0`` (m): the frame's origin at or above ``height`` (world ``z``; a
+    swing foot above the ground). Constraint only."""
+
+    height: float = 0.0
+
+    kind: ClassVar[str] = "height"
+    sense: ClassVar[str] = "ineq"
+    cost: ClassVar[bool] = False
+
+    def resolve(self, robot: Any, scene: Any) -> Residual:
+        _moving_frame(robot, self.frame)
+        return replace(self, height=as_real(self.height, f"FrameHeight({self.frame!r}).height"))
+
+    def dim(self, robot: Any, scene: Any) -> int:
+        return 1
+
+    def goal(self) -> dict[str, np.ndarray]:
+        return {"p_g": np.array([0.0, 0.0, self.height])}

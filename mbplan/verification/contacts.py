@@ -58,6 +58,8 @@ def contact_violations(ocp: OCP, q: np.ndarray, forces: np.ndarray | None) -> di
     """``<name>.position`` at the planned stance knots and ``<name>.cone`` of the planned
     forces ``(N, nc, 3)`` (module docstring; a plan without forces violates every cone by
     ``inf``)."""
+    if not ocp.contacts:
+        return {}
     model, out = ocp.robot.model, {}
     for i, c in enumerate(ocp.contacts):
         fid = model.getFrameId(c.frame)
@@ -73,6 +75,8 @@ def contact_violations(ocp: OCP, q: np.ndarray, forces: np.ndarray | None) -> di
 def replay_slip(ocp: OCP, path: np.ndarray) -> dict[str, float]:
     """``<name>.position`` along the replayed substeps ``path (N, S+1, nq)`` of every stance
     interval."""
+    if not ocp.contacts:
+        return {}
     model, out = ocp.robot.model, {}
     for c in ocp.contacts:
         fid = model.getFrameId(c.frame)
