@@ -13,6 +13,13 @@ def pyramid(friction: float) -> np.ndarray:
     return np.array([[1.0, 0.0, -mu], [-1.0, 0.0, -mu], [0.0, 1.0, -mu], [0.0, -1.0, -mu]])
 
 
+def pyramid_edges(friction: float) -> np.ndarray:
+    """The four edges ``(±μ', ±μ', 1)`` ``(4, 3)`` of the :func:`pyramid`: its forces are their
+    non-negative combinations."""
+    mu = friction / np.sqrt(2.0)
+    return np.array([[mu, mu, 1.0], [mu, -mu, 1.0], [-mu, mu, 1.0], [-mu, -mu, 1.0]])
+
+
 def cone_violation(forces: np.ndarray, friction: float) -> np.ndarray:
     """``max(‖f_xy‖ - μ f_z, 0)`` of forces ``(..., 3)``: how far each leaves the cone (N)."""
     f = np.asarray(forces, dtype=float)

@@ -14,8 +14,10 @@ from functools import lru_cache
 
 import numpy as np
 import pinocchio as pin
+import scipy.optimize
 import scipy.sparse as sp
 
+from mbplan.dynamics.friction import pyramid_edges
 from mbplan.errors import InputError
 from mbplan.formulations.maximal_joints import joint_terms
 from mbplan.formulations.maximal_layout import JointEliminationPlans
@@ -204,29 +206,31 @@ class MaximalNLP:
     ) -> dict[str, np.ndarray]:
         """``contact_forces_knots (N+1, nc, 3)`` (the LGVI's knot forces, first-order hold like
         its torques) and their interval means ``contact_forces``. Knot 0's force, which the LGVI
-        does not use, makes the first interval's mean force of the contacts held from the start
-        the one that balances the base's rows of the first step's inverse dynamics
-        ``RNEA(q0, v0, a0)`` (least squares; :meth:`joint_trajectory` does the same for the
-        torques)."""
-        contacts, N, model = self.ocp.contacts, self.ocp.N, self.mm.model
+        does not use, is the one inside the friction pyramid for which the first interval's mean
+        force of the contacts held from the start best balances the base's rows of the first
+        step's inverse dynamics ``RNEA(q0, v0, a0)`` (non-negative least squares on the
+        pyramid's edges; :meth:`joint_trajectory` then balances the rest with the torques)."""
+        contacts, N, mm = self.ocp.contacts, self.ocp.N, self.mm
         if not contacts:
             return {}
         knots = contact_forces(contacts, x, N + 1)
         start = [i for i, c in enumerate(contacts) if c.first <= 1]
-        base = np.zeros(self.mm.nv, dtype=bool)
-        for b in np.flatnonzero(self.mm.free):
-            base[self.mm.idx_v[b] : self.mm.idx_v[b] + 6] = True
+        base = np.zeros(mm.nv, dtype=bool)
+        for b in np.flatnonzero(mm.free):
+            base[mm.idx_v[b] : mm.idx_v[b] + 6] = True
         if start and base.any():
-            demand = pin.rnea(model, model.createData(), q0, v0, a0)[base]
+            model = mm.model
             data = model.createData()
-            J = [
-                pin.computeFrameJacobian(
-                    model, data, q0, model.getFrameId(contacts[i].frame), pin.LOCAL_WORLD_ALIGNED
-                )[:3, base]
-                for i in start
-            ]
-            mean = np.linalg.lstsq(np.vstack(J).T, demand, rcond=None)[0].reshape(-1, 3)
-            knots[0, start] = 2.0 * mean - knots[1, start]
+            demand = pin.rnea(model, data, q0, v0, a0)[base]
+            columns = []
+            for i in start:
+                fid = model.getFrameId(contacts[i].frame)
+                J = pin.computeFrameJacobian(model, data, q0, fid, pin.LOCAL_WORLD_ALIGNED)
+                demand -= 0.5 * J[:3, base].T @ knots[1, i]
+                columns.append(0.5 * J[:3, base].T @ pyramid_edges(contacts[i].friction).T)
+            beta = scipy.optimize.nnls(np.hstack(columns), demand)[0].reshape(len(start), 4)
+            for n, i in enumerate(start):
+                knots[0, i] = beta[n] @ pyramid_edges(contacts[i].friction)
         return {
             "contact_forces": 0.5 * (knots[:-1] + knots[1:]),
             "contact_forces_knots": knots,

@@ -7,8 +7,14 @@ replayed configuration (zero-order hold, or the knot forces' linear ramp). The c
 name:
 
 * ``<name>.position`` (m): the frame's distance from its contact position at every stance knot
-  of the plan, and along the replayed motion of every stance interval (no slip, no lift-off);
-  at most :data:`SLIP_TOLERANCE`;
+  of the plan (no slip, no lift-off); at most :data:`SLIP_TOLERANCE`;
+* ``<name>.slip`` (m): the same along the replayed motion of every stance interval, at most
+  :data:`SLIP_TOLERANCE` plus twice the frame's distance between the replay's end and the
+  explicit-Euler step's (the discretisation error there, as the deviation thresholds of
+  :mod:`mbplan.verification.multibody` allow it): near a contact switch the knot forces of the
+  LGVI, replayed as a ramp, and the knot velocities (central differences, which straddle a
+  touchdown impulse) are first order, which moves a light foot by millimetres within the
+  interval at Δt = 20 ms; ``<name>.slip_ratio`` is the largest slip over its threshold;
 * ``<name>.cone`` (N): the largest violation of the friction cone ``‖f_xy‖ ≤ μ f_z`` by the
   planned forces, at most :data:`~mbplan.residuals.base.CONSTRAINT_TOLERANCE` ``· max(1, |f|)``.
 """
@@ -72,20 +78,22 @@ def contact_violations(ocp: OCP, q: np.ndarray, forces: np.ndarray | None) -> di
     return out
 
 
-def replay_slip(ocp: OCP, path: np.ndarray) -> dict[str, float]:
-    """``<name>.position`` along the replayed substeps ``path (N, S+1, nq)`` of every stance
-    interval."""
+def replay_slip(ocp: OCP, path: np.ndarray, q_euler: np.ndarray) -> dict[str, float]:
+    """``<name>.slip`` and ``<name>.slip_ratio`` (module docstring) along the replayed substeps
+    ``path (N, S+1, nq)`` of every stance interval, the explicit-Euler steps ``q_euler (N, nq)``
+    from the planned knots."""
     if not ocp.contacts:
         return {}
     model, out = ocp.robot.model, {}
     for c in ocp.contacts:
         fid = model.getFrameId(c.frame)
-        gaps = [
-            np.linalg.norm(frame_position(model, fid, qs) - c.position)
-            for k in range(c.first, c.last)
-            for qs in path[k]
-        ]
-        out[f"{c.name}.position"] = float(max(gaps, default=0.0))
+        slip, ratio = 0.0, 0.0
+        for k in range(c.first, c.last):
+            gap = max(np.linalg.norm(frame_position(model, fid, qs) - c.position) for qs in path[k])
+            euler = frame_position(model, fid, q_euler[k]) - frame_position(model, fid, path[k, -1])
+            slip = max(slip, gap)
+            ratio = max(ratio, gap / (SLIP_TOLERANCE + 2.0 * np.linalg.norm(euler)))
+        out[f"{c.name}.slip"], out[f"{c.name}.slip_ratio"] = float(slip), float(ratio)
     return out
 
 
@@ -99,6 +107,13 @@ def contact_reasons(ocp: OCP, violations: dict[str, float], forces: np.ndarray |
             reasons.append(
                 f"contact {c.name!r}: frame {c.frame!r} is {slip:.3g} m from its contact "
                 f"position during its stance (tolerance {SLIP_TOLERANCE:g} m)"
+            )
+        ratio = violations.get(f"{c.name}.slip_ratio", 0.0)
+        if ratio > 1.0:
+            reasons.append(
+                f"contact {c.name!r}: the replayed motion moves frame {c.frame!r} "
+                f"{violations[f'{c.name}.slip']:.3g} m during its stance, {ratio:.3g} times its "
+                f"threshold ({SLIP_TOLERANCE:g} m plus twice the explicit-Euler error)"
             )
         cone = violations[f"{c.name}.cone"]
         if cone > CONSTRAINT_TOLERANCE * scale:

@@ -249,8 +249,7 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
             )
     violations = constraint_violations(ocp, result.q, result.v, result.tau, result.tau_knots)
     violations |= contact_violations(ocp, result.q, result.contact_forces)
-    for name, slip in replay_slip(ocp, path).items():
-        violations[name] = max(violations[name], slip)
+    violations |= replay_slip(ocp, path, q_euler)
     substeps = path.reshape(-1, path.shape[-1])
     clearances = {
         i.name: _clearance(ocp, i, substeps) for i in ocp.constraints if i.residual.is_obstacle

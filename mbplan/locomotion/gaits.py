@@ -1,0 +1,166 @@
+"""Quadruped gaits as OCPs: the schedules and targets of Crocoddyl's ``SimpleQuadrupedalGaitProblem``
+(``crocoddyl.utils.quadruped``), with hard contacts and friction cones.
+
+A gait is a list of :class:`Phase` (intervals, feet that swing). Knot ``t`` starts a phase; a
+support phase of ``S`` intervals keeps every foot on the ground; a step phase of ``K`` intervals
+lifts its feet after knot ``t`` and puts them down at knot ``t + K``, ``step_length`` further
+along ``x`` (the first step of a walk, trot or pace is half as long, as in Crocoddyl). Every
+stance of a foot is one :meth:`~mbplan.OCP.add_contact` (its position: where the foot starts,
+moved by its steps). Costs, as Crocoddyl's: the swing feet follow a triangular height profile
+to ``step_height`` (:class:`~mbplan.residuals.FrameTranslation`), the centre of mass moves with
+the feet (:class:`~mbplan.residuals.ComPosition`: by the step times the fraction of the feet that
+swing), the joints stay near the start's posture and the torques small; a swing foot stays above
+the ground (:class:`~mbplan.residuals.FrameHeight`, hard). A jump takes off from ``S`` support
+intervals, flies ``K`` intervals up (its centre of mass rising to ``step_height`` above the
+halfway point) and ``K`` down, and lands ``step_length`` further on ``S`` support intervals.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from mbplan.errors import InputError
+from mbplan.ocp.contacts import frame_position
+from mbplan.ocp.problem import OCP
+from mbplan.residuals import (
+    ComPosition,
+    FrameHeight,
+    FrameTranslation,
+    JointPosition,
+    JointTorque,
+    JointVelocity,
+)
+from mbplan.robots.robot import load_robot
+from mbplan.validation import as_array, as_int, as_real
+
+QUADRUPED_GAITS: dict[str, tuple[tuple[int, ...], ...]] = {
+    "walk": ((3,), (1,), (2,), (0,)),  # rh, rf, then lh, lf
+    "trot": ((1, 2), (0, 3)),  # rf + lh, then lf + rh
+    "pace": ((1, 3), (0, 2)),  # the right feet, then the left
+    "bound": ((0, 1), (2, 3)),  # the front feet, then the hind
+    "jump": ((0, 1, 2, 3),),
+}
+"""The feet (indices into ``(lf, rf, lh, rh)``) that each step of a gait swings; a walk's
+support phases come before its first and third steps."""
+
+FOOT_WEIGHT = 1e4  # swing-foot tracking (Crocoddyl: 1e6 on the same error)
+COM_WEIGHT = 1e4  # centre-of-mass tracking (Crocoddyl: 1e6)
+POSTURE_WEIGHT = 1.0  # joint positions near the start's (Crocoddyl's state regularisation)
+VELOCITY_WEIGHT = 1e-2
+TORQUE_WEIGHT = 1e-3  # (Crocoddyl's control regularisation: 1e-1 on the same torques)
+
+
+@dataclass(frozen=True)
+class Phase:
+    """``intervals`` long; the feet ``swing`` (indices) are in the air (none: support)."""
+
+    intervals: int
+    swing: tuple[int, ...] = ()
+
+
+def quadruped_schedule(gait: str, step_knots: int, support_knots: int) -> list[Phase]:
+    """The phases of a gait (module docstring)."""
+    if gait not in QUADRUPED_GAITS:
+        raise InputError(f"gait: {gait!r} is not one of {', '.join(QUADRUPED_GAITS)}")
+    steps = QUADRUPED_GAITS[gait]
+    support = Phase(support_knots)
+    if gait == "jump":
+        return [support, Phase(2 * step_knots, steps[0]), support]
+    out = []
+    for i, feet in enumerate(steps):
+        if gait != "walk" or i % 2 == 0:
+            out.append(support)
+        out.append(Phase(step_knots, feet))
+    return [*out, Phase(1)]
+
+
+def _feet(robot: Any, feet: Any) -> tuple[str, ...]:
+    if isinstance(feet, str) or len(tuple(feet)) != 4:
+        raise InputError(f"feet: expected four frame names (lf, rf, lh, rh), got {feet!r}")
+    for f in feet:
+        if not isinstance(f, str) or not robot.model.existFrame(f):
+            raise InputError(f"feet: the robot has no frame {f!r}")
+    return tuple(feet)
+
+
+def quadruped_gait(
+    robot: Any,
+    feet: tuple[str, str, str, str] = ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"),
+    gait: str = "walk",
+    step_length: float = 0.15,
+    step_height: float = 0.1,
+    dt: float = 0.01,
+    step_knots: int = 25,
+    support_knots: int = 2,
+    friction: float = 0.7,
+    start: np.ndarray | None = None,
+) -> OCP:
+    """The OCP of a quadruped gait (module docstring) from ``start`` (default: the robot's
+    ``standing`` configuration), feet ``(lf, rf, lh, rh)`` on the ground."""
+    robot = load_robot(robot)
+    if not getattr(robot, "floating", False):
+        raise InputError(f"quadruped_gait: robot {robot.name!r} has no floating base")
+    feet = _feet(robot, feet)
+    length = as_real(step_length, "step_length")
+    height = as_real(step_height, "step_height", positive=True)
+    K = as_int(step_knots, "step_knots", minimum=2, what="intervals of a step")
+    S = as_int(support_knots, "support_knots", minimum=1, what="intervals of a support phase")
+    if start is None:
+        start = robot.configuration("standing")
+    q0 = as_array(start, (robot.nq,), "start")
+    phases = quadruped_schedule(gait, K, S)
+    N = sum(p.intervals for p in phases)
+    ocp = OCP(robot, N=N, dt=as_real(dt, "dt", positive=True), q0=q0)
+    model = robot.model
+    ids = [robot.frame_id(f) for f in feet]
+    at = np.array([frame_position(model, i, q0) for i in ids])
+    ground = at[:, 2].copy()
+    data = model.createData()
+    com = pin.centerOfMass(model, data, q0).copy()
+    com[:2] = at[:, :2].mean(axis=0)
+    stance_start = [0, 0, 0, 0]
+    first_step = gait in ("walk", "trot", "pace")
+    t = 0
+    for p, phase in enumerate(phases):
+        if not phase.swing:
+            t += phase.intervals
+            continue
+        stride = 0.5 * length if first_step and p < (3 if gait == "walk" else 2) else length
+        share = len(phase.swing) / 4
+        for i in phase.swing:  # the stance that ends here
+            ocp.add_contact(f"{feet[i]}_{stance_start[i]}", feet[i], range(stance_start[i], t + 1),
+                            at[i], friction)  # fmt: skip
+        flight = np.arange(t + 1, t + phase.intervals)
+        for i in phase.swing:
+            above = FrameHeight(feet[i], ground[i])
+            ocp.add_constraint(f"above_{feet[i]}_{t}", above, knots=flight)
+        for k in range(1, phase.intervals):
+            s = k / phase.intervals
+            rise = min(s, 1.0 - s) * 2.0 if gait != "jump" else 0.0
+            for i in phase.swing:
+                target = at[i] + np.array([stride * s, 0.0, height * rise])
+                if gait != "jump":
+                    ocp.add_cost(f"swing_{feet[i]}_{t + k}", FrameTranslation(feet[i], target),
+                                 FOOT_WEIGHT, knots=[t + k])  # fmt: skip
+            goal = com + np.array([stride * s * share, 0.0, 0.0])
+            if gait == "jump" and s <= 0.5:
+                goal = com + np.array([stride * s, 0.0, 2.0 * height * s])
+            if gait != "jump" or s <= 0.5:
+                ocp.add_cost(f"com_{t + k}", ComPosition(goal), COM_WEIGHT, knots=[t + k])
+        t += phase.intervals
+        com = com + np.array([stride * share, 0.0, 0.0])
+        for i in phase.swing:
+            at[i] = at[i] + np.array([stride, 0.0, 0.0])
+            stance_start[i] = t
+    for i, f in enumerate(feet):
+        ocp.add_contact(f"{f}_{stance_start[i]}", f, range(stance_start[i], N + 1), at[i], friction)
+    joints = robot.q_of_v[robot.joint_indices(None)]
+    ocp.add_cost("posture", JointPosition(q0[joints]), POSTURE_WEIGHT)
+    ocp.add_cost("velocity", JointVelocity(), VELOCITY_WEIGHT)
+    ocp.add_cost("torque", JointTorque(), TORQUE_WEIGHT)
+    ocp.add_cost("com_end", ComPosition(com), COM_WEIGHT, knots="terminal")
+    return ocp
