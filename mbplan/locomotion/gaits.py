@@ -1,18 +1,24 @@
 """Quadruped gaits as OCPs: the schedules and targets of Crocoddyl's ``SimpleQuadrupedalGaitProblem``
 (``crocoddyl.utils.quadruped``), with hard contacts and friction cones.
 
-A gait is a list of :class:`Phase` (intervals, feet that swing). Knot ``t`` starts a phase; a
-support phase of ``S`` intervals keeps every foot on the ground; a step phase of ``K`` intervals
-lifts its feet after knot ``t`` and puts them down at knot ``t + K``, ``step_length`` further
-along ``x`` (the first step of a walk, trot or pace is half as long, as in Crocoddyl). Every
-stance of a foot is one :meth:`~mbplan.OCP.add_contact` (its position: where the foot starts,
-moved by its steps). Costs, as Crocoddyl's: the swing feet follow a triangular height profile
-to ``step_height`` (:class:`~mbplan.residuals.FrameTranslation`), the centre of mass moves with
-the feet (:class:`~mbplan.residuals.ComPosition`: by the step times the fraction of the feet that
-swing), the joints stay near the start's posture and the torques small; a swing foot stays above
-the ground (:class:`~mbplan.residuals.FrameHeight`, hard). A jump takes off from ``S`` support
-intervals, flies ``K`` intervals up (its centre of mass rising to ``step_height`` above the
-halfway point) and ``K`` down, and lands ``step_length`` further on ``S`` support intervals.
+A gait is a list of :class:`Phase` (intervals, feet that swing): Crocoddyl's running models
+without its impulse models (a touchdown is the force of the contact's first knot,
+:mod:`mbplan.ocp.contacts`), and one more support interval, so that the plan does not end on a
+landing (the LGVI's touchdown impulse and the feet's rest at the end would share one interval). Knot ``t`` starts a phase; a support phase of ``S`` intervals keeps
+every foot on the ground; a step phase of ``K`` intervals lifts its feet after knot ``t`` and puts
+them down at knot ``t + K``, ``step_length`` further along ``x`` (the first step of a walk, trot
+or pace is half as long). Every stance of a foot is one :meth:`~mbplan.OCP.add_contact` (its
+position: where the foot starts, moved by its steps). Costs, Crocoddyl's targets at the knots of
+its running models: at knot ``t + k`` of a step the centre of mass
+(:class:`~mbplan.residuals.ComPosition`, starting over the feet's centre) is ``(k+1)/K`` of the
+way to its next position (the step times the fraction of the feet that swing), a swing foot
+(:class:`~mbplan.residuals.FrameTranslation`; from ``k = 1``, the foot is held at knot ``t``)
+``(k+1)/K`` of its step ahead at a triangular height profile up to ``step_height``; the joints
+stay near the start's posture and the torques small; a swing foot stays above the ground
+(:class:`~mbplan.residuals.FrameHeight`, hard). A jump takes off after ``S`` support intervals,
+flies ``K`` intervals up (its centre of mass rising to ``step_height`` above the halfway point)
+and ``K`` down, and lands ``step_length`` further on for ``S`` intervals with its centre of mass
+there.
 """
 
 from __future__ import annotations
@@ -138,19 +144,21 @@ def quadruped_gait(
         for i in phase.swing:
             above = FrameHeight(feet[i], ground[i])
             ocp.add_constraint(f"above_{feet[i]}_{t}", above, knots=flight)
-        for k in range(1, phase.intervals):
-            s = k / phase.intervals
-            rise = min(s, 1.0 - s) * 2.0 if gait != "jump" else 0.0
+        K = phase.intervals // 2 if gait == "jump" else phase.intervals
+        for k in range(K):
+            ahead = (k + 1) / K  # Crocoddyl's targets for the state at knot t + k
+            if gait == "jump":  # rising to step_height above the halfway point
+                goal = com + np.array([0.5 * stride, 0.0, height]) * ahead
+            else:
+                goal = com + np.array([stride * share * ahead, 0.0, 0.0])
+            ocp.add_cost(f"com_{t + k}", ComPosition(goal), COM_WEIGHT, knots=[t + k])
+            if gait == "jump" or k == 0:  # knot t: the foot is still held
+                continue
+            rise = height * min(k, K - k) / (K / 2)
             for i in phase.swing:
-                target = at[i] + np.array([stride * s, 0.0, height * rise])
-                if gait != "jump":
-                    ocp.add_cost(f"swing_{feet[i]}_{t + k}", FrameTranslation(feet[i], target),
-                                 FOOT_WEIGHT, knots=[t + k])  # fmt: skip
-            goal = com + np.array([stride * s * share, 0.0, 0.0])
-            if gait == "jump" and s <= 0.5:
-                goal = com + np.array([stride * s, 0.0, 2.0 * height * s])
-            if gait != "jump" or s <= 0.5:
-                ocp.add_cost(f"com_{t + k}", ComPosition(goal), COM_WEIGHT, knots=[t + k])
+                target = at[i] + np.array([stride * ahead, 0.0, rise])
+                ocp.add_cost(f"swing_{feet[i]}_{t + k}", FrameTranslation(feet[i], target),
+                             FOOT_WEIGHT, knots=[t + k])  # fmt: skip
         t += phase.intervals
         com = com + np.array([stride * share, 0.0, 0.0])
         for i in phase.swing:
@@ -158,9 +166,12 @@ def quadruped_gait(
             stance_start[i] = t
     for i, f in enumerate(feet):
         ocp.add_contact(f"{f}_{stance_start[i]}", f, range(stance_start[i], N + 1), at[i], friction)
+    if gait == "jump":
+        ocp.add_cost("com_landed", ComPosition(com), COM_WEIGHT, knots=range(t, N + 1))
     joints = robot.q_of_v[robot.joint_indices(None)]
     ocp.add_cost("posture", JointPosition(q0[joints]), POSTURE_WEIGHT)
     ocp.add_cost("velocity", JointVelocity(), VELOCITY_WEIGHT)
     ocp.add_cost("torque", JointTorque(), TORQUE_WEIGHT)
-    ocp.add_cost("com_end", ComPosition(com), COM_WEIGHT, knots="terminal")
+    if gait != "jump":
+        ocp.add_cost("com_end", ComPosition(com), COM_WEIGHT, knots="terminal")
     return ocp

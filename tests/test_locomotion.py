@@ -1,0 +1,76 @@
+"""Quadruped gaits as OCPs: Crocoddyl's schedules phase by phase, a trot planned with hard
+contacts and verified, and inputs refused by name."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import mbplan as mb
+from mbplan.errors import InputError
+from mbplan.locomotion import QUADRUPED_GAITS, quadruped_gait
+from mbplan.ocp.contacts import frame_position
+
+FEET = ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT")
+
+
+def _contact_sets(ocp: mb.OCP) -> list[list[str]]:
+    """The feet on the ground over each interval (held at both of its knots)."""
+    return [
+        sorted(c.frame for c in ocp.contacts if c.first <= k and k + 1 <= c.last)
+        for k in range(ocp.N)
+    ]
+
+
+@pytest.mark.parametrize("gait", sorted(QUADRUPED_GAITS))
+def test_the_schedules_are_crocoddyl_s_phase_by_phase(gait: str) -> None:
+    """Every running model of Crocoddyl's gait but its impulse models, in order: the same feet
+    in contact over the same intervals; then one support interval more."""
+    pytest.importorskip("crocoddyl")
+    from crocoddyl.utils.quadruped import SimpleQuadrupedalGaitProblem
+
+    robot = mb.load_robot("solo12")
+    q0 = robot.configuration("standing")
+    x0 = np.concatenate([q0, np.zeros(robot.nv)])
+    builder = SimpleQuadrupedalGaitProblem(robot.model, *FEET)
+    if gait == "jump":
+        problem = builder.createJumpingProblem(x0, 0.1, np.array([0.2, 0.0, 0.0]), 0.01, 3, 5)
+    else:
+        names = {"walk": "Walking", "trot": "Trotting", "pace": "Pacing", "bound": "Bounding"}
+        problem = getattr(builder, f"create{names[gait]}Problem")(x0, 0.15, 0.1, 0.01, 5, 3)
+    expected = [
+        sorted(name.removesuffix("_contact") for name in m.differential.contacts.active_set)
+        for m in problem.runningModels
+        if hasattr(m, "differential")
+    ]
+    ocp = quadruped_gait(robot, FEET, gait, step_knots=5, support_knots=3)
+    assert _contact_sets(ocp) == [*expected, list(FEET)]
+
+
+@pytest.mark.parametrize("method", ["ripm", "ipopt"])
+def test_a_trot_is_planned_with_hard_cones_and_the_replay_verifies_it(method: str) -> None:
+    ocp = quadruped_gait("solo12", gait="trot", step_length=0.1, step_height=0.05, dt=0.02,
+                         step_knots=8, support_knots=2)  # fmt: skip
+    assert ocp.N == 21 and len(ocp.contacts) == 8
+    result = mb.plan(ocp, method, warm_start="linear")
+    assert result.success, result.message
+    check = mb.verify(result)
+    assert check.passed, check.reasons
+    assert 0.06 < result.q[-1, 0] - result.q[0, 0] < 0.09  # the COM: (0.05 + 0.1) / 2 ahead
+    assert max(check.violations[f"{c.name}.cone"] for c in ocp.contacts) < 1e-6
+    foot = ocp.robot.frame_id("FR_FOOT")
+    z = np.array([frame_position(ocp.robot.model, foot, q)[2] for q in result.q[3:10]])
+    assert z.max() > ocp.contacts[0].position[2] + 0.02  # the swing foot lifts
+
+
+def test_gait_inputs_are_refused_by_name() -> None:
+    with pytest.raises(InputError, match="four frame names"):
+        quadruped_gait("solo12", feet=FEET[:3])
+    with pytest.raises(InputError, match="no frame 'paw'"):
+        quadruped_gait("solo12", feet=("paw", *FEET[1:]))
+    with pytest.raises(InputError, match="'gallop' is not one of"):
+        quadruped_gait("solo12", gait="gallop")
+    with pytest.raises(InputError, match="no floating base"):
+        quadruped_gait("iiwa", feet=("iiwa_link_1",) * 4)
+    with pytest.raises(InputError, match="step_knots"):
+        quadruped_gait("solo12", step_knots=1)
