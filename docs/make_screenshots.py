@@ -10,7 +10,8 @@ page (``mbplan.viz.static_html``): docs/iiwa_plan.png and docs/side_by_side.png 
 with visual meshes and docs/meshes_panda_materials.png (the IPOPT plan in the meshes' own
 materials), and docs/drone.png (the RIPM's docking through clutter of
 ``examples/drone_cluttered.py``, halfway), docs/floating_solo12.png (``examples/tasks/solo12_tuck.toml``:
-a floating base in free flight). The pages are kept in out/screenshots/.
+a floating base in free flight) and docs/trot_solo12.png (the README's solo12 trot, mid-step).
+The pages are kept in out/screenshots/.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import panda_between_boxes  # noqa: E402
 from test_browser import screenshot  # noqa: E402
 
 import mbplan as mb  # noqa: E402
+from mbplan.locomotion import quadruped_gait  # noqa: E402
 from mbplan.taskfile import load_task  # noqa: E402
 from mbplan.tasks.drone import cluttered_task  # noqa: E402
 from mbplan.tasks.paper import drone_docking, iiwa_obstacle_cases, tracking_ocp  # noqa: E402
@@ -59,6 +61,15 @@ TASKS: dict[str, Callable[[], mb.OCP]] = {
     "xarm7": point_to_point("xarm7"),
     "so100": point_to_point("so100"),
     "solo12": lambda: load_task(str(ROOT / "examples" / "tasks" / "solo12_tuck.toml")).ocp,
+    "trot": lambda: quadruped_gait(
+        "solo12",
+        gait="trot",
+        step_length=0.1,
+        step_height=0.05,
+        dt=0.02,
+        step_knots=8,
+        support_knots=2,
+    ),
 }
 
 
@@ -85,7 +96,7 @@ def main(robots: list[str]) -> None:
             drone()
             continue
         task = TASKS[robot]()
-        warm = "linear" if robot in ("iiwa", "solo12") else "via"
+        warm = "linear" if robot in ("iiwa", "solo12", "trot") else "via"
         results = [mb.plan(task, method, warm_start=warm) for method in ("ripm", "ipopt")]
         for r in results:
             print(f"{robot} {r.method}: {r.status}, {r.iterations} iterations", flush=True)
@@ -93,8 +104,8 @@ def main(robots: list[str]) -> None:
             shoot(results[:1], task, "iiwa_plan")
             shoot(results, task, "side_by_side")
             continue
-        if robot == "solo12":
-            shoot(results, task, "floating_solo12")
+        if robot in ("solo12", "trot"):
+            shoot(results, task, "floating_solo12" if robot == "solo12" else "trot_solo12")
             continue
         shoot(results, task, f"meshes_{robot}")
         if robot == "panda":

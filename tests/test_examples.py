@@ -27,11 +27,30 @@ def run_example(name: str, *args: str, cwd: Path | None = None) -> subprocess.Co
     )
 
 
-def readme_script() -> str:
-    """The Python block of README.md under the ``panda-script`` marker."""
+def readme_script(marker: str = "panda-script") -> str:
+    """The Python block of README.md under the ``<!-- marker -->`` comment."""
     text = (ROOT / "README.md").read_text()
-    block = text.split("<!-- panda-script -->", 1)[1].split("```python", 1)[1]
+    block = text.split(f"<!-- {marker} -->", 1)[1].split("```python", 1)[1]
     return block.split("```", 1)[0]
+
+
+def test_readme_trot_script_plans_verifies_and_replays(tmp_path):
+    """The README's trot: solo12 on Crocoddyl's trot schedule with hard contacts, planned by
+    both methods, verified, both plans in one replay page."""
+    script = readme_script("trot-script")
+    assert len([line for line in script.strip().splitlines() if line.strip()]) <= 15
+    (tmp_path / "script.py").write_text(script)
+    proc = subprocess.run(
+        [sys.executable, "script.py"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=ENV,
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.count("True True (21, 8, 3)") == 2, proc.stdout
+    assert (tmp_path / "out" / "trot.html").stat().st_size > 10_000
 
 
 def test_readme_panda_script_plans_verifies_and_saves(tmp_path):

@@ -20,6 +20,7 @@ UR5 = str(EXAMPLES_TASKS / "ur5_shelf.toml")
 MIMIC = str(EXAMPLES_TASKS / "panda_mimic.toml")
 FOURBAR = str(EXAMPLES_TASKS / "fourbar_crank.toml")
 SOLO = str(EXAMPLES_TASKS / "solo12_tuck.toml")
+SQUAT = str(EXAMPLES_TASKS / "solo12_squat.toml")
 FINGERS_LOCKED = '--set=robot.lock=["panda_finger_joint1", "panda_finger_joint2"]'
 
 
@@ -75,6 +76,8 @@ CASES = [
     pytest.param(FOURBAR, "ipopt", [], id="fourbar-ipopt"),
     pytest.param(SOLO, "ripm", [], id="solo12-ripm"),  # a floating base in free flight
     pytest.param(SOLO, "ipopt", [], id="solo12-ipopt"),
+    pytest.param(SQUAT, "ripm", [], id="squat-ripm"),  # standing on four [[contact]] feet
+    pytest.param(SQUAT, "ipopt", [], id="squat-ipopt"),
 ]
 
 
@@ -166,3 +169,21 @@ def test_full_turn_position_limits_add_no_maximal_rows(robot, limited):
     ocp = mb.OCP(robot, N=3).add_constraint("position_limits", JointPositionLimits())
     terms = [t for t in MaximalNLP(ocp, jit=False).problem.terms if "position_limits" in t.name]
     assert sum(len(t.bind["Rc"][1]) for t in terms) == 3 * limited
+
+
+def test_contact_tables_become_the_ocp_s_contacts(tmp_path):
+    task = load_task(SQUAT)
+    assert task.ocp.contact_names == ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
+    assert all(c.first == 0 and c.last == task.ocp.N for c in task.ocp.contacts)
+    text = open(SQUAT).read()
+    for table, message in [
+        ('frame = "paw"', "no frame 'paw'"),
+        ('frame = "FL_FOOT"\nknots = [3]', "expected \\[first, last\\]"),
+        ('frame = "FL_FOOT"\nfriction = -1', "must be > 0"),
+        ('frame = "FL_FOOT"\nposition = [0, 0, -1]', "from its contact position .* at knot 0"),
+        ('frame = "FL_FOOT"\nstance = 1', "unknown key"),
+    ]:
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text.replace('frame = "FL_FOOT"', table, 1))
+        with pytest.raises(mb.InputError, match=message):
+            load_task(str(bad))

@@ -1,8 +1,8 @@
 """A task file (TOML) as an :class:`~mbplan.OCP` plus solver settings: :func:`load_task`.
 
 Every key is documented in docs/task-files.md. Tables: ``[robot]`` and ``[[loop]]``
-(:mod:`.robot`, :mod:`.loops`), ``[horizon]``, ``[start]``, ``[goal]``, ``[[obstacle]]``,
-``[cost]``, ``[constraints]``, ``[solver]``. Item names of the OCP: ``goal`` (terminal),
+(:mod:`.robot`, :mod:`.loops`), ``[horizon]``, ``[start]``, ``[[contact]]`` (:mod:`.contacts`),
+``[goal]``, ``[[obstacle]]``, ``[cost]``, ``[constraints]``, ``[solver]``. Item names of the OCP: ``goal`` (terminal),
 ``rest`` (terminal, ``[goal].rest``), ``goal_tracking`` (running),
 ``velocity``, ``velocity_terminal``, ``torque``, ``position_limits``, ``velocity_limits``,
 ``torque_limits``, and the obstacle constraints of :func:`mbplan.tasks.paper.add_obstacle_constraint`
@@ -37,11 +37,15 @@ from mbplan.residuals import (
 )
 from mbplan.results import PlanResult
 from mbplan.robots.robot import Robot
+from mbplan.taskfile.contacts import add_contacts
 from mbplan.taskfile.robot import read_robot
 from mbplan.taskfile.toml_table import Document, Table, read_toml
 from mbplan.tasks.paper import add_obstacle_constraint
 
-TABLES = ("robot", "loop", "horizon", "start", "goal", "obstacle", "cost", "constraints", "solver")
+TABLES = (
+    "robot", "loop", "horizon", "start", "contact", "goal", "obstacle", "cost", "constraints",
+    "solver",
+)  # fmt: skip
 SHAPES = {"box": 3, "cylinder": 2, "sphere": 1, "capsule": 2, "mesh": 3}
 COST_DEFAULTS = {"velocity": 1e-2, "terminal_velocity": 0.0, "torque": 1e-4, "tracking": 0.0}
 MARGIN = 0.02  # m, default [constraints].margin
@@ -93,6 +97,7 @@ def load_task(
         ocp = OCP(robot, scene, N=N, dt=dt, q0=q0)
     except InputError as err:  # the start off a mimic coupling
         raise InputError(f"{doc.where(('start', 'q'))}: {str(err).removeprefix('q0: ')}") from None
+    add_contacts(doc.tables("contact"), ocp)
     goal = doc.table("goal", required=True, what=" (with q, or frame and xyz)")
     residual = _goal(goal, robot, full_names, limits)
     _costs(doc.table("cost"), ocp, residual, goal)

@@ -268,8 +268,9 @@ def _maximal_of(model: pin.Model) -> MaximalModel:
 
 
 def _goal_configuration(ocp: Any) -> np.ndarray | None:
-    """The target of a terminal full joint-position goal (drawn as a translucent robot)."""
-    if ocp is None:
+    """The target of a terminal full joint-position goal (drawn as a translucent robot; none
+    for a floating base, whose goal does not place the base)."""
+    if ocp is None or getattr(ocp.robot, "floating", False):
         return None
     from mbplan.residuals import JointPosition
 
