@@ -27,28 +27,30 @@ def run_example(name: str, *args: str, cwd: Path | None = None) -> subprocess.Co
     )
 
 
-def readme_script(marker: str = "panda-script") -> str:
+def readme_script(marker: str) -> str:
     """The Python block of README.md under the ``<!-- marker -->`` comment."""
     text = (ROOT / "README.md").read_text()
     block = text.split(f"<!-- {marker} -->", 1)[1].split("```python", 1)[1]
     return block.split("```", 1)[0]
 
 
+def run_readme_script(marker: str, most_lines: int, cwd) -> subprocess.CompletedProcess:
+    """Run README.md's block under ``marker`` (at most ``most_lines`` non-blank lines) in
+    ``cwd``; it must exit 0."""
+    script = readme_script(marker)
+    assert len([line for line in script.strip().splitlines() if line.strip()]) <= most_lines
+    (cwd / "script.py").write_text(script)
+    proc = subprocess.run(
+        [sys.executable, "script.py"], capture_output=True, text=True, timeout=600, env=ENV, cwd=cwd
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return proc
+
+
 def test_readme_trot_script_plans_verifies_and_replays(tmp_path):
     """The README's trot: solo12 on Crocoddyl's trot schedule with hard contacts, planned by
     both methods, verified, both plans in one replay page."""
-    script = readme_script("trot-script")
-    assert len([line for line in script.strip().splitlines() if line.strip()]) <= 15
-    (tmp_path / "script.py").write_text(script)
-    proc = subprocess.run(
-        [sys.executable, "script.py"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        env=ENV,
-        cwd=tmp_path,
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+    proc = run_readme_script("trot-script", 15, tmp_path)
     assert proc.stdout.count("True True (21, 8, 3)") == 2, proc.stdout
     assert (tmp_path / "out" / "trot.html").stat().st_size > 10_000
 
@@ -57,19 +59,7 @@ def test_readme_panda_script_plans_verifies_and_saves(tmp_path):
     """The README's ≤ 12-line script: the panda's hand to a pose between two boxes in both
     formulations, verified, saved; the pose (a terminal constraint) is met within 1 mm and
     1e-3 rad by both."""
-    script = readme_script()
-    lines = [line for line in script.strip().splitlines() if line.strip()]
-    assert len(lines) <= 12
-    (tmp_path / "script.py").write_text(script)
-    proc = subprocess.run(
-        [sys.executable, "script.py"],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        env=ENV,
-        cwd=tmp_path,
-    )
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+    proc = run_readme_script("panda-script", 12, tmp_path)
     assert proc.stdout.count("True True") == 2, proc.stdout
     import pinocchio as pin
 

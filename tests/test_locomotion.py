@@ -74,3 +74,34 @@ def test_gait_inputs_are_refused_by_name() -> None:
         quadruped_gait("iiwa", feet=("iiwa_link_1",) * 4)
     with pytest.raises(InputError, match="step_knots"):
         quadruped_gait("solo12", step_knots=1)
+
+
+def test_the_locomotion_benchmark_draws_reproducible_steps_and_parses_its_options() -> None:
+    from mbplan.cli.main import build_parser
+    from mbplan.tasks.locomotion import HEIGHTS, LENGTHS, gait_case
+
+    nominal, drawn, again = gait_case("trot", 0), gait_case("trot", 3, 1), gait_case("trot", 3, 1)
+    assert nominal.to_dict() != drawn.to_dict() and drawn.to_dict() == again.to_dict()
+    stances = [c for c in drawn.contacts if c.frame == "FL_FOOT"]  # one step of full length
+    step = stances[-1].position[0] - stances[0].position[0]
+    assert len(stances) == 2 and LENGTHS[0] <= step <= LENGTHS[1]
+    swing = max(drawn[n].residual.translation[2] for n in drawn.names if n.startswith("swing"))
+    assert HEIGHTS[0] <= swing - drawn.contacts[0].position[2] <= HEIGHTS[1]
+    with pytest.raises(InputError, match="unknown gait 'gallop'"):
+        gait_case("gallop", 0)
+    args = build_parser().parse_args(["bench", "locomotion", "--gaits", "trot,jump", "--n", "2"])
+    assert args.gaits == ("trot", "jump") and args.n == 2
+
+
+def test_crocoddyl_s_own_gait_is_the_timing_anchor() -> None:
+    """The benchmark's anchor: Crocoddyl's FDDP converges on its own trot of the same size
+    (2 supports and 2 steps of 8 intervals, plus its 2 impulse models), and the section says
+    so; without the baselines extra it says why it did not run."""
+    pytest.importorskip("crocoddyl")
+    from mbplan.baselines.crocoddyl_gaits import fddp_gait
+    from mbplan.benchmarks.locomotion import anchor_markdown
+
+    r = fddp_gait("solo12", FEET, "trot", 0.1, 0.05, 0.02, 8, 2, repeats=1)
+    assert r["converged"] and r["knots"] == 22 and r["solve_time_s"] > 0.0
+    assert "| trot | 22 |" in "\n".join(anchor_markdown({"trot": r}))
+    assert anchor_markdown({"unavailable": "no crocoddyl"})[-1] == "Not run: no crocoddyl"

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from fd import check_generalized_derivatives
+from fd import check_generalized_derivatives, check_problem_derivatives
 
 import mbplan as mb
 from mbplan import residuals as res
@@ -99,27 +99,7 @@ def test_maximal_derivatives_match_finite_differences_along_the_retraction(case:
     goal = np.zeros(ocp.robot.nq) if case != "panda" else PANDA_START + 0.1
     x = nlp.initial_point(np.linspace(ocp.q0, goal, ocp.N + 1))
     x = prob.retract(x, 0.05 * rng.standard_normal(prob.n))
-    y = rng.standard_normal(prob.n_eq)
-    zi = np.zeros(prob.n_ineq) if distance else rng.standard_normal(prob.n_ineq)
-    ev = prob.evaluate(x, 1.0, y, zi)
-
-    def lag(pt):
-        f, h, g = prob.values(pt)
-        return f + y @ h + zi @ g
-
-    for _ in range(3):
-        d = rng.standard_normal(prob.n)
-        h = 1e-6
-        xp, xm = prob.retract(x, h * d), prob.retract(x, -h * d)
-        (fp, hp, gp), (fm, hm, gm) = prob.values(xp), prob.values(xm)
-        np.testing.assert_allclose((fp - fm) / (2 * h), ev.gradient @ d, rtol=1e-6, atol=1e-6)
-        np.testing.assert_allclose((hp - hm) / (2 * h), ev.eq_jacobian @ d, atol=1e-5)
-        np.testing.assert_allclose((gp - gm) / (2 * h), ev.ineq_jacobian @ d, atol=1e-5)
-        H = ev.hessian_lower
-        H = (H + H.T).toarray() - np.diag(H.diagonal())
-        h = 1e-4
-        fd2 = (lag(prob.retract(x, h * d)) - 2 * lag(x) + lag(prob.retract(x, -h * d))) / h**2
-        assert abs(fd2 - d @ H @ d) <= 1e-5 * max(1.0, abs(fd2))
+    check_problem_derivatives(prob, x, rng, ineq_hessian=not distance)
 
 
 def test_both_formulations_write_the_same_residuals() -> None:

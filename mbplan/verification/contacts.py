@@ -3,18 +3,18 @@
 A plan with contacts (:meth:`mbplan.OCP.add_contact`) carries its contact forces
 (``result.contact_forces``, and ``contact_forces_knots`` for the LGVI). The replay applies them as
 world forces at the contact frames, ``τ + Σ J_i(q)ᵀ f_i`` with the frames' Jacobians at the
-replayed configuration (zero-order hold, or the knot forces' linear ramp). The checks, by contact
-name:
+replayed configuration, held over each interval (eq. 61), or, for the LGVI, with its knot
+torques as impulses at the knots (:func:`kick`; :mod:`mbplan.verification.multibody` says why).
+The checks, by contact name:
 
 * ``<name>.position`` (m): the frame's distance from its contact position at every stance knot
   of the plan (no slip, no lift-off); at most :data:`SLIP_TOLERANCE`;
 * ``<name>.slip`` (m): the same along the replayed motion of every stance interval, at most
   :data:`SLIP_TOLERANCE` plus twice the frame's distance between the replay's end and the
   explicit-Euler step's (the discretisation error there, as the deviation thresholds of
-  :mod:`mbplan.verification.multibody` allow it): near a contact switch the knot forces of the
-  LGVI, replayed as a ramp, and the knot velocities (central differences, which straddle a
-  touchdown impulse) are first order, which moves a light foot by millimetres within the
-  interval at Δt = 20 ms; ``<name>.slip_ratio`` is the largest slip over its threshold;
+  :mod:`mbplan.verification.multibody` allow it): explicit Euler's held forces move a light
+  foot by about 1.5 mm within a 20 ms interval; the LGVI's replay sags by ``g Δt²/8``
+  between its impulses (0.5 mm); ``<name>.slip_ratio`` is the largest slip over its threshold;
 * ``<name>.cone`` (N): the largest violation of the friction cone ``‖f_xy‖ ≤ μ f_z`` by the
   planned forces, at most :data:`~mbplan.residuals.base.CONSTRAINT_TOLERANCE` ``· max(1, |f|)``.
 """
@@ -30,7 +30,7 @@ from mbplan.ocp.contacts import frame_position, generalized_force
 from mbplan.ocp.problem import OCP
 from mbplan.residuals.base import CONSTRAINT_TOLERANCE
 from mbplan.results import PlanResult
-from mbplan.simulation.reference import damped_aba
+from mbplan.simulation.reference import damped_aba, mass_matrix
 
 SLIP_TOLERANCE = 1e-3  # m: how far a held frame may move from its contact position
 
@@ -39,12 +39,14 @@ def frame_ids(ocp: OCP) -> list[int]:
     return [ocp.robot.model.getFrameId(c.frame) for c in ocp.contacts]
 
 
-def interval_forces(result: PlanResult, k: int, s0: float, s1: float) -> tuple[np.ndarray, ...]:
-    """The contact forces ``(nc, 3)`` at fractions ``s0`` and ``s1`` of interval ``k``."""
-    if result.contact_forces_knots is None:
-        return result.contact_forces[k], result.contact_forces[k]
-    a, b = result.contact_forces_knots[k], result.contact_forces_knots[k + 1]
-    return a + s0 * (b - a), a + s1 * (b - a)
+def kick(
+    ocp: OCP, q: np.ndarray, v: np.ndarray, tau: np.ndarray, forces: np.ndarray, dt: float
+) -> np.ndarray:
+    """``v + M(q)⁻¹ (τ + Σ J_i(q)ᵀ f_i) Δt``: the velocity after the impulses of the torques
+    ``τ`` and the contact forces ``f`` over ``Δt``."""
+    model = ocp.robot.model
+    impulse = (tau + generalized_force(model, frame_ids(ocp), q, forces)) * dt
+    return v + np.linalg.solve(mass_matrix(model, model.createData(), q), impulse)
 
 
 def contact_dynamics(ocp: OCP) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:

@@ -1,0 +1,69 @@
+"""Crocoddyl's own quadruped gaits solved by its FDDP: the timing anchor of
+``mbplan bench locomotion`` (the ``baselines`` extra).
+
+The same robot, gait, Δt, step and support knots as :func:`mbplan.locomotion.quadruped_gait`,
+but Crocoddyl's problem: ``crocoddyl.utils.quadruped.SimpleQuadrupedalGaitProblem`` (forward
+contact dynamics with Baumgarte stabilization, impulse models at touchdown, explicit Euler, the
+friction cone as a penalty cost, its own weights), from its own start (the standing state
+repeated, quasi-static controls), at most :data:`MAX_ITER` iterations. Its plans are not put
+through :func:`mbplan.verify` (their contact forces live in Crocoddyl's data, their cones are
+soft); the numbers are Crocoddyl's iterations and solve time on the machine that ran the
+benchmark.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from mbplan.robots.robot import load_robot
+
+MAX_ITER = 100
+CREATE = {"walk": "Walking", "trot": "Trotting", "pace": "Pacing", "bound": "Bounding"}
+
+
+def fddp_gait(
+    robot: str,
+    feet: tuple[str, str, str, str],
+    gait: str,
+    step_length: float,
+    step_height: float,
+    dt: float,
+    step_knots: int,
+    support_knots: int,
+    repeats: int = 3,
+) -> dict[str, Any]:
+    """Crocoddyl's FDDP on its gait problem (module docstring): iterations, whether it
+    converged, the median solve time over ``repeats`` solves (s)."""
+    import crocoddyl
+    from crocoddyl.utils.quadruped import SimpleQuadrupedalGaitProblem
+
+    model = load_robot(robot)
+    q0 = model.configuration("standing")
+    x0 = np.concatenate([q0, np.zeros(model.nv)])
+    builder = SimpleQuadrupedalGaitProblem(model.model, *feet)
+    if gait == "jump":
+        length = np.array([step_length, 0.0, 0.0])
+        problem = builder.createJumpingProblem(
+            x0, step_height, length, dt, support_knots, step_knots
+        )
+    else:
+        create = getattr(builder, f"create{CREATE[gait]}Problem")
+        problem = create(x0, step_length, step_height, dt, step_knots, support_knots)
+    times, iterations, converged = [], 0, False
+    for _ in range(repeats):
+        solver = crocoddyl.SolverFDDP(problem)
+        xs = [x0] * (problem.T + 1)
+        us = problem.quasiStatic([x0] * problem.T)
+        start = time.perf_counter()
+        converged = bool(solver.solve(xs, us, MAX_ITER, False))
+        times.append(time.perf_counter() - start)
+        iterations = int(solver.iter)
+    return {
+        "iterations": iterations,
+        "converged": converged,
+        "solve_time_s": float(np.median(times)),
+        "knots": int(problem.T),
+    }
