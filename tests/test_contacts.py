@@ -5,11 +5,13 @@ touchdown impulse, and inputs refused by name."""
 from __future__ import annotations
 
 from functools import cache
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 from fd import check_generalized_derivatives, check_problem_derivatives
+from test_viz import page_commands
 
 import mbplan as mb
 from mbplan.dynamics.friction import pyramid, pyramid_edges
@@ -258,3 +260,24 @@ def test_shooting_methods_refuse_contacts_before_any_solve(method: str) -> None:
     arm.add_contact("tool", "iiwa_link_ee", range(11))
     with pytest.raises(InputError, match="does not plan contacts"):
         mb.plan(arm, method)
+
+
+def test_the_replay_draws_the_ground_and_the_contact_forces(tmp_path) -> None:
+    """One slab under the feet and one arrow per contact (a cylinder scaled to the force at
+    every knot) for each plan; the longest arrow is the largest force's."""
+    from mbplan.viz import replay
+    from mbplan.viz.contacts import ARROW_LENGTH, force_layer
+
+    plans = [_lift_plans()[m] for m in ("ripm", "ipopt")]
+    page = replay(plans, html=tmp_path / "lift.html", open_browser=False)
+    paths = {str(c.get("path", "")) for c in page_commands(Path(page))}
+    for i in (0, 1):
+        assert any(f"mbplan/ground{i}/visuals/ground" in p for p in paths)
+        assert any(f"mbplan/forces{i}/visuals/force_FL_FOOT" in p for p in paths)
+    arrows = force_layer("forces", plans[0].ocp, plans[0])
+    assert arrows.scales.shape == (21, 4, 3)
+    assert np.isclose(arrows.scales[..., 2].max(), ARROW_LENGTH)
+    knots = plans[0].contact_forces_knots
+    k, i = np.unravel_index(np.argmax(np.linalg.norm(knots, axis=-1)), knots.shape[:2])
+    direction = arrows.placements[k, i, :3, 2]
+    np.testing.assert_allclose(direction, knots[k, i] / np.linalg.norm(knots[k, i]), atol=1e-12)

@@ -24,6 +24,7 @@ from mbplan.results import PlanResult, load_npz
 from mbplan.robots import available_robots
 from mbplan.robots.free_body import FreeBody
 from mbplan.robots.robot import load_robot
+from mbplan.viz.contacts import FORCE_RGBA, force_layer, ground_layer
 from mbplan.viz.drone import free_body_scene
 from mbplan.viz.page import write_page
 from mbplan.viz.placements import generalized_geometry_placements, maximal_geometry_placements
@@ -257,6 +258,8 @@ def _robot_scene(
         labels.append(Label("goal: q_target", GOAL_RGBA[:3]))
     if ocp is not None and len(ocp.scene):
         labels.append(Label("obstacles", OBSTACLE_RGBA[:3]))
+    if ocp is not None and ocp.contacts:
+        labels.append(Label("contact forces", FORCE_RGBA[:3]))
     title = "mbplan replay: " + " | ".join(result_label(r) for r in results)
     return Scene(title, layers, labels, dt, frame)
 
@@ -305,5 +308,7 @@ def _robot_copy(
         layers.append(layer(f"goal{i}", visual, at_goal, GOAL_RGBA, cache))
     if ocp is not None and len(ocp.scene):
         layers.append(obstacle_layer(f"obstacles{i}", ocp.scene, OBSTACLE_RGBA))
+    if ocp is not None and ocp.contacts and result.contact_forces is not None:
+        layers += [ground_layer(f"ground{i}", ocp), force_layer(f"forces{i}", ocp, result)]
     text = f"{result_label(result)}: {result.status}, {result.iterations} iterations"
     return layers, Label(text, tint, caption=result_label(result))

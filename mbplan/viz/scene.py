@@ -35,23 +35,29 @@ _BACKGROUND = ((0.93, 0.94, 0.96), (0.62, 0.66, 0.72))  # top and bottom: robots
 @dataclass(frozen=True, eq=False)
 class Layer:
     """Geometry under node ``mbplan/<name>/visuals`` at world placements ``(K, ngeom, 4, 4)``
-    per knot (``K = 1``: static); ``rgba`` None keeps each geometry's own material."""
+    per knot (``K = 1``: static), each scaled along its own axes by ``scales (K, ngeom, 3)``
+    (None: not scaled; an arrow's length); ``rgba`` None keeps each geometry's own material."""
 
     name: str
     objects: list[pin.GeometryObject]
     shapes: list[Shape]
     placements: np.ndarray
     rgba: Rgba | None
+    scales: np.ndarray | None = None
 
     def extent(self) -> np.ndarray:
         """World corners ``(n, 3)`` of every geometry's bounding box at every knot."""
-        corners = np.array([s.corners() for s in self.shapes])  # (ngeom, 8, 3)
+        corners = np.array([s.corners() for s in self.shapes])[None]  # (1, ngeom, 8, 3)
+        if self.scales is not None:
+            corners = corners * self.scales[:, :, None, :]
         R, p = self.placements[..., :3, :3], self.placements[..., :3, 3]
-        return (np.einsum("kgij,gcj->kgci", R, corners) + p[:, :, None]).reshape(-1, 3)
+        return (np.einsum("kgij,kgcj->kgci", R, corners) + p[:, :, None]).reshape(-1, 3)
 
     def shifted(self, shift: np.ndarray) -> Layer:
         """The layer moved by the world transform ``shift`` (4x4)."""
-        return Layer(self.name, self.objects, self.shapes, shift @ self.placements, self.rgba)
+        return Layer(
+            self.name, self.objects, self.shapes, shift @ self.placements, self.rgba, self.scales
+        )
 
 
 def layer(
@@ -153,11 +159,17 @@ def _draw_layer(
         node = node_name(la.name, obj)
         draw_geometry(vis[node], obj, shape, la.rgba)
         vis[node].set_transform(la.placements[min(shown, last), g])
+        if la.scales is not None:
+            vis[node].set_property("scale", la.scales[min(shown, last), g].tolist())
         if last == 0:
             continue
         for k in range(knots):
             with animation.at_frame(vis, k) as frame:
                 frame[node].set_transform(la.placements[min(k, last), g])
+                if la.scales is not None:
+                    frame[node].set_property(
+                        "scale", "vector3", la.scales[min(k, last), g].tolist()
+                    )
 
 
 class _LabelQuad:
