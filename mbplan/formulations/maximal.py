@@ -204,8 +204,8 @@ class MaximalNLP:
     def _contact_trajectory(
         self, x: Point, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray
     ) -> dict[str, np.ndarray]:
-        """``contact_forces_knots (N+1, nc, 3)`` (the LGVI's knot forces, first-order hold like
-        its torques) and their interval means ``contact_forces``. Knot 0's force, which the LGVI
+        """``contact_forces_knots (N+1, nc, 3)`` (the LGVI's knot forces) and their interval
+        means ``contact_forces``. Knot 0's force, which the LGVI
         does not use, is the one inside the friction pyramid for which the first interval's mean
         force of the contacts held from the start best balances the base's rows of the first
         step's inverse dynamics ``RNEA(q0, v0, a0)`` (non-negative least squares on the

@@ -14,7 +14,8 @@ knot, added by the constructor; ``q0`` must satisfy it. The robot's passive join
 :class:`~mbplan.residuals.joint.JointTorque` constraint ``passive`` (zero torque on every
 interval) and no other torque goal; ``q0`` must close the robot's loops
 (:mod:`mbplan.robots.loops`), whose constraints and forces are part of every formulation's
-dynamics.
+dynamics. Contacts (:meth:`OCP.add_contact`, :mod:`mbplan.ocp.contacts`) hold robot frames at
+ground points over stances, their forces variables of the dynamics with hard friction cones.
 """
 
 from __future__ import annotations
@@ -153,7 +154,9 @@ class OCP:
         if isinstance(self.robot, FreeBody):
             raise InputError(f"contact {name!r}: a free body has no frames to hold")
         if self.robot.loops:
-            raise InputError(f"contact {name!r}: contacts on a robot with loop closures")
+            raise InputError(
+                f"contact {name!r}: contacts are not written for a robot with loop closures"
+            )
         contact = make_contact(
             self.robot, self.N, self.q0, self.v0, self.dt, name, frame, knots, position, friction
         )
