@@ -7,7 +7,7 @@ jumping on Crocoddyl's schedules): the nominal step and seeded step lengths and 
 method from the same linear warm start. A :class:`~mbplan.benchmarks.families.Suite` run by
 :func:`mbplan.benchmarks.families.run`.
 
-Regenerate: ``mbplan bench locomotion --n 4 --seed 0 --out benchmarks/results/locomotion``.
+Regenerate: ``mbplan bench locomotion --n 20 --seed 0 --methods ripm,ipopt --out benchmarks/results/locomotion``.
 """
 
 from __future__ import annotations
@@ -85,7 +85,7 @@ SUITE = Suite(
     f"height in {HEIGHTS} m (`mbplan.tasks.locomotion`, seed {{seed}}). Point contacts with "
     "their forces as variables inside hard friction pyramids, swing feet above the ground, "
     "Crocoddyl's centre-of-mass and swing-foot targets as costs; no joint limits.",
-    n=4,
+    n=20,
     family_flag="gaits",
     family_noun="gait",
     profile=crocoddyl_anchor,

@@ -330,7 +330,7 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
         help="RIPM vs IPOPT on quadruped gaits with hard contacts (solo12: walk, trot, pace, "
         "bound, jump on Crocoddyl's schedules): nominal and seeded steps",
     )
-    _add_suite_options(locomotion, 4, ("walk", "trot", "pace", "bound", "jump"), "gaits", 1e-6)
+    _add_suite_options(locomotion, 20, ("walk", "trot", "pace", "bound", "jump"), "gaits", 1e-6)
     locomotion.add_argument("--out", default="out/bench/locomotion", help="output directory")
     _add_pool_options(locomotion)
     locomotion.set_defaults(func=_bench_suite("mbplan.benchmarks.locomotion"))
