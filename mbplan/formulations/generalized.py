@@ -45,7 +45,11 @@ from numpy.typing import ArrayLike
 from mbplan.errors import InputError
 from mbplan.formulations.casadi_nlp import NumpyCallback, SparsePattern, block
 from mbplan.formulations.free_flyer import FreeFlyerChart
-from mbplan.formulations.generalized_contacts import contact_rows, guess_contact_forces
+from mbplan.formulations.generalized_contacts import (
+    ContactColumns,
+    contact_rows,
+    guess_contact_forces,
+)
 from mbplan.formulations.generalized_loops import (
     check_first_step,
     guess_forces,
@@ -126,10 +130,8 @@ class GeneralizedNLP:
             check_first_step(robot, ocp.q0, ocp.v0, ocp.dt)
         self.nc = self.loops.size if self.loops else 0
         self.n = N * (nq + 2 * nv) + N * self.nc
-        intervals = [c.force_intervals(N) for c in ocp.contacts]
-        self._force_at = np.cumsum([self.n] + [3 * len(k) for k in intervals])
-        self._force_intervals = intervals
-        self.n = int(self._force_at[-1])
+        self.force_columns = ContactColumns(ocp.contacts, N, self.n)
+        self.n = self.force_columns.end
         a_of_x = np.zeros((nq + 2 * nv, nq + 2 * nv))  # (q, v, a) from (q_k, v_k, v_{k+1})
         a_of_x[: nq + nv, : nq + nv] = np.eye(nq + nv)
         a_of_x[nq + nv :, nq : nq + nv] = -np.eye(nv) / self.dt
@@ -210,18 +212,6 @@ class GeneralizedNLP:
         start = self.N * (self.nq + 2 * self.nv)
         return start + np.asarray(k)[..., None] * self.nc + np.arange(self.nc)
 
-    def iforce(self, i: int, k: ArrayLike) -> np.ndarray:
-        """Indices of contact ``i``'s force on its intervals ``k``, shape ``(*k.shape, 3)``."""
-        at = np.searchsorted(self._force_intervals[i], np.asarray(k))
-        return self._force_at[i] + at[..., None] * 3 + np.arange(3)
-
-    def contact_forces(self, z: np.ndarray) -> np.ndarray:
-        """Every contact's force ``(N, nc, 3)`` per interval (zero where it does not act)."""
-        out = np.zeros((self.N, len(self._force_intervals), 3))
-        for i, k in enumerate(self._force_intervals):
-            out[k, i] = z[self.iforce(i, k)]
-        return out
-
     def _columns(self, item: Item) -> np.ndarray:
         k = item.knots
         if item.residual.space == "control":
@@ -240,9 +230,7 @@ class GeneralizedNLP:
         contact forces ``forces (N, n_contacts, 3)`` (zero if None)."""
         lam = np.zeros((self.N, self.nc)) if lam is None else lam
         parts = [q[1:].ravel(), v[1:].ravel(), tau.ravel(), lam.ravel()]
-        for i, k in enumerate(self._force_intervals):
-            parts.append(np.zeros(3 * len(k)) if forces is None else forces[k, i].ravel())
-        return np.concatenate(parts)
+        return np.concatenate([*parts, self.force_columns.pack(forces)])
 
     def unpack(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Knots ``q (N+1, nq)``, ``v (N+1, nv)`` and torques ``tau (N, nv)`` (a floating base's

@@ -15,11 +15,13 @@ rest, ``J_i(q_N) v_N = 0``) and the friction pyramid ``A f_{i,k} ≤ 0``.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import lru_cache
 from typing import Any
 
 import casadi as cs
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mbplan.dynamics.friction import pyramid
 from mbplan.formulations.free_flyer import quaternion_matrix
@@ -63,6 +65,37 @@ def frame_functions(robot: Robot, frame: str) -> tuple[cs.Function, cs.Function]
     return cs.Function("frame_p", [q], [position(q)]), cs.Function("frame_J", [q], [J])
 
 
+class ContactColumns:
+    """Where the contact forces sit in the generalized NLP's ``z``: after column ``start``,
+    contact by contact, each force on its intervals
+    (:meth:`~mbplan.ocp.contacts.Contact.force_intervals`), 3 columns per interval."""
+
+    def __init__(self, contacts: Sequence[Any], N: int, start: int) -> None:
+        self.N = N
+        self.intervals = [c.force_intervals(N) for c in contacts]
+        self.at = np.cumsum([start] + [3 * len(k) for k in self.intervals])
+        self.end = int(self.at[-1])
+
+    def index(self, i: int, k: ArrayLike) -> np.ndarray:
+        """Columns of contact ``i``'s force on its intervals ``k``, shape ``(*k.shape, 3)``."""
+        at = np.searchsorted(self.intervals[i], np.asarray(k))
+        return self.at[i] + at[..., None] * 3 + np.arange(3)
+
+    def forces(self, z: np.ndarray) -> np.ndarray:
+        """Every contact's force ``(N, nc, 3)`` per interval (zero where it does not act)."""
+        out = np.zeros((self.N, len(self.intervals), 3))
+        for i, k in enumerate(self.intervals):
+            out[k, i] = z[self.index(i, k)]
+        return out
+
+    def pack(self, forces: np.ndarray | None) -> np.ndarray:
+        """The columns' values from ``forces (N, nc, 3)`` (zero if None)."""
+        parts = [np.zeros(0)]
+        for i, k in enumerate(self.intervals):
+            parts.append(np.zeros(3 * len(k)) if forces is None else forces[k, i].ravel())
+        return np.concatenate(parts)
+
+
 def contact_rows(
     nlp: Any, row: int
 ) -> tuple[list[tuple[cs.SX, cs.SX, np.ndarray, int, bool]], int]:
@@ -74,7 +107,7 @@ def contact_rows(
     for i, c in enumerate(nlp.ocp.contacts):
         p_of, J_of = frame_functions(robot, c.frame)
         k = c.force_intervals(N)
-        cols_f = nlp.iforce(i, k)
+        cols_f = nlp.force_columns.index(i, k)
         first = int(k[0] == 0)
         if first:  # interval 0, at the fixed q0
             force0 = -cs.mtimes(J_of(cs.DM(nlp.ocp.q0)).T, f)

@@ -183,7 +183,7 @@ def _solve_ipopt(
             loops = {"loop_forces": nlp.loop_forces(z_opt).tolist()}
         if ocp.contacts:
             traj |= {
-                "contact_forces": nlp.contact_forces(z_opt),
+                "contact_forces": nlp.force_columns.forces(z_opt),
                 "contact_frames": ocp.contact_frames,
             }
     message = stats.status.replace("_", " ")
