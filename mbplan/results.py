@@ -49,7 +49,9 @@ class PlanResult(SolverResult):
     mean. A plan with contacts (:meth:`mbplan.OCP.add_contact`) adds ``contact_frames`` and
     ``contact_forces (N, nc, 3)``: each contact's world force (N) on the robot at its frame,
     the mean over each interval (force × Δt is its impulse; zero where it does not act), and
-    the LGVI's knot forces ``contact_forces_knots (N+1, nc, 3)``, ramped like ``tau_knots``.
+    the LGVI's knot forces ``contact_forces_knots (N+1, nc, 3)``, ramped like ``tau_knots``;
+    ``(…, 6)`` when a contact is a sole: the world force, then the world torque (N m) about the
+    frame's origin (a point's zero).
     ``extra`` holds method-specific numbers (JSON-serialisable).
 
     One meaning of ``success`` for every method (:func:`mbplan.plan`): the solver converged to
@@ -131,8 +133,8 @@ class PlanResult(SolverResult):
             if knots is not None or frames:
                 raise InputError("PlanResult: contact_forces_knots or frames without forces")
             return
-        shape = (len(self.tau), len(frames or ()), 3)
-        if forces.shape != shape:
+        shape = (len(self.tau), len(frames or ()), forces.shape[-1] if forces.ndim == 3 else 3)
+        if forces.shape != shape or shape[-1] not in (3, 6):
             raise InputError(f"PlanResult.contact_forces: expected {shape}, got {forces.shape}")
         if knots is not None:
             if knots.shape != (shape[0] + 1, *shape[1:]):

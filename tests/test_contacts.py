@@ -102,12 +102,13 @@ def test_the_generalized_contact_jacobian_is_pinocchio_s() -> None:
 
     robot, rng = _robot(), np.random.default_rng(0)
     q = integrate(robot.model, _standing(), 0.3 * rng.standard_normal(18))
-    p_of, J_of = frame_functions(robot, "HR_FOOT")
+    p_of, R_of, J_of = frame_functions(robot, "HR_FOOT")
     data = robot.model.createData()
     fid = robot.frame_id("HR_FOOT")
-    J = pin.computeFrameJacobian(robot.model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[:3]
+    J = pin.computeFrameJacobian(robot.model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
     np.testing.assert_allclose(np.asarray(J_of(q)), J, atol=1e-12)
     np.testing.assert_allclose(np.asarray(p_of(q)).ravel(), data.oMf[fid].translation, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(R_of(q)), data.oMf[fid].rotation, atol=1e-12)
 
 
 def test_the_pyramid_is_inscribed_in_the_cone_and_touches_it_on_its_diagonals() -> None:

@@ -1,5 +1,5 @@
-"""Quadruped gaits as OCPs: Crocoddyl's schedules phase by phase, a trot planned with hard
-contacts and verified, and inputs refused by name."""
+"""Quadruped and biped gaits as OCPs: Crocoddyl's schedules phase by phase, a trot planned
+with hard contacts and verified, and inputs refused by name."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 import mbplan as mb
 from mbplan.errors import InputError
-from mbplan.locomotion import QUADRUPED_GAITS, quadruped_gait
+from mbplan.locomotion import QUADRUPED_GAITS, biped_gait, quadruped_gait
 from mbplan.ocp.contacts import frame_position
 
 FEET = ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT")
@@ -64,7 +64,7 @@ def test_a_trot_is_planned_with_hard_cones_and_the_replay_verifies_it(method: st
 
 
 def test_gait_inputs_are_refused_by_name() -> None:
-    with pytest.raises(InputError, match="four frame names"):
+    with pytest.raises(InputError, match="expected 4 frame names"):
         quadruped_gait("solo12", feet=FEET[:3])
     with pytest.raises(InputError, match="no frame 'paw'"):
         quadruped_gait("solo12", feet=("paw", *FEET[1:]))
@@ -105,3 +105,38 @@ def test_crocoddyl_s_own_gait_is_the_timing_anchor() -> None:
     assert r["converged"] and r["knots"] == 22 and r["solve_time_s"] > 0.0
     assert "| trot | 22 |" in "\n".join(anchor_markdown({"trot": r}))
     assert anchor_markdown({"unavailable": "no crocoddyl"})[-1] == "Not run: no crocoddyl"
+
+
+@pytest.mark.parametrize("gait", ["walk", "jump"])
+def test_the_biped_schedules_are_crocoddyl_s_phase_by_phase(gait: str) -> None:
+    """As for the quadrupeds: Crocoddyl's running models but its impulse models, then one
+    support interval more; the soles are 6-D contacts of Crocoddyl's sole size."""
+    pytest.importorskip("crocoddyl")
+    from crocoddyl.utils.biped import SimpleBipedGaitProblem
+
+    robot = mb.load_robot("talos_legs")
+    soles = ("left_sole_link", "right_sole_link")
+    q0 = robot.configuration("half_sitting")
+    x0 = np.concatenate([q0, np.zeros(robot.nv)])
+    builder = SimpleBipedGaitProblem(robot.model, soles[1], soles[0])
+    if gait == "jump":
+        problem = builder.createJumpingProblem(x0, 0.1, np.array([0.2, 0.0, 0.0]), 0.03, 4, 5)
+    else:
+        problem = builder.createWalkingProblem(x0, 0.3, 0.1, 0.03, 5, 4)
+    expected = [
+        sorted(name.removesuffix("_contact") for name in m.differential.contacts.active_set)
+        for m in problem.runningModels
+        if hasattr(m, "differential")
+    ]
+    ocp = biped_gait(robot, soles, gait, step_knots=5, support_knots=4)
+    assert _contact_sets(ocp) == [*expected, sorted(soles)]
+    assert all(c.sole == (0.2, 0.1) and c.dim == 6 for c in ocp.contacts)
+
+
+def test_biped_gait_inputs_are_refused_by_name() -> None:
+    with pytest.raises(InputError, match="expected 2 frame names"):
+        biped_gait("talos_legs", feet=("left_sole_link",))
+    with pytest.raises(InputError, match="'trot' is not one of walk, jump"):
+        biped_gait("talos_legs", gait="trot")
+    with pytest.raises(InputError, match=r"sole .* must be positive"):
+        biped_gait("talos_legs", sole=(0.2, 0.0))

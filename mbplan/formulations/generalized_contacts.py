@@ -11,6 +11,11 @@ dynamics rows of eq. (61)::
 written symbolically, so the Hessian of ``μᵀJ(q)ᵀf`` is CasADi's exact one), the position rows
 ``p_i(q_m) - c_i = 0`` at its held knots ``m ≤ N`` (a stance to the horizon's end: the frame at
 rest, ``J_i(q_N) v_N = 0``) and the friction pyramid ``A f_{i,k} ≤ 0``.
+
+A sole's variable is its wrench ``w = (f, τ)`` in its contact frame ``R_c``: ``J_i`` is then the
+frame's world-aligned 6-D Jacobian (the angular rows ``∂ vee(R(q ⊕ δ) R(q)ᵀ)/∂δ``) applied to
+the world wrench ``(R_c f, R_c τ)``, the held knots also hold the frame's orientation,
+``½ vee(R_cᵀR - RᵀR_c) = 0``, and its cone is the contact wrench cone.
 """
 
 from __future__ import annotations
@@ -23,7 +28,6 @@ import casadi as cs
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mbplan.dynamics.friction import pyramid
 from mbplan.formulations.free_flyer import quaternion_matrix
 from mbplan.formulations.joint_space import joint_axes, symbolic_placements
 from mbplan.robots.robot import Robot
@@ -48,51 +52,75 @@ def _perturbed(robot: Robot, q: cs.SX, delta: cs.SX) -> cs.SX:
     return cs.vertcat(*parts)
 
 
+def _vee(S: cs.SX) -> cs.SX:
+    """``vee`` of the skew part of ``S`` (3 × 3)."""
+    return 0.5 * cs.vertcat(S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1])
+
+
 # process-wide cache, result-neutral: CasADi functions of the robot's kinematics and a frame
 @lru_cache(maxsize=64)
-def frame_functions(robot: Robot, frame: str) -> tuple[cs.Function, cs.Function]:
-    """``p(q)`` (3) and ``J(q)`` (3 × nv) of a frame's origin (module docstring)."""
+def frame_functions(robot: Robot, frame: str) -> tuple[cs.Function, cs.Function, cs.Function]:
+    """``p(q)`` (3), ``R(q)`` (3 × 3) and ``J(q)`` (6 × nv: linear, then angular, both world
+    aligned) of a frame (module docstring)."""
     model = robot.model
     f = model.frames[model.getFrameId(frame)]
     q, delta = cs.SX.sym("q", model.nq), cs.SX.sym("d", model.nv)
 
-    def position(qq: cs.SX) -> cs.SX:
+    def placement(qq: cs.SX) -> tuple[cs.SX, cs.SX]:
         R, p = symbolic_placements(model, qq)[f.parentJoint]
-        return p + cs.mtimes(R, cs.DM(f.placement.translation))
+        return cs.mtimes(R, cs.DM(f.placement.rotation)), p + cs.mtimes(
+            R, cs.DM(f.placement.translation)
+        )
 
-    J = cs.jacobian(position(_perturbed(robot, q, delta)), delta)
+    R0, p0 = placement(q)
+    R1, p1 = placement(_perturbed(robot, q, delta))
+    J = cs.jacobian(cs.vertcat(p1, _vee(cs.mtimes(R1, R0.T))), delta)
     J = cs.substitute(J, delta, cs.DM.zeros(model.nv))
-    return cs.Function("frame_p", [q], [position(q)]), cs.Function("frame_J", [q], [J])
+    return (
+        cs.Function("frame_p", [q], [p0]),
+        cs.Function("frame_R", [q], [R0]),
+        cs.Function("frame_J", [q], [J]),
+    )
+
+
+def _world(c: Any) -> np.ndarray:
+    """``B (dim × dim)``: world force (and torque) ``B w`` of contact ``c``'s variables ``w``."""
+    return np.kron(np.eye(c.dim // 3), c.rotation)
 
 
 class ContactColumns:
-    """Where the contact forces sit in the generalized NLP's ``z``: after column ``start``,
-    contact by contact, each force on its intervals
-    (:meth:`~mbplan.ocp.contacts.Contact.force_intervals`), 3 columns per interval."""
+    """Where the contact variables sit in the generalized NLP's ``z``: after column ``start``,
+    contact by contact, each one's (:attr:`~mbplan.ocp.contacts.Contact.dim` columns) on its
+    intervals (:meth:`~mbplan.ocp.contacts.Contact.force_intervals`)."""
 
     def __init__(self, contacts: Sequence[Any], N: int, start: int) -> None:
-        self.N = N
+        self.N, self.contacts = N, list(contacts)
         self.intervals = [c.force_intervals(N) for c in contacts]
-        self.at = np.cumsum([start] + [3 * len(k) for k in self.intervals])
+        sizes = [c.dim * len(k) for c, k in zip(contacts, self.intervals, strict=True)]
+        self.at = np.cumsum([start, *sizes])
         self.end = int(self.at[-1])
+        self.dim = max((c.dim for c in contacts), default=3)
 
     def index(self, i: int, k: ArrayLike) -> np.ndarray:
-        """Columns of contact ``i``'s force on its intervals ``k``, shape ``(*k.shape, 3)``."""
+        """Columns of contact ``i``'s variables on its intervals ``k``, ``(*k.shape, dim_i)``."""
+        d = self.contacts[i].dim
         at = np.searchsorted(self.intervals[i], np.asarray(k))
-        return self.at[i] + at[..., None] * 3 + np.arange(3)
+        return self.at[i] + at[..., None] * d + np.arange(d)
 
     def forces(self, z: np.ndarray) -> np.ndarray:
-        """Every contact's force ``(N, nc, 3)`` per interval (zero where it does not act)."""
-        out = np.zeros((self.N, len(self.intervals), 3))
-        for i, k in enumerate(self.intervals):
-            out[k, i] = z[self.index(i, k)]
+        """Every contact's world force (and torque) ``(N, nc, dim)`` per interval (zero where it
+        does not act)."""
+        out = np.zeros((self.N, len(self.intervals), self.dim))
+        for i, (c, k) in enumerate(zip(self.contacts, self.intervals, strict=True)):
+            out[k, i, : c.dim] = c.world(z[self.index(i, k)])
         return out
 
     def pack(self, forces: np.ndarray | None) -> np.ndarray:
-        """The columns' values from ``forces (N, nc, 3)`` (zero if None)."""
+        """The columns' values from world ``forces (N, nc, dim)`` (zero if None)."""
         parts = [np.zeros(0)]
-        for i, k in enumerate(self.intervals):
-            parts.append(np.zeros(3 * len(k)) if forces is None else forces[k, i].ravel())
+        for i, (c, k) in enumerate(zip(self.contacts, self.intervals, strict=True)):
+            w = np.zeros((len(k), c.dim)) if forces is None else c.local(forces[k, i, : c.dim])
+            parts.append(w.ravel())
         return np.concatenate(parts)
 
 
@@ -103,45 +131,54 @@ def contact_rows(
     the generalized NLP ``nlp`` (its new rows from ``row`` on), and how many rows they add."""
     out = []
     N, nq, nv, robot = nlp.N, nlp.nq, nlp.nv, nlp.ocp.robot
-    q, f = cs.SX.sym("q", nq), cs.SX.sym("f", 3)
+    q = cs.SX.sym("q", nq)
     for i, c in enumerate(nlp.ocp.contacts):
-        p_of, J_of = frame_functions(robot, c.frame)
+        d, f = c.dim, cs.SX.sym("f", c.dim)
+        p_of, R_of, J_full = frame_functions(robot, c.frame)
+        J_of = cs.Function("contact_J", [q], [J_full(q)[:d, :]])
+        wrench = cs.mtimes(cs.DM(_world(c)), f)
         k = c.force_intervals(N)
         cols_f = nlp.force_columns.index(i, k)
         first = int(k[0] == 0)
         if first:  # interval 0, at the fixed q0
-            force0 = -cs.mtimes(J_of(cs.DM(nlp.ocp.q0)).T, f)
+            force0 = -cs.mtimes(J_of(cs.DM(nlp.ocp.q0)).T, wrench)
             out.append((f, force0, cols_f[:1], N * nv, False))
         inner = k[first:]
         if inner.size:
             x = cs.vertcat(q, f)
-            force = -cs.mtimes(J_of(q).T, f)
+            force = -cs.mtimes(J_of(q).T, wrench)
             cols = np.concatenate([nlp.iq(inner), cols_f[first:]], axis=1)
             out.append((x, force, cols, (N + inner[0]) * nv, False))
-        out.append((f, cs.mtimes(cs.DM(pyramid(c.friction)), f), cols_f, row, True))
-        row += 4 * len(k)
+        A = c.cone()
+        out.append((f, cs.mtimes(cs.DM(A), f), cols_f, row, True))
+        row += len(A) * len(k)
         held = c.held_knots(N)
         knots = held[held <= N]
         if knots.size:
-            out.append((q, p_of(q) - cs.DM(c.position), nlp.iq(knots), row, False))
-            row += 3 * len(knots)
+            held_rows = p_of(q) - cs.DM(c.position)
+            if c.sole is not None:
+                Rc = cs.DM(c.rotation)
+                held_rows = cs.vertcat(held_rows, _vee(cs.mtimes(Rc.T, R_of(q))))
+            out.append((q, held_rows, nlp.iq(knots), row, False))
+            row += d * len(knots)
         if held[-1] == N + 1:  # at rest at the end
             y = cs.SX.sym("y", nq + nv)
             rest = cs.mtimes(J_of(y[:nq]), y[nq:])
             cols = np.concatenate([nlp.iq([N]), nlp.iv([N])], axis=1)
             out.append((y, rest, cols, row, False))
-            row += 3
+            row += d
     return out, row
 
 
 def guess_contact_forces(
     nlp: Any, q: np.ndarray, demand: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Contact forces ``(N, nc, 3)`` and torques ``(N, nv)`` with ``τ_k + Σ J_iᵀ f_{i,k} =
-    demand_k`` (the inverse dynamics): each interval's forces the least-squares balance of the
-    base's rows (the first six), ``τ`` the rest (zero on the base)."""
+    """World contact forces ``(N, nc, dim)`` and torques ``(N, nv)`` with ``τ_k + Σ J_iᵀ
+    f_{i,k} = demand_k`` (the inverse dynamics): each interval's forces (wrenches) the
+    least-squares balance of the base's rows (the first six), ``τ`` the rest (zero on the
+    base)."""
     N, contacts = nlp.N, nlp.ocp.contacts
-    forces = np.zeros((N, len(contacts), 3))
+    forces = np.zeros((N, len(contacts), nlp.force_columns.dim))
     tau = np.array(demand, dtype=float)
     if nlp.chart is None:  # a fixed base carries itself
         return forces, tau
@@ -150,9 +187,16 @@ def guess_contact_forces(
         on = [i for i in range(len(contacts)) if k in active[i]]
         if not on:
             continue
-        jacobians = [frame_functions(nlp.ocp.robot, contacts[i].frame)[1] for i in on]
-        J = np.vstack([np.asarray(J_of(q[k])) for J_of in jacobians])
-        forces[k, on] = np.linalg.lstsq(J[:, :6].T, demand[k, :6], rcond=None)[0].reshape(-1, 3)
-        tau[k] -= J.T @ forces[k, on].ravel()
+        J = [
+            np.asarray(frame_functions(nlp.ocp.robot, contacts[i].frame)[2](q[k]))[
+                : contacts[i].dim
+            ]
+            for i in on
+        ]
+        J_all = np.vstack(J)
+        w = np.linalg.lstsq(J_all[:, :6].T, demand[k, :6], rcond=None)[0]
+        tau[k] -= J_all.T @ w
+        for i, part in zip(on, np.split(w, np.cumsum([len(j) for j in J])[:-1]), strict=True):
+            forces[k, i, : len(part)] = part
     tau[:, :6] = 0.0
     return forces, tau

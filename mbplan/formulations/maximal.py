@@ -17,7 +17,6 @@ import pinocchio as pin
 import scipy.optimize
 import scipy.sparse as sp
 
-from mbplan.dynamics.friction import pyramid_edges
 from mbplan.errors import InputError
 from mbplan.formulations.maximal_joints import joint_terms
 from mbplan.formulations.maximal_layout import JointEliminationPlans
@@ -204,16 +203,18 @@ class MaximalNLP:
     def _contact_trajectory(
         self, x: Point, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray
     ) -> dict[str, np.ndarray]:
-        """``contact_forces_knots (N+1, nc, 3)`` (the LGVI's knot forces) and their interval
-        means ``contact_forces``. Knot 0's force, which the LGVI
-        does not use, is the one inside the friction pyramid for which the first interval's mean
-        force of the contacts held from the start best balances the base's rows of the first
-        step's inverse dynamics ``RNEA(q0, v0, a0)`` (non-negative least squares on the
-        pyramid's edges; :meth:`joint_trajectory` then balances the rest with the torques)."""
+        """``contact_forces_knots (N+1, nc, d)`` (the LGVI's knot forces, world frame; ``d`` 6
+        with soles: their wrenches) and their interval means ``contact_forces``. Knot 0's
+        force, which the LGVI does not use, is the one inside its cone for which the first
+        interval's mean force of the contacts held from the start best balances the base's rows
+        of the first step's inverse dynamics ``RNEA(q0, v0, a0)`` (non-negative least squares on
+        the cones' edges; :meth:`joint_trajectory` then balances the rest with the torques)."""
         contacts, N, mm = self.ocp.contacts, self.ocp.N, self.mm
         if not contacts:
             return {}
         knots = contact_forces(contacts, x, N + 1)
+        for i, c in enumerate(contacts):
+            knots[:, i, : c.dim] = c.world(knots[:, i, : c.dim])
         start = [i for i, c in enumerate(contacts) if c.first <= 1]
         base = np.zeros(mm.nv, dtype=bool)
         for b in np.flatnonzero(mm.free):
@@ -224,13 +225,16 @@ class MaximalNLP:
             demand = pin.rnea(model, data, q0, v0, a0)[base]
             columns = []
             for i in start:
-                fid = model.getFrameId(contacts[i].frame)
+                c = contacts[i]
+                fid = model.getFrameId(c.frame)
                 J = pin.computeFrameJacobian(model, data, q0, fid, pin.LOCAL_WORLD_ALIGNED)
-                demand -= 0.5 * J[:3, base].T @ knots[1, i]
-                columns.append(0.5 * J[:3, base].T @ pyramid_edges(contacts[i].friction).T)
-            beta = scipy.optimize.nnls(np.hstack(columns), demand)[0].reshape(len(start), 4)
-            for n, i in enumerate(start):
-                knots[0, i] = beta[n] @ pyramid_edges(contacts[i].friction)
+                J = J[: c.dim, base].T
+                demand -= 0.5 * J @ knots[1, i, : c.dim]
+                columns.append(0.5 * J @ c.world(c.edges()).T)
+            beta = scipy.optimize.nnls(np.hstack(columns), demand)[0]
+            split = np.cumsum([len(contacts[i].edges()) for i in start])[:-1]
+            for i, b in zip(start, np.split(beta, split), strict=True):
+                knots[0, i, : contacts[i].dim] = b @ contacts[i].world(contacts[i].edges())
         return {
             "contact_forces": 0.5 * (knots[:-1] + knots[1:]),
             "contact_forces_knots": knots,

@@ -1,5 +1,7 @@
-"""Quadruped gaits as OCPs: the schedules and targets of Crocoddyl's ``SimpleQuadrupedalGaitProblem``
-(``crocoddyl.utils.quadruped``), with hard contacts and friction cones.
+"""Quadruped and biped gaits as OCPs: the schedules and targets of Crocoddyl's
+``SimpleQuadrupedalGaitProblem`` and ``SimpleBipedGaitProblem`` (``crocoddyl.utils.quadruped``,
+``.biped``), with hard contacts and friction cones: point feet for quadrupeds, flat soles
+(6-D contacts, their wrenches in the contact wrench cone) for bipeds.
 
 A gait is a list of :class:`Phase` (intervals, feet that swing): Crocoddyl's running models
 without its impulse models (a touchdown is the force of the contact's first knot,
@@ -17,8 +19,10 @@ way to its next position (the step times the fraction of the feet that swing), a
 stay near the start's posture and the torques small; a swing foot stays above the ground
 (:class:`~mbplan.residuals.FrameHeight`, hard). A jump takes off after ``S`` support intervals,
 flies ``K`` intervals up (its centre of mass rising to ``step_height`` above the halfway point)
-and ``K`` down, and lands ``step_length`` further on for ``S`` intervals with its centre of mass
-there.
+and ``K`` down, and lands ``step_length`` further on for ``S`` intervals (a biped's ``S/2``, as
+Crocoddyl's) with its centre of mass there. A biped walks with a support phase before each
+step, the right foot first (half a step), then the left; its swing soles track the placement
+(:class:`~mbplan.residuals.FramePlacement`: the start's orientation) and land flat.
 """
 
 from __future__ import annotations
@@ -30,11 +34,12 @@ import numpy as np
 import pinocchio as pin
 
 from mbplan.errors import InputError
-from mbplan.ocp.contacts import frame_position
+from mbplan.ocp.contacts import frame_position, frame_rotation
 from mbplan.ocp.problem import OCP
 from mbplan.residuals import (
     ComPosition,
     FrameHeight,
+    FramePlacement,
     FrameTranslation,
     JointPosition,
     JointTorque,
@@ -52,6 +57,13 @@ QUADRUPED_GAITS: dict[str, tuple[tuple[int, ...], ...]] = {
 }
 """The feet (indices into ``(lf, rf, lh, rh)``) that each step of a gait swings; a walk's
 support phases come before its first and third steps."""
+
+BIPED_GAITS: dict[str, tuple[tuple[int, ...], ...]] = {
+    "walk": ((1,), (0,)),  # the right foot, then the left
+    "jump": ((0, 1),),
+}
+"""The feet (indices into ``(left, right)``) that each step of a biped gait swings; support
+phases come before each step."""
 
 FOOT_WEIGHT = 1e4  # swing-foot tracking (Crocoddyl: 1e6 on the same error)
 COM_WEIGHT = 1e4  # centre-of-mass tracking (Crocoddyl: 1e6)
@@ -84,9 +96,22 @@ def quadruped_schedule(gait: str, step_knots: int, support_knots: int) -> list[P
     return [*out, Phase(1)]
 
 
-def _feet(robot: Any, feet: Any) -> tuple[str, ...]:
-    if isinstance(feet, str) or len(tuple(feet)) != 4:
-        raise InputError(f"feet: expected four frame names (lf, rf, lh, rh), got {feet!r}")
+def biped_schedule(gait: str, step_knots: int, support_knots: int) -> list[Phase]:
+    """The phases of a biped gait (module docstring)."""
+    if gait not in BIPED_GAITS:
+        raise InputError(f"gait: {gait!r} is not one of {', '.join(BIPED_GAITS)}")
+    support = Phase(support_knots)
+    if gait == "jump":
+        landed = Phase(max(support_knots // 2, 1))
+        return [support, Phase(2 * step_knots, BIPED_GAITS[gait][0]), landed]
+    right, left = BIPED_GAITS[gait]
+    return [support, Phase(step_knots, right), support, Phase(step_knots, left), Phase(1)]
+
+
+def _feet(robot: Any, feet: Any, names: str) -> tuple[str, ...]:
+    count = len(names.split(", "))
+    if isinstance(feet, str) or len(tuple(feet)) != count:
+        raise InputError(f"feet: expected {count} frame names ({names}), got {feet!r}")
     for f in feet:
         if not isinstance(f, str) or not robot.model.existFrame(f):
             raise InputError(f"feet: the robot has no frame {f!r}")
@@ -106,40 +131,95 @@ def quadruped_gait(
     start: np.ndarray | None = None,
 ) -> OCP:
     """The OCP of a quadruped gait (module docstring) from ``start`` (default: the robot's
-    ``standing`` configuration), feet ``(lf, rf, lh, rh)`` on the ground."""
+    ``standing`` configuration), point feet ``(lf, rf, lh, rh)`` on the ground."""
     robot = load_robot(robot)
-    if not getattr(robot, "floating", False):
-        raise InputError(f"quadruped_gait: robot {robot.name!r} has no floating base")
-    feet = _feet(robot, feet)
-    length = as_real(step_length, "step_length")
-    height = as_real(step_height, "step_height", positive=True)
+    feet = _feet(robot, feet, "lf, rf, lh, rh")
+    K, S = _knots(step_knots, support_knots)
+    phases = quadruped_schedule(gait, K, S)
+    return _gait_ocp(robot, feet, gait, phases, step_length, step_height, dt, friction, start,
+                     "standing", None)  # fmt: skip
+
+
+def biped_gait(
+    robot: Any,
+    feet: tuple[str, str] = ("left_sole_link", "right_sole_link"),
+    gait: str = "walk",
+    step_length: float = 0.6,
+    step_height: float = 0.1,
+    dt: float = 0.03,
+    step_knots: int = 15,
+    support_knots: int = 4,
+    friction: float = 0.7,
+    start: np.ndarray | None = None,
+    sole: tuple[float, float] = (0.2, 0.1),
+) -> OCP:
+    """The OCP of a biped gait (module docstring; Crocoddyl's ``SimpleBipedGaitProblem``) from
+    ``start`` (default: the robot's ``half_sitting`` configuration), flat soles of ``sole =
+    (length, width)`` (:meth:`~mbplan.OCP.add_contact`) at ``feet = (left, right)``."""
+    robot = load_robot(robot)
+    feet = _feet(robot, feet, "left, right")
+    K, S = _knots(step_knots, support_knots)
+    phases = biped_schedule(gait, K, S)
+    return _gait_ocp(robot, feet, gait, phases, step_length, step_height, dt, friction, start,
+                     "half_sitting", sole)  # fmt: skip
+
+
+def _knots(step_knots: int, support_knots: int) -> tuple[int, int]:
     K = as_int(step_knots, "step_knots", minimum=2, what="intervals of a step")
     S = as_int(support_knots, "support_knots", minimum=1, what="intervals of a support phase")
-    if start is None:
-        start = robot.configuration("standing")
-    q0 = as_array(start, (robot.nq,), "start")
-    phases = quadruped_schedule(gait, K, S)
+    return K, S
+
+
+def _gait_ocp(
+    robot: Any,
+    feet: tuple[str, ...],
+    gait: str,
+    phases: list[Phase],
+    step_length: float,
+    step_height: float,
+    dt: float,
+    friction: float,
+    start: np.ndarray | None,
+    standing: str,
+    sole: tuple[float, float] | None,
+) -> OCP:
+    """The OCP of the schedule ``phases`` of ``feet`` (module docstring)."""
+    if not getattr(robot, "floating", False):
+        raise InputError(f"{gait}: robot {robot.name!r} has no floating base")
+    length = as_real(step_length, "step_length")
+    height = as_real(step_height, "step_height", positive=True)
+    q0 = as_array(robot.configuration(standing) if start is None else start, (robot.nq,), "start")
     N = sum(p.intervals for p in phases)
     ocp = OCP(robot, N=N, dt=as_real(dt, "dt", positive=True), q0=q0)
     model = robot.model
     ids = [robot.frame_id(f) for f in feet]
     at = np.array([frame_position(model, i, q0) for i in ids])
+    turn = [frame_rotation(model, i, q0) for i in ids]
     ground = at[:, 2].copy()
     data = model.createData()
     com = pin.centerOfMass(model, data, q0).copy()
     com[:2] = at[:, :2].mean(axis=0)
-    stance_start = [0, 0, 0, 0]
+    stance_start = [0] * len(feet)
     first_step = gait in ("walk", "trot", "pace")
+
+    def contact(i: int, knots: range) -> None:
+        name = f"{feet[i]}_{stance_start[i]}"
+        ocp.add_contact(name, feet[i], knots, at[i], friction, sole)
+
+    def swing_target(i: int, target: np.ndarray) -> Any:
+        if sole is None:
+            return FrameTranslation(feet[i], target)
+        return FramePlacement(feet[i], pin.SE3(turn[i], target))
+
     t = 0
     for p, phase in enumerate(phases):
         if not phase.swing:
             t += phase.intervals
             continue
         stride = 0.5 * length if first_step and p < (3 if gait == "walk" else 2) else length
-        share = len(phase.swing) / 4
+        share = len(phase.swing) / len(feet)
         for i in phase.swing:  # the stance that ends here
-            ocp.add_contact(f"{feet[i]}_{stance_start[i]}", feet[i], range(stance_start[i], t + 1),
-                            at[i], friction)  # fmt: skip
+            contact(i, range(stance_start[i], t + 1))
         flight = np.arange(t + 1, t + phase.intervals)
         for i in phase.swing:
             above = FrameHeight(feet[i], ground[i])
@@ -156,16 +236,15 @@ def quadruped_gait(
                 continue
             rise = height * min(k, K - k) / (K / 2)
             for i in phase.swing:
-                target = at[i] + np.array([stride * ahead, 0.0, rise])
-                ocp.add_cost(f"swing_{feet[i]}_{t + k}", FrameTranslation(feet[i], target),
-                             FOOT_WEIGHT, knots=[t + k])  # fmt: skip
+                target = swing_target(i, at[i] + np.array([stride * ahead, 0.0, rise]))
+                ocp.add_cost(f"swing_{feet[i]}_{t + k}", target, FOOT_WEIGHT, knots=[t + k])
         t += phase.intervals
         com = com + np.array([stride * share, 0.0, 0.0])
         for i in phase.swing:
             at[i] = at[i] + np.array([stride, 0.0, 0.0])
             stance_start[i] = t
-    for i, f in enumerate(feet):
-        ocp.add_contact(f"{f}_{stance_start[i]}", f, range(stance_start[i], N + 1), at[i], friction)
+    for i in range(len(feet)):
+        contact(i, range(stance_start[i], N + 1))
     if gait == "jump":
         ocp.add_cost("com_landed", ComPosition(com), COM_WEIGHT, knots=range(t, N + 1))
     joints = robot.q_of_v[robot.joint_indices(None)]

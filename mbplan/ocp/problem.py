@@ -143,10 +143,13 @@ class OCP:
         knots: Sequence[int],
         position: ArrayLike | None = None,
         friction: float = 0.7,
+        sole: tuple[float, float] | None = None,
     ) -> OCP:
         """Hold ``frame`` at the ground point ``position`` (default: where ``q0`` puts it) over
         the stance ``knots`` (contiguous state knots), its force inside the friction cone of
-        coefficient ``friction`` (:mod:`mbplan.ocp.contacts`)."""
+        coefficient ``friction``; with ``sole = (length, width)`` a flat rectangular sole held
+        in place and orientation, its wrench inside the contact wrench cone
+        (:mod:`mbplan.ocp.contacts`)."""
         if not isinstance(name, str) or not name:
             raise InputError(f"name: expected a non-empty string, got {name!r}")
         if name in self.names or name in self.contact_names:
@@ -158,7 +161,17 @@ class OCP:
                 f"contact {name!r}: contacts are not written for a robot with loop closures"
             )
         contact = make_contact(
-            self.robot, self.N, self.q0, self.v0, self.dt, name, frame, knots, position, friction
+            self.robot,
+            self.N,
+            self.q0,
+            self.v0,
+            self.dt,
+            name,
+            frame,
+            knots,
+            position,
+            friction,
+            sole,
         )
         for other in self.contacts:
             both = np.intersect1d(other.knots, contact.knots)

@@ -18,7 +18,7 @@ from mbplan.errors import InputError
 from mbplan.lie import SO3, R
 from mbplan.residuals.base import Residual, SymbolicContext, SymbolicRows
 from mbplan.transcription.terms import Term
-from mbplan.validation import as_array, as_real, as_rotation
+from mbplan.validation import as_array, as_rotation
 
 
 def frame_error(R, p, p_goal, R_goal=None):
@@ -166,7 +166,8 @@ class FrameHeight(_FrameResidual):
 
     def resolve(self, robot: Any, scene: Any) -> Residual:
         _moving_frame(robot, self.frame)
-        return replace(self, height=as_real(self.height, f"FrameHeight({self.frame!r}).height"))
+        height = as_array(self.height, (), f"FrameHeight({self.frame!r}).height")
+        return replace(self, height=float(height))
 
     def dim(self, robot: Any, scene: Any) -> int:
         return 1

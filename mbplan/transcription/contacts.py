@@ -9,6 +9,12 @@ configuration ``x_m = (R_{m-1} F_{m-1}, p_{m-1} + v_{m-1} Δt)`` for the contact
 ``m`` (:meth:`~mbplan.ocp.contacts.Contact.held_knots`). Forces are one block per contact,
 ``contact_force{i}`` (``R³``), data (zero) at the other knots; the friction pyramid
 ``A f ≤ 0`` (:func:`~mbplan.dynamics.friction.pyramid`) is an inequality term on them.
+
+A sole is a weld to the world (the closure rows ``"weld"``) during its stance; its variable
+``w = (f, τ)`` (``R⁶``, contact frame ``R_c``) enters the dynamics rows as the world wrench
+``(R_c f, R_c τ)`` at the frame's origin (:func:`_sole_forces_function`), exactly, whatever the
+sole's orientation at the touchdown knot, so that its cone ``A w ≤ 0``
+(:func:`~mbplan.dynamics.friction.wrench_cone`) bounds the wrench the robot feels.
 """
 
 from __future__ import annotations
@@ -20,9 +26,9 @@ from typing import Any
 import casadi as cs
 import numpy as np
 
-from mbplan.dynamics.friction import pyramid
+from mbplan.dynamics.joints import constraint_forces
 from mbplan.engine import RiemannianFunction
-from mbplan.lie import R
+from mbplan.lie import SO3, R
 from mbplan.multibody import MaximalModel
 from mbplan.transcription.loops import loop_constraint_function, loop_forces_function
 from mbplan.transcription.multibody import dynamics_rows
@@ -32,24 +38,48 @@ from mbplan.transcription.variables import Block
 CONTACT_BLOCK = "contact_force{}"
 """Name of the block of the forces of the ``i``-th contact."""
 
-_GROUP = ("point", (0, 1, 2), True, False)  # a point closure, side 1 the world
+_POINT = ("point", (0, 1, 2), True, False)  # a point closure, side 1 the world
+_WELD = ("weld", (0, 1, 2, 3, 4, 5), True, False)
 
 
 # process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
-def _cone_function(jit: bool) -> RiemannianFunction:
-    """The friction pyramid's rows ``A f`` (``≤ 0``)."""
+def _cone_function(jit: bool, rows: int, dim: int) -> RiemannianFunction:
+    """A cone's rows ``A w`` (``≤ 0``)."""
+    name = f"contact_cone_{rows}x{dim}"
+    fn = lambda w, A: cs.mtimes(A, w)  # noqa: E731
+    return RiemannianFunction(name, [("w", R(dim))], fn, [("A", (rows, dim))], jit=jit)
+
+
+# process-wide cache, result-neutral: compiled from its symbolic key alone
+@cache
+def _sole_forces_function(jit: bool) -> RiemannianFunction:
+    """The world wrench ``(R_c f, R_c τ)`` of ``w = (f, τ)`` at the point ``r`` of a body
+    ``(R, p)``, into its dynamics rows as a closure's forces (module docstring): the
+    ``J(x)ᵀw`` of rows whose derivatives along ``R(I + η^)``, ``p + δp`` are the wrench's
+    lever arms, ``R_cᵀ(p + R r)`` and ``½ vee(R_cᵀ(R R̄ᵀ - R̄ Rᵀ)R_c)`` at ``R̄ = R``."""
+
+    def fn(R2, p2, lam, Rc, r2):
+        def rows(Rp, pp):
+            spin = cs.mtimes([Rc.T, cs.mtimes(Rp, R2.T) - cs.mtimes(R2, Rp.T), Rc])
+            turn = 0.5 * cs.vertcat(spin[2, 1], spin[0, 2], spin[1, 0])
+            return cs.vertcat(cs.mtimes(Rc.T, pp + cs.mtimes(Rp, r2)), turn)
+
+        ((torque, force),) = constraint_forces(rows, [(R2, p2)], lam)
+        return cs.vertcat(-torque, -force)
+
+    variables = [("R2", SO3), ("p2", R(3)), ("lam", R(6))]
     return RiemannianFunction(
-        "friction_pyramid", [("f", R(3))], lambda f, A: cs.mtimes(A, f), [("A", (4, 3))], jit=jit
+        "sole_wrench_forces", variables, fn, [("Rc", (3, 3)), ("r2", 3)], jit=jit
     )
 
 
 def contact_blocks(contacts: Sequence[Any], N: int) -> list[Block]:
-    """One force block per contact, knots outside its force knots fixed."""
+    """One force (wrench) block per contact, knots outside its force knots fixed."""
     blocks = []
     for i, c in enumerate(contacts):
         fixed = np.setdiff1d(np.arange(N + 1), c.held_knots(N) - 1)
-        blocks.append(Block(CONTACT_BLOCK.format(i), R(3), N + 1, tuple(fixed)))
+        blocks.append(Block(CONTACT_BLOCK.format(i), R(c.dim), N + 1, tuple(fixed)))
     return blocks
 
 
@@ -67,31 +97,36 @@ def contact_terms(
     """The force, constraint and friction terms of every contact
     (:class:`~mbplan.ocp.contacts.Contact`; module docstring)."""
     nb, terms = mm.nb, []
-    forces_fn = loop_forces_function(jit, _GROUP)
-    constraint_fn = loop_constraint_function(jit, _GROUP)
     for i, c in enumerate(contacts):
         block = CONTACT_BLOCK.format(i)
         b, Rf, r = contact_point(mm, mm.model.getFrameId(c.frame))
         k = c.held_knots(N) - 1
         site = k * nb + b
-        params = {"Rf1": np.eye(3), "r1": c.position, "Rf2": Rf, "r2": r}
+        params = {"Rf1": c.rotation, "r1": c.position, "Rf2": Rf, "r2": r}
         bind = {"R2": ("R", site), "p2": ("p", site), "lam": (block, k)}
         rows = dynamics_rows(nb, N, k - 1, np.full(len(k), b))
-        terms.append(Term(f"contact_{c.name}_forces", "eq", forces_fn, bind, params, rows=rows))
+        if c.sole is None:
+            forces_fn, force_params = loop_forces_function(jit, _POINT), params
+        else:
+            forces_fn, force_params = _sole_forces_function(jit), {"Rc": c.rotation, "r2": r}
+        terms.append(
+            Term(f"contact_{c.name}_forces", "eq", forces_fn, bind, force_params, rows=rows)
+        )
+        constraint_fn = loop_constraint_function(jit, _POINT if c.sole is None else _WELD)
         bind = {f"{n}2": (n, site) for n in ("R", "F", "p", "v")}
         terms.append(
             Term(f"contact_{c.name}_position", "eq", constraint_fn, bind, params | {"dt": dt})
         )
-        cone = {"A": pyramid(c.friction)}
-        terms.append(
-            Term(f"contact_{c.name}_cone", "ineq", _cone_function(jit), {"f": (block, k)}, cone)
-        )
+        A = c.cone()
+        cone_fn = _cone_function(jit, *A.shape)
+        terms.append(Term(f"contact_{c.name}_cone", "ineq", cone_fn, {"w": (block, k)}, {"A": A}))
     return terms
 
 
 def contact_forces(contacts: Sequence[Any], point: dict, knots: int) -> np.ndarray:
-    """The contacts' knot forces ``(knots, nc, 3)`` of a point (zero outside their force knots)."""
-    out = np.zeros((knots, len(contacts), 3))
-    for i in range(len(contacts)):
-        out[:, i] = np.asarray(point[CONTACT_BLOCK.format(i)]).reshape(knots, 3)
+    """The contacts' knot variables ``(knots, nc, d)`` of a point (zero outside their force
+    knots; ``d`` 6 if any contact is a sole, its forces' torques zero)."""
+    out = np.zeros((knots, len(contacts), max(c.dim for c in contacts)))
+    for i, c in enumerate(contacts):
+        out[:, i, : c.dim] = np.asarray(point[CONTACT_BLOCK.format(i)]).reshape(knots, c.dim)
     return out

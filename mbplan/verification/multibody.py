@@ -94,6 +94,7 @@ from mbplan.verification.contacts import (
     contact_dynamics,
     contact_reasons,
     contact_violations,
+    impulse_sag,
     kick,
     replay_slip,
     with_contact_forces,
@@ -263,7 +264,9 @@ def verify_multibody(ocp: OCP, result: PlanResult) -> Verification:
             )
     violations = constraint_violations(ocp, result.q, result.v, result.tau, result.tau_knots)
     violations |= contact_violations(ocp, result.q, result.contact_forces)
-    violations |= replay_slip(ocp, path, q_euler)
+    impulses = ocp.contacts and result.tau_knots is not None and not ocp.robot.loops
+    sag = impulse_sag(ocp, result) if impulses else None
+    violations |= replay_slip(ocp, path, q_euler, sag)
     substeps = path.reshape(-1, path.shape[-1])
     clearances = {
         i.name: _clearance(ocp, i, substeps) for i in ocp.constraints if i.residual.is_obstacle

@@ -58,6 +58,7 @@ def force_layer(name: str, ocp: Any, result: PlanResult) -> Layer:
     forces = result.contact_forces_knots
     if forces is None:
         forces = np.concatenate([result.contact_forces, result.contact_forces[-1:]])
+    forces = forces[..., :3]  # a sole's torque is not drawn
     largest = float(np.max(np.linalg.norm(forces, axis=-1), initial=0.0))
     scale = ARROW_LENGTH / largest if largest > 0.0 else 0.0
     geometry = pin.GeometryModel()
