@@ -49,7 +49,9 @@ class PlanResult(SolverResult):
     mean. A plan with contacts (:meth:`mbplan.OCP.add_contact`) adds ``contact_frames`` and
     ``contact_forces (N, nc, 3)``: each contact's world force (N) on the robot at its frame,
     the mean over each interval (force × Δt is its impulse; zero where it does not act), and
-    the LGVI's knot forces ``contact_forces_knots (N+1, nc, 3)``, ramped like ``tau_knots``;
+    the LGVI's knot forces ``contact_forces_knots (N+1, nc, 3)`` (the verifier applies them,
+    with ``tau_knots``, as impulses at the knots; ``v`` is then the velocity midway through each
+    knot's impulse, :func:`mbplan.formulations.maximal.impulse_midpoint_velocities`);
     ``(…, 6)`` when a contact is a sole: the world force, then the world torque (N m) about the
     frame's origin (a point's zero).
     ``extra`` holds method-specific numbers (JSON-serialisable).

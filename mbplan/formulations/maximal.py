@@ -174,7 +174,8 @@ class MaximalNLP:
 
         ``q_k`` from the relative poses and ``v_k`` their central differences (with ``q_{N+1}``
         from ``R_N F_N``; a floating base's local velocity, :func:`central_differences`; its
-        torques are zero). Knot 0's torque does not enter the LGVI, where the arm
+        torques are zero); with contacts (no loops), the velocity midway through each knot's
+        impulse (:func:`impulse_midpoint_velocities`). Knot 0's torque does not enter the LGVI, where the arm
         rests over the first step as in eq. (61): ``tau_knots[0]`` makes the mean over
         ``[t_0, t_1]`` the torque for which eq. (61)'s first step reaches the planned ``v_1``
         (with loop closures: the actuated joints' torques and closure forces that do, least
@@ -189,6 +190,11 @@ class MaximalNLP:
         v[1:] = central_differences(mm.model, q, dt)
         tau_knots = np.zeros((N + 1, mm.nv))
         tau_knots[:, mm.idx_v[mm.jointed]] = x["tau"][:, :, 0]
+        if self.ocp.contacts:  # (contacts exclude loops)
+            frames = [mm.model.getFrameId(c.frame) for c in self.ocp.contacts]
+            forces = self._knot_forces(x)
+            v[1:] = impulse_midpoint_velocities(mm.model, frames, q[1 : N + 1], v[1:],
+                                                tau_knots[1:], forces[1:], dt)  # fmt: skip
         a_0, external = (v[1] - v[0]) / dt, None
         contact = self._contact_trajectory(x, q[0], v[0], a_0)
         if contact:
@@ -212,9 +218,7 @@ class MaximalNLP:
         contacts, N, mm = self.ocp.contacts, self.ocp.N, self.mm
         if not contacts:
             return {}
-        knots = contact_forces(contacts, x, N + 1)
-        for i, c in enumerate(contacts):
-            knots[:, i, : c.dim] = c.world(knots[:, i, : c.dim])
+        knots = self._knot_forces(x)
         start = [i for i, c in enumerate(contacts) if c.first <= 1]
         base = np.zeros(mm.nv, dtype=bool)
         for b in np.flatnonzero(mm.free):
@@ -240,6 +244,14 @@ class MaximalNLP:
             "contact_forces_knots": knots,
             "contact_frames": self.ocp.contact_frames,
         }
+
+    def _knot_forces(self, x: Point) -> np.ndarray:
+        """The contacts' knot forces (and torques) ``(N+1, nc, d)`` of a point, world frame."""
+        contacts = self.ocp.contacts
+        knots = contact_forces(contacts, x, self.ocp.N + 1)
+        for i, c in enumerate(contacts):
+            knots[:, i, : c.dim] = c.world(knots[:, i, : c.dim])
+        return knots
 
     def _actuation(self, q: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """The joint torques ``u`` (zero on passive joints) with ``u + Jᵀf = tau`` for some
@@ -288,6 +300,53 @@ def free_first_step(model: pin.Model, q0: np.ndarray, v0: np.ndarray, dt: float)
     ``½gΔt²``, the LGVI's own first step when no joint force acts at knot 0)."""
     a0 = damped_aba(model, model.createData(), q0, v0, np.zeros(model.nv))
     return integrate(model, q0, dt * np.asarray(v0) + 0.5 * dt**2 * a0)
+
+
+MIDPOINT_ITERATIONS = 3  # fixed-point passes of impulse_midpoint_velocities (converged to ~1e-6)
+
+
+def impulse_midpoint_velocities(
+    model: pin.Model,
+    frames: list[int],
+    q: np.ndarray,
+    v: np.ndarray,
+    tau: np.ndarray,
+    forces: np.ndarray,
+    dt: float,
+) -> np.ndarray:
+    """The velocities ``(K, nv)`` at knots ``q (K, nq)`` midway through their impulses
+    ``Δt (τ_k + Σ J_iᵀ f_{i,k})`` (knot torques ``tau (K, nv)``, contact forces
+    ``forces (K, nc, 3)`` at ``frames``, or wrenches ``(K, nc, 6)``), from the central
+    differences ``v (K, nv)``.
+
+    The LGVI applies its knot forces as impulses with the unforced motion between
+    (:mod:`mbplan.verification.multibody`). Along such a motion the secants ``w_{k-1}``,
+    ``w_k`` of the intervals around knot ``k`` are ``v_k^∓ ∓ ½Δt a_k^∓ + O(Δt²)``, ``v_k^∓`` the
+    velocities before and after the impulse and ``a_k^∓`` the unforced accelerations there
+    (gravity, Coriolis, damping), so the velocity midway through the impulse,
+    ``½(v_k^- + v_k^+)``, is
+
+        ``v_k = ½(w_{k-1} + w_k) - ¼Δt (a_free(q_k, v_k^+) - a_free(q_k, v_k^-))``,
+        ``v_k^± = v_k ± ½Δt M(q_k)⁻¹(τ_k + Σ J_iᵀ f_{i,k})``
+
+    (fixed point, :data:`MIDPOINT_ITERATIONS` passes). The second term is ``O(Δt²)`` where
+    the impulse is small, first order where it reverses a light leg: at a jump's take-off
+    (solo12, Δt = 20 ms) the knee's velocity jumps by 13 rad/s within one knot and the central
+    difference is 0.2 rad/s off the velocity of the continuous motion through the planned
+    configurations (which an RK4 shooting from knot 2 finds within 0.02 rad/s of ``v_k``, and
+    then through ``q_3 … q_9`` within 2e-5 rad)."""
+    data = model.createData()
+    zero = np.zeros(model.nv)
+    out = np.array(v, dtype=float)
+    for k in range(len(q)):
+        load = tau[k] + generalized_force(model, frames, q[k], forces[k])
+        kick = 0.5 * dt * np.linalg.solve(mass_matrix(model, data, q[k]), load)
+        for _ in range(MIDPOINT_ITERATIONS):
+            jump = damped_aba(model, data, q[k], out[k] + kick, zero) - damped_aba(
+                model, data, q[k], out[k] - kick, zero
+            )
+            out[k] = v[k] - 0.25 * dt * jump
+    return out
 
 
 def central_differences(model: pin.Model, q: np.ndarray, dt: float) -> np.ndarray:
