@@ -195,6 +195,8 @@ class MaximalNLP:
             forces = self._knot_forces(x)
             v[1:] = impulse_midpoint_velocities(mm.model, frames, q[1 : N + 1], v[1:],
                                                 tau_knots[1:], forces[1:], dt)  # fmt: skip
+            if mm.free.any():
+                v[1:] = momentum_consistent_base(mm.model, q, v[1:], dt)
         a_0, external = (v[1] - v[0]) / dt, None
         contact = self._contact_trajectory(x, q[0], v[0], a_0)
         if contact:
@@ -215,7 +217,7 @@ class MaximalNLP:
         interval's mean force of the contacts held from the start best balances the base's rows
         of the first step's inverse dynamics ``RNEA(q0, v0, a0)`` (non-negative least squares on
         the cones' edges; :meth:`joint_trajectory` then balances the rest with the torques)."""
-        contacts, N, mm = self.ocp.contacts, self.ocp.N, self.mm
+        contacts, mm = self.ocp.contacts, self.mm
         if not contacts:
             return {}
         knots = self._knot_forces(x)
@@ -346,6 +348,29 @@ def impulse_midpoint_velocities(
                 model, data, q[k], out[k] - kick, zero
             )
             out[k] = v[k] - 0.25 * dt * jump
+    return out
+
+
+def momentum_consistent_base(
+    model: pin.Model, q: np.ndarray, v: np.ndarray, dt: float
+) -> np.ndarray:
+    """The velocities ``v (K, nv)`` at knots ``1 … K`` of a path ``q (K+2, nq)`` with a free
+    flyer's linear velocity set so that the robot's linear momentum is
+    ``m (c_{k+1} - c_{k-1}) / (2Δt)``, ``c`` the centre of mass.
+
+    Between the LGVI's impulses at the knots (:func:`impulse_midpoint_velocities`) only gravity
+    acts on the centre of mass: it moves on a parabola, whose secant over an interval is its
+    velocity at the interval's middle, and gravity's half-impulses on either side of a knot
+    cancel, so the momentum midway through a knot's impulse is exactly the central difference
+    of the centre of mass. The joints' velocities and the base's angular velocity are kept."""
+    data = model.createData()
+    mass = sum(inertia.mass for inertia in model.inertias)
+    com = np.array([pin.centerOfMass(model, data, qk) for qk in q])
+    out = np.array(v, dtype=float)
+    for k in range(len(v)):
+        target = mass * (com[k + 2] - com[k]) / (2.0 * dt)
+        A = pin.computeCentroidalMap(model, data, q[k + 1])[:3]
+        out[k, :3] += np.linalg.solve(A[:, :3], target - A @ out[k])
     return out
 
 
