@@ -74,23 +74,49 @@ def test_gait_inputs_are_refused_by_name() -> None:
         quadruped_gait("iiwa", feet=("iiwa_link_1",) * 4)
     with pytest.raises(InputError, match="step_knots"):
         quadruped_gait("solo12", step_knots=1)
+    with pytest.raises(InputError, match="limits: expected names among"):
+        quadruped_gait("solo12", limits=("speed",))
+    with pytest.raises(InputError, match="limits: expected names among"):
+        quadruped_gait("solo12", limits="velocity")
+
+
+def test_joint_limits_are_hard_constraints_on_request() -> None:
+    """ANYmal (its feet LF_FOOT, ...; standing on the ground): no limits by default, the
+    URDF's velocity and torque limits when asked for."""
+    feet = ("LF_FOOT", "RF_FOOT", "LH_FOOT", "RH_FOOT")
+    plain = quadruped_gait("anymal", feet, "jump", step_knots=4, support_knots=2)
+    assert not [c.name for c in plain.constraints if c.name.startswith("limits_")]
+    ocp = quadruped_gait("anymal", feet, "jump", step_knots=4, support_knots=2,
+                         limits=("velocity", "torque", "velocity"))  # fmt: skip
+    limited = {c.name: c.residual for c in ocp.constraints if c.name.startswith("limits_")}
+    assert set(limited) == {"limits_velocity", "limits_torque"}
+    assert np.allclose(limited["limits_velocity"].upper[6:], 15.0)  # ANYmal's URDF
+    assert all(abs(c.position[2]) < 1e-5 for c in ocp.contacts)  # the feet on the ground
 
 
 def test_the_locomotion_benchmark_draws_reproducible_steps_and_parses_its_options() -> None:
     from mbplan.cli.main import build_parser
-    from mbplan.tasks.locomotion import HEIGHTS, LENGTHS, gait_case
+    from mbplan.tasks.locomotion import FAMILIES, HEIGHT_RANGE, LENGTH_RANGE, gait_case
 
-    nominal, drawn, again = gait_case("trot", 0), gait_case("trot", 3, 1), gait_case("trot", 3, 1)
+    trot = "solo12-trot"
+    nominal, drawn, again = gait_case(trot, 0), gait_case(trot, 3, 1), gait_case(trot, 3, 1)
     assert nominal.to_dict() != drawn.to_dict() and drawn.to_dict() == again.to_dict()
     stances = [c for c in drawn.contacts if c.frame == "FL_FOOT"]  # one step of full length
     step = stances[-1].position[0] - stances[0].position[0]
-    assert len(stances) == 2 and LENGTHS[0] <= step <= LENGTHS[1]
+    length, height = FAMILIES[trot].length, FAMILIES[trot].height
+    assert len(stances) == 2 and LENGTH_RANGE[0] <= step / length <= LENGTH_RANGE[1]
     swing = max(drawn[n].residual.translation[2] for n in drawn.names if n.startswith("swing"))
-    assert HEIGHTS[0] <= swing - drawn.contacts[0].position[2] <= HEIGHTS[1]
-    with pytest.raises(InputError, match="unknown gait 'gallop'"):
-        gait_case("gallop", 0)
-    args = build_parser().parse_args(["bench", "locomotion", "--gaits", "trot,jump", "--n", "2"])
-    assert args.gaits == ("trot", "jump") and args.n == 2
+    assert HEIGHT_RANGE[0] <= (swing - drawn.contacts[0].position[2]) / height <= HEIGHT_RANGE[1]
+    walk = gait_case("talos_legs-walk", 1)
+    assert all(c.dim == 6 for c in walk.contacts)
+    jump = gait_case("anymal-jump", 0)
+    assert "limits_velocity" in jump.names
+    with pytest.raises(InputError, match="unknown gait family 'solo12-gallop'"):
+        gait_case("solo12-gallop", 0)
+    args = build_parser().parse_args(
+        ["bench", "locomotion", "--gaits", "solo12-trot,talos_legs-walk", "--n", "2"]
+    )
+    assert args.gaits == ("solo12-trot", "talos_legs-walk") and args.n == 2
 
 
 def test_crocoddyl_s_own_gait_is_the_timing_anchor() -> None:

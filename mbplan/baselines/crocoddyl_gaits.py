@@ -1,11 +1,13 @@
-"""Crocoddyl's own quadruped gaits solved by its FDDP: the timing anchor of
+"""Crocoddyl's own quadruped and biped gaits solved by its FDDP: the timing anchor of
 ``mbplan bench locomotion`` (the ``baselines`` extra).
 
-The same robot, gait, Δt, step and support knots as :func:`mbplan.locomotion.quadruped_gait`,
-but Crocoddyl's problem: ``crocoddyl.utils.quadruped.SimpleQuadrupedalGaitProblem`` (forward
-contact dynamics with Baumgarte stabilization, impulse models at touchdown, explicit Euler, the
-friction cone as a penalty cost, its own weights), from its own start (the standing state
-repeated, quasi-static controls), at most :data:`MAX_ITER` iterations. Its plans are not put
+The same robot, gait, Δt, step and support knots as :func:`mbplan.locomotion.quadruped_gait`
+(:func:`~mbplan.locomotion.biped_gait`), but Crocoddyl's problem:
+``crocoddyl.utils.quadruped.SimpleQuadrupedalGaitProblem`` (``.biped.SimpleBipedGaitProblem``:
+6-D sole contacts; forward contact dynamics with Baumgarte stabilization, impulse models at
+touchdown, explicit Euler, the friction (wrench) cone as a penalty cost, its own weights), from
+its own start (the standing state repeated, quasi-static controls), at most :data:`MAX_ITER`
+iterations. Its plans are not put
 through :func:`mbplan.verify` (their contact forces live in Crocoddyl's data, their cones are
 soft); the numbers are Crocoddyl's iterations and solve time on the machine that ran the
 benchmark.
@@ -26,7 +28,7 @@ CREATE = {"walk": "Walking", "trot": "Trotting", "pace": "Pacing", "bound": "Bou
 
 def fddp_gait(
     robot: str,
-    feet: tuple[str, str, str, str],
+    feet: tuple[str, ...],
     gait: str,
     step_length: float,
     step_height: float,
@@ -35,16 +37,26 @@ def fddp_gait(
     support_knots: int,
     repeats: int = 3,
 ) -> dict[str, Any]:
-    """Crocoddyl's FDDP on its gait problem (module docstring): iterations, whether it
-    converged, the median solve time over ``repeats`` solves (s)."""
+    """Crocoddyl's FDDP on its gait problem (module docstring; ``feet``: a quadruped's four
+    or a biped's ``(left, right)``): iterations, whether it converged, the median solve time
+    over ``repeats`` solves (s)."""
     import crocoddyl
+    from crocoddyl.utils.biped import SimpleBipedGaitProblem
     from crocoddyl.utils.quadruped import SimpleQuadrupedalGaitProblem
 
     model = load_robot(robot)
-    q0 = model.configuration("standing")
+    biped = len(feet) == 2
+    q0 = model.configuration("half_sitting" if biped else "standing")
     x0 = np.concatenate([q0, np.zeros(model.nv)])
-    builder = SimpleQuadrupedalGaitProblem(model.model, *feet)
-    if gait == "jump":
+    if biped:
+        builder = SimpleBipedGaitProblem(model.model, feet[1], feet[0])
+    else:
+        builder = SimpleQuadrupedalGaitProblem(model.model, *feet)
+    if biped and gait == "walk":
+        problem = builder.createWalkingProblem(
+            x0, step_length, step_height, dt, step_knots, support_knots
+        )
+    elif gait == "jump":
         length = np.array([step_length, 0.0, 0.0])
         problem = builder.createJumpingProblem(
             x0, step_height, length, dt, support_knots, step_knots

@@ -1,11 +1,11 @@
-"""Quadruped gaits with hard contacts: the RIPM (maximal coordinates: contacts as ball joints to
-the world during their stances) against IPOPT (generalized coordinates: contact forces as
-variables of eq. (61)).
+"""Gaits with hard contacts: the RIPM (maximal coordinates: contacts as joints to the world
+during their stances) against IPOPT (generalized coordinates: contact forces as variables of
+eq. (61)).
 
-Per gait of :mod:`mbplan.tasks.locomotion` (solo12 walking, trotting, pacing, bounding,
-jumping on Crocoddyl's schedules): the nominal step and seeded step lengths and heights, every
-method from the same linear warm start. A :class:`~mbplan.benchmarks.families.Suite` run by
-:func:`mbplan.benchmarks.families.run`.
+Per family of :mod:`mbplan.tasks.locomotion` (solo12 and ANYmal walking, trotting, pacing,
+bounding, jumping on Crocoddyl's schedules; talos_legs walking on flat soles): the nominal step
+and seeded step lengths and heights, every method from the same linear warm start. A
+:class:`~mbplan.benchmarks.families.Suite` run by :func:`mbplan.benchmarks.families.run`.
 
 Regenerate: ``mbplan bench locomotion --n 20 --seed 0 --methods ripm,ipopt --out benchmarks/results/locomotion``.
 """
@@ -17,32 +17,23 @@ from functools import partial
 from typing import Any
 
 from mbplan.benchmarks.families import Family, Suite
-from mbplan.tasks.locomotion import (
-    DT,
-    FEET,
-    GAITS,
-    HEIGHTS,
-    LENGTHS,
-    ROBOT,
-    STEP_HEIGHT,
-    STEP_KNOTS,
-    STEP_LENGTH,
-    SUPPORT_KNOTS,
-    WARM_START,
-    gait_case,
-)
+from mbplan.tasks.locomotion import FAMILIES, HEIGHT_RANGE, LENGTH_RANGE, WARM_START, gait_case
 
 
-def crocoddyl_anchor(gaits: Sequence[str], seed: int) -> dict[str, Any]:
-    """Crocoddyl's FDDP on its own problem of each gait's nominal step
+def crocoddyl_anchor(families: Sequence[str], seed: int) -> dict[str, Any]:
+    """Crocoddyl's FDDP on its own problem of each family's nominal step
     (:mod:`mbplan.baselines.crocoddyl_gaits`; ``seed``: unused, the nominal step is not drawn),
     or why it did not run."""
     try:
         from mbplan.baselines.crocoddyl_gaits import fddp_gait
     except ImportError as err:  # the baselines extra is not installed
         return {"unavailable": str(err)}
-    args = (STEP_LENGTH, STEP_HEIGHT, DT, STEP_KNOTS, SUPPORT_KNOTS)
-    return {g: fddp_gait(ROBOT, FEET, g, *args) for g in gaits}
+    out = {}
+    for name in families:
+        f = FAMILIES[name]
+        args = (f.length, f.height, f.dt, f.step_knots, f.support_knots)
+        out[name] = fddp_gait(f.robot, f.feet, f.gait, *args)
+    return out
 
 
 def anchor_markdown(profile: dict[str, Any]) -> list[str]:
@@ -50,18 +41,19 @@ def anchor_markdown(profile: dict[str, Any]) -> list[str]:
     lines = [
         "## Crocoddyl FDDP on its own problem (timing anchor)",
         "",
-        "The nominal step of each gait as Crocoddyl's `SimpleQuadrupedalGaitProblem` (contact "
-        "dynamics, impulse models, friction cones as penalties, its own weights) solved by its "
-        "FDDP from its own start: solve time, not verified by `mbplan.verify` "
-        "(`mbplan.baselines.crocoddyl_gaits`). Compare with case 0's rows above.",
+        "The nominal step of each family as Crocoddyl's `SimpleQuadrupedalGaitProblem` or "
+        "`SimpleBipedGaitProblem` (contact dynamics, impulse models, friction and wrench cones "
+        "as penalties, its own weights, no joint limits) solved by its FDDP from its own start: "
+        "solve time, not verified by `mbplan.verify` (`mbplan.baselines.crocoddyl_gaits`). "
+        "Compare with case 0's rows above.",
         "",
     ]
     if "unavailable" in profile:
         return [*lines, f"Not run: {profile['unavailable']}"]
-    lines += ["| gait | knots | iterations | converged | solve [s] |", "|---|---:|---:|---|---:|"]
-    for gait, r in profile.items():
+    lines += ["| family | knots | iterations | converged | solve [s] |", "|---|---:|---:|---|---:|"]
+    for name, r in profile.items():
         lines.append(
-            f"| {gait} | {r['knots']} | {r['iterations']} | {r['converged']} | "
+            f"| {name} | {r['knots']} | {r['iterations']} | {r['converged']} | "
             f"{r['solve_time_s']:.3f} |"
         )
     return lines
@@ -69,22 +61,17 @@ def anchor_markdown(profile: dict[str, Any]) -> list[str]:
 
 SUITE = Suite(
     name="locomotion",
-    title="Quadruped gaits with hard contacts: RIPM (maximal) vs IPOPT (generalized)",
+    title="Gaits with hard contacts: RIPM (maximal) vs IPOPT (generalized)",
     families={
-        g: Family(
-            g,
-            partial(gait_case, g),
-            WARM_START,
-            f"solo12 {g}s on Crocoddyl's {g} schedule, hard friction cones (mu = 0.7).",
-        )
-        for g in GAITS
+        name: Family(name, partial(gait_case, name), WARM_START, f.describe())
+        for name, f in FAMILIES.items()
     },
-    intro="Per gait, solo12 on Crocoddyl's schedule (`mbplan.locomotion.quadruped_gait`): "
-    f"Δt = {DT:g} s, steps of {STEP_KNOTS} intervals, supports of {SUPPORT_KNOTS}; case 0 the "
-    f"nominal step (0.1 m long, 0.05 m high), the others a step length in {LENGTHS} m and a "
-    f"height in {HEIGHTS} m (`mbplan.tasks.locomotion`, seed {{seed}}). Point contacts with "
-    "their forces as variables inside hard friction pyramids, swing feet above the ground, "
-    "Crocoddyl's centre-of-mass and swing-foot targets as costs; no joint limits.",
+    intro="Per family, a robot on Crocoddyl's schedule (`mbplan.locomotion.quadruped_gait`, "
+    "`biped_gait`); case 0 the nominal step, the others a step length of "
+    f"{LENGTH_RANGE} × and a height of {HEIGHT_RANGE} × the nominal one "
+    "(`mbplan.tasks.locomotion`, seed {seed}). Contact forces (wrenches) as variables inside "
+    "hard friction pyramids (contact wrench cones), swing feet above the ground, Crocoddyl's "
+    "centre-of-mass and swing-foot targets as costs.",
     n=20,
     family_flag="gaits",
     family_noun="gait",

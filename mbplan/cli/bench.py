@@ -325,12 +325,15 @@ def add_bench_parser(sub: argparse._SubParsersAction) -> None:
     floating.add_argument("--out", default="out/bench/floating", help="output directory")
     _add_pool_options(floating)
     floating.set_defaults(func=_bench_suite("mbplan.benchmarks.floating"))
+    from mbplan.tasks.locomotion import FAMILIES
+
     locomotion = bench_sub.add_parser(
         "locomotion",
-        help="RIPM vs IPOPT on quadruped gaits with hard contacts (solo12: walk, trot, pace, "
-        "bound, jump on Crocoddyl's schedules): nominal and seeded steps",
+        help="RIPM vs IPOPT on gaits with hard contacts (solo12 and anymal: walk, trot, pace, "
+        "bound, jump on Crocoddyl's schedules; talos_legs: walk on soles): nominal and seeded "
+        "steps",
     )
-    _add_suite_options(locomotion, 20, ("walk", "trot", "pace", "bound", "jump"), "gaits", 1e-6)
+    _add_suite_options(locomotion, 20, tuple(FAMILIES), "gaits", 1e-6)
     locomotion.add_argument("--out", default="out/bench/locomotion", help="output directory")
     _add_pool_options(locomotion)
     locomotion.set_defaults(func=_bench_suite("mbplan.benchmarks.locomotion"))
