@@ -21,6 +21,7 @@ MIMIC = str(EXAMPLES_TASKS / "panda_mimic.toml")
 FOURBAR = str(EXAMPLES_TASKS / "fourbar_crank.toml")
 SOLO = str(EXAMPLES_TASKS / "solo12_tuck.toml")
 SQUAT = str(EXAMPLES_TASKS / "solo12_squat.toml")
+SOLES = str(EXAMPLES_TASKS / "talos_legs_squat.toml")
 FINGERS_LOCKED = '--set=robot.lock=["panda_finger_joint1", "panda_finger_joint2"]'
 
 
@@ -78,6 +79,7 @@ CASES = [
     pytest.param(SOLO, "ipopt", [], id="solo12-ipopt"),
     pytest.param(SQUAT, "ripm", [], id="squat-ripm"),  # standing on four [[contact]] feet
     pytest.param(SQUAT, "ipopt", [], id="squat-ipopt"),
+    pytest.param(SOLES, "ripm", [], id="talos-soles-ripm"),  # two flat [[contact]] soles
 ]
 
 
@@ -175,6 +177,7 @@ def test_contact_tables_become_the_ocp_s_contacts(tmp_path):
     task = load_task(SQUAT)
     assert task.ocp.contact_names == ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
     assert all(c.first == 0 and c.last == task.ocp.N for c in task.ocp.contacts)
+    assert [c.sole for c in load_task(SOLES).ocp.contacts] == [(0.2, 0.1), (0.2, 0.1)]
     text = open(SQUAT).read()
     for table, message in [
         ('frame = "paw"', "no frame 'paw'"),
@@ -182,6 +185,8 @@ def test_contact_tables_become_the_ocp_s_contacts(tmp_path):
         ('frame = "FL_FOOT"\nfriction = -1', "must be > 0"),
         ('frame = "FL_FOOT"\nposition = [0, 0, -1]', "from its contact position .* at knot 0"),
         ('frame = "FL_FOOT"\nstance = 1', "unknown key"),
+        ('frame = "FL_FOOT"\nsole = [0.1]', "sole"),
+        ('frame = "FL_FOOT"\nsole = [0.1, -0.05]', "must be positive"),
     ]:
         bad = tmp_path / "bad.toml"
         bad.write_text(text.replace('frame = "FL_FOOT"', table, 1))

@@ -83,11 +83,6 @@ def frame_functions(robot: Robot, frame: str) -> tuple[cs.Function, cs.Function,
     )
 
 
-def _world(c: Any) -> np.ndarray:
-    """``B (dim × dim)``: world force (and torque) ``B w`` of contact ``c``'s variables ``w``."""
-    return np.kron(np.eye(c.dim // 3), c.rotation)
-
-
 class ContactColumns:
     """Where the contact variables sit in the generalized NLP's ``z``: after column ``start``,
     contact by contact, each one's (:attr:`~mbplan.ocp.contacts.Contact.dim` columns) on its
@@ -136,7 +131,7 @@ def contact_rows(
         d, f = c.dim, cs.SX.sym("f", c.dim)
         p_of, R_of, J_full = frame_functions(robot, c.frame)
         J_of = cs.Function("contact_J", [q], [J_full(q)[:d, :]])
-        wrench = cs.mtimes(cs.DM(_world(c)), f)
+        wrench = cs.mtimes(cs.DM(c.world(np.eye(d)).T), f)  # the world force (and torque)
         k = c.force_intervals(N)
         cols_f = nlp.force_columns.index(i, k)
         first = int(k[0] == 0)

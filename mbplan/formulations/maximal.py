@@ -175,8 +175,9 @@ class MaximalNLP:
         ``q_k`` from the relative poses and ``v_k`` their central differences (with ``q_{N+1}``
         from ``R_N F_N``; a floating base's local velocity, :func:`central_differences`; its
         torques are zero); with contacts (no loops), the velocity midway through each knot's
-        impulse (:func:`impulse_midpoint_velocities`). Knot 0's torque does not enter the LGVI, where the arm
-        rests over the first step as in eq. (61): ``tau_knots[0]`` makes the mean over
+        impulse (:func:`impulse_midpoint_velocities`), a floating base's linear velocity the
+        centre of mass's (:func:`momentum_consistent_base`). Knot 0's torque does not enter
+        the LGVI, where the arm rests over the first step as in eq. (61): ``tau_knots[0]`` makes the mean over
         ``[t_0, t_1]`` the torque for which eq. (61)'s first step reaches the planned ``v_1``
         (with loop closures: the actuated joints' torques and closure forces that do, least
         squares; the passive joints' zero).

@@ -57,8 +57,7 @@ def frame_rotation(model: pin.Model, frame: int, q: np.ndarray) -> np.ndarray:
 
 def orientation_error(rotation: np.ndarray, R: np.ndarray) -> float:
     """The angle (rad) between rotations ``rotation`` and ``R``."""
-    cos = 0.5 * (np.trace(np.asarray(rotation).T @ R) - 1.0)
-    return float(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return float(np.linalg.norm(pin.log3(np.asarray(rotation).T @ np.asarray(R))))
 
 
 def generalized_force(

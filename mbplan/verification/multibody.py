@@ -19,9 +19,9 @@ interpolation 1 does (1.002), and the median ratio drops from 0.74 to 0.56. A pl
 ``½Δt (τ_k + Σ J_iᵀ f_{i,k})`` at both ends of each interval (velocity Verlet: its positions do
 not see the next knot's forces) with the unforced dynamics between: its contact forces switch on
 and off within one knot (a touchdown impulse, a push-off) on light legs, where a ramp's
-``⅙Δt²|q̈_k - q̈_{k+1}|`` reaches the velocity threshold (``mbplan bench locomotion``, four
-cases per gait: of the RIPM's 20 converged solo12 gait plans 7 verified with the ramp, 15 with
-the impulses).
+``⅙Δt²|q̈_k - q̈_{k+1}|`` reaches the velocity threshold; such a plan's ``v_k`` is the velocity
+midway through the knot's impulse
+(:func:`~mbplan.formulations.maximal.impulse_midpoint_velocities`).
 
 Replay from the planned knots, not open loop. An open-loop replay from ``(q0, v0)`` over the
 whole horizon cannot be thresholded for the iiwa: errors grow about 100-fold per 0.3 s (the light
