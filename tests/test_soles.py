@@ -23,7 +23,7 @@ from mbplan.residuals import ComPosition, JointPosition, JointTorque, JointVeloc
 from mbplan.robots.configuration import integrate
 
 SOLES = ("left_sole_link", "right_sole_link")
-SIZE = (0.2, 0.1)  # talos' sole, Crocoddyl's biped example
+SIZE = (0.2, 0.1)  # about talos' sole (Crocoddyl's biped example bounds a 0.1 m x 0.05 m one)
 
 
 @cache
@@ -86,6 +86,17 @@ def test_the_wrench_cone_is_the_wrenches_of_the_corners_pyramids() -> None:
         assert decomposable == bool(np.all(A @ w <= 1e-9))
         inside += decomposable
     assert 50 < inside < 250  # both sides sampled
+
+
+def test_the_wrench_cone_is_crocoddyl_s() -> None:
+    """Row for row Crocoddyl's ``WrenchCone`` (its inscribed pyramid, box = (length, width)),
+    whose one more row, ``f_z ≥ 0``, the pyramid implies."""
+    crocoddyl = pytest.importorskip("crocoddyl")
+    theirs = crocoddyl.WrenchCone(np.eye(3), 0.7, np.array([0.1, 0.05]), 4, True).A
+    ours = wrench_cone(0.7, 0.1, 0.05)
+    assert len(theirs) == len(ours) + 1
+    for row in ours:
+        assert np.min(np.abs(theirs - row).max(axis=1)) < 1e-12, row
 
 
 def test_the_centre_of_pressure_stays_in_the_sole() -> None:

@@ -10,7 +10,9 @@ its own start (the standing state repeated, quasi-static controls), at most :dat
 iterations. Its plans are not put
 through :func:`mbplan.verify` (their contact forces live in Crocoddyl's data, their cones are
 soft); the numbers are Crocoddyl's iterations and solve time on the machine that ran the
-benchmark.
+benchmark, and the largest violation of the hard cones of :mod:`mbplan.dynamics.friction` by
+its contact forces (:func:`cone_violations`: the friction cone for points, the contact wrench
+cone of Crocoddyl's own 0.1 m × 0.05 m box for soles), which its penalty lets them leave.
 """
 
 from __future__ import annotations
@@ -20,9 +22,12 @@ from typing import Any
 
 import numpy as np
 
+from mbplan.dynamics.friction import cone_violation, wrench_cone_violation
 from mbplan.robots.robot import load_robot
 
 MAX_ITER = 100
+FRICTION = 0.7  # Crocoddyl's gait examples
+SOLE = (0.1, 0.05)  # Crocoddyl's biped WrenchCone box (length, width)
 CREATE = {"walk": "Walking", "trot": "Trotting", "pace": "Pacing", "bound": "Bounding"}
 
 
@@ -78,4 +83,25 @@ def fddp_gait(
         "converged": converged,
         "solve_time_s": float(np.median(times)),
         "knots": int(problem.T),
+        "max_cone_violation": cone_violations(solver),
     }
+
+
+def cone_violations(solver: Any) -> float:
+    """The largest violation (N; N m for a sole's torque rows) of the cones by the contact
+    forces of a solved Crocoddyl problem's running models (world-aligned, as its gait builders
+    define their contacts; a 6-D contact's wrench about the sole in its ``WrenchCone``)."""
+    worst = 0.0
+    for data in solver.problem.runningDatas:
+        if not hasattr(data, "differential"):  # an impulse model
+            continue
+        contacts = data.differential.multibody.contacts.contacts.todict()
+        for contact in contacts.values():
+            f = contact.f
+            if len(contact.Jc) == 3:
+                violation = cone_violation(f.linear, FRICTION)
+            else:
+                wrench = np.concatenate([f.linear, f.angular])
+                violation = wrench_cone_violation(wrench, FRICTION, *SOLE)
+            worst = max(worst, float(violation))
+    return worst

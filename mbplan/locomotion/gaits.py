@@ -167,12 +167,13 @@ def biped_gait(
     support_knots: int = 4,
     friction: float = 0.7,
     start: np.ndarray | None = None,
-    sole: tuple[float, float] = (0.2, 0.1),
+    sole: tuple[float, float] = (0.1, 0.05),
     limits: tuple[str, ...] = (),
 ) -> OCP:
     """The OCP of a biped gait (module docstring; Crocoddyl's ``SimpleBipedGaitProblem``) from
     ``start`` (default: the robot's ``half_sitting`` configuration), flat soles of ``sole =
-    (length, width)`` (:meth:`~mbplan.OCP.add_contact`) at ``feet = (left, right)``;
+    (length, width)`` (:meth:`~mbplan.OCP.add_contact`; Crocoddyl's wrench cone's 0.1 m ×
+    0.05 m) at ``feet = (left, right)``;
     ``limits`` as for :func:`quadruped_gait`."""
     robot = load_robot(robot)
     feet = _feet(robot, feet, "left, right")
