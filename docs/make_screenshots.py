@@ -10,7 +10,9 @@ page (``mbplan.viz.static_html``): docs/iiwa_plan.png and docs/side_by_side.png 
 with visual meshes and docs/meshes_panda_materials.png (the IPOPT plan in the meshes' own
 materials), and docs/drone.png (the RIPM's docking through clutter of
 ``examples/drone_cluttered.py``, halfway), docs/floating_solo12.png (``examples/tasks/solo12_tuck.toml``:
-a floating base in free flight) and docs/trot_solo12.png (the README's solo12 trot, mid-step).
+a floating base in free flight), docs/trot_solo12.png (the README's solo12 trot, mid-step) and
+docs/walk_talos_legs.png (the nominal talos_legs walk of ``mbplan bench locomotion``, on two
+flat soles, mid-way through its first step).
 The pages are kept in out/screenshots/.
 """
 
@@ -32,6 +34,7 @@ import mbplan as mb  # noqa: E402
 from mbplan.locomotion import quadruped_gait  # noqa: E402
 from mbplan.taskfile import load_task  # noqa: E402
 from mbplan.tasks.drone import cluttered_task  # noqa: E402
+from mbplan.tasks.locomotion import gait_case  # noqa: E402
 from mbplan.tasks.paper import drone_docking, iiwa_obstacle_cases, tracking_ocp  # noqa: E402
 from mbplan.viz import drone_replay, static_html  # noqa: E402
 
@@ -70,11 +73,15 @@ TASKS: dict[str, Callable[[], mb.OCP]] = {
         step_knots=8,
         support_knots=2,
     ),
+    "talos_walk": lambda: gait_case("talos_legs-walk", 0),
 }
 
 
-def shoot(results: list[mb.PlanResult], task: mb.OCP, name: str, **kwargs: str) -> None:
-    page = static_html(results, OUT / f"{name}.html", task, frame=task.N // 2, **kwargs)
+def shoot(
+    results: list[mb.PlanResult], task: mb.OCP, name: str, frame: int | None = None, **kwargs: str
+) -> None:
+    frame = task.N // 2 if frame is None else frame
+    page = static_html(results, OUT / f"{name}.html", task, frame=frame, **kwargs)
     png = screenshot(page.resolve().as_uri(), DOCS / f"{name}.png", budget_ms=10000, timeout_s=180)
     print(f"wrote {DOCS / name}.png ({png.shape[1]}x{png.shape[0]})", flush=True)
 
@@ -96,7 +103,7 @@ def main(robots: list[str]) -> None:
             drone()
             continue
         task = TASKS[robot]()
-        warm = "linear" if robot in ("iiwa", "solo12", "trot") else "via"
+        warm = "linear" if robot in ("iiwa", "solo12", "trot", "talos_walk") else "via"
         results = [mb.plan(task, method, warm_start=warm) for method in ("ripm", "ipopt")]
         for r in results:
             print(f"{robot} {r.method}: {r.status}, {r.iterations} iterations", flush=True)
@@ -106,6 +113,9 @@ def main(robots: list[str]) -> None:
             continue
         if robot in ("solo12", "trot"):
             shoot(results, task, "floating_solo12" if robot == "solo12" else "trot_solo12")
+            continue
+        if robot == "talos_walk":  # mid-way through the first step
+            shoot(results, task, "walk_talos_legs", frame=7)
             continue
         shoot(results, task, f"meshes_{robot}")
         if robot == "panda":

@@ -1,4 +1,5 @@
-"""Coulomb friction at a point contact on a horizontal ground (normal ``+z``)."""
+"""Coulomb friction at a point contact or a flat rectangular sole on the ground (normal ``+z``
+of the contact frame)."""
 
 from __future__ import annotations
 
@@ -68,3 +69,15 @@ def wrench_cone_violation(
     how far each leaves the cone."""
     A = wrench_cone(friction, length, width)
     return np.maximum(np.max(np.asarray(wrenches, dtype=float) @ A.T, axis=-1), 0.0)
+
+
+def cone_rows(friction: float, sole: tuple[float, float] | None = None) -> np.ndarray:
+    """The rows ``A`` of a contact's cone ``A w ≤ 0`` on its variable: a point's
+    :func:`pyramid` (``w = f``), a ``sole = (length, width)``'s :func:`wrench_cone`."""
+    return pyramid(friction) if sole is None else wrench_cone(friction, *sole)
+
+
+def cone_edges(friction: float, sole: tuple[float, float] | None = None) -> np.ndarray:
+    """The edges ``(n, 3)`` or ``(16, 6)`` of :func:`cone_rows`' cone: its variables are their
+    non-negative combinations."""
+    return pyramid_edges(friction) if sole is None else wrench_cone_edges(friction, *sole)

@@ -28,6 +28,7 @@ import casadi as cs
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mbplan.dynamics.friction import cone_rows
 from mbplan.formulations.free_flyer import quaternion_matrix
 from mbplan.formulations.joint_space import joint_axes, symbolic_placements
 from mbplan.robots.robot import Robot
@@ -144,7 +145,7 @@ def contact_rows(
             force = -cs.mtimes(J_of(q).T, wrench)
             cols = np.concatenate([nlp.iq(inner), cols_f[first:]], axis=1)
             out.append((x, force, cols, (N + inner[0]) * nv, False))
-        A = c.cone()
+        A = cone_rows(c.friction, c.sole)
         out.append((f, cs.mtimes(cs.DM(A), f), cols_f, row, True))
         row += len(A) * len(k)
         held = c.held_knots(N)

@@ -17,6 +17,7 @@ import pinocchio as pin
 import scipy.optimize
 import scipy.sparse as sp
 
+from mbplan.dynamics.friction import cone_edges
 from mbplan.errors import InputError
 from mbplan.formulations.maximal_joints import joint_terms
 from mbplan.formulations.maximal_layout import JointEliminationPlans
@@ -237,11 +238,12 @@ class MaximalNLP:
                 J = pin.computeFrameJacobian(model, data, q0, fid, pin.LOCAL_WORLD_ALIGNED)
                 J = J[: c.dim, base].T
                 demand -= 0.5 * J @ knots[1, i, : c.dim]
-                columns.append(0.5 * J @ c.world(c.edges()).T)
+                columns.append(0.5 * J @ c.world(cone_edges(c.friction, c.sole)).T)
             beta = scipy.optimize.nnls(np.hstack(columns), demand)[0]
-            split = np.cumsum([len(contacts[i].edges()) for i in start])[:-1]
-            for i, b in zip(start, np.split(beta, split), strict=True):
-                knots[0, i, : contacts[i].dim] = b @ contacts[i].world(contacts[i].edges())
+            edges = [cone_edges(contacts[i].friction, contacts[i].sole) for i in start]
+            split = np.cumsum([len(e) for e in edges])[:-1]
+            for i, b, e in zip(start, np.split(beta, split), edges, strict=True):
+                knots[0, i, : contacts[i].dim] = b @ contacts[i].world(e)
         return {
             "contact_forces": 0.5 * (knots[:-1] + knots[1:]),
             "contact_forces_knots": knots,

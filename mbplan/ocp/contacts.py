@@ -12,7 +12,8 @@ Crocoddyl's 6D contacts hold their initial placement; the ground under the sole 
 its ``x`` and ``y``, which the robot's start should make horizontal); its variable is the wrench ``w = (f, τ)`` about the frame's origin in the
 contact frame ``rotation``, inside the contact wrench cone
 (:func:`mbplan.dynamics.friction.wrench_cone`: the pyramid, the centre of pressure inside the
-sole, the yaw torque the corners' friction can hold). :meth:`Contact.world` turns the variables
+sole, the yaw torque the corners' friction can hold; :func:`~mbplan.dynamics.friction.cone_rows`
+of its ``friction`` and ``sole``). :meth:`Contact.world` turns the variables
 into world forces (and torques).
 
 Timing: the frame is at ``position`` at knots ``a … b`` (:meth:`Contact.held_knots`: those
@@ -34,7 +35,6 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
 
-from mbplan.dynamics.friction import pyramid, pyramid_edges, wrench_cone, wrench_cone_edges
 from mbplan.errors import InputError
 from mbplan.validation import as_array, as_real
 
@@ -94,18 +94,6 @@ class Contact:
     def dim(self) -> int:
         """Size of its variable: 3 (a point's force) or 6 (a sole's wrench)."""
         return 3 if self.sole is None else 6
-
-    def cone(self) -> np.ndarray:
-        """Rows ``A`` of its cone ``A w ≤ 0`` on its variable (the pyramid or the wrench cone)."""
-        if self.sole is None:
-            return pyramid(self.friction)
-        return wrench_cone(self.friction, *self.sole)
-
-    def edges(self) -> np.ndarray:
-        """The cone's edges ``(n, dim)``: its variables are their non-negative combinations."""
-        if self.sole is None:
-            return pyramid_edges(self.friction)
-        return wrench_cone_edges(self.friction, *self.sole)
 
     def world(self, w: np.ndarray) -> np.ndarray:
         """World force (and torque) ``(..., dim)`` of its variables ``w (..., dim)``."""

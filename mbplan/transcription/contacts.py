@@ -26,6 +26,7 @@ from typing import Any
 import casadi as cs
 import numpy as np
 
+from mbplan.dynamics.friction import cone_rows
 from mbplan.dynamics.joints import constraint_forces
 from mbplan.engine import RiemannianFunction
 from mbplan.lie import SO3, R
@@ -117,7 +118,7 @@ def contact_terms(
         terms.append(
             Term(f"contact_{c.name}_position", "eq", constraint_fn, bind, params | {"dt": dt})
         )
-        A = c.cone()
+        A = cone_rows(c.friction, c.sole)
         cone_fn = _cone_function(jit, *A.shape)
         terms.append(Term(f"contact_{c.name}_cone", "ineq", cone_fn, {"w": (block, k)}, {"A": A}))
     return terms
