@@ -23,6 +23,7 @@ from mbplan.errors import InputError
 from mbplan.formulations import free_body, maximal
 from mbplan.formulations.free_body_shooting import FreeBodyShooting
 from mbplan.formulations.generalized import GeneralizedNLP
+from mbplan.formulations.maximal_velocity_limits import ROUNDS, tighten_velocity_limits
 from mbplan.formulations.quaternion import QuaternionNLP
 from mbplan.ocp.problem import OCP
 from mbplan.results import PlanResult
@@ -77,29 +78,42 @@ def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Setting
     build = building.elapsed()
     defaults = LGVI_RIPM_OPTIONS if solver == "ripm" else {}
     options = options_for(solver, tol=settings.tol, max_iter=settings.max_iter, **defaults)
-    result = solve_with(
-        solver, nlp.problem, x0, options.replace(**settings.options), settings.workspace
-    )
+    options = options.replace(**settings.options)
+    runs = [solve_with(solver, nlp.problem, x0, options, settings.workspace)]
+    if formulation is maximal and ocp.contacts:  # the reported knot velocities within limits
+        for _ in range(ROUNDS):
+            last, used = runs[-1], sum(r.iterations for r in runs)
+            if last.status is not RIPMStatus.CONVERGED or used >= options.max_iter:
+                break
+            if not tighten_velocity_limits(nlp, nlp.joint_trajectory(last.x)["v"]):
+                break
+            again = options.replace(max_iter=options.max_iter - used)
+            runs.append(solve_with(solver, nlp.problem, last.x, again, settings.workspace))
+    result = runs[-1]
     traj = nlp.trajectory(result.x)
-    h = result.history.arrays()
+    h = [r.history.arrays() for r in runs]
+    iterations = sum(r.iterations for r in runs)
+    wall = sum(r.wall_time_s for r in runs)
+    compile_s = sum(r.compile_time_s for r in runs)
     return PlanResult(
         method=solver,
         status=result.status.name,
         success=result.status is RIPMStatus.CONVERGED,
         message=result.message,
-        iterations=result.iterations,
-        solve_time_s=result.wall_time_s,
-        total_time_s=building.wall() + result.wall_time_s + result.compile_time_s,
-        time_per_iter_s=result.wall_time_s / max(result.iterations, 1),
+        iterations=iterations,
+        solve_time_s=wall,
+        total_time_s=building.wall() + wall + compile_s,
+        time_per_iter_s=wall / max(iterations, 1),
         dt=ocp.dt,
-        compile_time_s=building.compile_s + result.compile_time_s,
-        kkt_history=np.stack([h["inf_pr"], h["inf_du"]], axis=1),
-        entered_restoration=bool(np.any(h["restoration"])),
+        compile_time_s=building.compile_s + compile_s,
+        kkt_history=np.concatenate([np.stack([a["inf_pr"], a["inf_du"]], axis=1) for a in h]),
+        entered_restoration=any(bool(np.any(a["restoration"])) for a in h),
         extra={
             "objective": result.objective,
             "kkt_error": result.kkt_error,
             "n_variables": int(result.y.size),
             "build_time_s": build,
+            "solves": len(runs),
         },
         formulation="maximal",
         **traj,

@@ -63,7 +63,9 @@ FAMILIES: dict[str, GaitFamily] = {
         )
         for g in QUADRUPED_GAITS
     },
-    "talos_legs-walk": GaitFamily("talos_legs", "walk", TALOS, 0.3, 0.05, dt=0.03, step_knots=10),
+    "talos_legs-walk": GaitFamily(
+        "talos_legs", "walk", TALOS, 0.3, 0.05, dt=0.03, step_knots=10, limits=("velocity",)
+    ),
 }
 """Every family of the benchmark, by name."""
 

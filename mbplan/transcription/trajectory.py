@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -288,6 +289,17 @@ class TrajectoryProblem:
 
     def retract(self, point: Point, dx: np.ndarray) -> Point:
         return self.variables.retract(point, dx)
+
+    def set_parameters(self, term: str, values: Mapping[str, Any]) -> None:
+        """Replace parameters of the term named ``term`` (``(sites, ·)`` arrays or one value):
+        the structure stays, the next evaluation reads the new values."""
+        layouts = [lay for lay in self._all_layouts if lay.term.name == term]
+        if not layouts:
+            raise InputError(f"no term named {term!r}")
+        for lay in layouts:
+            lay.term.parameters = {**lay.term.parameters, **values}
+            lay.parameters = lay.term.function.pack_parameters(lay.term.parameters, lay.term.sites)
+        self._bound.clear()  # the compiled calls hold the old arrays
 
     # ------------------------------------------------------------------ evaluation
     def _gather(self, point: Point, lam: tuple[float, np.ndarray, np.ndarray] | None) -> None:
