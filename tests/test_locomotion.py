@@ -8,8 +8,11 @@ import pytest
 
 import mbplan as mb
 from mbplan.errors import InputError
+from mbplan.formulations import maximal
+from mbplan.formulations.maximal_velocity_limits import SLACK, tighten_velocity_limits
 from mbplan.locomotion import QUADRUPED_GAITS, biped_gait, quadruped_gait
 from mbplan.ocp.contacts import frame_position
+from mbplan.tasks.locomotion import gait_case
 
 FEET = ("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT")
 
@@ -94,9 +97,36 @@ def test_joint_limits_are_hard_constraints_on_request() -> None:
     assert all(abs(c.position[2]) < 1e-5 for c in ocp.contacts)  # the feet on the ground
 
 
+def test_velocity_limits_are_kept_at_the_knot_velocities_a_plan_reports() -> None:
+    """The LGVI bounds the secant velocities; a knot's excess (the reported velocity, midway
+    through its impulse, over the limit) tightens the two secant bounds around it by 1.5 times
+    the excess, no other; ANYmal's jump (case 3 of its family), whose landing exceeds the limit
+    after the first solve, is solved again and every reported velocity is within 15 rad/s."""
+    ocp = gait_case("anymal-jump", 3)
+    nlp, _ = maximal.build(ocp, jit=False)
+    v = np.zeros((ocp.N + 1, ocp.robot.nv))
+    v[5, 8] = -16.0  # 1 rad/s over the limit
+    assert tighten_velocity_limits(nlp, v) == pytest.approx(1.0)
+    (term,) = [t for t in nlp.problem.terms if t.name == "limits_velocity"]
+    flat = term.bind["Rc"][1]
+    knot, body = flat // nlp.mm.nb, flat % nlp.mm.nb
+    vmax = np.arccos(term.parameters["cos_step"]) / ocp.dt
+    cut = (np.isin(knot, (4, 5))) & (nlp.mm.idx_v[body] == 8)
+    assert cut.sum() == 2
+    np.testing.assert_allclose(vmax[cut], 15.0 - 1.5 - SLACK)
+    np.testing.assert_allclose(vmax[~cut], 15.0)
+    assert tighten_velocity_limits(nlp, np.zeros_like(v)) == 0.0
+
+    plan = mb.plan(ocp, "ripm", warm_start="linear")
+    assert plan.success and plan.extra["solves"] >= 2, plan.message
+    assert np.abs(plan.v[:, 6:]).max() <= 15.0 + 1e-4
+    check = mb.verify(plan)
+    assert check.passed, check.reasons
+
+
 def test_the_locomotion_benchmark_draws_reproducible_steps_and_parses_its_options() -> None:
     from mbplan.cli.main import build_parser
-    from mbplan.tasks.locomotion import FAMILIES, HEIGHT_RANGE, LENGTH_RANGE, gait_case
+    from mbplan.tasks.locomotion import FAMILIES, HEIGHT_RANGE, LENGTH_RANGE
 
     trot = "solo12-trot"
     nominal, drawn, again = gait_case(trot, 0), gait_case(trot, 3, 1), gait_case(trot, 3, 1)

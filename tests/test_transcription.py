@@ -189,6 +189,30 @@ def test_problems_of_one_structure_share_patterns_not_parameters_or_buffers():
     assert same.evaluate(u).objective == ev_a.objective
 
 
+def test_a_term_s_parameters_are_replaced_in_place_of_a_rebuild():
+    """``set_parameters`` changes what the next evaluation reads, per site, as a problem built
+    with those parameters evaluates; the structure stays; an unknown term is named."""
+    f = _input_cost()
+    variables = TrajectoryVariables([Block("u", R(4), 3, fixed=(0,))])
+
+    def problem(u_ref: np.ndarray) -> TrajectoryProblem:
+        term = Term("c", "cost", f, {"u": ("u", [1, 2])}, {"u_ref": u_ref, "w": 2.0})
+        return TrajectoryProblem(variables, [term])
+
+    u = {"u": np.arange(12.0).reshape(3, 4)}
+    a = problem(np.zeros(4))
+    before = a.evaluate(u).objective
+    structure = a._structure
+    per_site = np.array([np.ones(4), np.full(4, 3.0)])
+    a.set_parameters("c", {"u_ref": per_site})
+    fresh = problem(per_site).evaluate(u)
+    assert a.evaluate(u).objective == pytest.approx(fresh.objective) != pytest.approx(before)
+    np.testing.assert_allclose(a.evaluate(u).gradient, fresh.gradient)
+    assert a._structure is structure
+    with pytest.raises(InputError, match="no term named 'd'"):
+        a.set_parameters("d", {"w": 1.0})
+
+
 @pytest.mark.skipif(not jit_available(), reason="no C compiler")
 def test_compiled_term_pass_equals_the_term_by_term_calls(monkeypatch):
     """A problem of compiled terms runs their site loops in one compiled pass; its values,
