@@ -192,6 +192,12 @@ def joint_function(jtype: str, kind: str, jit: bool, world: bool) -> RiemannianF
     return RiemannianFunction(f"{name}_world", child, world_fn, params, jit=jit)
 
 
+def joint_term_name(name: str, jtype: str, world: bool) -> str:
+    """The name of the term of the joint residual ``name`` on the ``jtype`` joints with a body
+    parent (``world``: to the world) that :func:`joint_terms` makes."""
+    return name + ("" if jtype == "revolute" else "_prismatic") + ("_world" if world else "")
+
+
 def joint_terms(
     mm: MaximalModel,
     item: Item,
@@ -237,6 +243,5 @@ def joint_terms(
                     "dt": dt,
                 }
             fn = joint_function(jtype, kind, jit, world)
-            tag = ("" if jtype == "revolute" else "_prismatic") + ("_world" if world else "")
-            out.append(Term(f"{item.name}{tag}", sense, fn, bind, params))
+            out.append(Term(joint_term_name(item.name, jtype, world), sense, fn, bind, params))
     return out

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from mbplan.formulations.maximal_joints import joint_term_name
 from mbplan.residuals.limits import JointVelocityLimits
 
 ROUNDS = 4  # re-solves with tightened secant bounds, at most
@@ -27,17 +28,19 @@ SLACK = 1e-4  # ... plus this (rad/s, m/s): the reported velocities land inside 
 
 def velocity_excess(nlp: Any, v: np.ndarray) -> dict[str, np.ndarray]:
     """Per velocity-limit constraint of ``nlp.ocp``, the excess ``max(0, |v| - limit)``
-    ``(N+1, nv)`` of the knot velocities ``v`` over its limits (zero off its knots)."""
+    ``(N+1, nv)`` of the knot velocities ``v`` over its limits (zero off its knots and on the
+    entries it does not limit)."""
     out = {}
     for item in nlp.ocp.constraints:
-        if not isinstance(item.residual, JointVelocityLimits):
-            continue
         r = item.residual
-        e = np.maximum(np.maximum(r.lower - v, v - r.upper), 0.0)
-        mask = np.zeros(len(v), dtype=bool)
-        mask[item.knots] = True
-        e[~mask] = 0.0
-        e[:, ~np.isfinite(r.upper) | ~np.isfinite(r.lower)] = 0.0
+        if not isinstance(r, JointVelocityLimits):
+            continue
+        limited = r.indices(nlp.ocp.robot)
+        e = np.zeros_like(v)
+        rows = v[np.ix_(item.knots, limited)]
+        e[np.ix_(item.knots, limited)] = np.maximum(
+            np.maximum(r.lower[limited] - rows, rows - r.upper[limited]), 0.0
+        )
         out[item.name] = e
     return out
 
@@ -55,8 +58,12 @@ def tighten_velocity_limits(nlp: Any, v: np.ndarray) -> float:
         # the secant w_k enters the knot velocities of k and k+1
         around = excess.copy()
         around[:-1] = np.maximum(excess[:-1], excess[1:])
-        tags = ("", "_world", "_prismatic", "_prismatic_world")  # maximal_joints.joint_terms
-        for term in (t for t in problem.terms if t.name in {name + tag for tag in tags}):
+        names = {
+            joint_term_name(name, jtype, world)
+            for jtype in ("revolute", "prismatic")
+            for world in (True, False)
+        }
+        for term in (t for t in problem.terms if t.name in names):
             flat = term.bind["Rc"][1]
             knot, body = flat // mm.nb, flat % mm.nb
             cut = MARGIN * around[knot, mm.idx_v[body]]

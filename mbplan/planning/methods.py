@@ -80,17 +80,18 @@ def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Setting
     options = options_for(solver, tol=settings.tol, max_iter=settings.max_iter, **defaults)
     options = options.replace(**settings.options)
     runs = [solve_with(solver, nlp.problem, x0, options, settings.workspace)]
+    traj = nlp.trajectory(runs[-1].x)
     if formulation is maximal and ocp.contacts:  # the reported knot velocities within limits
         for _ in range(ROUNDS):
-            last, used = runs[-1], sum(r.iterations for r in runs)
-            if last.status is not RIPMStatus.CONVERGED or used >= options.max_iter:
+            used = sum(r.iterations for r in runs)
+            if runs[-1].status is not RIPMStatus.CONVERGED or used >= options.max_iter:
                 break
-            if not tighten_velocity_limits(nlp, nlp.joint_trajectory(last.x)["v"]):
+            if not tighten_velocity_limits(nlp, traj["v"]):
                 break
             again = options.replace(max_iter=options.max_iter - used)
-            runs.append(solve_with(solver, nlp.problem, last.x, again, settings.workspace))
+            runs.append(solve_with(solver, nlp.problem, runs[-1].x, again, settings.workspace))
+            traj = nlp.trajectory(runs[-1].x)
     result = runs[-1]
-    traj = nlp.trajectory(result.x)
     h = [r.history.arrays() for r in runs]
     iterations = sum(r.iterations for r in runs)
     wall = sum(r.wall_time_s for r in runs)
