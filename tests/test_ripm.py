@@ -82,6 +82,16 @@ def test_hs071_matches_ipopt():
     assert res.iterations <= 15
 
 
+def test_a_problem_s_accept_sees_every_accepted_iterate_in_order():
+    problem = hs071()
+    seen = []
+    problem.accept = lambda x: seen.append(np.array(x, dtype=float))
+    res = solve_ripm(problem, HS071_X0)
+    assert res.status is RIPMStatus.CONVERGED
+    assert len(seen) == res.iterations
+    np.testing.assert_array_equal(seen[-1], res.x)
+
+
 def test_kkt_error_at_solution_is_below_tol():
     problem = hs071()
     res = solve_ripm(problem, HS071_X0, tol=1e-10)

@@ -54,6 +54,12 @@ def test_arm_boxes_cycles_the_mesh_arms_and_keeps_start_and_goal_clear(index):
     start = np.array([ocp.q0])
     rows = Distance(tasks.BOX_CLEARANCE).resolve(robot, ocp.scene)
     assert np.max(evaluate(robot, ocp.scene, rows, start, None, None)) <= 0
+    # 3 s, stretched by ARM_SPEED / (the slowest joint's velocity limit) for a slower arm
+    slowest = float(np.min(robot.model.velocityLimit))
+    horizon = tasks.ARM_N * tasks.ARM_DT * max(1.0, tasks.ARM_SPEED / slowest)
+    assert ocp.dt == tasks.ARM_DT
+    assert horizon - 1e-9 <= ocp.N * ocp.dt < horizon + ocp.dt
+    assert (ocp.N > tasks.ARM_N) == (robot.name in ("kinova", "so100"))
 
 
 def test_near_limits_puts_half_the_goal_joints_next_to_a_limit():

@@ -158,19 +158,23 @@ def test_mesh_obstacle_relative_to_the_task_file(tmp_path):
     assert ocp["clearance"].residual.objects == ("left", "right", "cube")
 
 
-@pytest.mark.parametrize(("robot", "limited"), [("iiwa", 7), ("ur5", 1)])
-def test_full_turn_position_limits_add_no_maximal_rows(robot, limited):
-    """A joint range wider than 2π (the UR5's ±2π) limits no rotation: no rows in maximal
-    coordinates (``cos(θ - mid) ≥ -1`` would be a barrier active at θ - mid = ±π with a zero
-    gradient there: the UR5 task took 467 RIPM iterations with it, 37 without). A range of
-    exactly 2π (its elbow's ±π) keeps the arc ``|θ - mid| ≤ π - ε`` (``tests/test_wrapping_limits.py``),
-    whose boundary has a nonzero gradient: the UR5 task still takes 37."""
+@pytest.mark.parametrize(("robot", "arcs", "turns"), [("iiwa", 7, 0), ("ur5", 1, 5)])
+def test_position_limits_rows_per_range_in_maximal_coordinates(robot, arcs, turns):
+    """A range below 2π (the iiwa's) and of exactly 2π (the UR5's elbow, ±π) are cosine rows
+    (``tests/test_wrapping_limits.py``); a range wider than 2π (the UR5's other ±2π joints)
+    limits no rotation and is counted in turns from a reference (two rows per knot). A cosine
+    row ``cos(θ - mid) ≥ -1`` for it would be a barrier active at θ - mid = ±π with a zero
+    gradient there (the UR5 task took 467 RIPM iterations with it)."""
     from mbplan.formulations.maximal import MaximalNLP
     from mbplan.residuals import JointPositionLimits
 
     ocp = mb.OCP(robot, N=3).add_constraint("position_limits", JointPositionLimits())
     terms = [t for t in MaximalNLP(ocp, jit=False).problem.terms if "position_limits" in t.name]
-    assert sum(len(t.bind["Rc"][1]) for t in terms) == 3 * limited
+    sites = {
+        k: sum(len(t.bind["Rc"][1]) for t in terms if t.name.endswith("/turns") == k)
+        for k in (False, True)
+    }
+    assert sites == {False: 3 * arcs, True: 3 * turns}
 
 
 def test_contact_tables_become_the_ocp_s_contacts(tmp_path):

@@ -1,14 +1,20 @@
-"""Revolute position limits whose range is 2π (UR elbows: ±π) in maximal coordinates: a
-rotation forgets the turns, so the rows keep the joint off an arc around the angle it must not
-pass (:meth:`mbplan.residuals.JointPositionLimits.maximal_terms`); wider ranges have none."""
+"""Revolute position limits beyond what a rotation shows, in maximal coordinates: a range of 2π
+(UR elbows: ±π) keeps the joint off an arc around the angle it must not pass; wider ranges (the
+UR5's ±2π) count the turns from a reference per knot
+(:meth:`mbplan.residuals.JointPositionLimits.maximal_terms`)."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import mbplan as mb
 from mbplan import residuals as res
+from mbplan.engine import check_derivatives
 from mbplan.formulations.maximal import MaximalNLP
+from mbplan.formulations.maximal_joints import joint_function
+from mbplan.formulations.maximal_turns import center_turns, follow_turns
+from mbplan.lie import SO3
 
 N, DT = 3, 0.075
 
@@ -21,15 +27,16 @@ def _limits_ocp() -> mb.OCP:
     return ocp
 
 
-def test_a_two_pi_range_keeps_an_arc_of_half_width_eps_and_wider_ranges_have_no_rows():
+def test_a_two_pi_range_keeps_an_arc_of_half_width_eps_and_wider_ranges_count_turns():
     ocp = _limits_ocp()
     model = ocp.robot.model
     ranges = model.upperPositionLimit - model.lowerPositionLimit
     elbow = int(np.flatnonzero(np.isclose(ranges, 2 * np.pi))[0])
     assert np.all(ranges[np.arange(model.nq) != elbow] > 2 * np.pi + 1.0)
     nlp = MaximalNLP(ocp, jit=False)
-    assert nlp.problem.n_ineq == N  # the elbow's cosine row per knot, no others
-    eps = 0.5 * min(model.velocityLimit[elbow] * DT, 0.5 * np.pi)
+    # per knot the elbow's cosine row and two rows (lower, upper) per wider joint
+    assert nlp.problem.n_ineq == N * (1 + 2 * (model.nq - 1))
+    eps = res.limits.ARC_MARGIN * min(model.velocityLimit[elbow] * DT, 0.5 * np.pi)
     lo = model.lowerPositionLimit[elbow]
     for angle, inside in ((lo + 2.0 * eps, True), (lo + 0.5 * eps, False), (lo - 0.1, False)):
         q = np.zeros((N + 1, model.nq))
@@ -40,4 +47,79 @@ def test_a_two_pi_range_keeps_an_arc_of_half_width_eps_and_wider_ranges_have_no_
     q = np.zeros((N + 1, model.nq))
     q[1:, elbow] = 0.3
     _, _, g = nlp.problem.values(nlp.initial_point(q))
-    np.testing.assert_allclose(np.max(g), np.cos(np.pi - eps) - np.cos(0.3), atol=1e-12)
+    rows = nlp.problem.term_rows("ineq")
+    np.testing.assert_allclose(g[rows["position_limits"]], np.cos(np.pi - eps) - np.cos(0.3))
+    assert np.max(g) < 0.0
+
+
+def _turn_rows(nlp: MaximalNLP, q: np.ndarray) -> np.ndarray:
+    """The turn-counting rows at the path ``q``, ``(sites, 2)``: the shoulder's (a child of
+    the world) at knots 1..N first, then the other joints'."""
+    _, _, g = nlp.problem.values(nlp.initial_point(q))
+    rows = nlp.problem.term_rows("ineq")
+    return np.concatenate(
+        [g[rows[n]] for n in ("position_limits_world/turns", "position_limits/turns")]
+    )
+
+
+def test_wider_ranges_count_the_turns_from_their_references():
+    """``(lo - θ, θ - hi)`` with ``θ`` the angle counted from the reference: the same rows for
+    any reference within π of the path (the chart), a joint wound past ``hi`` caught although
+    its rotation is inside the range again, and the references moved only where the path
+    left them by more than ``beyond``."""
+    ocp = _limits_ocp()
+    model = ocp.robot.model
+    nlp = MaximalNLP(ocp, jit=False)
+    wide = np.flatnonzero(model.upperPositionLimit - model.lowerPositionLimit > 2 * np.pi + 1.0)
+    rng = np.random.default_rng(3)
+    q = np.zeros((N + 1, model.nq))
+    q[1:, wide] = rng.uniform(-5.0, 5.0, (N, wide.size))
+    q[N, wide[0]] = model.upperPositionLimit[wide[0]] + 0.4  # wound past the limit
+    assert center_turns(nlp, q)
+    rows = _turn_rows(nlp, q)
+    first = rows[:N]
+    expect = np.stack([model.lowerPositionLimit[wide[0]] - q[1:, 0], q[1:, 0] - 2 * np.pi], 1)
+    np.testing.assert_allclose(first, expect, atol=1e-9)
+    assert first[-1, 1] == pytest.approx(0.4)
+    # any reference within π gives the same rows
+    assert not center_turns(nlp, q + 0.1, beyond=0.5)
+    assert center_turns(nlp, q + 2.0, beyond=0.5)
+    np.testing.assert_allclose(_turn_rows(nlp, q), rows, atol=1e-9)
+    # past π the chart wraps: the same rotation 2π lower
+    center_turns(nlp, q - 4.0)
+    moved = _turn_rows(nlp, q)[:N]
+    np.testing.assert_allclose(moved[-1, 1], 0.4 - 2 * np.pi, atol=1e-9)
+
+
+@pytest.mark.parametrize("world", [False, True])
+def test_turn_rows_match_finite_differences(world):
+    f = joint_function("revolute", "position_winding", False, world)
+    rng = np.random.default_rng(5)
+    axis = rng.standard_normal(3)
+    params = {
+        "R_ref": SO3.exp(rng.standard_normal(3)),
+        "theta_ref": 4.0,
+        "a": axis / np.linalg.norm(axis),
+        "lo": -6.0,
+        "hi": 6.0,
+    }
+    for _ in range(3):
+        x = {s.name: SO3.exp(rng.standard_normal(3)) for s in f.variables}
+        assert check_derivatives(f, x, params, rng=rng).ok(1e-6)
+
+
+def test_the_references_follow_the_iterates_so_the_rows_count_their_turns():
+    """Iterates turning the shoulder by 2 rad twice: each accepted iterate moves the references
+    (farther than π/2) without changing the rows, so the second counts +4 rad, not 4 - 2π."""
+    ocp = _limits_ocp()
+    nlp = MaximalNLP(ocp, jit=False)
+    q = np.zeros((N + 1, ocp.robot.nq))
+    center_turns(nlp, q)
+    turned = q.copy()
+    for k in range(1, 3):
+        turned[1:, 0] = 2.0 * k
+        before = _turn_rows(nlp, turned)
+        follow_turns(nlp, nlp.initial_point(turned))
+        np.testing.assert_allclose(_turn_rows(nlp, turned), before, atol=1e-9)
+    upper = ocp.robot.model.upperPositionLimit[0]
+    np.testing.assert_allclose(_turn_rows(nlp, turned)[:N, 1], 4.0 - upper, atol=1e-9)

@@ -10,7 +10,7 @@ model ``mm``, the OCP, the joints' bodies and :meth:`MaximalNLP.joint_terms`).
 from __future__ import annotations
 
 import time
-from functools import lru_cache
+from functools import lru_cache, partial
 
 import numpy as np
 import pinocchio as pin
@@ -21,6 +21,7 @@ from mbplan.dynamics.friction import cone_edges
 from mbplan.errors import InputError
 from mbplan.formulations.maximal_joints import joint_terms
 from mbplan.formulations.maximal_layout import JointEliminationPlans
+from mbplan.formulations.maximal_turns import follow_turns
 from mbplan.lie import SO3
 from mbplan.multibody import MaximalModel, joint_positions, maximal_model
 from mbplan.ocp.contacts import generalized_force
@@ -70,6 +71,8 @@ class MaximalNLP:
         # picked on the reference values
         self.problem.elimination_plan = JointEliminationPlans(self.problem, workspace=workspace)
         self.problem.pick_reference = self.pick_reference
+        if any("theta_ref" in t.parameters for t in terms):
+            self.problem.accept = partial(follow_turns, self)
 
     def pick_reference(self, eq_jacobian: sp.spmatrix) -> np.ndarray | None:
         """The values of ``eq_jacobian``'s entries that the joint reduction picks its pivots on:

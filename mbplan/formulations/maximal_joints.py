@@ -11,7 +11,9 @@ exp(Δθ a)``:
 * joint position limits ``cos(θ - θ_mid) ≥ cos(θ_half)`` and velocity limits
   ``cos(θ_{k+1} - θ_k) ≥ cos(v_max Δt)`` (exact for ranges below 2π, an arc of ``π - ε`` about
   the middle for ranges in ``[2π, 2π + 2ε)``: :class:`~mbplan.residuals.JointPositionLimits`;
-  symmetric velocity limits).
+  symmetric velocity limits); for ranges beyond a turn, the angle counted from a reference
+  ``θ_ref`` per knot (the warm start's), ``θ = θ_ref + atan2(…)`` of ``E = R_refᵀ R_rel``, in
+  ``[lo, hi]``: exact while the joint stays within π of its reference.
 
 Prismatic joints, from the displacement ``d = (R_p a_p)ᵀ(pivot_c - pivot_p)``
 (:func:`mbplan.dynamics.joints.prismatic_displacement`): ``½ w (d - d_t)²`` and ``d - d_t``,
@@ -74,6 +76,11 @@ def _position_limits(Rp, Fp, Rc, Fc, R_mid, cos_half):
     return cos_half - _cos_angle(R_mid, _relative(Rp, Fp, Rc, Fc)[0])
 
 
+def _position_winding(Rp, Fp, Rc, Fc, R_ref, theta_ref, a, lo, hi):
+    theta = theta_ref + _angle(R_ref, _relative(Rp, Fp, Rc, Fc)[0], a)
+    return cs.vertcat(lo - theta, theta - hi)
+
+
 def _velocity_limits(Rp, Fp, Rc, Fc, cos_step):
     rel, nxt = _relative(Rp, Fp, Rc, Fc)
     return cos_step - _cos_angle(rel, nxt)
@@ -86,6 +93,10 @@ _REVOLUTE = {
     "velocity_eq": (_velocity_eq, [("a", 3), ("target", 1), ("dt", 1)]),
     "position_limits": (_position_limits, [("R_mid", (3, 3)), ("cos_half", 1)]),
     "velocity_limits": (_velocity_limits, [("cos_step", 1)]),
+    "position_winding": (
+        _position_winding,
+        [("R_ref", (3, 3)), ("theta_ref", 1), ("a", 3), ("lo", 1), ("hi", 1)],
+    ),
 }
 _REVOLUTE_VARS = [("Rp", SO3), ("Fp", SO3), ("Rc", SO3), ("Fc", SO3)]
 

@@ -249,9 +249,9 @@ def _path(ocp: OCP, kind: str) -> np.ndarray:
     rng = np.random.default_rng(0)
     mid = 0.5 * (q0 + q_goal)
     lo, hi = joint_ranges(ocp.robot, mid)
-    vias = np.clip(
-        mid + 0.5 * rng.uniform(-1.0, 1.0, (VIA_CANDIDATES, *mid.shape)) * (hi - lo), lo, hi
-    )
+    # within half a turn of the middle: a via farther round is a pose reached the long way
+    reach = np.minimum(0.5 * (hi - lo), np.pi)
+    vias = np.clip(mid + rng.uniform(-1.0, 1.0, (VIA_CANDIDATES, *mid.shape)) * reach, lo, hi)
     lengths = np.linalg.norm(vias - q0, axis=1) + np.linalg.norm(q_goal - vias, axis=1)
     first = np.minimum(2 * s, 1.0)[:, None]
     second = np.maximum(2 * s - 1.0, 0.0)[:, None]

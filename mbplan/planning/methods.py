@@ -23,6 +23,7 @@ from mbplan.errors import InputError
 from mbplan.formulations import free_body, maximal
 from mbplan.formulations.free_body_shooting import FreeBodyShooting
 from mbplan.formulations.generalized import GeneralizedNLP
+from mbplan.formulations.maximal_turns import FOLLOW, center_turns
 from mbplan.formulations.maximal_velocity_limits import ROUNDS, tighten_velocity_limits
 from mbplan.formulations.quaternion import QuaternionNLP
 from mbplan.ocp.problem import OCP
@@ -69,11 +70,18 @@ def solve_mlgipm_maximal(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> P
 
 
 def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
-    """``solver`` (:mod:`mbplan.solvers.dispatch`) on the maximal-coordinate LGVI of ``ocp``."""
+    """``solver`` (:mod:`mbplan.solvers.dispatch`) on the maximal-coordinate LGVI of ``ocp``;
+    a converged plan solves again (at most ``ROUNDS`` times, all iterations counted) while a
+    joint's reported angles left the references of its turn-counting limit rows
+    (:mod:`~mbplan.formulations.maximal_turns`) or,
+    with contacts, a reported knot velocity exceeds its limit
+    (:func:`~mbplan.formulations.maximal_velocity_limits.tighten_velocity_limits`)."""
     jit = jit_available() if settings.jit is None else settings.jit
     formulation = free_body if isinstance(ocp.robot, FreeBody) else maximal
     with CompileClock() as building:
         nlp, _ = formulation.build(ocp, jit, settings.workspace)
+        if formulation is maximal:
+            center_turns(nlp, q_guess)
         x0 = nlp.initial_point(q_guess)
     build = building.elapsed()
     defaults = LGVI_RIPM_OPTIONS if solver == "ripm" else {}
@@ -81,12 +89,13 @@ def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Setting
     options = options.replace(**settings.options)
     runs = [solve_with(solver, nlp.problem, x0, options, settings.workspace)]
     traj = nlp.trajectory(runs[-1].x)
-    if formulation is maximal and ocp.contacts:  # the reported knot velocities within limits
+    if formulation is maximal:  # limits held where the rows see only part of them
         for _ in range(ROUNDS):
             used = sum(r.iterations for r in runs)
             if runs[-1].status is not RIPMStatus.CONVERGED or used >= options.max_iter:
                 break
-            if not tighten_velocity_limits(nlp, traj["v"]):
+            turned = center_turns(nlp, traj["q"], beyond=FOLLOW)
+            if not (ocp.contacts and tighten_velocity_limits(nlp, traj["v"])) and not turned:
                 break
             again = options.replace(max_iter=options.max_iter - used)
             runs.append(solve_with(solver, nlp.problem, runs[-1].x, again, settings.workspace))

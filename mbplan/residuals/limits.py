@@ -107,6 +107,10 @@ class _Limits(Residual):
         return ShootingResidual(model, lo, hi, ctx.limit_weight)
 
 
+ARC_MARGIN = 0.6
+"""Half the arc a range of 2π excludes, in steps ``v̄Δt`` (:class:`JointPositionLimits`)."""
+
+
 @dataclass(frozen=True, eq=False)
 class JointPositionLimits(_Limits):
     """Position limits of every joint but the continuous ones (no limits, no rows)."""
@@ -126,27 +130,46 @@ class JointPositionLimits(_Limits):
         return free
 
     def maximal_terms(self, ctx: Any, item: Any) -> list[Term]:
-        """``cos(θ - mid) ≥ cos(half)`` per revolute joint; no rows for continuous joints.
+        """``cos(θ - mid) ≥ cos(half)`` per revolute joint of a range below a turn; the angle
+        counted in turns from a reference for wider ranges; no rows for continuous joints.
 
-        A rotation forgets the turns: a revolute range of 2π or more limits no rotation
-        (``cos ≥ -1``). A range ``R`` in ``[2π, 2π + 2ε)`` (UR elbows: ±π) keeps the open arc
-        ``|θ - mid| < π - ε``, ``ε = min(v̄Δt, π/2) / 2`` with ``v̄`` the joint's velocity limit:
-        a step of at most ``v̄Δt`` cannot jump the excluded arc of width ``2ε``, so the joint
+        A rotation forgets the turns. A range ``R`` in ``[2π, 2π + 2ε)`` (UR elbows: ±π) keeps
+        the open arc ``|θ - mid| < π - ε``, ``ε = ARC_MARGIN · min(v̄Δt, π/2)`` with ``v̄`` the
+        joint's velocity limit: a step of at most ``v̄Δt`` cannot jump the excluded arc of width
+        ``2ε`` (wider than a step, which would otherwise jump it from edge to edge), so the joint
         cannot wrap past its limits; the last ``ε`` of the range at either end is given up.
-        Wider ranges have no rows (a plan leaving them fails :func:`mbplan.verify`)."""
+
+        A wider range (the UR5's and xarm7's ±2π) bounds ``θ = θ_ref + Δ`` with ``Δ`` the
+        signed angle of ``R_rel`` from ``R_rel0 exp(θ_ref a)``: ``θ_ref`` per knot is the
+        start's angle until a solve sets it to the warm start's and moves it along the iterates
+        (:mod:`mbplan.formulations.maximal_turns`), so the rows count the turns the plan makes,
+        as its reported angles (unwrapped from knot to knot) do."""
         mm = ctx.mm
         lo, hi = np.asarray(self.lower)[mm.idx_v], np.asarray(self.upper)[mm.idx_v]
         vmax = np.asarray(ctx.ocp.robot.model.velocityLimit, dtype=float)[mm.idx_v]
         step = np.where(np.isfinite(vmax) & (vmax > 0), vmax * ctx.ocp.dt, np.inf)
-        eps = 0.5 * np.minimum(step, 0.5 * np.pi)
+        eps = ARC_MARGIN * np.minimum(step, 0.5 * np.pi)
         limited = np.isin(mm.idx_v, self.indices(ctx.ocp.robot))
-        b = np.flatnonzero(limited & (~mm.revolute | (hi - lo < 2 * np.pi + 2 * eps)))
-        if not b.size:
-            return []
-        lo, hi, eps = lo[b], hi[b], eps[b]
-        half = np.where(hi - lo < 2 * np.pi, 0.5 * (hi - lo), np.pi - eps)
-        per = {"R_mid": ctx.about_axis(b, 0.5 * (lo + hi)), "cos_half": np.cos(half)}
-        return ctx.joint_terms(item, "position_limits", b, per, {"lo": lo, "hi": hi})
+        arc = limited & (~mm.revolute | (hi - lo < 2 * np.pi + 2 * eps))
+        terms = []
+        b = np.flatnonzero(arc)
+        if b.size:
+            half = np.where(hi[b] - lo[b] < 2 * np.pi, 0.5 * (hi[b] - lo[b]), np.pi - eps[b])
+            per = {"R_mid": ctx.about_axis(b, 0.5 * (lo[b] + hi[b])), "cos_half": np.cos(half)}
+            terms += ctx.joint_terms(item, "position_limits", b, per, {"lo": lo[b], "hi": hi[b]})
+        b = np.flatnonzero(limited & ~arc)
+        if b.size:
+            start = np.asarray(ctx.ocp.q0, dtype=float)[mm.idx_q[b]]
+            per = {
+                "R_ref": ctx.about_axis(b, start),
+                "theta_ref": start,
+                "a": mm.axis_child[b],
+                "lo": lo[b],
+                "hi": hi[b],
+            }
+            winding = ctx.joint_terms(item, "position_winding", b, per, {})
+            terms += [replace(t, name=f"{t.name}/turns") for t in winding]
+        return terms
 
 
 @dataclass(frozen=True, eq=False)

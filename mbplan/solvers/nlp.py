@@ -53,7 +53,9 @@ class RIPMProblem(Protocol):
 
     ``evaluate`` is called once per iterate; ``values`` once per line-search trial. A problem
     may also provide ``elimination_plan(eq_jacobian) -> EliminationPlan | None``
-    (:mod:`mbplan.solvers.kkt.elimination`), used by ``RIPMOptions.kkt_method``.
+    (:mod:`mbplan.solvers.kkt.elimination`), used by ``RIPMOptions.kkt_method``, and
+    ``accept(x)``, called at every accepted iterate: it may move the charts its functions are
+    written in (a reference angle) to ``x``, leaving every value near ``x`` unchanged.
     """
 
     n: int

@@ -1,7 +1,9 @@
 """Seeded task families chosen for what makes trajectory optimization hard, not for where a
 method wins (``mbplan bench robustness``). Case ``i`` of a family draws from
 ``numpy.random.default_rng((seed, i, FAMILY_TAG))``, so a case does not depend on how many are
-drawn:
+drawn. The arm families run over ``ARM_N`` steps of ``ARM_DT`` (3 s), more steps for an arm
+slower than :data:`ARM_SPEED` (kinova 83, 6.2 s; so100 52, 3.9 s) so that its goals lie within
+its velocity limits' reach:
 
 * ``graded_chain``: a hanging chain of 8, 16, 32 or 64 links (cycling with ``i``; 4.8 m and
   16 kg in all) whose torque limits fall linearly from :data:`CHAIN_EFFORT` along the chain,
@@ -67,6 +69,7 @@ CHAIN_N, CHAIN_DT = 40, 0.05
 ARMS = ("iiwa", "panda", "ur5", "ur10", "kinova", "xarm7", "z1", "so100")
 MESH_ARMS = ("panda", "ur5", "ur10", "kinova", "xarm7", "so100")
 ARM_N, ARM_DT = 40, 0.075
+ARM_SPEED = 1.3  # rad/s: an arm whose slowest joint's velocity limit is below gets more steps
 MARGIN = 0.02  # m, least distance of every link to every box
 BOX_CLEARANCE = 0.05  # m, least distance of the start and the goal configurations to a box
 LIMIT_GAP = 0.02  # fraction of a joint's range between the goal and the limit
@@ -129,9 +132,11 @@ def _pose(robot: Robot, frame: str, q: np.ndarray) -> pin.SE3:
 
 
 def _arm_ocp(robot: Robot, q0: np.ndarray, scene: Scene | None = None) -> OCP:
-    """An arm's task from rest at ``q0`` over ``ARM_N`` steps of ``ARM_DT`` with the task
-    files' default costs and every joint limit."""
-    ocp = OCP(robot, scene, N=ARM_N, dt=ARM_DT, q0=q0)
+    """An arm's task from rest at ``q0`` over ``ARM_N`` steps of ``ARM_DT`` (more for a slow
+    arm, module docstring) with the task files' default costs and every joint limit."""
+    slowest = float(np.min(robot.model.velocityLimit))
+    steps = int(np.ceil(ARM_N * max(1.0, ARM_SPEED / slowest)))
+    ocp = OCP(robot, scene, N=steps, dt=ARM_DT, q0=q0)
     ocp.add_cost("velocity", JointVelocity(), 1e-2, knots="running")
     ocp.add_cost("torque", JointTorque(), 1e-4)
     ocp.add_constraint("position_limits", JointPositionLimits())

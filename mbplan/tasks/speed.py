@@ -33,12 +33,16 @@ def maximal_ripm_problem(
     in ``workspace``)."""
     from mbplan.engine.jit import jit_available
     from mbplan.formulations import free_body, maximal
+    from mbplan.formulations.maximal_turns import center_turns
     from mbplan.planning.initial_guess import initial_path
     from mbplan.robots.free_body import FreeBody
 
     formulation = free_body if isinstance(ocp.robot, FreeBody) else maximal
     nlp, _ = formulation.build(ocp, jit_available(), workspace)
-    return nlp.problem, nlp.initial_point(initial_path(ocp, warm_start))
+    q = initial_path(ocp, warm_start)
+    if formulation is maximal:
+        center_turns(nlp, q)
+    return nlp.problem, nlp.initial_point(q)
 
 
 def drone_task(index: int, n: int = 100, seed: int = 0, limits: bool = False):

@@ -377,6 +377,9 @@ class _Iterations:
                     RIPMStatus.NUMERICAL_ERROR, "non-finite derivatives at the accepted point"
                 )
         self.it = new
+        accept = getattr(ph.problem, "accept", None)
+        if accept is not None:
+            accept(trial.x)
         self.sh.iter += 1
         tag = "r" if ph.resto else search.tag[0]
         self.last = StepRecord(alpha * amax(step.dx), dw, alpha_z, alpha, search.trials, tag)
