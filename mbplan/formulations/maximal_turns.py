@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from mbplan.multibody.state_maps import signed_angle
 from mbplan.transcription.terms import Term
 from mbplan.transcription.variables import Point
 
@@ -61,13 +62,7 @@ def follow_turns(nlp: Any, point: Point) -> None:
         if "Rp" in term.bind:
             rel = np.swapaxes(R[term.bind["Rp"][1]], -1, -2) @ rel
         E = np.swapaxes(term.parameters["R_ref"], -1, -2) @ rel
-        axial = np.stack(
-            [E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]], 1
-        )
-        delta = np.arctan2(
-            0.5 * np.einsum("si,si->s", term.parameters["a"], axial),
-            0.5 * (np.trace(E, axis1=1, axis2=2) - 1.0),
-        )
+        delta = signed_angle(E, term.parameters["a"])
         at = np.abs(delta) > FOLLOW
         if at.any():
             _set_turns(nlp, term, at, term.parameters["theta_ref"] + delta)

@@ -49,6 +49,15 @@ def body_velocities(
     return omega, v_com
 
 
+def signed_angle(M: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The angle in ``(-π, π]`` of rotations ``M (..., 3, 3) = exp(θ a)`` about unit axes
+    ``axis`` (broadcast against ``M``'s leading shape): ``atan2(aᵀ vee(M - Mᵀ)/2, (tr M - 1)/2)``."""
+    skew = M - np.swapaxes(M, -1, -2)
+    axial = np.stack([skew[..., 2, 1], skew[..., 0, 2], skew[..., 1, 0]], -1)
+    sin = 0.5 * np.sum(axis * axial, axis=-1)
+    return np.arctan2(sin, 0.5 * (np.trace(M, axis1=-2, axis2=-1) - 1.0))
+
+
 def joint_positions(
     mm: MaximalModel,
     R: npt.ArrayLike,
@@ -70,11 +79,7 @@ def joint_positions(
     Rb = R[None] if single else R
     Rp = _from_parent(mm, Rb, np.eye(3), axis=1)
     M = np.einsum("bji,...bjk->...bik", mm.R_rel0, np.einsum("...bji,...bjk->...bik", Rp, Rb))
-    skew = M - np.swapaxes(M, -1, -2)
-    axial = np.stack([skew[..., 2, 1], skew[..., 0, 2], skew[..., 1, 0]], -1)
-    sin = 0.5 * np.einsum("bi,...bi->...b", mm.axis_child, axial)
-    cos = 0.5 * (np.trace(M, axis1=-2, axis2=-1) - 1.0)
-    theta = np.arctan2(sin, cos)
+    theta = signed_angle(M, mm.axis_child)
 
     if q_ref is None:
         bounded = np.isfinite(mm.lower_position_limit) & np.isfinite(mm.upper_position_limit)
