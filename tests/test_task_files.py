@@ -158,11 +158,14 @@ def test_mesh_obstacle_relative_to_the_task_file(tmp_path):
     assert ocp["clearance"].residual.objects == ("left", "right", "cube")
 
 
-@pytest.mark.parametrize(("robot", "arcs", "turns"), [("iiwa", 7, 0), ("ur5", 1, 5)])
+@pytest.mark.parametrize(
+    ("robot", "arcs", "turns"), [("iiwa", 7, 0), ("ur5", 0, 6), ("so100", 5, 1)]
+)
 def test_position_limits_rows_per_range_in_maximal_coordinates(robot, arcs, turns):
-    """A range below 2π (the iiwa's) and of exactly 2π (the UR5's elbow, ±π) are cosine rows
-    (``tests/test_wrapping_limits.py``); a range wider than 2π (the UR5's other ±2π joints)
-    limits no rotation and is counted in turns from a reference (two rows per knot). A cosine
+    """A range below 2π (the iiwa's) is a cosine row; a range of 2π or more (the UR5's elbow,
+    ±π, and its other ±2π joints; the so100's wrist roll, ±3.14158, a turn up to the URDF's
+    rounding) is counted in turns from a reference (two rows per knot,
+    ``tests/test_wrapping_limits.py``). A cosine
     row ``cos(θ - mid) ≥ -1`` for it would be a barrier active at θ - mid = ±π with a zero
     gradient there (the UR5 task took 467 RIPM iterations with it)."""
     from mbplan.formulations.maximal import MaximalNLP

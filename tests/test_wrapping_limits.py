@@ -1,7 +1,6 @@
-"""Revolute position limits beyond what a rotation shows, in maximal coordinates: a range of 2π
-(UR elbows: ±π) keeps the joint off an arc around the angle it must not pass; wider ranges (the
-UR5's ±2π) count the turns from a reference per knot
-(:meth:`mbplan.residuals.JointPositionLimits.maximal_terms`)."""
+"""Revolute position limits beyond what a rotation shows, in maximal coordinates: ranges of a
+turn or more (UR elbows: ±π, the UR5's other joints: ±2π) count the turns from a reference per
+knot (:meth:`mbplan.residuals.JointPositionLimits.maximal_terms`)."""
 
 from __future__ import annotations
 
@@ -27,29 +26,25 @@ def _limits_ocp() -> mb.OCP:
     return ocp
 
 
-def test_a_two_pi_range_keeps_an_arc_of_half_width_eps_and_wider_ranges_count_turns():
+def test_ranges_of_a_turn_or_more_count_turns_to_their_exact_limits():
+    """The UR5's elbow (±π) and its other joints (±2π) have two rows per knot each, exact at
+    the limit: ``lo + 0.01`` inside, ``lo - 0.01`` outside, both ends of the range."""
     ocp = _limits_ocp()
     model = ocp.robot.model
     ranges = model.upperPositionLimit - model.lowerPositionLimit
     elbow = int(np.flatnonzero(np.isclose(ranges, 2 * np.pi))[0])
-    assert np.all(ranges[np.arange(model.nq) != elbow] > 2 * np.pi + 1.0)
     nlp = MaximalNLP(ocp, jit=False)
-    # per knot the elbow's cosine row and two rows (lower, upper) per wider joint
-    assert nlp.problem.n_ineq == N * (1 + 2 * (model.nq - 1))
-    eps = res.limits.ARC_MARGIN * min(model.velocityLimit[elbow] * DT, 0.5 * np.pi)
-    lo = model.lowerPositionLimit[elbow]
-    for angle, inside in ((lo + 2.0 * eps, True), (lo + 0.5 * eps, False), (lo - 0.1, False)):
-        q = np.zeros((N + 1, model.nq))
-        q[1:, elbow] = angle
-        _, _, g = nlp.problem.values(nlp.initial_point(q))
-        assert (np.max(g) <= 0.0) == inside, (angle, np.max(g))
-    # the rows are the cosine form with half = π - ε about the range's middle
-    q = np.zeros((N + 1, model.nq))
-    q[1:, elbow] = 0.3
-    _, _, g = nlp.problem.values(nlp.initial_point(q))
-    rows = nlp.problem.term_rows("ineq")
-    np.testing.assert_allclose(g[rows["position_limits"]], np.cos(np.pi - eps) - np.cos(0.3))
-    assert np.max(g) < 0.0
+    assert nlp.problem.n_ineq == N * 2 * model.nq
+    for limit, sign in (
+        (model.lowerPositionLimit[elbow], 1.0),
+        (model.upperPositionLimit[elbow], -1.0),
+    ):
+        for offset, inside in ((0.01, True), (-0.01, False)):
+            q = np.zeros((N + 1, model.nq))
+            q[1:, elbow] = np.linspace(0.0, limit + sign * offset, N)
+            center_turns(nlp, q)
+            _, _, g = nlp.problem.values(nlp.initial_point(q))
+            assert (np.max(g) <= 0.0) == inside, (limit, offset, np.max(g))
 
 
 def _turn_rows(nlp: MaximalNLP, q: np.ndarray) -> np.ndarray:

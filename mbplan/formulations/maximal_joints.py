@@ -9,9 +9,9 @@ exp(Δθ a)``:
   (target zero only) ``w (1 - cos(θ_{k+1} - θ_k))/Δt²``, a constraint the central difference
   ``(θ_{k+1} - θ_{k-1})/(2Δt)`` of ``atan2`` steps (the velocity a plan reports);
 * joint position limits ``cos(θ - θ_mid) ≥ cos(θ_half)`` and velocity limits
-  ``cos(θ_{k+1} - θ_k) ≥ cos(v_max Δt)`` (exact for ranges below 2π, an arc of ``π - ε`` about
-  the middle for ranges in ``[2π, 2π + 2ε)``: :class:`~mbplan.residuals.JointPositionLimits`;
-  symmetric velocity limits); for ranges beyond a turn, the angle counted from a reference
+  ``cos(θ_{k+1} - θ_k) ≥ cos(v_max Δt)`` (exact for ranges below 2π:
+  :class:`~mbplan.residuals.JointPositionLimits`; symmetric velocity limits); for ranges of a
+  turn or more, the angle counted from a reference
   ``θ_ref`` per knot (the warm start's), ``θ = θ_ref + atan2(…)`` of ``E = R_refᵀ R_rel``, in
   ``[lo, hi]``: exact while the joint stays within π of its reference.
 

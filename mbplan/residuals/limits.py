@@ -107,8 +107,8 @@ class _Limits(Residual):
         return ShootingResidual(model, lo, hi, ctx.limit_weight)
 
 
-ARC_MARGIN = 0.6
-"""Half the arc a range of 2π excludes, in steps ``v̄Δt`` (:class:`JointPositionLimits`)."""
+TURN_ROUNDING = 1e-3
+"""How far below 2π a range still counts as a turn (URDFs round π: the so100's ±3.14158)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,31 +130,24 @@ class JointPositionLimits(_Limits):
         return free
 
     def maximal_terms(self, ctx: Any, item: Any) -> list[Term]:
-        """``cos(θ - mid) ≥ cos(half)`` per revolute joint of a range below a turn; the angle
-        counted in turns from a reference for wider ranges; no rows for continuous joints.
+        """``cos(θ - mid) ≥ cos(half)`` per revolute joint of a range below a turn (exact); the
+        angle counted in turns from a reference for a range of a turn or more; no rows for
+        continuous joints.
 
-        A rotation forgets the turns. A range ``R`` in ``[2π, 2π + 2ε)`` (UR elbows: ±π) keeps
-        the open arc ``|θ - mid| < π - ε``, ``ε = ARC_MARGIN · min(v̄Δt, π/2)`` with ``v̄`` the
-        joint's velocity limit: a step of at most ``v̄Δt`` cannot jump the excluded arc of width
-        ``2ε`` (wider than a step, which would otherwise jump it from edge to edge), so the joint
-        cannot wrap past its limits; the last ``ε`` of the range at either end is given up.
-
-        A wider range (the UR5's and xarm7's ±2π) bounds ``θ = θ_ref + Δ`` with ``Δ`` the
-        signed angle of ``R_rel`` from ``R_rel0 exp(θ_ref a)``: ``θ_ref`` per knot is the
-        start's angle until a solve sets it to the warm start's and moves it along the iterates
+        A rotation forgets the turns, so a range of 2π or more (less :data:`TURN_ROUNDING`; UR
+        elbows' ±π, the UR5's and xarm7's ±2π, the so100's wrist roll) bounds ``θ = θ_ref + Δ`` with ``Δ`` the signed angle of ``R_rel`` from
+        ``R_rel0 exp(θ_ref a)``: ``θ_ref`` per knot is the start's angle until a solve sets it to
+        the warm start's and moves it along the iterates
         (:mod:`mbplan.formulations.maximal_turns`), so the rows count the turns the plan makes,
         as its reported angles (unwrapped from knot to knot) do."""
         mm = ctx.mm
         lo, hi = np.asarray(self.lower)[mm.idx_v], np.asarray(self.upper)[mm.idx_v]
-        vmax = np.asarray(ctx.ocp.robot.model.velocityLimit, dtype=float)[mm.idx_v]
-        step = np.where(np.isfinite(vmax) & (vmax > 0), vmax * ctx.ocp.dt, np.inf)
-        eps = ARC_MARGIN * np.minimum(step, 0.5 * np.pi)
         limited = np.isin(mm.idx_v, self.indices(ctx.ocp.robot))
-        arc = limited & (~mm.revolute | (hi - lo < 2 * np.pi + 2 * eps))
+        arc = limited & (~mm.revolute | (hi - lo < 2 * np.pi - TURN_ROUNDING))
         terms = []
         b = np.flatnonzero(arc)
         if b.size:
-            half = np.where(hi[b] - lo[b] < 2 * np.pi, 0.5 * (hi[b] - lo[b]), np.pi - eps[b])
+            half = 0.5 * (hi[b] - lo[b])
             per = {"R_mid": ctx.about_axis(b, 0.5 * (lo[b] + hi[b])), "cos_half": np.cos(half)}
             terms += ctx.joint_terms(item, "position_limits", b, per, {"lo": lo[b], "hi": hi[b]})
         b = np.flatnonzero(limited & ~arc)
