@@ -150,6 +150,55 @@ def test_interrupts_at_random_points(tmp_path, signum, workers):
     assert not list(out.glob("*.tmp*"))
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_workers_die_with_a_killed_run(tmp_path):
+    """SIGKILL gives the run no chance to stop its pool: the workers must still go."""
+    script = tmp_path / "sleepers.py"
+    script.write_text(
+        textwrap.dedent(
+            """
+            import os, sys, time
+            from pathlib import Path
+            from mbplan.benchmarks.harness import Job, run_jobs
+
+            def job(case, method, folder):
+                Path(folder, str(os.getpid())).touch()
+                time.sleep(120)
+                return {"success": True}
+
+            folder = sys.argv[1]
+            jobs = [Job(i, "a", job, (i, "a", folder)) for i in range(2)]
+            run_jobs(jobs, Path(folder) / "out" / "results.jsonl", workers=2)
+            """
+        )
+    )
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    run = subprocess.Popen([sys.executable, str(script), str(pids)], env=os.environ | ENV)
+    deadline = time.monotonic() + 60
+    while len([p for p in pids.iterdir() if p.name.isdigit()]) < 2:
+        assert time.monotonic() < deadline and run.poll() is None, "the workers did not start"
+        time.sleep(0.05)
+    workers = [int(p.name) for p in pids.iterdir() if p.name.isdigit()]
+    run.kill()
+    run.wait(timeout=30)
+    deadline = time.monotonic() + 20
+    alive = workers
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.1)
+        alive = [pid for pid in workers if _running(pid)]
+    assert not alive, f"workers {alive} outlived their killed run"
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
 def _default_sigint() -> None:
     """SIGINT's default in the child, so that Python turns it into KeyboardInterrupt even when
     the tests run in a background job (which starts with SIGINT ignored)."""

@@ -7,6 +7,7 @@ import pytest
 
 import mbplan as mb
 import mbplan.planning.methods as methods
+from mbplan.formulations.casadi_nlp import callbacks
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.joint_space import evaluate
 from mbplan.multibody.collision import chain_kinematics, joint_space_contacts, point_jacobians
@@ -35,7 +36,7 @@ def small_cases(
 
 def test_callbacks_agree_with_the_numpy_functions() -> None:
     nlp = GeneralizedNLP(small_cases(1)[0])
-    g, jac_g, hess_lag = nlp.callbacks()
+    g, jac_g, hess_lag = callbacks(nlp, "generalized")
     z = nlp.initial_guess(initial_path(nlp.ocp, "linear"))
     z = z + 0.1 * np.random.default_rng(3).standard_normal(nlp.n)
     lam = np.random.default_rng(4).standard_normal(nlp.m)

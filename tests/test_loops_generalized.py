@@ -10,6 +10,7 @@ from loop_problems import fourbar, fourbar_ocp, fourbar_plan, rocker_goal, welde
 
 import mbplan as mb
 from mbplan.errors import InputError
+from mbplan.formulations.casadi_nlp import callbacks
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.generalized_loops import loop_functions
 from mbplan.residuals import JointTorque
@@ -51,7 +52,7 @@ def test_loop_rows_derivatives_match_finite_differences(case: str) -> None:
     z = nlp.initial_guess(q) + 0.1 * rng.standard_normal(nlp.n)
     lam = rng.standard_normal(nlp.m)
     check_generalized_derivatives(nlp, z, lam)
-    _, jac_g, hess_lag = nlp.callbacks()
+    _, jac_g, hess_lag = callbacks(nlp, "generalized")
     np.testing.assert_allclose(np.asarray(jac_g(z, np.zeros(0))[1]), nlp.jacobian(z).toarray())
     np.testing.assert_allclose(
         np.asarray(hess_lag(z, np.zeros(0), 0.3, lam)),

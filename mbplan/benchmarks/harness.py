@@ -10,6 +10,8 @@ second concurrent run into the same folder is refused.
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import os
 import signal
 import sys
 import time
@@ -110,7 +112,9 @@ def _execute(
         for j in jobs:
             yield j, j.fn(*j.args)
         return
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_signals)
+    pool = ProcessPoolExecutor(
+        max_workers=workers, initializer=_worker_signals, initargs=(os.getpid(),)
+    )
     try:
         # The workers are forked by the first submit: an interrupt then would be lost in the
         # fork handlers, so it waits (blocked) until the pool stands.
@@ -129,6 +133,7 @@ def _execute(
 
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 _STOP_GRACE = 2.0  # s a terminated worker gets before it is killed
+_PR_SET_PDEATHSIG = 1  # prctl option: the signal a process gets when its parent dies
 
 
 def _stop_workers(processes: list) -> None:
@@ -155,10 +160,16 @@ def _signals_blocked() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
-def _worker_signals() -> None:
+def _worker_signals(parent: int) -> None:
     """Workers leave Ctrl-C (sent to the whole process group) to the parent, which stops them
     (SIGTERM: the default, quiet exit, not a handler inherited from the parent); they are
-    forked with these signals blocked (:func:`_signals_blocked`)."""
+    forked with these signals blocked (:func:`_signals_blocked`). On Linux a worker is killed
+    when its parent dies (``PR_SET_PDEATHSIG``), however it dies: a killed run leaves no worker
+    behind holding its pipes or its CPU."""
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+        if os.getppid() != parent:  # the parent died before the request
+            os._exit(1)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     for signum in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(signum, signal.SIG_DFL)

@@ -5,6 +5,7 @@ triplet sparsity patterns and ``casadi.Callback`` functions for ``nlpsol``'s ``g
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Protocol
 
 import casadi as cs
 import numpy as np
@@ -60,3 +61,46 @@ class NumpyCallback(cs.Callback):
 
     def eval(self, arg: list[cs.DM]) -> list[cs.DM]:
         return self._fn(*(a.full().ravel() for a in arg))
+
+
+class SparseNLP(Protocol):
+    """An NLP ``min f(z) s.t. g(z)`` evaluated in NumPy, its derivatives' values listed like the
+    triplets of fixed patterns."""
+
+    n: int
+    m: int
+    jac_pattern: SparsePattern
+    hess_pattern: SparsePattern
+
+    def constraints(self, z: np.ndarray) -> np.ndarray: ...
+
+    def jacobian_values(self, z: np.ndarray) -> np.ndarray: ...
+
+    def hessian_values(self, z: np.ndarray, sigma: float, lam: np.ndarray) -> np.ndarray: ...
+
+
+def callbacks(nlp: SparseNLP, name: str) -> tuple[NumpyCallback, NumpyCallback, NumpyCallback]:
+    """``g(z)``, ``jac_g(z, p) -> (g, ∂g/∂z)`` and ``hess_lag(z, p, σ, λ) -> triu ∇²L`` of
+    ``nlp`` for ``casadi.nlpsol`` (its ``g`` and the ``jac_g``/``hess_lag`` options)."""
+    dense_z, dense_g = cs.Sparsity.dense(nlp.n, 1), cs.Sparsity.dense(nlp.m, 1)
+    no_p, scalar = cs.Sparsity(0, 1), cs.Sparsity.dense(1, 1)
+    jac, hess = nlp.jac_pattern, nlp.hess_pattern
+
+    def g(z):
+        return [cs.DM(nlp.constraints(z))]
+
+    def jac_g(z, _p):
+        values = jac.nonzeros(nlp.jacobian_values(z))
+        return [cs.DM(nlp.constraints(z)), cs.DM(jac.sparsity, values)]
+
+    def hess_lag(z, _p, sigma, lam):
+        values = hess.nonzeros(nlp.hessian_values(z, float(sigma[0]), lam))
+        return [cs.DM(hess.sparsity, values)]
+
+    return (
+        NumpyCallback(f"{name}_g", [dense_z], [dense_g], g),
+        NumpyCallback(f"{name}_jac_g", [dense_z, no_p], [dense_g, jac.sparsity], jac_g),
+        NumpyCallback(
+            f"{name}_hess_lag", [dense_z, no_p, scalar, dense_g], [hess.sparsity], hess_lag
+        ),
+    )

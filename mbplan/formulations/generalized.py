@@ -26,10 +26,10 @@ rows at configurations of the motion between knots ``k`` and ``k+1``
 
 Pinocchio's pip wheel has no CasADi bindings, so the constraint function, its Jacobian and the
 Lagrangian Hessian are ``casadi.Callback`` functions given to ``casadi.nlpsol`` (``g`` and the
-``jac_g``/``hess_lag`` options). Dynamics Jacobian: ``computeRNEADerivatives``. Dynamics Hessian
-``∇²(λ_kᵀ RNEA)``: central differences in ``q`` of Pinocchio's analytic first derivatives (step
-:data:`FD_STEP_Q`), a unit forward difference in ``v`` (exact: ``∂τ/∂v`` is affine in ``v``),
-``∂²τ/∂a² = ∂²τ/∂a∂v = 0``, mapped to ``(q_k, v_k, v_{k+1})`` through ``a = (v_{k+1} - v_k)/Δt``.
+``jac_g``/``hess_lag`` options, :func:`~mbplan.formulations.casadi_nlp.callbacks`). Dynamics
+Jacobian: ``computeRNEADerivatives``; dynamics Hessian
+:func:`~mbplan.formulations.generalized_dynamics.rnea_hessian`, mapped to ``(q_k, v_k, v_{k+1})``
+through ``a = (v_{k+1} - v_k)/Δt``.
 """
 
 from __future__ import annotations
@@ -43,13 +43,14 @@ import scipy.sparse as sp
 from numpy.typing import ArrayLike
 
 from mbplan.errors import InputError
-from mbplan.formulations.casadi_nlp import NumpyCallback, SparsePattern, block
+from mbplan.formulations.casadi_nlp import SparsePattern, block
 from mbplan.formulations.free_flyer import FreeFlyerChart
 from mbplan.formulations.generalized_contacts import (
     ContactColumns,
     contact_rows,
     guess_contact_forces,
 )
+from mbplan.formulations.generalized_dynamics import rnea_hessian
 from mbplan.formulations.generalized_loops import (
     check_first_step,
     guess_forces,
@@ -62,8 +63,6 @@ from mbplan.formulations.joint_space import configuration_rows, knot_function
 from mbplan.ocp.problem import OCP, Item
 from mbplan.residuals.base import SymbolicRows
 from mbplan.robots.configuration import difference
-
-FD_STEP_Q = 1e-5  # rad: central differences of the analytic RNEA derivatives in q
 
 
 @dataclass
@@ -374,7 +373,7 @@ class GeneralizedNLP:
             [*(steps if self.chart is None else ()), np.full((N - 1) * nv, -1.0)]
         )
 
-    def _jacobian_values(self, z: np.ndarray) -> np.ndarray:
+    def jacobian_values(self, z: np.ndarray) -> np.ndarray:
         q, v, _ = self.unpack(z)
         a = np.diff(v, axis=0) / self.dt
         dq, dv, M = (np.empty((self.N, self.nv, self.nv)) for _ in range(3))
@@ -401,7 +400,7 @@ class GeneralizedNLP:
         return np.concatenate(parts)
 
     def jacobian(self, z: np.ndarray) -> sp.csc_matrix:
-        return self.jac_pattern.csc(self._jacobian_values(z))
+        return self.jac_pattern.csc(self.jacobian_values(z))
 
     def _hessian_pattern(self) -> None:
         N = self.N
@@ -422,44 +421,19 @@ class GeneralizedNLP:
         cols = np.concatenate([c for _, c in triplets])
         self.hess_pattern = SparsePattern((self.n, self.n), rows, cols, rows <= cols)
 
-    def _rnea_hessian(self, q, v, a, lam) -> np.ndarray:
-        """``∇²(λᵀ RNEA(q, v, a))`` over ``(q, v, a)``, ``(nq + 2nv)²`` (module docstring; a
-        floating base: over its coordinates ``q``, RNEA at the normalized ones)."""
-        nq, nv, model, data, chart = self.nq, self.nv, self.model, self.data, self.chart
-
-        at_q = None if chart is None else chart.tangent(q)
-
-        def gradient(qq: np.ndarray, vv: np.ndarray, j: int = -1) -> np.ndarray:
-            """At ``qq``, ``q`` moved along coordinate ``j`` (-1: not moved)."""
-            unit = qq if chart is None else chart.normalize(qq)
-            dq, dv, M = pin.computeRNEADerivatives(model, data, unit, vv, a)
-            if chart is not None:  # C depends on the base's coordinates alone
-                dq = dq @ (chart.tangent(qq) if 0 <= j < 7 else at_q)
-            return np.concatenate([lam @ dq, lam @ dv, lam @ M])
-
-        H = np.zeros((nq + 2 * nv, nq + 2 * nv))
-        for j in range(nq):
-            hq = np.zeros(nq)
-            hq[j] = FD_STEP_Q
-            H[:, j] = (gradient(q + hq, v, j) - gradient(q - hq, v, j)) / (2.0 * FD_STEP_Q)
-        vv = slice(nq, nq + nv)
-        base = gradient(q, v)[vv]
-        step = np.eye(nv)
-        for j in range(nv):
-            H[vv, nq + j] = gradient(q, v + step[j])[vv] - base
-        H[:nq, :nq] = 0.5 * (H[:nq, :nq] + H[:nq, :nq].T)
-        H[vv, vv] = 0.5 * (H[vv, vv] + H[vv, vv].T)
-        H[:nq, nq:] = H[nq:, :nq].T
-        return H
-
-    def _hessian_values(self, z: np.ndarray, sigma: float, lam: np.ndarray) -> np.ndarray:
+    def hessian_values(self, z: np.ndarray, sigma: float, lam: np.ndarray) -> np.ndarray:
         N, nv, T = self.N, self.nv, self._a_of_x
         q, v, _ = self.unpack(z)
         a = np.diff(v, axis=0) / self.dt
         lam_dyn = lam[N * nv : 2 * N * nv].reshape(N, nv)
         coords = q if self.chart is None else self._coordinates(z)
         dyn = np.array(
-            [T.T @ self._rnea_hessian(coords[k], v[k], a[k], lam_dyn[k]) @ T for k in range(1, N)]
+            [
+                T.T
+                @ rnea_hessian(self.model, self.data, self.chart, coords[k], v[k], a[k], lam_dyn[k])
+                @ T
+                for k in range(1, N)
+            ]
         )
         parts = [dyn.ravel()]
         if self.chart is not None:
@@ -476,29 +450,4 @@ class GeneralizedNLP:
 
     def lagrangian_hessian(self, z: np.ndarray, sigma: float, lam: np.ndarray) -> sp.csc_matrix:
         """Upper triangle of ``∇²(σ f + λᵀ g)``."""
-        return self.hess_pattern.csc(self._hessian_values(z, sigma, lam))
-
-    def callbacks(self) -> tuple[NumpyCallback, NumpyCallback, NumpyCallback]:
-        """``g(z)``, ``jac_g(z, p) -> (g, ∂g/∂z)`` and ``hess_lag(z, p, σ, λ) -> triu ∇²L``."""
-        dense_z, dense_g = cs.Sparsity.dense(self.n, 1), cs.Sparsity.dense(self.m, 1)
-        no_p, scalar = cs.Sparsity(0, 1), cs.Sparsity.dense(1, 1)
-        jac, hess = self.jac_pattern, self.hess_pattern
-
-        def g(z):
-            return [cs.DM(self.constraints(z))]
-
-        def jac_g(z, _p):
-            values = jac.nonzeros(self._jacobian_values(z))
-            return [cs.DM(self.constraints(z)), cs.DM(jac.sparsity, values)]
-
-        def hess_lag(z, _p, sigma, lam):
-            values = hess.nonzeros(self._hessian_values(z, float(sigma[0]), lam))
-            return [cs.DM(hess.sparsity, values)]
-
-        return (
-            NumpyCallback("generalized_g", [dense_z], [dense_g], g),
-            NumpyCallback("generalized_jac_g", [dense_z, no_p], [dense_g, jac.sparsity], jac_g),
-            NumpyCallback(
-                "generalized_hess_lag", [dense_z, no_p, scalar, dense_g], [hess.sparsity], hess_lag
-            ),
-        )
+        return self.hess_pattern.csc(self.hessian_values(z, sigma, lam))

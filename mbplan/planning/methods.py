@@ -21,6 +21,7 @@ from mbplan.engine.compile_clock import CompileClock
 from mbplan.engine.jit import jit_available
 from mbplan.errors import InputError
 from mbplan.formulations import free_body, maximal
+from mbplan.formulations.casadi_nlp import callbacks
 from mbplan.formulations.free_body_shooting import FreeBodyShooting
 from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.maximal_turns import FOLLOW, center_turns
@@ -69,6 +70,21 @@ def solve_mlgipm_maximal(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> P
     return _solve_maximal("mlgipm", ocp, q_guess, settings)
 
 
+def maximal_start(
+    ocp: OCP, q_guess: np.ndarray, jit: bool, workspace: Workspace | None = None
+) -> tuple[Any, np.ndarray]:
+    """The LGVI NLP of ``ocp`` (the free-body formulation for a
+    :class:`~mbplan.robots.free_body.FreeBody`, else the maximal one, its turn references centred
+    on ``q_guess``) and its initial point from the joint path ``q_guess (N+1, nq)``; structures
+    kept in ``workspace``."""
+    if isinstance(ocp.robot, FreeBody):
+        nlp, _ = free_body.build(ocp, jit, workspace)
+    else:
+        nlp, _ = maximal.build(ocp, jit, workspace)
+        center_turns(nlp, q_guess)
+    return nlp, nlp.initial_point(q_guess)
+
+
 def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Settings) -> PlanResult:
     """``solver`` (:mod:`mbplan.solvers.dispatch`) on the maximal-coordinate LGVI of ``ocp``;
     a converged plan solves again (at most ``ROUNDS`` times, all iterations counted) while a
@@ -77,19 +93,15 @@ def _solve_maximal(solver: str, ocp: OCP, q_guess: np.ndarray, settings: Setting
     with contacts, a reported knot velocity exceeds its limit
     (:func:`~mbplan.formulations.maximal_velocity_limits.tighten_velocity_limits`)."""
     jit = jit_available() if settings.jit is None else settings.jit
-    formulation = free_body if isinstance(ocp.robot, FreeBody) else maximal
     with CompileClock() as building:
-        nlp, _ = formulation.build(ocp, jit, settings.workspace)
-        if formulation is maximal:
-            center_turns(nlp, q_guess)
-        x0 = nlp.initial_point(q_guess)
+        nlp, x0 = maximal_start(ocp, q_guess, jit, settings.workspace)
     build = building.elapsed()
     defaults = LGVI_RIPM_OPTIONS if solver == "ripm" else {}
     options = options_for(solver, tol=settings.tol, max_iter=settings.max_iter, **defaults)
     options = options.replace(**settings.options)
     runs = [solve_with(solver, nlp.problem, x0, options, settings.workspace)]
     traj = nlp.trajectory(runs[-1].x)
-    if formulation is maximal:  # limits held where the rows see only part of them
+    if not isinstance(ocp.robot, FreeBody):  # limits held where the rows see only part of them
         for _ in range(ROUNDS):
             used = sum(r.iterations for r in runs)
             if runs[-1].status is not RIPMStatus.CONVERGED or used >= options.max_iter:
@@ -166,7 +178,7 @@ def _solve_ipopt(
         problem, derivatives = nlp.problem, {}
     else:
         nlp = GeneralizedNLP(ocp)
-        g_fn, jac_fn, hess_fn = nlp.callbacks()
+        g_fn, jac_fn, hess_fn = callbacks(nlp, "generalized")
         z = cs.MX.sym("z", nlp.n)
         problem = {"x": z, "f": nlp.symbolic_objective(z), "g": g_fn(z)}
         derivatives = {"jac_g": jac_fn, "hess_lag": hess_fn, "no_nlp_grad": True}

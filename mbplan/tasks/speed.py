@@ -32,17 +32,11 @@ def maximal_ripm_problem(
     free-body formulation for a :class:`~mbplan.robots.free_body.FreeBody`; its structures kept
     in ``workspace``)."""
     from mbplan.engine.jit import jit_available
-    from mbplan.formulations import free_body, maximal
-    from mbplan.formulations.maximal_turns import center_turns
     from mbplan.planning.initial_guess import initial_path
-    from mbplan.robots.free_body import FreeBody
+    from mbplan.planning.methods import maximal_start
 
-    formulation = free_body if isinstance(ocp.robot, FreeBody) else maximal
-    nlp, _ = formulation.build(ocp, jit_available(), workspace)
-    q = initial_path(ocp, warm_start)
-    if formulation is maximal:
-        center_turns(nlp, q)
-    return nlp.problem, nlp.initial_point(q)
+    nlp, x0 = maximal_start(ocp, initial_path(ocp, warm_start), jit_available(), workspace)
+    return nlp.problem, x0
 
 
 def drone_task(index: int, n: int = 100, seed: int = 0, limits: bool = False):
