@@ -175,13 +175,15 @@ def test_workers_die_with_a_killed_run(tmp_path):
     pids = tmp_path / "pids"
     pids.mkdir()
     run = subprocess.Popen([sys.executable, str(script), str(pids)], env=os.environ | ENV)
-    deadline = time.monotonic() + 60
-    while len([p for p in pids.iterdir() if p.name.isdigit()]) < 2:
-        assert time.monotonic() < deadline and run.poll() is None, "the workers did not start"
-        time.sleep(0.05)
+    try:
+        deadline = time.monotonic() + 60
+        while len([p for p in pids.iterdir() if p.name.isdigit()]) < 2:
+            assert time.monotonic() < deadline and run.poll() is None, "the workers did not start"
+            time.sleep(0.05)
+    finally:
+        run.kill()
+        run.wait(timeout=30)
     workers = [int(p.name) for p in pids.iterdir() if p.name.isdigit()]
-    run.kill()
-    run.wait(timeout=30)
     deadline = time.monotonic() + 20
     alive = workers
     while alive and time.monotonic() < deadline:

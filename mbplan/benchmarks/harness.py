@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import multiprocessing
 import os
 import signal
 import sys
@@ -113,7 +114,10 @@ def _execute(
             yield j, j.fn(*j.args)
         return
     pool = ProcessPoolExecutor(
-        max_workers=workers, initializer=_worker_signals, initargs=(os.getpid(),)
+        max_workers=workers,
+        mp_context=multiprocessing.get_context("fork") if _LINUX else None,
+        initializer=_worker_signals,
+        initargs=(os.getpid(),),
     )
     try:
         # The workers are forked by the first submit: an interrupt then would be lost in the
@@ -134,6 +138,7 @@ def _execute(
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 _STOP_GRACE = 2.0  # s a terminated worker gets before it is killed
 _PR_SET_PDEATHSIG = 1  # prctl option: the signal a process gets when its parent dies
+_LINUX = sys.platform.startswith("linux")
 
 
 def _stop_workers(processes: list) -> None:
@@ -166,8 +171,10 @@ def _worker_signals(parent: int) -> None:
     forked with these signals blocked (:func:`_signals_blocked`). On Linux a worker is killed
     when its parent dies (``PR_SET_PDEATHSIG``), however it dies: a killed run leaves no worker
     behind holding its pipes or its CPU."""
-    if sys.platform.startswith("linux"):
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+    if _LINUX:  # forked by ``parent`` (the pool's context)
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.prctl(_PR_SET_PDEATHSIG, ctypes.c_ulong(signal.SIGKILL)) != 0:
+            raise OSError(ctypes.get_errno(), "prctl(PR_SET_PDEATHSIG) failed")
         if os.getppid() != parent:  # the parent died before the request
             os._exit(1)
     signal.signal(signal.SIGINT, signal.SIG_IGN)

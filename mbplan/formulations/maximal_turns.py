@@ -1,5 +1,6 @@
-"""Position limits of revolute joints whose range exceeds a turn, in maximal coordinates: the
-references their rows count the turns from.
+"""Position limits of revolute joints whose range is a turn or more (less
+:data:`~mbplan.residuals.limits.TURN_ROUNDING`), in maximal coordinates: the references their
+rows count the turns from.
 
 A rotation forgets the turns, so :class:`~mbplan.residuals.JointPositionLimits` bounds
 ``θ = θ_ref + Δ`` per knot, ``Δ ∈ (-π, π]`` the signed angle of the joint's relative rotation

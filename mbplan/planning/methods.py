@@ -22,8 +22,10 @@ from mbplan.engine.jit import jit_available
 from mbplan.errors import InputError
 from mbplan.formulations import free_body, maximal
 from mbplan.formulations.casadi_nlp import callbacks
+from mbplan.formulations.free_body import FreeBodyNLP
 from mbplan.formulations.free_body_shooting import FreeBodyShooting
 from mbplan.formulations.generalized import GeneralizedNLP
+from mbplan.formulations.maximal import MaximalNLP
 from mbplan.formulations.maximal_turns import FOLLOW, center_turns
 from mbplan.formulations.maximal_velocity_limits import ROUNDS, tighten_velocity_limits
 from mbplan.formulations.quaternion import QuaternionNLP
@@ -72,7 +74,7 @@ def solve_mlgipm_maximal(ocp: OCP, q_guess: np.ndarray, settings: Settings) -> P
 
 def maximal_start(
     ocp: OCP, q_guess: np.ndarray, jit: bool, workspace: Workspace | None = None
-) -> tuple[Any, np.ndarray]:
+) -> tuple[MaximalNLP | FreeBodyNLP, np.ndarray]:
     """The LGVI NLP of ``ocp`` (the free-body formulation for a
     :class:`~mbplan.robots.free_body.FreeBody`, else the maximal one, its turn references centred
     on ``q_guess``) and its initial point from the joint path ``q_guess (N+1, nq)``; structures

@@ -135,11 +135,11 @@ class JointPositionLimits(_Limits):
         continuous joints.
 
         A rotation forgets the turns, so a range of 2π or more (less :data:`TURN_ROUNDING`; UR
-        elbows' ±π, the UR5's and xarm7's ±2π, the so100's wrist roll) bounds ``θ = θ_ref + Δ`` with ``Δ`` the signed angle of ``R_rel`` from
-        ``R_rel0 exp(θ_ref a)``: ``θ_ref`` per knot is the start's angle until a solve sets it to
-        the warm start's and moves it along the iterates
-        (:mod:`mbplan.formulations.maximal_turns`), so the rows count the turns the plan makes,
-        as its reported angles (unwrapped from knot to knot) do."""
+        elbows' ±π, the UR5's and xarm7's ±2π, the so100's wrist roll) bounds
+        ``θ = θ_ref + Δ`` with ``Δ`` the signed angle of ``R_rel`` from ``R_rel0 exp(θ_ref a)``:
+        ``θ_ref`` per knot is the start's angle until a solve sets it to the warm start's and
+        moves it along the iterates (:mod:`mbplan.formulations.maximal_turns`), so the rows count
+        the turns the plan makes, as its reported angles (unwrapped from knot to knot) do."""
         mm = ctx.mm
         lo, hi = np.asarray(self.lower)[mm.idx_v], np.asarray(self.upper)[mm.idx_v]
         limited = np.isin(mm.idx_v, self.indices(ctx.ocp.robot))
