@@ -1,10 +1,13 @@
 """Benchmark harness: resume after a kill without lost or duplicate lines; local pool and Dask."""
 
 import json
+import os
 
+import numpy as np
 import pytest
+import threadpoolctl
 
-from mbplan.benchmarks.harness import Job, read_results, run_jobs, summarize
+from mbplan.benchmarks.harness import Job, read_results, run_jobs, summarize, worker_threads
 from mbplan.errors import InputError
 
 
@@ -49,6 +52,32 @@ def test_process_pool_matches_serial(tmp_path):
     pooled = run_jobs(_jobs(4), tmp_path / "p.jsonl", workers=2)
     key = lambda r: (r["case"], r["method"])  # noqa: E731
     assert sorted(serial, key=key) == sorted(pooled, key=key)
+
+
+def thread_budget(x: int) -> dict:
+    """What a worker may use: the largest thread count of its loaded thread pools (NumPy's
+    BLAS at least) and what libraries it loads later read."""
+    np.ones((2, 2)) @ np.ones((2, 2))
+    pools = threadpoolctl.threadpool_info()
+    return {
+        **square(x),
+        "pools": len(pools),
+        "threads": max(p["num_threads"] for p in pools),
+        "environment": os.environ.get("OMP_NUM_THREADS"),
+    }
+
+
+def test_pool_workers_share_out_the_cpus(tmp_path):
+    """Two workers on n CPUs use n // 2 threads each (at least one), not n each."""
+    budget = worker_threads(2)
+    assert budget == max(1, len(os.sched_getaffinity(0)) // 2)
+    before = threadpoolctl.threadpool_info()
+    rows = run_jobs(
+        [Job(i, "a", thread_budget, (i,)) for i in range(4)], tmp_path / "t.jsonl", workers=2
+    )
+    assert all(r["pools"] >= 1 and r["threads"] == budget for r in rows)
+    assert all(r["environment"] == str(budget) for r in rows)
+    assert threadpoolctl.threadpool_info() == before  # the run's own process keeps its pools
 
 
 def test_dask_local_cluster(tmp_path):

@@ -29,7 +29,7 @@ from typing import Any
 
 from mbplan.benchmarks.common import machine_info, plan_row, write_atomic, write_json
 from mbplan.benchmarks.families_report import family_summary, markdown, plot
-from mbplan.benchmarks.harness import Job, run_jobs
+from mbplan.benchmarks.harness import Job, run_jobs, worker_threads
 from mbplan.benchmarks.speed_report import INTERVALS
 from mbplan.errors import InfeasibleRequestError, InputError
 from mbplan.ocp.problem import OCP
@@ -259,6 +259,8 @@ def run(
             "tol": tol,
             "max_iter": max_iter,
             "warm_up_iterations": WARM_UP_ITERATIONS,
+            "workers": workers if scheduler is None else None,
+            "threads_per_worker": worker_threads(workers) if scheduler is None else None,
         },
         "interval_method": INTERVALS,
     }

@@ -121,6 +121,16 @@ def _extra(key: str, value: float | None) -> str:
     return f"{100 * value:.0f} %" if key in PERCENT_COLUMNS else f"{value:.1e}"
 
 
+def _workers(settings: dict[str, Any]) -> str:
+    """How the run shared the machine: its worker processes and their threads."""
+    workers, threads = settings["workers"], settings["threads_per_worker"]
+    if workers is None:
+        return ", a Dask cluster's workers"
+    if workers == 1:
+        return ", one process"
+    return f", {workers} worker processes of {threads} thread{'s' * (threads > 1)} each"
+
+
 def markdown(suite: Suite, s: dict[str, Any]) -> str:
     """results.md of a :func:`run` summary."""
     st, m = s["settings"], s["machine"]
@@ -130,8 +140,9 @@ def markdown(suite: Suite, s: dict[str, Any]) -> str:
         f"# {suite.title}",
         "",
         f"Command: `{s['command']}`  ",
-        f"Machine: {m['processor']}, {m['cpus']} CPUs, Python {m['python']}, CasADi "
-        f"{m['casadi']}, NumPy {m['numpy']} (shared with other jobs: only ratios mean anything).",
+        f"Machine: {m['processor']}, {m['cpus']} CPUs{_workers(st)}, Python {m['python']}, "
+        f"CasADi {m['casadi']}, NumPy {m['numpy']} (shared with other jobs: only ratios mean "
+        "anything).",
         "",
         suite.intro.format(**st),
         "",
