@@ -41,7 +41,13 @@ from mbplan.transcription.distance import (
     interval_distance_function,
     pair_bodies,
 )
-from mbplan.transcription.intervals import SECANT_ENDS, SECANT_HALF_WIDTH, interval_pose
+from mbplan.transcription.intervals import (
+    INTERVAL_ROWS,
+    SECANT_ENDS,
+    SECANT_HALF_WIDTH,
+    interval_pose,
+    secant_weights,
+)
 from mbplan.verification.report import MARGIN_KEPT
 
 PANDA_TASK = Path(__file__).resolve().parents[1] / "examples" / "tasks" / "panda_boxes.toml"
@@ -75,8 +81,8 @@ def _intervals(nlp: GeneralizedNLP) -> SecantRows:
 
 def test_generalized_rows_sit_on_the_interval_motion_with_exact_derivatives() -> None:
     """Eq. (62) between knots: the secant through the rows at ``q_k + sΔt v_k + ½s²Δt(v_{k+1} -
-    v_k)``, ``s = ½ ∓ δ``, at ``σ = 0, 1``; Jacobian and Hessian against central differences of
-    the whole NLP."""
+    v_k)``, ``s = ½ ∓ δ``, at ``σ = 0, 1`` and the row at ``s = ½``; Jacobian and Hessian against
+    central differences of the whole NLP."""
     nlp, z = _nlp("com")
     block = _intervals(nlp)
     q, v, _ = nlp.unpack(z)
@@ -85,11 +91,14 @@ def test_generalized_rows_sit_on_the_interval_motion_with_exact_derivatives() ->
     for j, s in enumerate(samples):
         expected = q[2] + s * nlp.dt * v[2] + 0.5 * s * s * nlp.dt * (v[3] - v[2])
         np.testing.assert_allclose(Q[j, 2], expected, rtol=1e-14)
-    r = np.stack([block.form.values(Q[j]) for j in range(2)])  # (sample, interval, P)
-    line = r[0] + (SECANT_ENDS[:, None, None] - samples[0]) * (r[1] - r[0]) / (
-        samples[1] - samples[0]
+    assert samples[1] == 0.5 and samples[2] - 0.5 == 0.5 - samples[0] > 0
+    r = np.stack([block.form.values(Q[j]) for j in range(3)])  # (sample, interval, P)
+    line = r[0] + (SECANT_ENDS[:, None, None] - samples[0]) * (r[2] - r[0]) / (
+        samples[2] - samples[0]
     )
-    np.testing.assert_allclose(block.values(q, v), np.swapaxes(line, 0, 1).ravel(), atol=1e-14)
+    expected = np.concatenate([line, r[1:2]])  # (row, interval, P)
+    assert INTERVAL_ROWS == len(expected)
+    np.testing.assert_allclose(block.values(q, v), np.swapaxes(expected, 0, 1).ravel(), atol=1e-14)
     assert np.allclose(weights.sum(axis=1), 1.0)
     lam = np.random.default_rng(4).standard_normal(nlp.m)
     check_generalized_derivatives(nlp, z, lam)
@@ -118,7 +127,8 @@ def test_generalized_distance_rows_have_the_witness_point_derivatives() -> None:
         _, _, kin, contacts, _ = distance_values(ocp.robot, ocp.scene, block.form.residual, Q, 1)
         R, t = kin.rotation[:, joints], kin.translation[:, joints]
         witness.append((np.einsum("kpji,kpj->kpi", R, contacts.robot_point - t), contacts.normal))
-    lam_rows = np.random.default_rng(7).uniform(0.5, 2.0, (block.size // (2 * block.P), 2, block.P))
+    shape = (block.size // (INTERVAL_ROWS * block.P), INTERVAL_ROWS, block.P)
+    lam_rows = np.random.default_rng(7).uniform(0.5, 2.0, shape)
     lam = np.zeros(nlp.m)
     lam[block.row0 : block.row0 + block.size] = lam_rows.ravel()
     data = ocp.robot.model.createData()
@@ -171,10 +181,10 @@ def _pose(xyz, rotvec) -> np.ndarray:
 
 def test_maximal_distance_between_knots_has_witness_point_derivatives_on_the_retraction() -> None:
     """Coal distances at ``(R exp(t log F), p + tΔt v)`` for ``t = s ∓ δ`` as two secant rows
-    ``margin - ℓ(σ)``, ``σ = 0, 1``, ``ℓ`` the line through the two distances: the values are
-    coal's, the Jacobian matches central differences along the retraction of ``(R, p, F, v)``
-    and the Hessian is that of the fixed-witness-point model ``Σ_j w_σj nⱼᵀ(p_t + R_t aⱼ)``
-    (four-point differences)."""
+    ``margin - ℓ(σ)``, ``σ = 0, 1``, ``ℓ`` the line through the two distances, and the row at
+    ``t = s``: the values are coal's, the Jacobian matches central differences along the
+    retraction of ``(R, p, F, v)`` and the Hessian is that of the fixed-witness-point model
+    ``Σ_j w_ij nⱼᵀ(p_t + R_t aⱼ)`` (four-point differences)."""
     desc, mm, R, p, F, v, dt = _maximal_interval()
     obstacles = [
         (coal.Sphere(0.1), _pose((0.35, 0.25, 0.6), (0.0, 0.0, 0.0))),
@@ -186,7 +196,7 @@ def test_maximal_distance_between_knots_has_witness_point_derivatives_on_the_ret
     sites = {"R": R[b], "p": p[b], "F": F[b], "v": v[b]}
     params = {"pair": np.arange(P), "margin": 0.02, "s": s, "dt": dt}
     at_knot = distance_constraint_function(mm, pairs)
-    samples = np.array([s - SECANT_HALF_WIDTH, s + SECANT_HALF_WIDTH])
+    samples = np.array([s - SECANT_HALF_WIDTH, s, s + SECANT_HALF_WIDTH])
     poses = [
         interval_pose(R[b], p[b], F[b], v[b], np.full(P, t), np.full(P, t * dt)) for t in samples
     ]
@@ -197,11 +207,12 @@ def test_maximal_distance_between_knots_has_witness_point_derivatives_on_the_ret
         ],
         axis=1,
     )
-    slope = (d[:, 1] - d[:, 0]) / (samples[1] - samples[0])
-    line = d[:, :1] + (np.array([0.0, 1.0])[None] - samples[0]) * slope[:, None]
-    np.testing.assert_allclose(f.value(sites, params), 0.02 - line, atol=1e-12)
+    slope = (d[:, 2] - d[:, 0]) / (samples[2] - samples[0])
+    line = d[:, :1] + (SECANT_ENDS[None] - samples[0]) * slope[:, None]
+    rows = np.column_stack([line, d[:, 1]])
+    np.testing.assert_allclose(f.value(sites, params), 0.02 - rows, atol=1e-12)
     assert np.abs(slope).max() > 1e-2  # the rows differ from the distances at the samples
-    lam = np.random.default_rng(1).uniform(0.5, 2.0, (P, 2))
+    lam = np.random.default_rng(1).uniform(0.5, 2.0, (P, INTERVAL_ROWS))
     H = f.dense_hessian(f.hessian(sites, params, lam)[2])
     witness = []
     for Rt, pt in poses:
@@ -211,9 +222,8 @@ def test_maximal_distance_between_knots_has_witness_point_derivatives_on_the_ret
         )
         contacts = signed_distances(pairs, np.arange(P), geometry_R, geometry_t)
         witness.append((np.einsum("pji,pj->pi", Rt, contacts.robot_point - pt), contacts.normal))
-    weights = (np.array([[samples[1], -samples[0]], [samples[1] - 1, 1 - samples[0]]])) / (
-        samples[1] - samples[0]
-    )  # [σ, sample]
+    weights = secant_weights(np.array([s]))[1][0]  # [row, sample]
+    np.testing.assert_allclose(weights[:2, [0, 2]] @ samples[[0, 2]], SECANT_ENDS)
     h, eye = 1e-4, np.eye(f.n)
     for i in range(P):
         one = {n: x[i] for n, x in sites.items()}
@@ -252,17 +262,17 @@ def test_maximal_distance_between_knots_has_witness_point_derivatives_on_the_ret
 
 
 def test_maximal_com_between_knots_has_exact_derivatives() -> None:
-    """Eq. (62) at ``p + tΔt v``, ``t = ½ ∓ δ``, as the secant's two ends: value, Jacobian and
-    Hessian along the retraction."""
+    """Eq. (62) at ``p + tΔt v``, ``t = ½ ∓ δ``, as the secant's two ends, and at ``t = ½``:
+    value, Jacobian and Hessian along the retraction."""
     _, _, _, p, _, v, dt = _maximal_interval()
     f = interval_cylinder_clearance_function(False)
     c = np.array([0.4, 0.2, 0.13])
-    samples = 0.5 + SECANT_HALF_WIDTH * np.array([-1.0, 1.0])
+    samples = 0.5 + SECANT_HALF_WIDTH * np.array([-1.0, 0.0, 1.0])
     for b in range(len(p)):
         params = {"c": c, "s": 0.5, "dt": dt}
         at = [c[2] ** 2 - np.sum((p[b] + t * dt * v[b] - c)[:2] ** 2) for t in samples]
-        slope = (at[1] - at[0]) / (samples[1] - samples[0])
-        expected = at[0] + (SECANT_ENDS - samples[0]) * slope
+        slope = (at[2] - at[0]) / (samples[2] - samples[0])
+        expected = [*(at[0] + (SECANT_ENDS - samples[0]) * slope), at[1]]
         np.testing.assert_allclose(f.value({"p": p[b], "v": v[b]}, params)[0], expected, atol=1e-14)
         assert check_derivatives(f, {"p": p[b], "v": v[b]}, params).ok(1e-6)
 
@@ -316,7 +326,7 @@ def test_knot_only_obstacles_add_no_rows_between_knots() -> None:
     knots, between = (small_cases(1, "distance", 0.05, b)[0] for b in (False, True))
     nlps = [GeneralizedNLP(ocp) for ocp in (knots, between)]
     assert [b.K for b in nlps[0].own] == [knots.N]
-    assert [b.K for b in nlps[1].own] == [knots.N, knots.N * len(SECANT_ENDS)]
+    assert [b.K for b in nlps[1].own] == [knots.N, knots.N * INTERVAL_ROWS]
     assert nlps[1].m == nlps[0].m + nlps[1].own[1].size
     z = nlps[0].initial_guess(initial_path(knots, "linear"))
     np.testing.assert_array_equal(nlps[1].constraints(z)[: nlps[0].m], nlps[0].constraints(z))

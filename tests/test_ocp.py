@@ -14,7 +14,7 @@ from mbplan.formulations.generalized import GeneralizedNLP
 from mbplan.formulations.maximal import MaximalNLP
 from mbplan.planning.initial_guess import inverse_kinematics
 from mbplan.tasks.paper import IIWA_START
-from mbplan.transcription.intervals import SECANT_ENDS
+from mbplan.transcription.intervals import INTERVAL_ROWS
 
 GOAL = pin.SE3(pin.rpy.rpyToMatrix(0.3, -0.2, 0.5), np.array([0.4, 0.1, 0.6]))
 
@@ -83,7 +83,7 @@ def test_generalized_derivatives_match_finite_differences(distance: bool) -> Non
         if isinstance(block.item.residual, res.Distance):
             lam[block.row0 : block.row0 + block.size] = 0.0
     check_generalized_derivatives(nlp, z, lam)
-    between = 3 * len(SECANT_ENDS)  # rows between knots: 3 intervals, a secant's two ends
+    between = 3 * INTERVAL_ROWS  # rows between knots: 3 intervals, a secant's ends, its centre
     com, pairs = 7, 7 * 2
     knots = 2 * 3 * 7 + 1 + 2 + 1 + 6 + 3 + 3 + (3 + between) * com + 3 + 3  # com_eq, above
     assert nlp.m == knots + ((3 + between) * pairs if distance else 0)

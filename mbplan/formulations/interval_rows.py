@@ -11,9 +11,10 @@ configuration at the fraction ``s ∈ [0, 1]`` of the interval is::
 the verifier's replay to second order. Obstacle rows between knots are the secant of the row
 through two configurations of the interval, ``s = ½ ∓ δ``
 (:data:`~mbplan.transcription.intervals.SECANT_HALF_WIDTH`), evaluated
-at both ends ``σ = 0, 1``: ``ℓ_σ = Σ_j w_σj r(q_k(s_j))``. Where the row is concave along the
-interval (a distance to a convex obstacle along a straight motion), its secant lies above it
-outside ``[s₁, s₂]``, so ``ℓ_0, ℓ_1 ≤ 0`` keep it ``≤ 0`` there, up to the motion's end
+at both ends ``σ = 0, 1``, and the row at ``s = ½``:
+``ℓ_σ = Σ_j w_σj r(q_k(s_j))``. Where the row is concave along the interval (a distance to a
+convex obstacle along a straight motion), its secant lies above it outside ``[s₁, s₃]``, so
+``ℓ_0, ℓ_1 ≤ 0`` keep it ``≤ 0`` there, up to the motion's end
 ``q_k + ½Δt (v_k + v_{k+1})``, which the knot ``q_{k+1}`` does not pin (it lies ``½Δt²‖a_k‖``
 away). Each row reads knots ``k`` and ``k+1`` only, and the configurations are linear in the
 variables, so the derivatives are those of the residual at ``q_k(s)`` times the coefficients:
@@ -28,14 +29,14 @@ from typing import Any
 import numpy as np
 
 from mbplan.ocp.problem import Item
-from mbplan.transcription.intervals import secant_weights
+from mbplan.transcription.intervals import INTERVAL_ROWS, secant_weights
 
 
 def secant() -> tuple[np.ndarray, np.ndarray]:
-    """The samples ``s_j (2,)`` of every interval's secant and its weights ``w (2, 2)``
-    ``[σ, sample]`` (:func:`~mbplan.transcription.intervals.secant_weights` centred at ``½``)."""
-    lo, hi, weights = secant_weights(np.array([0.5]))
-    return np.array([lo[0], hi[0]]), weights[0]
+    """The samples ``s_j (3,)`` of every interval's rows and their weights ``w (3, 3)``
+    ``[row, sample]`` (:func:`~mbplan.transcription.intervals.secant_weights` centred at ``½``)."""
+    samples, weights = secant_weights(np.array([0.5]))
+    return samples[0], weights[0]
 
 
 def _gather(arrays: list[np.ndarray], masks: list[np.ndarray]) -> np.ndarray:
@@ -111,26 +112,27 @@ def _interval_terms(k: np.ndarray, s: np.ndarray, dt: float) -> list:
 
 
 class SecantRows(ConfigurationRows):
-    """``form``'s secant rows ``ℓ_σ`` (module docstring) of the intervals ``k = knot - 1`` ending
-    at the item's knots, rows ``row0 + (2i + σ)·P + p`` for interval ``i``. The sparsity is that
-    of :class:`ConfigurationRows` over the same knots; the Hessian of an interval sits on its
+    """``form``'s rows ``ℓ_σ`` (module docstring) of the intervals ``k = knot - 1`` ending at
+    the item's knots, rows ``row0 + (Ri + σ)·P + p`` for interval ``i`` (``R``:
+    :data:`~mbplan.transcription.intervals.INTERVAL_ROWS`). The sparsity is that of
+    :class:`ConfigurationRows` over the same knots; the Hessian of an interval sits on its
     ``σ = 0`` site."""
 
     def __init__(self, nlp: Any, item: Item, form: Any, row0: int):
-        k = np.repeat(np.asarray(item.knots) - 1, 2)
+        k = np.repeat(np.asarray(item.knots) - 1, INTERVAL_ROWS)
         super().__init__(nlp, item, form, _interval_terms(k, np.zeros(k.size), nlp.dt), row0)
         self.samples, self.weights = secant()
-        intervals = k[::2]
+        intervals = k[::INTERVAL_ROWS]
         self._sample_terms = [
             _interval_terms(intervals, np.full(intervals.size, t), nlp.dt) for t in self.samples
         ]
 
     def sample_configurations(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """``q_k(s_j)`` ``(2, K, nv)`` of the two samples ``s_j`` of every interval."""
+        """``q_k(s_j)`` ``(S, K, nv)`` of the samples ``s_j`` of every interval."""
         return np.stack([_configurations(terms, q, v) for terms in self._sample_terms])
 
     def values(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
-        r = np.stack([self.form.values(Q) for Q in self.sample_configurations(q, v)])  # (2, K, P)
+        r = np.stack([self.form.values(Q) for Q in self.sample_configurations(q, v)])  # (S, K, P)
         return np.einsum("sj,jkp->ksp", self.weights, r).ravel()
 
     def jacobian_values(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -140,13 +142,13 @@ class SecantRows(ConfigurationRows):
             c = [terms[t][2] for terms in self._sample_terms]
             Gt = sum(
                 self.weights[None, :, j, None, None] * (c[j][:, None, None] * G[j])[:, None]
-                for j in range(2)
+                for j in range(len(self.samples))
             )  # (K, σ, P, nv)
             pieces.append(Gt.reshape(-1, *Gt.shape[2:]))
         return _gather(pieces, self._jac)
 
     def hessian_values(self, q: np.ndarray, v: np.ndarray, lam: np.ndarray) -> np.ndarray:
-        mu = lam[self.row0 : self.row0 + self.size].reshape(-1, 2, self.P)  # (K, σ, P)
+        mu = lam[self.row0 : self.row0 + self.size].reshape(-1, INTERVAL_ROWS, self.P)
         H = [
             self.form.hessian(Q, np.einsum("ksp,s->kp", mu, self.weights[:, j]))
             for j, Q in enumerate(self.sample_configurations(q, v))
@@ -154,10 +156,9 @@ class SecantRows(ConfigurationRows):
         blocks = []
         for t, u in self._pairs:
             c = [(terms[t][2] * terms[u][2])[:, None, None] for terms in self._sample_terms]
-            on_first = c[0] * H[0] + c[1] * H[1]
-            blocks.append(
-                np.stack([on_first, np.zeros_like(on_first)], 1).reshape(-1, *on_first.shape[1:])
-            )
+            on_first = sum(cj * Hj for cj, Hj in zip(c, H, strict=True))
+            rest = [np.zeros_like(on_first)] * (INTERVAL_ROWS - 1)
+            blocks.append(np.stack([on_first, *rest], 1).reshape(-1, *on_first.shape[1:]))
         return _gather(blocks, self._hess)
 
 

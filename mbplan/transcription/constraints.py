@@ -31,17 +31,16 @@ def cylinder_clearance_function(jit: bool) -> RiemannianFunction:
 # process-wide cache, result-neutral: compiled from its symbolic key alone
 @cache
 def interval_cylinder_clearance_function(jit: bool) -> RiemannianFunction:
-    """The secant rows (:data:`~mbplan.transcription.intervals.SECANT_HALF_WIDTH`) of
-    :func:`cylinder_clearance` of the point ``p + tΔt v`` between knots: the line through its
-    values at ``t = s ∓ δ``, at both ends of the interval; the cylinder ``c``, the secant's
-    centre ``s`` and ``Δt`` as parameters."""
+    """The rows between knots (:func:`~mbplan.transcription.intervals.secant_weights`) of
+    :func:`cylinder_clearance` of the point ``p + tΔt v``: the line through its values at
+    ``t = s ∓ δ`` at both ends of the interval, and its value at ``t = s``; the cylinder ``c``,
+    the centre ``s`` and ``Δt`` as parameters."""
 
     def clearance(p: cs.SX, v: cs.SX, c: cs.SX, s: cs.SX, dt: cs.SX) -> cs.SX:
         lo, hi = s - SECANT_HALF_WIDTH, s + SECANT_HALF_WIDTH
-        at = [cylinder_clearance(p + t * dt * v, c) for t in (lo, hi)]
-        return cs.vertcat(
-            *((at[0] * (hi - end) + at[1] * (end - lo)) / (hi - lo) for end in SECANT_ENDS)
-        )
+        at = [cylinder_clearance(p + t * dt * v, c) for t in (lo, s, hi)]
+        line = [(at[0] * (hi - end) + at[2] * (end - lo)) / (hi - lo) for end in SECANT_ENDS]
+        return cs.vertcat(*line, at[1])
 
     return RiemannianFunction(
         "interval_cylinder_clearance",

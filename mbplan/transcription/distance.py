@@ -32,7 +32,7 @@ from mbplan.errors import InputError
 from mbplan.lie import SO3, R
 from mbplan.multibody import MaximalModel
 from mbplan.multibody.collision import CollisionPairs, Contacts, signed_distances
-from mbplan.transcription.intervals import interval_pose, secant_weights
+from mbplan.transcription.intervals import INTERVAL_ROWS, interval_pose, secant_weights
 
 _LOWER = np.tril_indices(3)
 
@@ -120,14 +120,13 @@ def _interval_witness_model(jit: bool) -> RiemannianFunction:
 def interval_distance_function(
     mm: MaximalModel, pairs: CollisionPairs, activation: float = np.inf, jit: bool = False
 ) -> CallbackFunction:
-    """The secant rows ``margin - min(ℓ(σ), margin + activation)``, ``σ = 0, 1``, of pair
-    ``pair`` on interval ``k`` from knot ``(R, p, F, v)``: ``ℓ`` is the line through the
-    distances at the fractions ``s ∓ δ``
-    (:func:`~mbplan.transcription.intervals.secant_weights`) of the interval. Where the
-    distance along the interval is convex (a point moving on a line, a convex obstacle) the line
-    lies below it outside ``[s - δ, s + δ]``, so both rows ``≤ 0`` keep the margin along the
-    interval but for a dip of order ``δ²`` between the samples. Parameters ``pair``, ``margin``
-    (m), the secant's centre ``s`` and ``Δt`` (s)."""
+    """The rows between knots ``margin - min(ℓ_i, margin + activation)`` of pair ``pair`` on
+    interval ``k`` from knot ``(R, p, F, v)``: ``ℓ_0, ℓ_1`` the line through the distances at the
+    fractions ``s ∓ δ`` of the interval at its ends, ``ℓ_2`` the distance at ``s``
+    (:func:`~mbplan.transcription.intervals.secant_weights`). Where the distance along the
+    interval is convex (a point moving on a line, a convex obstacle) the line lies below it
+    outside ``[s - δ, s + δ]``, so rows ``≤ 0`` keep the margin along the interval but for dips
+    between the samples. Parameters ``pair``, ``margin`` (m), the centre ``s`` and ``Δt`` (s)."""
     body_contacts = _body_contacts(mm, pairs)
     witness = _interval_witness_model(jit)
 
@@ -136,37 +135,39 @@ def interval_distance_function(
         pair, margin = parameters[:, 0].astype(np.int64), parameters[:, 1]
         s, dt = parameters[:, 2], parameters[:, 3]
         cap = margin + activation
-        lo, hi, weights = secant_weights(s)
-        # both samples as one batch of 2K sites: sample j of site k is row j·K + k
-        both = {n: np.concatenate([x, x]) for n, x in variables.items()}
-        t = np.concatenate([lo, hi])
-        Rt, pt = interval_pose(both["R"], both["p"], both["F"], both["v"], t, t * np.tile(dt, 2))
-        contacts = body_contacts(np.tile(pair, 2), Rt, pt, np.tile(cap + SECANT_REACH, 2))
-        line = np.einsum("kij,kj->ki", weights, contacts.distance.reshape(2, K).T)
+        samples, weights = secant_weights(s)
+        S = samples.shape[1]
+        # the samples as one batch of S·K sites: sample j of site k is row j·K + k
+        every = {n: np.concatenate([x] * S) for n, x in variables.items()}
+        t = samples.T.ravel()
+        h = t * np.tile(dt, S)
+        Rt, pt = interval_pose(every["R"], every["p"], every["F"], every["v"], t, h)
+        contacts = body_contacts(np.tile(pair, S), Rt, pt, np.tile(cap + SECANT_REACH, S))
+        line = np.einsum("kij,kj->ki", weights, contacts.distance.reshape(S, K).T)
         active = line < cap[:, None]
         outs = [margin[:, None] - np.minimum(line, cap[:, None])]
         if order == 0:
             return outs
-        # row σ = Σ_j w_σj (margin - d_j): its derivatives are Σ_j w_σj ∂(nⱼᵀ p₁ⱼ)
+        # row i = Σ_j w_ij (margin - d_j): its derivatives are Σ_j w_ij ∂(nⱼᵀ p₁ⱼ)
         w = weights * active[:, :, None]
         a = np.einsum("kji,kj->ki", Rt, contacts.robot_point - pt)
-        model = {"a": a, "n": contacts.normal, "s": t, "h": t * np.tile(dt, 2)}
+        model = {"a": a, "n": contacts.normal, "s": t, "h": h}
         if order == 1:
-            J = witness.jacobian(both, model)[1]
+            J = witness.jacobian(every, model)[1]
         else:
             mu = np.einsum("ki,kij->jk", multipliers, w).reshape(-1, 1)
-            _, J, H = witness.hessian(both, model, mu)
-        jac = np.einsum("kij,jkn->kin", w, J.reshape(2, K, -1)).reshape(K, -1)
-        return [*outs, jac] if order == 1 else [*outs, jac, H[:K] + H[K:]]
+            _, J, H = witness.hessian(every, model, mu)
+        jac = np.einsum("kij,jkn->kin", w, J.reshape(S, K, -1)).reshape(K, -1)
+        return [*outs, jac] if order == 1 else [*outs, jac, H.reshape(S, K, -1).sum(axis=0)]
 
     return CallbackFunction(
         "coal_interval_distance",
         [("R", SO3), ("p", R(3)), ("F", SO3), ("v", R(3))],
         [("pair", 1), ("margin", 1), ("s", 1), ("dt", 1)],
-        m=2,
+        m=INTERVAL_ROWS,
         jacobian_pattern=(
-            np.repeat([0, 1], witness.jac_nnz),
-            np.tile(witness.jac_cols, 2),
+            np.repeat(np.arange(INTERVAL_ROWS), witness.jac_nnz),
+            np.tile(witness.jac_cols, INTERVAL_ROWS),
         ),
         hessian_pattern=(witness.hess_rows, witness.hess_cols),
         evaluate=evaluate,

@@ -25,20 +25,28 @@ SECANT_HALF_WIDTH = 0.25
 """An obstacle row between knots is the line through its values at the fractions ``s ∓ δ`` of
 the interval, evaluated at both ends, :data:`SECANT_ENDS`. Where the row is concave along the
 interval (a distance to a convex obstacle along a straight motion) the line lies above it
-outside ``[s - δ, s + δ]``, so both ends ``≤ 0`` keep the row ``≤ 0`` there; between the samples
-it can exceed the line by the row's curvature times ``δ²/2``."""
+outside ``[s - δ, s + δ]``, so both ends ``≤ 0`` keep the row ``≤ 0`` there. Between the samples
+it can exceed the line by the row's curvature times ``δ²/2``, or by its slope times ``δ`` where
+the row has a kink (a link passing a box's edge: a tent peaking between the samples); the row
+at the centre ``s`` itself halves that span."""
 SECANT_ENDS = np.array([0.0, 1.0])
+INTERVAL_ROWS = 3
+"""Rows of an obstacle row between knots per interval: the secant at :data:`SECANT_ENDS` and
+the row at the secant's centre."""
 
 
-def secant_weights(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The samples ``s ∓ δ`` ``(K,)`` each of the secants centred at ``s (K,)`` and the weights
-    ``(K, 2, 2)`` ``[site, σ, sample]`` of the line through the values there, at ``σ = 0, 1``."""
+def secant_weights(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The samples ``(K, 3)`` ``s - δ, s, s + δ`` of the rows between knots centred at ``s (K,)``
+    and their weights ``(K, 3, 3)`` ``[site, row, sample]``: rows 0 and 1 the line through the
+    values at ``s ∓ δ`` at ``σ = 0, 1``, row 2 the value at ``s``."""
     s = np.asarray(s, dtype=float)
     lo, hi = s - SECANT_HALF_WIDTH, s + SECANT_HALF_WIDTH
     width = (hi - lo)[:, None]
-    to_lo = (hi[:, None] - SECANT_ENDS[None]) / width
-    to_hi = (SECANT_ENDS[None] - lo[:, None]) / width
-    return lo, hi, np.stack([to_lo, to_hi], axis=2)
+    weights = np.zeros((s.size, INTERVAL_ROWS, 3))
+    weights[:, :2, 0] = (hi[:, None] - SECANT_ENDS[None]) / width
+    weights[:, :2, 2] = (SECANT_ENDS[None] - lo[:, None]) / width
+    weights[:, 2, 1] = 1.0
+    return np.stack([lo, s, hi], axis=1), weights
 
 
 def interval_pose(R: Any, p: Any, F: Any, v: Any, s: Any, h: Any) -> tuple[Any, Any]:
