@@ -229,7 +229,7 @@ def test_maximal_distance_between_knots_has_witness_point_derivatives_on_the_ret
         one = {n: x[i] for n, x in sites.items()}
         check = check_derivatives(f, one, params | {"pair": i}, step_jacobian=1e-5)
         # the distances' 2e-6 (curved shapes, witness points to ~sqrt(GJK tolerance)) times the
-        # secant's weights (|w| ≤ 2.5, Σ|w| = 4 per row)
+        # rows' weights (|w| ≤ 1.5, Σ|w| = 2 per row)
         assert check.jacobian_error < 8e-6, (pairs.names[i], check)
 
         def model(xi: np.ndarray, i: int = i, one: dict = one) -> float:
@@ -275,6 +275,16 @@ def test_maximal_com_between_knots_has_exact_derivatives() -> None:
         expected = [*(at[0] + (SECANT_ENDS - samples[0]) * slope), at[1]]
         np.testing.assert_allclose(f.value({"p": p[b], "v": v[b]}, params)[0], expected, atol=1e-14)
         assert check_derivatives(f, {"p": p[b], "v": v[b]}, params).ok(1e-6)
+
+
+def test_the_centre_row_catches_a_peak_the_secant_misses() -> None:
+    """A point crossing a cylinder's edge between the secant's samples: eq. (62) is violated at
+    ``s = ½`` (the row > 0) while both secant rows are satisfied; the centre row says so."""
+    f = interval_cylinder_clearance_function(False)
+    c, dt = np.array([0.0, 0.0, 0.1]), 0.1
+    p, v = np.array([-0.2, 0.095, 0.5]), np.array([4.0, 0.0, 0.0])  # x = 0 at s = ½
+    rows = f.value({"p": p, "v": v}, {"c": c, "s": 0.5, "dt": dt})[0]
+    assert rows[0] <= 0 and rows[1] <= 0 and rows[2] > 0
 
 
 # process-wide cache of test plans, result-neutral: a function of its arguments alone

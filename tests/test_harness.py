@@ -70,14 +70,17 @@ def thread_budget(x: int) -> dict:
 def test_pool_workers_share_out_the_cpus(tmp_path):
     """Two workers on n CPUs use n // 2 threads each (at least one), not n each."""
     budget = worker_threads(2)
-    assert budget == max(1, len(os.sched_getaffinity(0)) // 2)
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    assert budget == max(1, cpus // 2)
     before = threadpoolctl.threadpool_info()
+    environment = os.environ.get("OMP_NUM_THREADS")
     rows = run_jobs(
         [Job(i, "a", thread_budget, (i,)) for i in range(4)], tmp_path / "t.jsonl", workers=2
     )
     assert all(r["pools"] >= 1 and r["threads"] == budget for r in rows)
     assert all(r["environment"] == str(budget) for r in rows)
     assert threadpoolctl.threadpool_info() == before  # the run's own process keeps its pools
+    assert os.environ.get("OMP_NUM_THREADS") == environment
 
 
 def test_dask_local_cluster(tmp_path):

@@ -260,7 +260,9 @@ def run(
             "max_iter": max_iter,
             "warm_up_iterations": WARM_UP_ITERATIONS,
             "workers": workers if scheduler is None else None,
-            "threads_per_worker": worker_threads(workers) if scheduler is None else None,
+            "threads_per_worker": worker_threads(workers)
+            if scheduler is None and workers > 1
+            else None,
         },
         "interval_method": INTERVALS,
     }

@@ -9,7 +9,7 @@ configuration at the fraction ``s ∈ [0, 1]`` of the interval is::
     q_k(s) = q_k + sΔt v_k + ½s²Δt (v_{k+1} - v_k),
 
 the verifier's replay to second order. Obstacle rows between knots are the secant of the row
-through two configurations of the interval, ``s = ½ ∓ δ``
+through two configurations of the interval, ``s₁,₃ = ½ ∓ δ``
 (:data:`~mbplan.transcription.intervals.SECANT_HALF_WIDTH`), evaluated
 at both ends ``σ = 0, 1``, and the row at ``s = ½``:
 ``ℓ_σ = Σ_j w_σj r(q_k(s_j))``. Where the row is concave along the interval (a distance to a

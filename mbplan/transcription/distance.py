@@ -8,15 +8,16 @@ fixed-witness-point Hessian as derived in :mod:`mbplan.multibody.collision`: wit
 ``½(m aᵀ + a mᵀ) - (mᵀa) I``.
 
 Between knots (:func:`interval_distance_function`) the poses are
-:func:`~mbplan.transcription.intervals.interval_pose` of knot ``k``'s ``(R, p, F, v)`` at two
-fractions ``s ∓ δ`` of the interval; coal gives the distances and witness points there, and two
-rows keep the line through the two distances above the margin at both ends of the interval
-(``σ = 0, 1``): where the distance is convex along the interval (a point moving on a line, a
-convex obstacle) the line lies below it outside ``[s - δ, s + δ]``, so the margin holds along
-the interval up to a dip of order ``δ²`` between the samples, not only at one sample. The rows
-are fixed linear combinations of the two distances, so their derivatives are the same
-combinations of the fixed-witness-point model ``nᵀ(p_s + R_s a)``'s at each sample, through the
-interpolation, by CasADi (:func:`_interval_witness_model`).
+:func:`~mbplan.transcription.intervals.interval_pose` of knot ``k``'s ``(R, p, F, v)`` at the
+fractions ``s - δ, s, s + δ`` of the interval; coal gives the distances and witness points
+there, and three rows keep the line through the distances at ``s ∓ δ`` above the margin at both
+ends of the interval (``σ = 0, 1``) and the distance at ``s`` above it: where the distance is
+convex along the interval (a point moving on a line, a convex obstacle) the line lies below it
+outside ``[s - δ, s + δ]``, so the margin holds along the interval up to dips between the
+samples (:data:`~mbplan.transcription.intervals.SECANT_HALF_WIDTH`). The rows are fixed linear
+combinations of the distances, so their derivatives are the same combinations of the
+fixed-witness-point model ``nᵀ(p_s + R_s a)``'s at each sample, through the interpolation, by
+CasADi (:func:`_interval_witness_model`).
 """
 
 from __future__ import annotations

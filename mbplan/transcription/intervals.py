@@ -30,7 +30,7 @@ it can exceed the line by the row's curvature times ``δ²/2``, or by its slope 
 the row has a kink (a link passing a box's edge: a tent peaking between the samples); the row
 at the centre ``s`` itself halves that span."""
 SECANT_ENDS = np.array([0.0, 1.0])
-INTERVAL_ROWS = 3
+INTERVAL_ROWS = len(SECANT_ENDS) + 1
 """Rows of an obstacle row between knots per interval: the secant at :data:`SECANT_ENDS` and
 the row at the secant's centre."""
 
@@ -42,10 +42,11 @@ def secant_weights(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     s = np.asarray(s, dtype=float)
     lo, hi = s - SECANT_HALF_WIDTH, s + SECANT_HALF_WIDTH
     width = (hi - lo)[:, None]
-    weights = np.zeros((s.size, INTERVAL_ROWS, 3))
-    weights[:, :2, 0] = (hi[:, None] - SECANT_ENDS[None]) / width
-    weights[:, :2, 2] = (SECANT_ENDS[None] - lo[:, None]) / width
-    weights[:, 2, 1] = 1.0
+    ends = len(SECANT_ENDS)
+    weights = np.zeros((s.size, INTERVAL_ROWS, 3))  # samples s - δ, s, s + δ
+    weights[:, :ends, 0] = (hi[:, None] - SECANT_ENDS[None]) / width
+    weights[:, :ends, 2] = (SECANT_ENDS[None] - lo[:, None]) / width
+    weights[:, ends, 1] = 1.0
     return np.stack([lo, s, hi], axis=1), weights
 
 
