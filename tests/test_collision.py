@@ -15,7 +15,9 @@ from mbplan.multibody import body_poses, maximal_model
 from mbplan.multibody.collision import (
     chain_kinematics,
     collision_pairs,
+    joint_placements,
     joint_space_contacts,
+    placed_contacts,
     point_hessians,
     point_jacobians,
     signed_distances,
@@ -299,6 +301,50 @@ def test_meshes_become_cached_convex_hulls_with_one_request_per_pair(tmp_path, m
     np.testing.assert_array_equal(d_hull, d_again)
     assert np.all(d_hull <= d_mesh + 1e-9)
     assert convex.hull_cache_dir() == tmp_path / "hulls"
+
+
+def test_values_by_forward_kinematics_alone_equal_those_with_jacobians() -> None:
+    """The distances' values (warm start, the generalized NLP's line search) take the joint
+    placements without Jacobians: the same placements and distances, bit for bit."""
+    q = Q + 0.5 * np.random.default_rng(3).standard_normal((5, MODEL.nv))
+    kin = chain_kinematics(MODEL, MODEL.createData(), q)
+    rotation, translation = joint_placements(MODEL, MODEL.createData(), q)
+    np.testing.assert_array_equal(rotation, kin.rotation)
+    np.testing.assert_array_equal(translation, kin.translation)
+    values = placed_contacts(PAIRS, rotation, translation, 0.3)
+    with_jacobians, _ = joint_space_contacts(PAIRS, kin, 0.3)
+    np.testing.assert_array_equal(values.distance, with_jacobians.distance)
+    np.testing.assert_array_equal(values.robot_point, with_jacobians.robot_point)
+
+
+def test_polytope_pairs_start_gjk_from_the_bounding_boxes_at_the_same_answer() -> None:
+    """Hull/box pairs start GJK from the boxes' centres: coal's answer from its default start
+    direction, to round-off, on random UR5 configurations (both paths use the one request)."""
+    from mbplan.multibody import collision
+
+    ur5 = load("ur5")
+    box = (coal.Box(0.3, 0.02, 0.5), _pose((0.5, 0.1, 0.3), (0.1, 0.2, 0.3)))
+    pairs = collision_pairs(ur5.collision_model, [box])
+    assert not pairs.checked.any()
+    request = collision._POLYTOPE
+    assert request.gjk_initial_guess == coal.GJKInitialGuess.BoundingVolumeGuess
+    default = collision._request(collision.POLYTOPE_TOLERANCE)
+    assert default.gjk_initial_guess == coal.GJKInitialGuess.DefaultGuess
+    rng = np.random.default_rng(4)
+    q = rng.uniform(-np.pi, np.pi, (40, ur5.model.nv))
+    contacts = placed_contacts(pairs, *joint_placements(ur5.model, ur5.model.createData(), q))
+    gaps = []
+    for k in range(len(q)):
+        gdata = ur5.collision_model.createData()
+        pin.updateGeometryPlacements(
+            ur5.model, ur5.model.createData(), ur5.collision_model, gdata, q[k]
+        )
+        for i in range(pairs.size):
+            M = gdata.oMg[int(pairs.geometry[i])]
+            placement = coal.Transform3s(M.rotation, M.translation)
+            d = collision._distance(pairs, i, placement, default)[0]
+            gaps.append(abs(d - contacts.distance[k, i]))
+    assert max(gaps) <= 1e-12
 
 
 @pytest.mark.parametrize(

@@ -71,6 +71,12 @@ class ConfigurationRows:
         self.jac_cols = _gather([c[:, None, :] for c in cols], self._jac)
         n = len(cols)
         self._pairs = [(t, u) for t in range(n) for u in range(n)]
+        self._cols = cols
+        self._hessian_pattern(slice(None))
+
+    def _hessian_pattern(self, sites: slice) -> None:
+        """The Hessian's pattern: the knot variables of the sites ``sites``."""
+        cols = [c[sites] for c in self._cols]
         blocks = [(cols[t][:, :, None], cols[u][:, None, :]) for t, u in self._pairs]
         self._hess = [(r >= 0) & (c >= 0) for r, c in blocks]
         self.hess_rows = _gather([r for r, _ in blocks], self._hess)
@@ -114,13 +120,14 @@ def _interval_terms(k: np.ndarray, s: np.ndarray, dt: float) -> list:
 class SecantRows(ConfigurationRows):
     """``form``'s rows ``ℓ_σ`` (module docstring) of the intervals ``k = knot - 1`` ending at
     the item's knots, rows ``row0 + (Ri + σ)·P + p`` for interval ``i`` (``R``:
-    :data:`~mbplan.transcription.intervals.INTERVAL_ROWS`). The sparsity is that of
-    :class:`ConfigurationRows` over the same knots; the Hessian of an interval sits on its
-    ``σ = 0`` site."""
+    :data:`~mbplan.transcription.intervals.INTERVAL_ROWS`). The Jacobian's sparsity is that of
+    :class:`ConfigurationRows` over the same knots; the Hessian of an interval's rows has the
+    pattern of one site."""
 
     def __init__(self, nlp: Any, item: Item, form: Any, row0: int):
         k = np.repeat(np.asarray(item.knots) - 1, INTERVAL_ROWS)
         super().__init__(nlp, item, form, _interval_terms(k, np.zeros(k.size), nlp.dt), row0)
+        self._hessian_pattern(slice(None, None, INTERVAL_ROWS))
         self.samples, self.weights = secant()
         intervals = k[::INTERVAL_ROWS]
         self._sample_terms = [
@@ -156,9 +163,7 @@ class SecantRows(ConfigurationRows):
         blocks = []
         for t, u in self._pairs:
             c = [(terms[t][2] * terms[u][2])[:, None, None] for terms in self._sample_terms]
-            on_first = sum(cj * Hj for cj, Hj in zip(c, H, strict=True))
-            rest = [np.zeros_like(on_first)] * (INTERVAL_ROWS - 1)
-            blocks.append(np.stack([on_first, *rest], 1).reshape(-1, *on_first.shape[1:]))
+            blocks.append(sum(cj * Hj for cj, Hj in zip(c, H, strict=True)))
         return _gather(blocks, self._hess)
 
 

@@ -20,10 +20,13 @@ coal::Transform3s pose(const double* R, const double* t) {
   return coal::Transform3s(rotation, coal::Vec3s(t[0], t[1], t[2]));
 }
 
-coal::DistanceRequest request(double gjk_tolerance, double epa_tolerance) {
+// from_boxes: GJK starts from the shapes' bounding-box centres (as collision.py's polytope
+// request).
+coal::DistanceRequest request(double gjk_tolerance, double epa_tolerance, bool from_boxes) {
   coal::DistanceRequest r;
   r.gjk_tolerance = gjk_tolerance;
   r.epa_tolerance = epa_tolerance;
+  if (from_boxes) r.gjk_initial_guess = coal::GJKInitialGuess::BoundingVolumeGuess;
   return r;
 }
 
@@ -115,9 +118,9 @@ extern "C" long long mbplan_coal_distances(
     const double* obstacle_box, const double* obstacle_R, const double* obstacle_t,
     const double* robot_R, const double* robot_t, const double* cap, const double* tolerance,
     double* distance, double* normal, double* point, long long* sent) {
-  const coal::DistanceRequest polytope = request(tolerance[0], tolerance[3]);
-  const coal::DistanceRequest tight = request(tolerance[1], tolerance[3]);
-  const coal::DistanceRequest check = request(tolerance[2], tolerance[3]);
+  const coal::DistanceRequest polytope = request(tolerance[0], tolerance[3], true);
+  const coal::DistanceRequest tight = request(tolerance[1], tolerance[3], false);
+  const coal::DistanceRequest check = request(tolerance[2], tolerance[3], false);
   const coal::DistanceRequest fallback;
   const double cross_check = tolerance[4], failed = tolerance[5];
   long long first_failure = S, asked = 0;

@@ -23,8 +23,10 @@ from mbplan.multibody.collision import (
     CollisionPairs,
     chain_kinematics,
     collision_pairs,
+    joint_placements,
     joint_space_contacts,
     joint_support,
+    placed_contacts,
     point_hessians,
 )
 from mbplan.multibody.convex import GEOMETRIES, collision_geometry
@@ -65,11 +67,13 @@ def distance_values(
     also the Jacobian ``(K, P, nv)`` ``nᵀ J₁`` (and the kinematics and contacts for second
     order)."""
     pairs = distance_pairs(robot, scene, residual.objects, residual.geometry)
+    cap = residual.margin + residual.activation
+    if order == 0:  # placements alone: no Jacobians
+        placements = joint_placements(robot.model, robot.model.createData(), np.atleast_2d(q))
+        return (residual.margin - placed_contacts(pairs, *placements, cap).distance,)
     kin = chain_kinematics(robot.model, robot.model.createData(), np.atleast_2d(q))
-    contacts, J = joint_space_contacts(pairs, kin, residual.margin + residual.activation)
+    contacts, J = joint_space_contacts(pairs, kin, cap)
     value = residual.margin - contacts.distance
-    if order == 0:
-        return (value,)
     grad = np.einsum("kpa,kpja->kpj", contacts.normal, J)
     return value, grad, kin, contacts, J
 
