@@ -55,9 +55,18 @@ class ConfigurationRows:
     """The rows ``form`` (own derivatives in ``q``, ``P`` per site) at ``K`` site configurations
     ``Q_i = Σ_t c_ti X_t[k_ti]``, linear in knot variables: ``terms`` lists ``(block, knots
     (K,), coefficients (K,))`` with block ``"q"`` or ``"v"``. ``nlp`` gives the columns of the
-    knots' variables in ``z`` (knot 0 is data: no column). Rows ``row0 + i·P + p``."""
+    knots' variables in ``z`` (knot 0 is data: no column). Rows ``row0 + i·P + p``; the
+    Hessian's pattern is that of the sites ``hessian_sites`` (all by default)."""
 
-    def __init__(self, nlp: Any, item: Item, form: Any, terms: list, row0: int):
+    def __init__(
+        self,
+        nlp: Any,
+        item: Item,
+        form: Any,
+        terms: list,
+        row0: int,
+        hessian_sites: slice = slice(None),
+    ):
         self.item, self.form, self.row0 = item, form, row0
         self.terms = [(b, np.asarray(k, np.int64), np.asarray(c, float)) for b, k, c in terms]
         self.K, self.P = len(self.terms[0][1]), form.size
@@ -71,12 +80,7 @@ class ConfigurationRows:
         self.jac_cols = _gather([c[:, None, :] for c in cols], self._jac)
         n = len(cols)
         self._pairs = [(t, u) for t in range(n) for u in range(n)]
-        self._cols = cols
-        self._hessian_pattern(slice(None))
-
-    def _hessian_pattern(self, sites: slice) -> None:
-        """The Hessian's pattern: the knot variables of the sites ``sites``."""
-        cols = [c[sites] for c in self._cols]
+        cols = [c[hessian_sites] for c in cols]
         blocks = [(cols[t][:, :, None], cols[u][:, None, :]) for t, u in self._pairs]
         self._hess = [(r >= 0) & (c >= 0) for r, c in blocks]
         self.hess_rows = _gather([r for r, _ in blocks], self._hess)
@@ -126,8 +130,8 @@ class SecantRows(ConfigurationRows):
 
     def __init__(self, nlp: Any, item: Item, form: Any, row0: int):
         k = np.repeat(np.asarray(item.knots) - 1, INTERVAL_ROWS)
-        super().__init__(nlp, item, form, _interval_terms(k, np.zeros(k.size), nlp.dt), row0)
-        self._hessian_pattern(slice(None, None, INTERVAL_ROWS))
+        terms = _interval_terms(k, np.zeros(k.size), nlp.dt)
+        super().__init__(nlp, item, form, terms, row0, slice(None, None, INTERVAL_ROWS))
         self.samples, self.weights = secant()
         intervals = k[::INTERVAL_ROWS]
         self._sample_terms = [
